@@ -1,0 +1,33 @@
+# isa_mocap_ros — every target sets up .venv itself (idempotent), so on a fresh machine
+# `make demo` and `make test` are the only two commands a newcomer needs.
+SHELL := /bin/bash
+PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+# Keep DDS traffic on this machine; a private domain unless the caller chose one.
+export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
+export PYTHONUNBUFFERED := 1
+PYTEST_ARGS ?=
+
+.PHONY: venv test demo bench clean-venv
+
+venv: $(STAMP)
+
+$(STAMP): setup.py setup.cfg package.xml
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	@touch $(STAMP)
+
+test: venv
+	$(PY) -m pytest -n 2 --timeout 600 $(PYTEST_ARGS)
+
+demo: venv
+	$(VENV)/bin/isa-mocap demo
+
+bench: venv
+	$(VENV)/bin/isa-mocap bench all
+
+clean-venv:
+	rm -rf $(VENV)

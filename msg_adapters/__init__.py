@@ -1,0 +1,1 @@
+"""ROS 2 message adapters (filled in by the adapters work)."""

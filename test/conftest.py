@@ -1,0 +1,99 @@
+"""Shared fixtures: private ROS domains, child-process helpers, the shared motion data."""
+from __future__ import annotations
+
+import itertools
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from isa_mocap_ros.rosenv import ros_env
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = Path(os.environ.get("ISA_MOCAP_SHARED", REPO.parent / "shared"))
+CMU_WALK = SHARED / "data" / "mocap" / "cmu_131_01_walk.bvh"
+
+_domain_counter = itertools.count()
+
+
+def _worker_index() -> int:
+    wid = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
+    return int(wid[2:]) if wid.startswith("gw") and wid[2:].isdigit() else 0
+
+
+@pytest.fixture
+def ros_domain() -> int:
+    """A ROS_DOMAIN_ID of its own for each test (10..99), spread by worker and pid."""
+    k = next(_domain_counter)
+    return 10 + (os.getpid() * 13 + _worker_index() * 45 + k * 7) % 90
+
+
+@pytest.fixture
+def rosenv(ros_domain):
+    """Environment for child processes: localhost discovery on the test's own domain."""
+    env = ros_env(ros_domain)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    return env
+
+
+class ChildProcess:
+    """A child process with its output in files, stopped by a signal like a user would."""
+
+    def __init__(self, args: list[str], env: dict[str, str], log_dir: Path, name: str):
+        self.name = name
+        self.out_path = log_dir / f"{name}.out"
+        self._out = open(self.out_path, "wb")
+        self.popen = subprocess.Popen(args, env=env, stdout=self._out, stderr=subprocess.STDOUT,
+                                      start_new_session=True)
+
+    def output(self) -> str:
+        self._out.flush()
+        return self.out_path.read_text(errors="replace")
+
+    def wait_for_output(self, text: str, timeout: float = 30.0) -> bool:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if text in self.output():
+                return True
+            if self.popen.poll() is not None:
+                return text in self.output()
+            time.sleep(0.05)
+        return False
+
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 15.0) -> int:
+        if self.popen.poll() is None:
+            self.popen.send_signal(sig)
+            try:
+                self.popen.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.popen.kill()
+                self.popen.wait(5)
+        self._out.close()
+        return self.popen.returncode
+
+
+@pytest.fixture
+def spawn(rosenv, tmp_path):
+    """``spawn(name, *args)`` starts ``python args...`` in the test's ROS domain; all are stopped after."""
+    procs: list[ChildProcess] = []
+
+    def _spawn(name: str, *args: str, env: dict[str, str] | None = None) -> ChildProcess:
+        p = ChildProcess([sys.executable, *args], env or rosenv, tmp_path, name)
+        procs.append(p)
+        return p
+
+    yield _spawn
+    for p in procs:
+        p.stop(signal.SIGKILL if p.popen.poll() is None else signal.SIGINT, timeout=5)
+
+
+@pytest.fixture
+def cmu_walk() -> Path:
+    """The CMU walk BVH from ../shared (skips where it is absent, as DESIGN §6 asks)."""
+    if not CMU_WALK.exists():
+        pytest.skip(f"CMU motion file not found at {CMU_WALK} (set ISA_MOCAP_SHARED to the shared/ folder)")
+    return CMU_WALK
