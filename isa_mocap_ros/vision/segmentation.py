@@ -1,0 +1,381 @@
+"""Foreground segmentation by background subtraction (the segmentation node's core).
+
+EA-vs-PF §3.2 (yeguas_ea_vs_pf_mocap): "In an initial phase, a background model which captures
+the color statistics of each pixel is created. Then, using background subtraction techniques, the
+foreground images are obtained" -- the masks ``F_v^t`` of its Eq. 2 that the silhouette energy
+(Eq. 4-5) compares with the projected model.
+
+Methods
+-------
+``"colour"`` (default)
+    One Gaussian per pixel and channel: mean ``mu`` and standard deviation ``s`` learnt from the
+    first ``learn_frames`` images (or initialised from a clean plate). A pixel ``I`` is foreground
+    when its normalised colour distance
+
+        d(p) = sqrt( sum_c ((I_c(p) - mu_c(p)) / s_c(p))^2 )
+
+    exceeds ``threshold`` (in units of the per-pixel standard deviation). The model keeps learning
+    outside the (dilated) foreground (everywhere after a global change, see
+    ``max_foreground_fraction``) with an exponential running update of rate ``rho``:
+    ``mu += rho (I - mu)``, ``s^2 += rho ((I - mu)^2 - s^2)``. Optional shadow suppression uses the
+    brightness / chromaticity distortion of Horprasert et al. (1999): with
+    ``alpha = sum_c I_c mu_c / s_c^2 / sum_c mu_c^2 / s_c^2`` and
+    ``CD = || (I - alpha mu) / s ||``, a foreground pixel with ``alpha`` in
+    ``[shadow_min_brightness, shadow_max_brightness]`` and ``CD < shadow_chroma_threshold`` is a
+    shadow (a darker copy of the background) and is returned as background.
+``"mog2"``, ``"knn"``
+    OpenCV's ``BackgroundSubtractorMOG2`` / ``BackgroundSubtractorKNN``; shadows (value 127) are
+    background.
+
+Every method ends with the same clean-up (:func:`clean_mask`): morphological opening (removes
+speckle), closing (fills small gaps), removal of connected components smaller than
+``min_blob_area_px``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+__all__ = ["SegmentationError", "SegmentationConfig", "BackgroundSegmenter", "clean_mask"]
+
+METHODS = ("colour", "mog2", "knn")
+
+
+class SegmentationError(ValueError):
+    """Bad configuration or a bad image given to the segmentation."""
+
+
+@dataclass(frozen=True)
+class SegmentationConfig:
+    """Settings of :class:`BackgroundSegmenter` (fixed; the segmenter holds the changing state).
+
+    Attributes
+    ----------
+    method : {"colour", "mog2", "knn"}
+        Background model (see the module docstring).
+    learn_frames : int
+        Number of first images used only to learn the background (an all-zero mask is returned for
+        them). Ignored by ``"colour"`` when a clean plate is given.
+    threshold : float
+        ``"colour"``: foreground when the normalised colour distance ``d`` exceeds this many
+        per-pixel standard deviations. ``"mog2"``: its ``varThreshold`` is ``threshold**2``
+        (the same squared Mahalanobis distance).
+    min_std : float
+        Floor of the per-pixel standard deviation, in intensity levels (uint8 units).
+    initial_std : float
+        Per-pixel standard deviation assumed when the model starts from a clean plate (one image
+        carries no noise statistics); the running update refines it.
+    std_smoothing_px : int
+        Side of the box filter applied to the learnt variance image (0 or 1: none). Ten frames
+        give a noisy per-pixel variance; averaging over a small neighbourhood steadies it.
+    update_rate : float
+        Running update rate ``rho`` in [0, 1] of the model outside the foreground (0: frozen).
+        ``"mog2"``/``"knn"`` get it as OpenCV's ``learningRate`` after the learning phase.
+    update_margin_px : int
+        The foreground is dilated by this many pixels before it is excluded from the update, so
+        the silhouette's fringe does not leak into the background.
+    max_foreground_fraction : float
+        When the raw foreground covers more than this fraction of the image, the frame is taken
+        as a global change (lighting, exposure, a bumped camera) rather than a person, and the
+        ``"colour"`` model is updated at every pixel; otherwise a selective update could never
+        learn such a change. The mask of that frame is still returned as computed.
+    shadow_suppression : bool
+        Return shadows (darker, same chromaticity) as background. ``"mog2"``/``"knn"``: OpenCV's
+        ``detectShadows``.
+    shadow_min_brightness, shadow_max_brightness : float
+        Brightness-distortion range ``alpha`` of a shadow (``"colour"`` only).
+    shadow_chroma_threshold : float
+        Largest chromaticity distortion ``CD`` of a shadow, in per-pixel standard deviations.
+    open_kernel, close_kernel : int
+        Sizes (pixels, elliptic element) of the morphological opening and closing; 0 or 1 skips.
+    min_blob_area_px : int
+        Connected foreground components (8-connected) with fewer pixels are removed.
+    history : int
+        OpenCV's ``history`` for ``"mog2"``/``"knn"``.
+    knn_dist2_threshold : float
+        OpenCV's ``dist2Threshold`` for ``"knn"`` (squared intensity distance).
+    """
+
+    method: str = "colour"
+    learn_frames: int = 10
+    threshold: float = 4.0
+    min_std: float = 2.0
+    initial_std: float = 5.0
+    std_smoothing_px: int = 5
+    update_rate: float = 0.02
+    update_margin_px: int = 3
+    max_foreground_fraction: float = 0.5
+    shadow_suppression: bool = False
+    shadow_min_brightness: float = 0.4
+    shadow_max_brightness: float = 1.0
+    shadow_chroma_threshold: float = 3.0
+    open_kernel: int = 3
+    close_kernel: int = 7
+    min_blob_area_px: int = 50
+    history: int = 200
+    knn_dist2_threshold: float = 400.0
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise SegmentationError(f"method: expected one of {METHODS}, got {self.method!r}")
+        _check_int("learn_frames", self.learn_frames, 1)
+        for name in ("threshold", "min_std", "initial_std", "shadow_chroma_threshold",
+                     "knn_dist2_threshold"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise SegmentationError(f"{name}: expected a finite number > 0, got {value!r}")
+        if not (0.0 <= self.update_rate <= 1.0):
+            raise SegmentationError(f"update_rate: expected a number in [0, 1], got {self.update_rate!r}")
+        if not (0.0 < self.max_foreground_fraction <= 1.0):
+            raise SegmentationError("max_foreground_fraction: expected a number in (0, 1], got "
+                                    f"{self.max_foreground_fraction!r}")
+        if not (0.0 <= self.shadow_min_brightness < self.shadow_max_brightness):
+            raise SegmentationError(
+                "shadow_min_brightness, shadow_max_brightness: expected 0 <= min < max, got "
+                f"{self.shadow_min_brightness!r}, {self.shadow_max_brightness!r}")
+        for name in ("std_smoothing_px", "update_margin_px", "open_kernel", "close_kernel",
+                     "min_blob_area_px"):
+            _check_int(name, getattr(self, name), 0)
+        _check_int("history", self.history, 1)
+
+
+def _check_int(name: str, value, lowest: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lowest:
+        raise SegmentationError(f"{name}: expected an integer >= {lowest}, got {value!r}")
+
+
+def _ellipse(size: int) -> np.ndarray:
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (int(size), int(size)))
+
+
+def clean_mask(mask: np.ndarray, *, open_kernel: int = 3, close_kernel: int = 7,
+               min_blob_area_px: int = 50) -> np.ndarray:
+    """Morphological clean-up of a raw foreground mask.
+
+    Parameters
+    ----------
+    mask : (H, W) uint8 ndarray
+        Raw mask, non-zero = foreground.
+    open_kernel, close_kernel : int
+        Elliptic structuring element sizes for opening then closing (0 or 1: skip).
+    min_blob_area_px : int
+        8-connected components with fewer pixels are removed (0: keep all).
+
+    Returns
+    -------
+    (H, W) uint8 ndarray
+        Cleaned mask with values 0 and 255 (a new array).
+    """
+    out = np.where(mask > 0, np.uint8(255), np.uint8(0))
+    if open_kernel > 1:
+        out = cv2.morphologyEx(out, cv2.MORPH_OPEN, _ellipse(open_kernel))
+    if close_kernel > 1:
+        out = cv2.morphologyEx(out, cv2.MORPH_CLOSE, _ellipse(close_kernel))
+    if min_blob_area_px > 0:
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(out, connectivity=8)
+        if n > 1:
+            keep = stats[:, cv2.CC_STAT_AREA] >= min_blob_area_px
+            keep[0] = False  # label 0 is the background
+            out = np.where(keep[labels], np.uint8(255), np.uint8(0))
+    return out
+
+
+class BackgroundSegmenter:
+    """Per-view background model: one :meth:`apply` per image gives its foreground mask.
+
+    Parameters
+    ----------
+    config : SegmentationConfig
+        Method and settings.
+    clean_plate : (H, W, 3) or (H, W) uint8 ndarray, optional
+        An image of the empty scene. ``"colour"`` starts from it (mean = plate, std =
+        ``initial_std``) and segments from the first image on; ``"mog2"``/``"knn"`` are fed it
+        ``learn_frames`` times.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(1)
+    >>> bg = rng.integers(0, 200, size=(48, 64, 3)).astype(np.uint8)
+    >>> seg = BackgroundSegmenter(SegmentationConfig(min_blob_area_px=10), clean_plate=bg)
+    >>> img = bg.copy(); img[10:30, 20:40] = (250, 20, 250)
+    >>> int(seg.apply(img)[20, 30]), int(seg.apply(bg)[5, 5])
+    (255, 0)
+    """
+
+    def __init__(self, config: SegmentationConfig = SegmentationConfig(), *,
+                 clean_plate: np.ndarray | None = None) -> None:
+        if not isinstance(config, SegmentationConfig):
+            raise SegmentationError(f"config: expected a SegmentationConfig, got {type(config).__name__}")
+        self.config = config
+        self._plate = None if clean_plate is None else self._check_image(clean_plate, "clean_plate").copy()
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Forget everything learnt (a clean plate given at construction is used again)."""
+        self.frames_seen = 0
+        self._shape: tuple[int, ...] | None = None
+        self._sum = self._sumsq = None
+        self._mu = self._var = None
+        self._cv = None
+        self._n_learnt = 0  # images the model has learnt from before segmenting
+        if self.config.method != "colour":
+            c = self.config
+            if c.method == "mog2":
+                self._cv = cv2.createBackgroundSubtractorMOG2(
+                    history=c.history, varThreshold=float(c.threshold) ** 2,
+                    detectShadows=bool(c.shadow_suppression))
+            else:
+                self._cv = cv2.createBackgroundSubtractorKNN(
+                    history=c.history, dist2Threshold=float(c.knn_dist2_threshold),
+                    detectShadows=bool(c.shadow_suppression))
+        if self._plate is not None:
+            self._shape = self._plate.shape
+            if self._cv is None:
+                self._mu = self._as3(self._plate).astype(np.float32)
+                self._var = np.full_like(self._mu, max(self.config.initial_std, self.config.min_std) ** 2)
+                self._n_learnt = self.config.learn_frames
+            else:
+                for _ in range(self.config.learn_frames):
+                    self._cv.apply(self._plate, learningRate=-1)
+                self._n_learnt = self.config.learn_frames
+
+    @property
+    def learning(self) -> bool:
+        """True while the next image only feeds the background model (all-zero mask)."""
+        return self._n_learnt < self.config.learn_frames
+
+    @property
+    def image_shape(self) -> tuple[int, ...] | None:
+        """Shape of the images this model was learnt on (None before the first image)."""
+        return self._shape
+
+    def background_image(self) -> np.ndarray | None:
+        """Current background estimate, same shape as the input images, uint8 (None if unknown)."""
+        if self._cv is not None:
+            if self._shape is None:
+                return None
+            img = self._cv.getBackgroundImage()
+            return None if img is None else img.reshape(self._shape)
+        if self._mu is None:
+            return None
+        return np.clip(np.rint(self._mu), 0, 255).astype(np.uint8).reshape(self._shape)
+
+    # ------------------------------------------------------------------ main call
+    def apply(self, image: np.ndarray) -> np.ndarray:
+        """Segment one image (and learn from it).
+
+        Parameters
+        ----------
+        image : (H, W, 3) or (H, W) uint8 ndarray
+            Colour or grey image; every image must have the shape of the first one (or of the
+            clean plate).
+
+        Returns
+        -------
+        (H, W) uint8 ndarray
+            Foreground mask, 0 / 255; all zero while :attr:`learning`.
+
+        Raises
+        ------
+        SegmentationError
+            Wrong dtype, number of dimensions or channels, or a shape other than the learnt one.
+        """
+        image = self._check_image(image, "image")
+        if self._shape is None:
+            self._shape = image.shape
+        elif image.shape != self._shape:
+            raise SegmentationError(
+                f"image: expected shape {self._shape} (the size the background was learnt at), "
+                f"got {image.shape}")
+        self.frames_seen += 1
+        if self._cv is not None:
+            return self._apply_opencv(image)
+        return self._apply_colour(image)
+
+    # ------------------------------------------------------------------ helpers
+    @staticmethod
+    def _check_image(image, name: str) -> np.ndarray:
+        if not isinstance(image, np.ndarray):
+            raise SegmentationError(f"{name}: expected a numpy uint8 array, got {type(image).__name__}")
+        if image.dtype != np.uint8:
+            raise SegmentationError(f"{name}: expected dtype uint8, got {image.dtype}")
+        if not (image.ndim == 2 or (image.ndim == 3 and image.shape[2] == 3)):
+            raise SegmentationError(f"{name}: expected shape (H, W, 3) or (H, W), got {image.shape}")
+        if image.shape[0] < 1 or image.shape[1] < 1:
+            raise SegmentationError(f"{name}: expected a non-empty image, got shape {image.shape}")
+        return image
+
+    @staticmethod
+    def _as3(image: np.ndarray) -> np.ndarray:
+        return image[:, :, None] if image.ndim == 2 else image
+
+    def _clean(self, raw: np.ndarray) -> np.ndarray:
+        c = self.config
+        return clean_mask(raw, open_kernel=c.open_kernel, close_kernel=c.close_kernel,
+                          min_blob_area_px=c.min_blob_area_px)
+
+    def _zero(self) -> np.ndarray:
+        return np.zeros(self._shape[:2], np.uint8)
+
+    def _apply_opencv(self, image: np.ndarray) -> np.ndarray:
+        if self.learning:
+            self._cv.apply(image, learningRate=-1)
+            self._n_learnt += 1
+            return self._zero()
+        raw = self._cv.apply(image, learningRate=float(self.config.update_rate))
+        return self._clean(np.where(raw == 255, np.uint8(255), np.uint8(0)))
+
+    def _apply_colour(self, image: np.ndarray) -> np.ndarray:
+        c = self.config
+        img = self._as3(image).astype(np.float32)
+        if self.learning:
+            if self._sum is None:
+                self._sum = np.zeros(img.shape, np.float64)
+                self._sumsq = np.zeros(img.shape, np.float64)
+            self._sum += img
+            self._sumsq += np.square(img, dtype=np.float64)
+            self._n_learnt += 1
+            if not self.learning:  # last learning image: mean and variance over the K images
+                k = self._n_learnt
+                mu = self._sum / k
+                var = np.maximum(self._sumsq / k - mu * mu, 0.0) * (k / max(k - 1, 1))
+                if c.std_smoothing_px > 1:
+                    var = cv2.blur(var.astype(np.float32), (c.std_smoothing_px,) * 2,
+                                   borderType=cv2.BORDER_REFLECT).reshape(mu.shape)
+                self._mu = mu.astype(np.float32)
+                self._var = var.astype(np.float32)
+                self._sum = self._sumsq = None
+            return self._zero()
+
+        mu, var = self._mu, self._var
+        inv_var = 1.0 / np.maximum(var, np.float32(c.min_std) ** 2)
+        diff = img - mu
+        d2 = np.einsum("hwc,hwc->hw", diff * diff, inv_var)        # d^2 = sum_c (I-mu)^2 / s^2
+        fg = d2 > np.float32(c.threshold) ** 2
+        if c.shadow_suppression:
+            num = np.einsum("hwc,hwc->hw", img * mu, inv_var)
+            den = np.maximum(np.einsum("hwc,hwc->hw", mu * mu, inv_var), 1e-6)
+            alpha = num / den                                         # brightness distortion
+            r = img - alpha[:, :, None] * mu
+            cd2 = np.einsum("hwc,hwc->hw", r * r, inv_var)            # chromaticity distortion^2
+            shadow = ((alpha >= c.shadow_min_brightness) & (alpha <= c.shadow_max_brightness)
+                      & (cd2 < np.float32(c.shadow_chroma_threshold) ** 2))
+            fg &= ~shadow
+        mask = self._clean(fg.view(np.uint8))
+
+        if c.update_rate > 0:
+            if fg.mean() > c.max_foreground_fraction:   # a global change: learn it everywhere
+                bgpix = True
+            else:
+                grown = mask
+                if c.update_margin_px > 0:
+                    grown = cv2.dilate(mask, _ellipse(2 * c.update_margin_px + 1))
+                bgpix = (grown == 0)[:, :, None]
+            rho = np.float32(c.update_rate)
+            # mu += rho (I - mu); s^2 += rho ((I - mu)^2 - s^2), outside the (dilated) foreground
+            np.add(mu, rho * diff, out=mu, where=bgpix)
+            np.add(var, rho * (diff * diff - var), out=var, where=bgpix)
+        return mask

@@ -1,0 +1,244 @@
+"""Background segmentation (EA-vs-PF §3.2) on synthetic scenes: textured background, a moving
+person-shaped blob, camera noise."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from isa_mocap_ros.vision.segmentation import (
+    BackgroundSegmenter,
+    SegmentationConfig,
+    SegmentationError,
+    clean_mask,
+)
+
+H, W = 240, 320
+NOISE_STD = 4.0
+
+
+def make_background(rng: np.random.Generator) -> np.ndarray:
+    """A textured background: colour gradients, smooth blotches, a few sharp-edged tiles."""
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    img = np.empty((H, W, 3), np.float32)
+    img[..., 0] = 60 + 80 * xx / W
+    img[..., 1] = 90 + 60 * yy / H
+    img[..., 2] = 120 - 40 * xx / W + 30 * yy / H
+    blotches = cv2.GaussianBlur(rng.normal(0, 1, (H, W, 3)).astype(np.float32), (0, 0), 6)
+    img += 25 * blotches / blotches.std()
+    for _ in range(12):
+        x0, y0 = rng.integers(0, W - 20), rng.integers(0, H - 20)
+        w, h = rng.integers(8, 40, size=2)
+        img[y0:y0 + h, x0:x0 + w] += rng.uniform(-40, 40, size=3)
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def person_mask(cx: float, cy: float = 120.0) -> np.ndarray:
+    """Ground-truth silhouette of a stick-ish person: head, torso, two arms, two legs."""
+    m = np.zeros((H, W), np.uint8)
+    c = (int(cx), int(cy))
+    cv2.circle(m, (c[0], c[1] - 62), 11, 255, -1)                       # head
+    cv2.ellipse(m, (c[0], c[1] - 20), (17, 32), 0, 0, 360, 255, -1)     # torso
+    cv2.line(m, (c[0] - 15, c[1] - 45), (c[0] - 32, c[1]), 255, 8)      # arms
+    cv2.line(m, (c[0] + 15, c[1] - 45), (c[0] + 30, c[1] + 2), 255, 8)
+    cv2.line(m, (c[0] - 8, c[1] + 8), (c[0] - 14, c[1] + 75), 255, 11)  # legs
+    cv2.line(m, (c[0] + 8, c[1] + 8), (c[0] + 16, c[1] + 75), 255, 11)
+    return m
+
+
+def compose(background: np.ndarray, mask: np.ndarray, rng: np.random.Generator,
+            colour=(200, 40, 50)) -> np.ndarray:
+    """Paste the person (shaded colour) over the background and add camera noise."""
+    img = background.astype(np.float32)
+    yy = np.mgrid[0:H, 0:W][0].astype(np.float32)
+    person = np.array(colour, np.float32)[None, None, :] * (0.8 + 0.3 * yy / H)[:, :, None]
+    img = np.where(mask[:, :, None] > 0, person, img)
+    img += rng.normal(0, NOISE_STD, img.shape)
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+
+def noisy(background: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    return compose(background, np.zeros((H, W), np.uint8), rng)
+
+
+def iou(a: np.ndarray, b: np.ndarray) -> float:
+    a, b = a > 0, b > 0
+    return float((a & b).sum() / max((a | b).sum(), 1))
+
+
+@pytest.fixture(scope="module")
+def scene():
+    rng = np.random.default_rng(7)
+    return make_background(rng)
+
+
+def run_sequence(seg: BackgroundSegmenter, background: np.ndarray, rng, n_learn: int, n_track: int):
+    """Feed n_learn empty frames then n_track frames with a walking person; return IoUs."""
+    for _ in range(n_learn):
+        out = seg.apply(noisy(background, rng))
+        assert out.dtype == np.uint8 and out.shape == (H, W) and not out.any()
+    ious = []
+    for k in range(n_track):
+        truth = person_mask(60 + 12 * k)
+        out = seg.apply(compose(background, truth, rng))
+        assert set(np.unique(out)) <= {0, 255}
+        ious.append(iou(out, truth))
+    return ious
+
+
+def test_colour_model_segments_the_person(scene):
+    rng = np.random.default_rng(1)
+    seg = BackgroundSegmenter(SegmentationConfig(method="colour", learn_frames=10))
+    assert seg.learning
+    ious = run_sequence(seg, scene, rng, 10, 15)
+    assert not seg.learning and seg.frames_seen == 25
+    assert min(ious) >= 0.9, ious
+
+
+def test_colour_model_from_clean_plate_needs_no_learning(scene):
+    rng = np.random.default_rng(2)
+    seg = BackgroundSegmenter(SegmentationConfig(), clean_plate=scene)
+    assert not seg.learning
+    truth = person_mask(150)
+    out = seg.apply(compose(scene, truth, rng))
+    assert iou(out, truth) >= 0.9
+
+
+def test_grey_images_are_segmented(scene):
+    rng = np.random.default_rng(3)
+    grey = cv2.cvtColor(scene, cv2.COLOR_RGB2GRAY)
+    seg = BackgroundSegmenter(SegmentationConfig(learn_frames=5))
+    for _ in range(5):
+        seg.apply(cv2.cvtColor(noisy(scene, rng), cv2.COLOR_RGB2GRAY))
+    truth = person_mask(160)
+    img = cv2.cvtColor(compose(scene, truth, rng, colour=(250, 250, 250)), cv2.COLOR_RGB2GRAY)
+    out = seg.apply(img)
+    assert out.shape == grey.shape
+    assert iou(out, truth) >= 0.9
+
+
+@pytest.mark.parametrize("method", ["mog2", "knn"])
+def test_opencv_methods_give_sensible_masks(scene, method):
+    rng = np.random.default_rng(4)
+    seg = BackgroundSegmenter(SegmentationConfig(method=method, learn_frames=20))
+    ious = run_sequence(seg, scene, rng, 20, 8)
+    assert min(ious) >= 0.7, ious
+
+
+def test_small_blobs_are_removed(scene):
+    rng = np.random.default_rng(5)
+    cfg = SegmentationConfig(min_blob_area_px=80)
+    seg = BackgroundSegmenter(cfg, clean_plate=scene)
+    truth = person_mask(100)
+    img = compose(scene, truth, rng)
+    img[20:27, 250:257] = (255, 255, 0)    # 49 px speck, far from the person
+    img[200:212, 280:292] = (0, 255, 255)  # 144 px blob, kept
+    out = seg.apply(img)
+    assert not out[20:27, 250:257].any()
+    assert out[201:211, 281:291].all()
+    # without blob removal, the speck survives
+    seg2 = BackgroundSegmenter(SegmentationConfig(min_blob_area_px=0), clean_plate=scene)
+    assert seg2.apply(img)[21:26, 251:256].all()
+
+
+def test_clean_mask_removes_speckle_and_fills_gaps():
+    m = np.zeros((60, 60), np.uint8)
+    m[10:40, 10:40] = 255
+    m[25, 25] = 0            # pinhole inside
+    m[50, 50] = 255          # isolated pixel
+    out = clean_mask(m, open_kernel=3, close_kernel=5, min_blob_area_px=20)
+    assert out[25, 25] == 255 and out[50, 50] == 0
+    assert out.dtype == np.uint8 and set(np.unique(out)) == {0, 255}
+
+
+def test_shadow_suppression(scene):
+    rng = np.random.default_rng(6)
+    truth = person_mask(120)
+    img = compose(scene, truth, rng).astype(np.float32)
+    shadow = np.zeros((H, W), bool)
+    shadow[200:235, 140:230] = True          # a cast shadow on the floor, beside the feet
+    shadow &= truth == 0
+    img[shadow] *= 0.6
+    img = np.clip(img, 0, 255).astype(np.uint8)
+    plain = BackgroundSegmenter(SegmentationConfig(), clean_plate=scene).apply(img)
+    sup = BackgroundSegmenter(SegmentationConfig(shadow_suppression=True), clean_plate=scene).apply(img)
+    assert (plain[shadow] > 0).mean() > 0.9           # a plain model takes the shadow for a person
+    assert (sup[shadow] > 0).mean() < 0.05            # shadow suppression does not
+    assert iou(sup, truth) >= 0.9
+
+
+def test_running_update_absorbs_a_lighting_change(scene):
+    rng = np.random.default_rng(8)
+    seg = BackgroundSegmenter(SegmentationConfig(update_rate=0.2), clean_plate=scene)
+    brighter = np.clip(scene.astype(np.int16) + 20, 0, 255).astype(np.uint8)
+    first = seg.apply(noisy(brighter, rng))
+    for _ in range(30):
+        last = seg.apply(noisy(brighter, rng))
+    assert (first > 0).mean() > 0.5       # the change first looks like foreground
+    assert (last > 0).mean() < 0.01       # and is learnt away (a global change: updated everywhere)
+    frozen = BackgroundSegmenter(SegmentationConfig(update_rate=0.0), clean_plate=scene)
+    for _ in range(5):
+        out = frozen.apply(noisy(brighter, rng))
+    assert (out > 0).mean() > 0.5
+
+
+def test_background_is_updated_only_outside_the_foreground(scene):
+    rng = np.random.default_rng(10)
+    seg = BackgroundSegmenter(SegmentationConfig(update_rate=0.2), clean_plate=scene)
+    truth = person_mask(160)
+    for k in range(1, 41):   # a slow local light change at the left edge, +1 level per frame
+        lit = scene.copy()
+        lit[:, :40] = np.clip(lit[:, :40].astype(np.int16) + k, 0, 255)
+        out = seg.apply(compose(lit, truth, rng))                        # a person standing still
+    assert iou(out, truth) >= 0.9            # the person is not learnt into the background
+    assert not out[:, :30].any()             # the local change is
+    bg = seg.background_image()
+    # an exponential update (rho = 0.2) follows a ramp of 1 level/frame with a lag of ~(1-rho)/rho = 4
+    assert np.abs(bg[:, :30].astype(int) - lit[:, :30]).mean() < 6
+    assert (bg[:, :30].astype(int) - scene[:, :30]).mean() > 30
+
+
+def test_wrong_size_dtype_and_shape_raise(scene):
+    seg = BackgroundSegmenter(SegmentationConfig(), clean_plate=scene)
+    with pytest.raises(SegmentationError, match=r"image: expected shape \(240, 320, 3\).*got \(120, 160, 3\)"):
+        seg.apply(scene[:120, :160].copy())
+    with pytest.raises(SegmentationError, match=r"image: expected dtype uint8, got float32"):
+        seg.apply(scene.astype(np.float32))
+    with pytest.raises(SegmentationError, match=r"image: expected shape \(H, W, 3\) or \(H, W\), got \(240, 320, 4\)"):
+        seg.apply(np.zeros((H, W, 4), np.uint8))
+    learner = BackgroundSegmenter(SegmentationConfig(learn_frames=2))
+    learner.apply(scene)
+    with pytest.raises(SegmentationError, match="expected shape"):
+        learner.apply(scene[:, :, 0].copy())   # grey after colour
+
+
+def test_bad_config_raises():
+    with pytest.raises(SegmentationError, match=r"method: expected one of .*got 'gmm'"):
+        SegmentationConfig(method="gmm")
+    with pytest.raises(SegmentationError, match=r"learn_frames: expected an integer >= 1, got 0"):
+        SegmentationConfig(learn_frames=0)
+    with pytest.raises(SegmentationError, match=r"update_rate"):
+        SegmentationConfig(update_rate=1.5)
+    with pytest.raises(SegmentationError, match=r"threshold"):
+        SegmentationConfig(threshold=-1.0)
+
+
+def test_reset_restarts_learning(scene):
+    rng = np.random.default_rng(9)
+    seg = BackgroundSegmenter(SegmentationConfig(learn_frames=3))
+    for _ in range(3):
+        seg.apply(noisy(scene, rng))
+    assert not seg.learning and seg.image_shape == (H, W, 3)
+    seg.reset()
+    assert seg.learning and seg.frames_seen == 0 and seg.image_shape is None
+    seg.apply(scene[:100, :100].copy())   # a new size is accepted after reset
+    assert seg.image_shape == (100, 100, 3)
+
+
+def test_same_input_same_mask(scene):
+    masks = []
+    for _ in range(2):
+        rng = np.random.default_rng(11)
+        seg = BackgroundSegmenter(SegmentationConfig(learn_frames=4))
+        masks.append(run_sequence(seg, scene, rng, 4, 3))
+    assert masks[0] == masks[1]
