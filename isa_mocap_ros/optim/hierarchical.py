@@ -1,0 +1,261 @@
+"""Hierarchical driver: one optimizer per ordered partition of the coordinates.
+
+yeguas_ea_vs_pf_mocap §3.3 (the six-step hierarchy: root, torso+head, then each limb) and §5
+(H-CMAES, H-DE, H-PSO run "sequentially in each part of the 6-step hierarchy"); PSAPF (§4.1.2) is
+the same driver with APF inside. H-ISA (ISA inside) is new.
+
+Rules
+-----
+* ``partitions`` is an ordered list of non-empty, pairwise disjoint index arrays within
+  ``[0, d)``. They need not cover every coordinate: uncovered coordinates stay at ``x0``.
+* While partition ``k`` is optimised, every other coordinate is held at the current estimate
+  (partitions before ``k`` at their optimised values, later ones at ``x0``); the inner optimizer
+  starts at the current estimate's sub-vector with the sub-spread.
+* Budget split: partition ``k`` gets ``floor(B * d_k / sum_j d_j)`` evaluations (proportional to its
+  dimension); the remainder of the integer division goes to the first partition. Each share must
+  hold at least one generation of its inner optimizer, else :class:`OptimError`. Without a bound
+  budget, ``evals_per_partition`` (int or list) must be given.
+* A partition ends when its share is spent or its inner optimizer stops; its estimate (the inner
+  ``result().x``) is then written into the full estimate. Rotation triples must lie inside one
+  partition.
+"""
+from __future__ import annotations
+
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ._base import OptimError, Optimizer
+
+__all__ = ["Hierarchical", "check_partitions", "split_budget"]
+
+
+def check_partitions(partitions, d: int) -> list[np.ndarray]:
+    """Validate ordered partitions: non-empty, integer, in ``[0, d)``, pairwise disjoint."""
+    if partitions is None or len(partitions) == 0:
+        raise OptimError("partitions: expected a non-empty list of index arrays, got none")
+    out, seen = [], {}
+    for k, p in enumerate(partitions):
+        a = np.asarray(p)
+        if a.ndim != 1 or a.size == 0:
+            raise OptimError(f"partitions[{k}]: expected a non-empty 1-D index array, got {p!r}")
+        if not np.issubdtype(a.dtype, np.integer):
+            raise OptimError(f"partitions[{k}]: expected integer indices, got dtype {a.dtype}")
+        if a.min() < 0 or a.max() >= d:
+            raise OptimError(f"partitions[{k}]: indices must lie in [0, {d}), got {a.tolist()}")
+        if len(np.unique(a)) != a.size:
+            raise OptimError(f"partitions[{k}]: repeated index in {a.tolist()}")
+        for i in a.tolist():
+            if i in seen:
+                raise OptimError(f"partitions: index {i} is in partitions[{seen[i]}] and "
+                                 f"partitions[{k}] (partitions must be disjoint)")
+            seen[i] = k
+        out.append(a.astype(int))
+    return out
+
+
+def split_budget(max_evals: int, dims: Sequence[int]) -> list[int]:
+    """Shares ``floor(B d_k / sum d)``, remainder to the first partition."""
+    tot = sum(dims)
+    shares = [max_evals * dk // tot for dk in dims]
+    shares[0] += max_evals - sum(shares)
+    return shares
+
+
+class Hierarchical(Optimizer):
+    """Run an inner optimizer sequentially over ordered partitions (H-ISA, PSAPF, H-CMAES, ...).
+
+    Parameters
+    ----------
+    x0, spread, bounds, rng, initial_population, rotation_blocks
+        See :class:`Optimizer`. ``initial_population`` columns of a partition are handed to its
+        inner optimizer.
+    partitions : list of index arrays
+        Ordered partitions (see module rules).
+    optimizer : str or callable
+        Inner optimizer: a :func:`make_optimizer` name, or a factory
+        ``f(x0_sub, spread_sub, *, rng, bounds, initial_population, rotation_blocks, **params)``.
+    evals_per_partition : int or list of int, optional
+        Shares when no budget is bound (``minimize`` binds one and overrides this).
+    **params
+        Passed to every inner optimizer.
+    """
+
+    name = "hierarchical"
+
+    def __init__(self, x0, spread, *, partitions, optimizer="cmaes",
+                 evals_per_partition=None, rng, bounds=None, initial_population=None,
+                 rotation_blocks=(), init="normal", max_iter=None, **params):
+        super().__init__(x0, spread, rng=rng, bounds=bounds, initial_population=initial_population,
+                         rotation_blocks=rotation_blocks, init=init, max_iter=max_iter)
+        self.partitions = check_partitions(partitions, self.d)
+        self._blocks = []
+        for blk in self.rotation_blocks:
+            owner = [k for k, p in enumerate(self.partitions) if set(blk) <= set(p.tolist())]
+            touched = [k for k, p in enumerate(self.partitions) if set(blk) & set(p.tolist())]
+            if touched and not owner:
+                raise OptimError(f"rotation_blocks: triple {blk} is split across partitions "
+                                 f"{touched}")
+            self._blocks.append((owner[0] if owner else None, blk))
+        if isinstance(optimizer, str):
+            from . import make_optimizer, OPTIMIZERS
+            if optimizer not in OPTIMIZERS or optimizer.startswith("h-") or optimizer == "psapf":
+                raise OptimError(f"optimizer: expected a flat optimizer name "
+                                 f"({', '.join(k for k in OPTIMIZERS if not k.startswith('h-') and k != 'psapf')}), "
+                                 f"got {optimizer!r}")
+            name = optimizer
+
+            def factory(x, s, **kw):
+                return make_optimizer(name, x, s, **kw)
+            self._factory: Callable = factory
+            self.inner_name = optimizer
+        elif callable(optimizer):
+            self._factory = optimizer
+            self.inner_name = getattr(optimizer, "__name__", "custom")
+        else:
+            raise OptimError(f"optimizer: expected a name or a factory, got {optimizer!r}")
+        self.params = params
+        self._x = self.x0.copy()
+        self.k = 0                      # current partition
+        self._inner: Optimizer | None = None
+        self._inner_used = 0
+        self.shares: list[int] | None = None
+        if evals_per_partition is not None:
+            self.shares = self._check_shares(evals_per_partition)
+        self._last_pop = None
+        self.partition_log: list[tuple[int, int]] = []   # (partition, evaluations spent)
+
+    def _check_shares(self, eps):
+        if np.ndim(eps) == 0:
+            eps = [int(eps)] * len(self.partitions)
+        eps = [int(e) for e in eps]
+        if len(eps) != len(self.partitions) or min(eps) < 1:
+            raise OptimError(f"evals_per_partition: expected {len(self.partitions)} positive "
+                             f"integers, got {eps}")
+        return eps
+
+    # ------------------------------------------------------------ inner setup
+    def _make_inner(self, k: int, share: int | None) -> Optimizer:
+        idx = self.partitions[k]
+        local = {int(i): j for j, i in enumerate(idx.tolist())}
+        blocks = tuple(tuple(local[i] for i in blk) for owner, blk in self._blocks if owner == k)
+        P = None
+        if self._initial_population is not None:
+            P = self._initial_population[:, idx]
+        opt = self._factory(self._x[idx], self.spread[idx], rng=self.rng,
+                            bounds=(self.lo[idx], self.hi[idx]), initial_population=P,
+                            rotation_blocks=blocks, **self.params)
+        if share is not None:
+            opt._on_bind(share)
+            if share < opt.generation_size:
+                raise OptimError(
+                    f"max_evals: partition {k} ({len(idx)} coordinates) gets {share} evaluations, "
+                    f"fewer than one generation of {opt.name} ({opt.generation_size})")
+        return opt
+
+    def _on_bind(self, max_evals):
+        if self.n_iter != 0:
+            return
+        if max_evals is not None:
+            self.shares = split_budget(max_evals, [len(p) for p in self.partitions])
+            if min(self.shares) < 1:
+                raise OptimError(f"max_evals: budget {max_evals} gives an empty share to a "
+                                 f"partition (shares {self.shares})")
+            # validate every share now, so a too-small budget fails before any evaluation
+            for k in range(len(self.partitions)):
+                probe = self._make_inner(k, self.shares[k])
+                if k == 0:
+                    self._inner = probe
+            self._inner_used = 0
+
+    @property
+    def generation_size(self):
+        return self._current().generation_size
+
+    def _current(self) -> Optimizer:
+        if self._inner is None:
+            self._inner = self._make_inner(self.k, None if self.shares is None else self.shares[self.k])
+        return self._inner
+
+    def _share(self) -> int | None:
+        return None if self.shares is None else self.shares[self.k]
+
+    def _advance_if_done(self):
+        inner = self._current()
+        share = self._share()
+        while (share is not None and self._inner_used >= share) or inner.stop():
+            self._finish_partition()
+            if self.k >= len(self.partitions):
+                return False
+            inner = self._current()
+            share = self._share()
+        return True
+
+    def _finish_partition(self):
+        inner = self._inner
+        idx = self.partitions[self.k]
+        if inner is not None and inner.n_iter > 0:
+            self._x[idx] = inner.result().x
+        self.partition_log.append((self.k, self._inner_used))
+        self.k += 1
+        self._inner = None
+        self._inner_used = 0
+
+    # --------------------------------------------------------------- protocol
+    def _ask(self):
+        if not self._advance_if_done():
+            raise OptimError("ask: every partition is finished")
+        Xs = self._current().ask()
+        X = np.repeat(self._x[None, :], len(Xs), axis=0)
+        X[:, self.partitions[self.k]] = Xs
+        return X
+
+    def _remaining(self):
+        rem = super()._remaining()
+        share = self._share()
+        if share is None:
+            return rem
+        part = share - self._inner_used
+        return part if rem is None else min(rem, part)
+
+    def _record(self, X, E, *, n_counted, n_bad):
+        self._counted = n_counted
+        super()._record(X, E, n_counted=n_counted, n_bad=n_bad)
+
+    def _tell(self, X, E):
+        inner = self._current()
+        idx = self.partitions[self.k]
+        n = getattr(self, "_counted", len(X))
+        inner._record(X[:, idx], E, n_counted=n, n_bad=0)
+        self._inner_used += n
+        self._counted = len(X)
+        Xin = inner.result().x
+        self._last_pop = X
+        self._xcur = self._x.copy()
+        self._xcur[idx] = Xin
+
+    def _stop(self):
+        if self.k >= len(self.partitions):
+            return {"partitions": len(self.partitions)}
+        share = self._share()
+        last = self.k == len(self.partitions) - 1
+        if last and ((share is not None and self._inner_used >= share)
+                     or (self._inner is not None and self._inner.stop())):
+            return {"partitions": len(self.partitions)}
+        return {}
+
+    def _estimate(self):
+        x = self._x.copy()
+        if self._inner is not None and self._inner.n_iter > 0 and self.k < len(self.partitions):
+            x[self.partitions[self.k]] = self._inner.result().x
+        return x, None
+
+    def _population(self):
+        if self._last_pop is None:
+            return np.repeat(self._x[None, :], 1, axis=0), None
+        return self._last_pop, None
+
+    @property
+    def current_partition(self) -> int:
+        """Index of the partition being optimised (``len(partitions)`` when done)."""
+        return self.k

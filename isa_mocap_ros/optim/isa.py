@@ -1,0 +1,144 @@
+"""Interacting simulated annealing (ISA), gall_isa_introduction §13.3, Algorithm 6.
+
+One generation ``t``:
+
+1. weights ``pi_i = exp(-beta_t V(x_i))`` (log-sum-exp normalised), ``beta_t`` from the
+   annealing scheme: polynomial (13.19), logarithmic (13.18) or adaptive (target ESS);
+2. the estimate: weighted mean ``sum_i W_i x_i``, with rotation-vector triples averaged on SO(3)
+   by the fixed-point iteration (13.24);
+3. selection by kernel S1 (13.8), S2 (13.9) or S3 (13.10) (:mod:`.resampling`);
+4. mutation by the dynamic variance scheme (13.16): Gaussian, diagonal covariance
+   ``Sigma_kk = c / (n - 1) * sum_i max(|x_ik - mu_k|, rho)^2`` computed on the selected particles.
+
+Note on (13.16): the book writes ``((x)_rho)_k = max(x_k, rho)`` applied to the deviation
+``x - mu``; taken literally this would floor every negative deviation to ``rho``. We read it as a
+floor on the deviation's magnitude, ``max(|x_k - mu_k|, rho)``, which keeps the stated purpose
+("the variance does not become zero": ``Sigma_kk >= c n rho^2 / (n - 1)``).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ._base import OptimError, Optimizer
+from ._rotations import rotation_mean
+from .resampling import SCHEMES, SELECTION_KERNELS, ess, normalise_log
+from .schedules import AdaptiveEss, make_schedule
+
+__all__ = ["Isa", "weighted_estimate", "dynamic_variance"]
+
+
+def weighted_estimate(X: np.ndarray, W: np.ndarray, rotation_blocks=()) -> np.ndarray:
+    """Weighted mean ``(d,)`` of ``X : (n, d)`` with weights ``W : (n,)``; coordinates in
+    ``rotation_blocks`` (index triples) are averaged with :func:`rotation_mean` (13.24)."""
+    x = W @ X
+    for blk in rotation_blocks:
+        idx = list(blk)
+        x[idx] = rotation_mean(X[:, idx], W)
+    return x
+
+
+def dynamic_variance(X: np.ndarray, c: float, rho: float) -> np.ndarray:
+    """Diagonal of the dynamic-variance covariance (13.16), ``(d,)``, of particles ``X : (n, d)``."""
+    n = X.shape[0]
+    dev = np.maximum(np.abs(X - X.mean(axis=0)), rho)
+    return c / max(n - 1, 1) * np.sum(dev * dev, axis=0)
+
+
+class Isa(Optimizer):
+    """Interacting simulated annealing (Algorithm 6).
+
+    Parameters
+    ----------
+    x0, spread, bounds, rng, initial_population, rotation_blocks, init, max_iter
+        See :class:`Optimizer`.
+    n_particles : int
+        Particles ``n`` (default 50, as in Table 13.1).
+    kernel : {"s1", "s2", "s3"}
+        Selection kernel (13.8) / (13.9) / (13.10).
+    schedule : {"polynomial", "logarithmic", "adaptive"} or callable ``(t, E) -> beta``
+        Annealing scheme (13.19) / (13.18) / target-ESS.
+    b : float, optional
+        Schedule parameter (polynomial default 0.993, logarithmic default 2).
+    target_ess : float
+        ESS fraction for the adaptive schedule (default 0.5); the adaptive beta never decreases.
+    c : float
+        Dynamic-variance constant (13.16), default 0.8.
+    rho : float
+        Floor of the deviations in (13.16), default 1e-4.
+    resampling : {"multinomial", "residual", "stratified", "systematic"}
+        Scheme used for the replaced particles (the paper: multinomial).
+    """
+
+    name = "isa"
+    has_weights = True
+
+    def __init__(self, x0, spread, *, n_particles: int = 50, kernel: str = "s1",
+                 schedule="polynomial", b: float | None = None, target_ess: float = 0.5,
+                 c: float = 0.8, rho: float = 1e-4, resampling: str = "multinomial", **kw):
+        super().__init__(x0, spread, **kw)
+        n = int(n_particles) if self._initial_population is None or n_particles != 50 \
+            else self._initial_population.shape[0]
+        if n < 2:
+            raise OptimError(f"n_particles: expected >= 2, got {n_particles}")
+        self.n = n
+        if kernel not in SELECTION_KERNELS:
+            raise OptimError(f"kernel: expected one of {sorted(SELECTION_KERNELS)}, got {kernel!r}")
+        self.kernel = kernel
+        self._select = SELECTION_KERNELS[kernel]
+        if resampling not in SCHEMES:
+            raise OptimError(f"resampling: expected one of {sorted(SCHEMES)}, got {resampling!r}")
+        self._scheme = SCHEMES[resampling]
+        self.schedule = make_schedule(schedule, b=b, target=target_ess)
+        if not (c > 0):
+            raise OptimError(f"c: expected > 0, got {c}")
+        if not (rho >= 0):
+            raise OptimError(f"rho: expected >= 0, got {rho}")
+        self.c, self.rho = float(c), float(rho)
+        self._X: np.ndarray | None = None   # next particles to evaluate
+        self._P: np.ndarray | None = None   # last evaluated particles
+        self._W: np.ndarray | None = None   # their normalised weights
+        self._x = self.x0.copy()
+        self.beta = float("nan")
+        self._ess = float("nan")
+
+    @property
+    def generation_size(self) -> int:
+        return self.n
+
+    def _ask(self):
+        if self._X is None:
+            self._X = self._draw_initial(self.n)
+        return self._X
+
+    def weights(self, E: np.ndarray) -> np.ndarray:
+        """Normalised weights ``exp(-beta_t E)`` of this generation (sets ``self.beta``)."""
+        beta = float(self.schedule(self.n_iter, E))
+        if isinstance(self.schedule, AdaptiveEss) and np.isfinite(self.beta):
+            beta = max(beta, self.beta)
+        self.beta = beta
+        fin = np.isfinite(E)
+        E0 = E[fin].min() if fin.any() else 0.0
+        return normalise_log(np.where(fin, -beta * (E - E0), -np.inf))
+
+    def _tell(self, X, E):
+        W = self.weights(E)
+        self._P, self._W = X, W
+        self._ess = ess(W)
+        self._x = weighted_estimate(X, W, self.rotation_blocks)
+        A = self._select(W, self.rng, scheme=self._scheme)        # selection (13.8-13.10)
+        Xs = X[A]
+        var = dynamic_variance(Xs, self.c, self.rho)               # Sigma_t (13.16), diagonal
+        Z = self.rng.standard_normal(Xs.shape)
+        self._X = self.clip(Xs + Z * np.sqrt(var))                 # mutation K_t
+
+    def _beta_ess(self):
+        return self.beta, self._ess
+
+    def _estimate(self):
+        return self._x.copy(), None
+
+    def _population(self):
+        if self._P is None:
+            P = self._ask()
+            return P, np.full(len(P), 1.0 / len(P))
+        return self._P, self._W
