@@ -1,0 +1,268 @@
+"""Pose prediction for the next frame: autoregression on twists (ISA 13.28) and two baselines.
+
+Source: Gall et al., ISA §13.4.2, "Pose prediction". The root's rigid body motions ``P_i`` of
+the last frames give relative motions as twists ``ξ_i = log(P_i P_{i-1}^{-1})`` (13.26); each is
+moved into the current frame ``M`` by the adjoint of ``G_i = M P_{i-1}^{-1}`` and damped by
+``λ_i`` (``0 ≤ λ_i ≤ 1``, ``Σ λ_i = 1``), and the prediction is the rigid body motion
+
+    exp(ξ'_N) exp(ξ'_{N-1}) ... exp(ξ'_1) M,    ξ'_i = Ad_{G_i} (λ_i ξ_i)            (13.28)
+
+Formula implemented by :class:`ArPredictor` (``N = order``; with ``K + 1`` estimates
+``x_{k-K}, ..., x_k`` stored, ``K = min(order, n_estimates - 1)``):
+
+* root (``root_slice``: translation ``t`` then rotation vector ``w``, DESIGN §3), with
+  ``P_j = [exp(ŵ_j) t_j; 0 1]`` (:func:`~isa_mocap_ros.geometry.pose_to_matrix`),
+  ``M = P_k``, twists ``ξ_i = log(P_i P_{i-1}^{-1})`` for the last ``K`` steps, ``G_i =
+  M P_{i-1}^{-1}``, ``ξ'_i = Ad_{G_i} λ_i ξ_i`` and ``P_pred = exp(ξ'_K) ... exp(ξ'_1) M``
+  (oldest motion applied first, index ``i = 1`` the oldest). Because
+  ``exp(Ad_G ξ) = G exp(ξ) G^{-1}``, this equals
+  ``P_pred = M exp(λ_K ζ_K) ... exp(λ_1 ζ_1)`` with the body-frame increments
+  ``ζ_i = log(P_{i-1}^{-1} P_i)``: the recent relative motions, re-applied at the current pose;
+* joint angles ``q`` (every other coordinate) by the same weights on first differences:
+  ``q_pred = q_k + Σ_i λ_i (q_i - q_{i-1})``;
+* ``λ``: ``damping`` given oldest first (``λ_1 ... λ_N``), normalised to sum 1; default
+  ``λ_i ∝ i`` (the newest motion weighs most). With fewer than ``N`` motions known, the newest
+  ``K`` weights ``λ_{N-K+1} ... λ_N`` are renormalised.
+
+Since ``Σ λ_i = 1``, a constant-twist motion ``P_j = exp(ξ)^j P_0`` with constant joint
+velocities is extrapolated exactly. The predicted rotation vector is chosen among its
+equivalents ``(θ + 2πm) ω`` as the one nearest the last estimate's, so a root turning through
+``θ = π`` does not jump.
+
+Baselines: :class:`ConstantPosePredictor` (the last estimate) and
+:class:`ConstantVelocityPredictor` (``2 x_k - x_{k-1}`` in pose-vector space; ``ArPredictor``
+with ``order=1`` is the constant velocity on SE(3)).
+"""
+from __future__ import annotations
+
+from collections import deque
+from typing import Sequence
+
+import numpy as np
+
+from isa_mocap_ros.geometry import adjoint, exp_se3, log_se3, matrix_to_pose, pose_to_matrix
+
+__all__ = ["PredictionError", "ArPredictor", "ConstantPosePredictor", "ConstantVelocityPredictor"]
+
+
+class PredictionError(ValueError):
+    """Bad estimate given to a predictor, bad settings, or a prediction asked of an empty history."""
+
+
+def _se3_inverse(T: np.ndarray) -> np.ndarray:
+    """``[R t; 0 1]^{-1} = [Rᵀ -Rᵀt; 0 1]``."""
+    Ti = np.eye(4)
+    Ti[:3, :3] = T[:3, :3].T
+    Ti[:3, 3] = -T[:3, :3].T @ T[:3, 3]
+    return Ti
+
+
+def _nearest_rotvec(w: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """The rotation vector ``(θ + 2πm) ω`` equivalent to ``w`` that is nearest to ``ref``."""
+    theta = float(np.linalg.norm(w))
+    if theta < 1e-12:
+        return w
+    axis = w / theta
+    m = np.round((float(axis @ ref) - theta) / (2.0 * np.pi))
+    return axis * (theta + 2.0 * np.pi * m)
+
+
+class _HistoryPredictor:
+    """Keeps the last ``history`` estimates; subclasses implement :meth:`predict`."""
+
+    def __init__(self, history: int) -> None:
+        self._hist: deque[np.ndarray] = deque(maxlen=history)
+        self._n_dof: int | None = None
+
+    @property
+    def n_estimates(self) -> int:
+        """Number of estimates held (at most the history length)."""
+        return len(self._hist)
+
+    @property
+    def n_dof(self) -> int | None:
+        """Length ``D`` of the pose vectors (fixed by the first estimate; None before)."""
+        return self._n_dof
+
+    @property
+    def history(self) -> np.ndarray:
+        """(k, D) ndarray: the held estimates, oldest first (a copy)."""
+        if not self._hist:
+            return np.empty((0, self._n_dof or 0))
+        return np.array(self._hist)
+
+    def _check(self, x) -> np.ndarray:
+        try:
+            x = np.array(x, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise PredictionError(f"x: expected a 1-D array of floats, got {x!r}") from exc
+        if x.ndim != 1 or x.size == 0:
+            raise PredictionError(f"x: expected shape (D,), got {x.shape}")
+        if self._n_dof is not None and x.size != self._n_dof:
+            raise PredictionError(f"x: expected shape ({self._n_dof},) like the earlier estimates, "
+                                  f"got {x.shape}")
+        if not np.all(np.isfinite(x)):
+            bad = int(np.flatnonzero(~np.isfinite(x))[0])
+            raise PredictionError(f"x: expected finite values, got {x[bad]} at index {bad}")
+        return x
+
+    def update(self, x) -> None:
+        """Append the estimate of the frame just finished.
+
+        Parameters
+        ----------
+        x : (D,) array_like
+            Pose vector; ``D`` must match the earlier estimates.
+
+        Raises
+        ------
+        PredictionError
+            Non-finite values or a wrong shape; the history is left untouched.
+        """
+        x = self._check(x)
+        if self._n_dof is None:
+            self._validate_dof(x.size)
+        self._n_dof = x.size
+        self._hist.append(x)
+
+    def _validate_dof(self, n_dof: int) -> None:
+        pass
+
+    def reset(self) -> None:
+        """Forget every estimate (the pose length may change afterwards)."""
+        self._hist.clear()
+        self._n_dof = None
+
+    def _last(self) -> np.ndarray:
+        if not self._hist:
+            raise PredictionError("predict: no estimate yet; call update(x) first")
+        return self._hist[-1]
+
+    def predict(self) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+class ConstantPosePredictor(_HistoryPredictor):
+    """Predicts the last estimate again (the "no motion model" baseline)."""
+
+    def __init__(self) -> None:
+        super().__init__(1)
+
+    def predict(self) -> np.ndarray:
+        """Return ``x_k`` as a (D,) ndarray (a copy)."""
+        return self._last().copy()
+
+
+class ConstantVelocityPredictor(_HistoryPredictor):
+    """Predicts ``x_k + (x_k - x_{k-1})`` coordinate-wise (rotation vectors included).
+
+    A naive baseline: it treats the root rotation vector as Euclidean. With one estimate it
+    returns that estimate.
+    """
+
+    def __init__(self) -> None:
+        super().__init__(2)
+
+    def predict(self) -> np.ndarray:
+        """Return the (D,) prediction ``2 x_k - x_{k-1}`` (``x_k`` with a single estimate)."""
+        last = self._last()
+        if len(self._hist) < 2:
+            return last.copy()
+        return last + (last - self._hist[-2])
+
+
+class ArPredictor(_HistoryPredictor):
+    """Autoregressive prediction on twists with damping (ISA 13.28); see the module docstring.
+
+    Parameters
+    ----------
+    order : int
+        ``N``, the number of past relative motions used (``N + 1`` estimates kept).
+    damping : sequence of float, optional
+        ``λ_1 ... λ_N``, oldest first, non-negative with a positive sum; normalised to sum 1.
+        Default ``λ_i = i / Σ_j j``.
+    root_slice : slice or None
+        The 6 root coordinates (translation, rotation vector) in the pose vector; None treats
+        every coordinate as a joint angle.
+
+    Attributes
+    ----------
+    damping : (N,) ndarray
+        The normalised ``λ``.
+
+    Examples
+    --------
+    >>> ar = ArPredictor(order=2)
+    >>> for k in range(3):
+    ...     ar.update([0.1 * k, 0, 1.0, 0, 0, 0, 0.5 + 0.05 * k])
+    >>> np.round(ar.predict(), 12).tolist()
+    [0.3, 0.0, 1.0, 0.0, 0.0, 0.0, 0.65]
+    """
+
+    def __init__(self, *, order: int = 3, damping: Sequence[float] | None = None,
+                 root_slice: slice | None = slice(0, 6)) -> None:
+        if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order < 1:
+            raise PredictionError(f"order: expected an integer >= 1, got {order!r}")
+        if damping is None:
+            lam = np.arange(1, order + 1, dtype=float)
+        else:
+            lam = np.asarray(damping, dtype=float)
+            if lam.shape != (order,):
+                raise PredictionError(f"damping: expected {order} weights (one per motion, oldest "
+                                      f"first), got shape {lam.shape}")
+            if not np.all(np.isfinite(lam)) or np.any(lam < 0) or lam.sum() <= 0:
+                raise PredictionError(f"damping: expected finite non-negative weights with a "
+                                      f"positive sum, got {lam.tolist()}")
+        if root_slice is not None and not isinstance(root_slice, slice):
+            raise PredictionError(f"root_slice: expected a slice of 6 coordinates or None, "
+                                  f"got {root_slice!r}")
+        super().__init__(order + 1)
+        self.order = int(order)
+        self.damping = lam / lam.sum()
+        self.root_slice = root_slice
+
+    def _validate_dof(self, n_dof: int) -> None:
+        if self.root_slice is not None:
+            idx = range(n_dof)[self.root_slice]
+            if len(idx) != 6:
+                raise PredictionError(f"root_slice: expected 6 coordinates of a pose of length "
+                                      f"{n_dof}, got {len(idx)} ({self.root_slice})")
+
+    def predict(self) -> np.ndarray:
+        """Prediction for the next frame.
+
+        Returns
+        -------
+        (D,) ndarray
+            The 13.28 prediction; the last estimate while only one is known.
+
+        Raises
+        ------
+        PredictionError
+            No estimate yet.
+        """
+        last = self._last()
+        K = min(self.order, len(self._hist) - 1)
+        if K == 0:
+            return last.copy()
+        X = np.array(self._hist)[-(K + 1):]                 # x_{k-K} ... x_k, oldest first
+        lam = self.damping[-K:] / self.damping[-K:].sum()    # λ of the newest K motions
+        out = np.empty_like(last)
+        joint = np.ones(last.size, bool)
+        if self.root_slice is not None:
+            joint[self.root_slice] = False
+            P = pose_to_matrix(X[:, self.root_slice])         # (K+1, 4, 4)
+            M = P[-1]
+            T = M
+            for i in range(1, K + 1):                        # oldest motion first (rightmost)
+                P_prev_inv = _se3_inverse(P[i - 1])
+                xi = log_se3(P[i] @ P_prev_inv)              # ξ_i = log(P_i P_{i-1}^{-1})
+                G = M @ P_prev_inv                           # G_i = M P_{i-1}^{-1}
+                xi_cur = adjoint(G) @ (lam[i - 1] * xi)      # ξ'_i = Ad_G λ_i ξ_i
+                T = exp_se3(xi_cur) @ T                      # exp(ξ'_i) ... exp(ξ'_1) M
+            root = matrix_to_pose(T)
+            root[3:] = _nearest_rotvec(root[3:], X[-1, self.root_slice][3:])
+            out[self.root_slice] = root
+        # q_pred = q_k + Σ λ_i (q_i - q_{i-1})
+        out[joint] = X[-1, joint] + lam @ np.diff(X[:, joint], axis=0)
+        return out
