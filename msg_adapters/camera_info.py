@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import array
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from sensor_msgs.msg import CameraInfo

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 from sensor_msgs.msg import Image
 
-from .errors import AdapterError, Received, as_int, as_str
+from .errors import AdapterError, Received, as_int
 from .stamp import make_header
 
 __all__ = ["ENCODINGS", "image_to_array", "array_to_image"]
@@ -77,7 +77,7 @@ def _byte_view(data: Any) -> memoryview:
     if not mv.c_contiguous:
         raise AdapterError("Image.data", "a contiguous buffer", Received("a strided buffer"))
     if mv.format != "B" or mv.ndim != 1:
-        mv = mv.cast("B") if mv.ndim <= 1 or mv.itemsize == 1 else mv.cast("B")
+        mv = mv.cast("B")  # any C-contiguous buffer may be viewed as flat bytes
     return mv
 
 

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from sensor_msgs.msg import JointState
 
-from .errors import AdapterError, Received, as_float_array, as_str
+from .errors import AdapterError, Received, as_float_array
 from .stamp import make_header
 
 __all__ = ["joint_state_to_arrays", "arrays_to_joint_state"]
