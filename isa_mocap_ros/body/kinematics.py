@@ -1,0 +1,154 @@
+"""Batch forward kinematics, capsule end points and position Jacobians of a body model.
+
+Source: the kinematic tree of EA-vs-PF §3.1 (a node's transformation moves all its children) with
+the root as the rigid body motion of ISA Eq. 13.20. For joint ``j`` with parent ``p``:
+
+    R_j = R_p · R_a1(q1) R_a2(q2) ...      (local axes in the joint's chain order)
+    p_j = p_p + R_p · offset_j             (the joint centre is fixed in the parent's frame)
+
+and the root: ``R_0 = exp(ŵ)``, ``p_0 = t`` for the pose ``x = (t, w, q...)``. Everything is
+vectorized over the ``n`` poses (a Python loop runs over the ~22 joints only).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..geometry import exp_so3
+from .model import BodyError, BodyModel
+
+__all__ = ["forward_kinematics", "joint_positions", "capsule_endpoints", "position_jacobian"]
+
+
+def _axis_rot(q: np.ndarray, axis: int) -> np.ndarray:
+    c, s = np.cos(q), np.sin(q)
+    R = np.zeros(q.shape + (3, 3))
+    i, k = [(1, 2), (2, 0), (0, 1)][axis]
+    R[:, axis, axis] = 1.0
+    R[:, i, i] = c
+    R[:, k, k] = c
+    R[:, i, k] = -s
+    R[:, k, i] = s
+    return R
+
+
+def _as_batch(model: BodyModel, X) -> np.ndarray:
+    X = model.validate_pose(X, name="X")
+    return X[None] if X.ndim == 1 else X
+
+
+def _fk(model: BodyModel, X: np.ndarray, *, want_axes: bool = False):
+    """World rotations ``(n, J, 3, 3)``, positions ``(n, J, 3)`` and, optionally, the world axis
+    of every joint-angle DOF ``(n, D, 3)`` (rows 0-5 unused)."""
+    n = X.shape[0]
+    J = len(model.joint_names)
+    R = np.empty((n, J, 3, 3))
+    P = np.empty((n, J, 3))
+    axes = np.zeros((n, model.dof, 3)) if want_axes else None
+    R[:, 0] = exp_so3(X[:, 3:6])
+    P[:, 0] = X[:, :3]
+    parents = model.parents
+    offsets = model.offsets
+    for j in range(1, J):
+        p = parents[j]
+        Rp = R[:, p]
+        P[:, j] = P[:, p] + Rp @ offsets[j]
+        Rj = Rp
+        for d in model.joint_dofs[j]:
+            a = model.dof_axis[d]
+            if want_axes:
+                axes[:, d] = Rj[:, :, a]
+            Rj = Rj @ _axis_rot(X[:, d], a)
+        R[:, j] = Rj
+    return R, P, axes
+
+
+def forward_kinematics(model: BodyModel, X) -> np.ndarray:
+    """World transforms of all joints for a batch of poses.
+
+    Parameters
+    ----------
+    model : BodyModel
+    X : (n, D) or (D,) array_like
+        Pose vectors (root translation, root rotation vector, joint angles).
+
+    Returns
+    -------
+    T : (n, J, 4, 4) ndarray
+        Homogeneous world transform of each joint frame (``n = 1`` for a single pose).
+    """
+    X = _as_batch(model, X)
+    R, P, _ = _fk(model, X)
+    T = np.zeros(R.shape[:2] + (4, 4))
+    T[..., :3, :3] = R
+    T[..., :3, 3] = P
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def joint_positions(model: BodyModel, X) -> np.ndarray:
+    """Joint centres in the world frame, ``(n, D) -> (n, J, 3)`` metres."""
+    X = _as_batch(model, X)
+    return _fk(model, X)[1]
+
+
+def capsule_endpoints(model: BodyModel, X) -> np.ndarray:
+    """Capsule end points ``(n, C, 2, 3)``; radii in ``model.capsule_radii`` ``(C, 2)``."""
+    P = joint_positions(model, X)
+    return P[:, model.capsules]
+
+
+def position_jacobian(model: BodyModel, X, joints) -> tuple[np.ndarray, np.ndarray]:
+    """Positions of selected joints and their Jacobian w.r.t. a local pose perturbation.
+
+    The root rotation is perturbed on the left, ``R_0 ← exp(δ̂) R_0`` (δ in the world frame),
+    so columns 3-5 are ``∂p/∂δ = -[p - p_0]_×``; columns 0-2 the identity; a joint angle
+    ``q_d`` about world axis ``a_d`` at joint centre ``c_d`` gives ``a_d × (p - c_d)`` for the
+    joints below it, zero elsewhere.
+
+    Parameters
+    ----------
+    model : BodyModel
+    X : (n, D) array_like
+    joints : (K,) int array_like
+        Joint indices.
+
+    Returns
+    -------
+    P : (n, K, 3) ndarray
+    Jac : (n, K, 3, D) ndarray
+    """
+    X = _as_batch(model, X)
+    joints = np.asarray(joints, dtype=int)
+    if joints.ndim != 1 or np.any(joints < 0) or np.any(joints >= len(model.joint_names)):
+        raise BodyError(f"joints: expected indices in [0, {len(model.joint_names)}), got {joints}")
+    _, Pall, axes = _fk(model, X, want_axes=True)
+    P = Pall[:, joints]
+    n, K = P.shape[:2]
+    JacT = np.zeros((n, K, model.dof, 3))
+    Jac = np.moveaxis(JacT, 2, 3)                       # (n, K, 3, D) view of JacT
+    Jac[:, :, [0, 1, 2], [0, 1, 2]] = 1.0
+    u = P - Pall[:, :1]
+    # -[u]_x columns: d(δ × u)/dδ
+    Jac[:, :, 0, 4], Jac[:, :, 0, 5] = u[..., 2], -u[..., 1]
+    Jac[:, :, 1, 3], Jac[:, :, 1, 5] = -u[..., 2], u[..., 0]
+    Jac[:, :, 2, 3], Jac[:, :, 2, 4] = u[..., 1], -u[..., 0]
+    below = _descendant_mask(model)[:, joints]          # (J, K): joint k is below (or at) joint j
+    for d in range(6, model.dof):
+        j = model.dof_joint[d]
+        mask = below[j]
+        if not mask.any():
+            continue
+        lever = P[:, mask] - Pall[:, j][:, None]
+        JacT[:, mask, d] = np.cross(axes[:, d][:, None], lever)
+    return P, Jac
+
+
+def _descendant_mask(model: BodyModel) -> np.ndarray:
+    J = len(model.joint_names)
+    M = np.eye(J, dtype=bool)
+    for k in range(J):
+        p = model.parents[k]
+        while p >= 0:
+            M[p, k] = True
+            p = model.parents[p]
+    return M
