@@ -11,11 +11,13 @@ The view is read-only (it aliases the message). Multi-byte encodings (16-bit, 32
 ``is_bigendian`` differs from this machine are byte-swapped into a new, writable native array,
 so callers (OpenCV, numba) only ever see native dtypes.
 
-Speed (measured on the project's 2-core build machine, numpy 2, rclpy Jazzy wheels,
-``benchmark in docs/msg_adapters.md``): for a 640x480 ``rgb8`` frame
-``array_to_image`` takes ~0.2 ms (one copy of 0.92 MB into an ``array.array('B')``; assigning a
-numpy array to ``Image.data`` instead goes element by element through ``array.array('B', arr)``
-and takes ~70 ms) and ``image_to_array`` takes ~5 µs (a view, no copy).
+Speed (measured with ``isa-mocap bench adapters`` on the 2-core build machine, numpy 2, rclpy
+Jazzy wheels; best of 5 rounds): for a 640x480 ``rgb8`` frame ``array_to_image`` takes
+~0.07-0.12 ms (one memcpy of 0.92 MB into an ``array.array('B')``, assigned to ``Image.data``
+after construction; the first two or three calls of a process take ~1 ms while the allocator
+maps fresh pages). Assigning the numpy array itself to ``Image.data`` converts element by
+element and takes ~70 ms. ``image_to_array`` takes ~4 µs (a strided view, padded or not),
+~30-40 µs with ``copy=True``, ~25 µs for a byte-swapped 640x480 ``mono16``.
 """
 from __future__ import annotations
 
