@@ -6,7 +6,10 @@ body, rotation-vector root). See ``docs/body_models.md``.
 from .kinematics import capsule_endpoints, forward_kinematics, joint_positions, position_jacobian
 from .model import (DEFAULT_SHAPE_PATH, FULL_BODY_JOINTS, ROOT_DOF_NAMES, BodyError, BodyModel,
                     default_shape, load_shape, make_model, save_shape)
+from .urdf import (euler_to_root_rotvec, joint_state_to_pose, pose_to_joint_state, root_rotvec_to_euler,
+                   to_urdf)
 
 __all__ = ["BodyError", "BodyModel", "make_model", "load_shape", "save_shape", "default_shape",
            "DEFAULT_SHAPE_PATH", "FULL_BODY_JOINTS", "ROOT_DOF_NAMES", "forward_kinematics",
-           "joint_positions", "capsule_endpoints", "position_jacobian"]
+           "joint_positions", "capsule_endpoints", "position_jacobian", "to_urdf",
+           "root_rotvec_to_euler", "euler_to_root_rotvec", "pose_to_joint_state", "joint_state_to_pose"]
