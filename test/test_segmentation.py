@@ -242,3 +242,21 @@ def test_same_input_same_mask(scene):
         seg = BackgroundSegmenter(SegmentationConfig(learn_frames=4))
         masks.append(run_sequence(seg, scene, rng, 4, 3))
     assert masks[0] == masks[1]
+
+
+@pytest.mark.parametrize("shadow", [False, True])
+def test_numba_kernel_agrees_with_numpy_reference(scene, shadow):
+    runs = {}
+    for kernel in ("numba", "numpy"):
+        rng = np.random.default_rng(12)
+        seg = BackgroundSegmenter(SegmentationConfig(kernel=kernel, learn_frames=4,
+                                                     shadow_suppression=shadow))
+        masks = []
+        for k in range(10):
+            img = noisy(scene, rng) if k < 4 else compose(scene, person_mask(80 + 10 * k), rng)
+            masks.append(seg.apply(img))
+        runs[kernel] = (np.array(masks), seg._mu.copy(), seg._var.copy())
+    (m1, mu1, v1), (m2, mu2, v2) = runs["numba"], runs["numpy"]
+    assert (m1 != m2).mean() < 1e-4            # float32 rounding may flip a borderline pixel
+    np.testing.assert_allclose(mu1, mu2, rtol=1e-4, atol=1e-3)
+    np.testing.assert_allclose(v1, v2, rtol=1e-3, atol=1e-2)

@@ -36,6 +36,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import cv2
+import numba
 import numpy as np
 
 __all__ = ["SegmentationError", "SegmentationConfig", "BackgroundSegmenter", "clean_mask"]
@@ -96,6 +97,9 @@ class SegmentationConfig:
         OpenCV's ``history`` for ``"mog2"``/``"knn"``.
     knn_dist2_threshold : float
         OpenCV's ``dist2Threshold`` for ``"knn"`` (squared intensity distance).
+    kernel : {"numba", "numpy"}
+        Implementation of the ``"colour"`` per-pixel steps: a compiled single pass (default) or
+        the plain numpy reference (same results up to float32 rounding).
     """
 
     method: str = "colour"
@@ -116,10 +120,13 @@ class SegmentationConfig:
     min_blob_area_px: int = 50
     history: int = 200
     knn_dist2_threshold: float = 400.0
+    kernel: str = "numba"
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise SegmentationError(f"method: expected one of {METHODS}, got {self.method!r}")
+        if self.kernel not in ("numba", "numpy"):
+            raise SegmentationError(f"kernel: expected 'numba' or 'numpy', got {self.kernel!r}")
         _check_int("learn_frames", self.learn_frames, 1)
         for name in ("threshold", "min_std", "initial_std", "shadow_chroma_threshold",
                      "knn_dist2_threshold"):
@@ -180,6 +187,82 @@ def clean_mask(mask: np.ndarray, *, open_kernel: int = 3, close_kernel: int = 7,
             keep[0] = False  # label 0 is the background
             out = np.where(keep[labels], np.uint8(255), np.uint8(0))
     return out
+
+
+# --------------------------------------------------------------------------- colour-model kernels
+# Two implementations of the same per-pixel steps: a plain numpy reference and a single-pass numba
+# kernel (the default, ~10x faster); test/test_segmentation.py checks that they agree.
+
+def _foreground_numpy(img, mu, var, min_var, thr2, shadow, a_lo, a_hi, cd2_max):
+    """Raw foreground (H, W) uint8 0/1: ``d^2 = sum_c (I-mu)^2 / s^2 > thr2``, minus shadows."""
+    imgf = img.astype(np.float32)
+    inv_var = 1.0 / np.maximum(var, min_var)
+    diff = imgf - mu
+    d2 = np.einsum("hwc,hwc->hw", diff * diff, inv_var)          # d^2 = sum_c (I-mu)^2 / s^2
+    fg = d2 > thr2
+    if shadow:
+        num = np.einsum("hwc,hwc->hw", imgf * mu, inv_var)
+        den = np.maximum(np.einsum("hwc,hwc->hw", mu * mu, inv_var), np.float32(1e-6))
+        alpha = num / den                                           # brightness distortion
+        r = imgf - alpha[:, :, None] * mu
+        cd2 = np.einsum("hwc,hwc->hw", r * r, inv_var)              # chromaticity distortion^2
+        fg &= ~((alpha >= a_lo) & (alpha <= a_hi) & (cd2 < cd2_max))
+    return fg.view(np.uint8)
+
+
+def _update_numpy(img, mu, var, frozen, rho):
+    """In place, where ``frozen == 0``: ``mu += rho (I - mu)``, ``s^2 += rho ((I - mu)^2 - s^2)``."""
+    diff = img.astype(np.float32) - mu
+    where = (frozen == 0)[:, :, None]
+    np.add(mu, rho * diff, out=mu, where=where)
+    np.add(var, rho * (diff * diff - var), out=var, where=where)
+
+
+@numba.njit(cache=True, nogil=True)
+def _foreground_numba(img, mu, var, min_var, thr2, shadow, a_lo, a_hi, cd2_max):  # pragma: no cover
+    H, W, C = img.shape
+    out = np.zeros((H, W), np.uint8)
+    for y in range(H):
+        for x in range(W):
+            d2 = np.float32(0.0)
+            num = np.float32(0.0)
+            den = np.float32(0.0)
+            for c in range(C):
+                iv = np.float32(1.0) / max(var[y, x, c], min_var)
+                i = np.float32(img[y, x, c])
+                m = mu[y, x, c]
+                d = i - m
+                d2 += d * d * iv
+                num += i * m * iv
+                den += m * m * iv
+            if d2 > thr2:
+                out[y, x] = 1
+                if shadow:
+                    alpha = num / max(den, np.float32(1e-6))
+                    if alpha >= a_lo and alpha <= a_hi:
+                        cd2 = np.float32(0.0)
+                        for c in range(C):
+                            iv = np.float32(1.0) / max(var[y, x, c], min_var)
+                            r = np.float32(img[y, x, c]) - alpha * mu[y, x, c]
+                            cd2 += r * r * iv
+                        if cd2 < cd2_max:
+                            out[y, x] = 0
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _update_numba(img, mu, var, frozen, rho):  # pragma: no cover
+    H, W, C = img.shape
+    for y in range(H):
+        for x in range(W):
+            if frozen[y, x] == 0:
+                for c in range(C):
+                    d = np.float32(img[y, x, c]) - mu[y, x, c]
+                    mu[y, x, c] += rho * d
+                    var[y, x, c] += rho * (d * d - var[y, x, c])
+
+
+_KERNELS = {"numpy": (_foreground_numpy, _update_numpy), "numba": (_foreground_numba, _update_numba)}
 
 
 class BackgroundSegmenter:
@@ -330,8 +413,9 @@ class BackgroundSegmenter:
 
     def _apply_colour(self, image: np.ndarray) -> np.ndarray:
         c = self.config
-        img = self._as3(image).astype(np.float32)
+        img = self._as3(image)
         if self.learning:
+            img = img.astype(np.float32)
             if self._sum is None:
                 self._sum = np.zeros(img.shape, np.float64)
                 self._sumsq = np.zeros(img.shape, np.float64)
@@ -351,31 +435,19 @@ class BackgroundSegmenter:
             return self._zero()
 
         mu, var = self._mu, self._var
-        inv_var = 1.0 / np.maximum(var, np.float32(c.min_std) ** 2)
-        diff = img - mu
-        d2 = np.einsum("hwc,hwc->hw", diff * diff, inv_var)        # d^2 = sum_c (I-mu)^2 / s^2
-        fg = d2 > np.float32(c.threshold) ** 2
-        if c.shadow_suppression:
-            num = np.einsum("hwc,hwc->hw", img * mu, inv_var)
-            den = np.maximum(np.einsum("hwc,hwc->hw", mu * mu, inv_var), 1e-6)
-            alpha = num / den                                         # brightness distortion
-            r = img - alpha[:, :, None] * mu
-            cd2 = np.einsum("hwc,hwc->hw", r * r, inv_var)            # chromaticity distortion^2
-            shadow = ((alpha >= c.shadow_min_brightness) & (alpha <= c.shadow_max_brightness)
-                      & (cd2 < np.float32(c.shadow_chroma_threshold) ** 2))
-            fg &= ~shadow
-        mask = self._clean(fg.view(np.uint8))
+        kernels = _KERNELS[c.kernel]
+        fg = kernels[0](img, mu, var, np.float32(c.min_std) ** 2,
+                        np.float32(c.threshold) ** 2, bool(c.shadow_suppression),
+                        np.float32(c.shadow_min_brightness), np.float32(c.shadow_max_brightness),
+                        np.float32(c.shadow_chroma_threshold) ** 2)
+        mask = self._clean(fg)
 
         if c.update_rate > 0:
-            if fg.mean() > c.max_foreground_fraction:   # a global change: learn it everywhere
-                bgpix = True
+            if np.count_nonzero(fg) > c.max_foreground_fraction * fg.size:
+                frozen = np.zeros(fg.shape, np.uint8)     # a global change: learn it everywhere
+            elif c.update_margin_px > 0:
+                frozen = cv2.dilate(mask, _ellipse(2 * c.update_margin_px + 1))
             else:
-                grown = mask
-                if c.update_margin_px > 0:
-                    grown = cv2.dilate(mask, _ellipse(2 * c.update_margin_px + 1))
-                bgpix = (grown == 0)[:, :, None]
-            rho = np.float32(c.update_rate)
-            # mu += rho (I - mu); s^2 += rho ((I - mu)^2 - s^2), outside the (dilated) foreground
-            np.add(mu, rho * diff, out=mu, where=bgpix)
-            np.add(var, rho * (diff * diff - var), out=var, where=bgpix)
+                frozen = mask
+            kernels[1](img, mu, var, frozen, np.float32(c.update_rate))
         return mask
