@@ -51,7 +51,8 @@ class ChildProcess:
                                       start_new_session=True)
 
     def output(self) -> str:
-        self._out.flush()
+        if not self._out.closed:
+            self._out.flush()
         return self.out_path.read_text(errors="replace")
 
     def wait_for_output(self, text: str, timeout: float = 30.0) -> bool:

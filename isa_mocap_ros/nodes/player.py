@@ -1,0 +1,236 @@
+"""Bag player node: replays an MCAP rosbag2 bag's CDR bytes on their topics.
+
+Run alone::
+
+    player_node --ros-args -p bag:=bags/demo -p rate:=1.0 -p lockstep_topic:=/mocap/joint_states
+
+or through ``isa-mocap play BAG``. Messages are published as recorded bytes (never deserialized),
+with the recorded QoS re-offered (latched topics stay latched). In lockstep mode frame k+1 goes out
+only after a message on ``lockstep_topic`` carries frame k's ``header.stamp`` (see
+:mod:`isa_mocap_ros.bag.playback`), so downstream results do not depend on machine speed.
+"""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor, FloatingPointRange
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+
+import msg_adapters as ma
+from isa_mocap_ros.bag import BagError, BagMessage, BagReader
+from isa_mocap_ros.bag.playback import (PlaybackOptions, first_field_is_header, frames,
+                                        parse_remaps, select_topics)
+from isa_mocap_ros.nodes import qos
+
+
+def _desc(text: str, lo: float | None = None, hi: float | None = None) -> ParameterDescriptor:
+    d = ParameterDescriptor(description=text)
+    if lo is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=lo, to_value=hi, step=0.0)]
+    return d
+
+
+class BagPlayer(Node):
+    """Publishes a bag's messages; ``run()`` plays it (call it beside a spinning executor)."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("player", **kwargs)
+        p = self.declare_parameter
+        self.bag_path = p("bag", "", _desc("rosbag2 directory or .mcap file to replay")).value
+        rate = p("rate", 1.0, _desc("playback rate (1.0 = recorded speed)", 0.001, 1000.0)).value
+        loop = p("loop", False, _desc("start again at the end")).value
+        start = p("start_offset_s", 0.0, _desc("skip this many seconds of the bag", 0.0, 1e9)).value
+        topics = p("topics", [""], _desc("topics (or globs) to replay; empty = all")).value
+        exclude = p("exclude_topics", [""], _desc("topics (or globs) not to replay")).value
+        remap = p("remap", [""], _desc("topic remaps 'old:=new'")).value
+        self.clock = p("clock", False, _desc("publish /clock from the bag's time")).value
+        self.clock_hz = p("clock_hz", 40.0, _desc("/clock rate between messages", 0.1, 1000.0)).value
+        self.lockstep_topic = p("lockstep_topic", "", _desc(
+            "wait for this topic to echo each frame's stamp before the next frame ('' = real time)")).value
+        self.lockstep_type = p("lockstep_type", "sensor_msgs/msg/JointState", _desc(
+            "message type on lockstep_topic (its first field must be a std_msgs/Header)")).value
+        self.lockstep_timeout_s = p("lockstep_timeout_s", 10.0, _desc(
+            "give up waiting for a lockstep echo after this long; replay continues", 0.0, 1e6)).value
+        self.wait_for_subscribers_s = p("wait_for_subscribers_s", 0.0, _desc(
+            "before playing, wait up to this long until every topic has a subscriber", 0.0, 1e6)).value
+        self.delay_s = p("delay_s", 0.0, _desc("sleep before playing (discovery)", 0.0, 1e6)).value
+        if not self.bag_path:
+            raise BagError("parameter 'bag' is empty: give the bag to replay (-p bag:=PATH)")
+        self.options = PlaybackOptions(
+            rate=rate, loop=loop, start_offset_s=start,
+            topics=tuple(t for t in topics if t), exclude_topics=tuple(t for t in exclude if t),
+            remap=parse_remaps(r for r in remap if r))
+        self.reader = BagReader(self.bag_path)
+        self.topics = select_topics(self.reader.topics, self.options)
+        self.publishers_by_topic = {}
+        self.stamped: list[str] = []
+        self.latched: list[str] = []
+        for name in self.topics:
+            info = self.reader.topics[name]
+            try:
+                msg_type = ma.message_type(info.type)
+            except ma.AdapterError as exc:
+                self.get_logger().error(f"skipping topic {name}: {exc}")
+                continue
+            profile = qos.playback_qos(info.offered_qos)
+            out_name = self.options.remap.get(name, name)
+            self.publishers_by_topic[name] = self.create_publisher(msg_type, out_name, profile)
+            if profile.durability == qos.LATCHED.durability:
+                self.latched.append(name)
+            elif first_field_is_header(self.reader.msgdef(info.type)):
+                self.stamped.append(name)
+        self.clock_pub = self.create_publisher(Clock, "/clock", 10) if self.clock else None
+        self._acked: set[int] = set()
+        self._ack_cv = threading.Condition()
+        if self.lockstep_topic:
+            self.create_subscription(ma.message_type(self.lockstep_type), self.lockstep_topic,
+                                     self._on_ack, qos.RELIABLE, raw=True)
+        self.published = 0
+        self.acks = 0
+        self.timeouts = 0
+        self._bad_stamp_logged: set[str] = set()
+
+    # -- lockstep ------------------------------------------------------------------------------
+    def _on_ack(self, data: bytes) -> None:
+        try:
+            stamp = ma.header_stamp_ns_from_cdr(data)
+        except ma.AdapterError as exc:
+            self.get_logger().warn(f"lockstep: unreadable message on {self.lockstep_topic}: {exc}")
+            return
+        with self._ack_cv:
+            self._acked.add(stamp)
+            self._ack_cv.notify_all()
+
+    def _wait_ack(self, stamp_ns: int) -> bool:
+        deadline = time.monotonic() + self.lockstep_timeout_s
+        with self._ack_cv:
+            while stamp_ns not in self._acked:
+                left = deadline - time.monotonic()
+                if left <= 0 or not rclpy.ok(context=self.context):
+                    return False
+                self._ack_cv.wait(min(left, 0.1))
+            self._acked.discard(stamp_ns)
+        return True
+
+    # -- playback ------------------------------------------------------------------------------
+    def _stamp_of(self, msg: BagMessage) -> int | None:
+        try:
+            return ma.header_stamp_ns_from_cdr(msg.data)
+        except ma.AdapterError as exc:
+            if msg.topic not in self._bad_stamp_logged:
+                self._bad_stamp_logged.add(msg.topic)
+                self.get_logger().warn(f"cannot read header stamp on {msg.topic}: {exc}")
+            return None
+
+    def _wait_for_subscribers(self) -> None:
+        if self.wait_for_subscribers_s <= 0:
+            return
+        deadline = time.monotonic() + self.wait_for_subscribers_s
+        while time.monotonic() < deadline and rclpy.ok(context=self.context):
+            missing = [t for t, pub in self.publishers_by_topic.items() if pub.get_subscription_count() == 0]
+            if not missing:
+                return
+            time.sleep(0.05)
+        self.get_logger().warn(f"no subscriber after {self.wait_for_subscribers_s:.1f} s on: {missing}")
+
+    def _sleep_until(self, t: float) -> bool:
+        while rclpy.ok(context=self.context):
+            left = t - time.monotonic()
+            if left <= 0:
+                return True
+            time.sleep(min(left, 0.05))
+        return False
+
+    def _publish(self, msg: BagMessage) -> None:
+        pub = self.publishers_by_topic.get(msg.topic)
+        if pub is None:
+            return
+        pub.publish(msg.data)
+        self.published += 1
+        if self.clock_pub is not None:
+            self.clock_pub.publish(Clock(clock=ma.ns_to_stamp(msg.log_time_ns)))
+
+    def run(self) -> dict:
+        """Play the bag (blocking); returns a summary dict."""
+        self._wait_for_subscribers()
+        if self.delay_s > 0:
+            self._sleep_until(time.monotonic() + self.delay_s)
+        t_start = time.monotonic()
+        start_ns = self.reader.start_ns + int(self.options.start_offset_s * 1e9)
+        n_frames = 0
+        while rclpy.ok(context=self.context):
+            wall0 = time.monotonic()
+            for frame in frames(self.reader.messages(list(self.publishers_by_topic), start_ns=start_ns),
+                                stamped_topics=self.stamped, latched_topics=self.latched,
+                                stamp_of=self._stamp_of):
+                if not rclpy.ok(context=self.context):
+                    break
+                for msg in frame.messages:
+                    if not self.lockstep_topic:
+                        due = wall0 + (msg.log_time_ns - start_ns) / 1e9 / self.options.rate
+                        if not self._sleep_until(due):
+                            break
+                    self._publish(msg)
+                if frame.stamp_ns is not None:
+                    n_frames += 1
+                    if self.lockstep_topic:
+                        if self._wait_ack(frame.stamp_ns):
+                            self.acks += 1
+                        elif rclpy.ok(context=self.context):
+                            self.timeouts += 1
+                            self.get_logger().warn(
+                                f"lockstep: no {self.lockstep_topic} with stamp {frame.stamp_ns} within "
+                                f"{self.lockstep_timeout_s:.1f} s; continuing")
+            if not self.options.loop:
+                break
+        summary = {"messages": self.published, "frames": n_frames, "topics": len(self.publishers_by_topic),
+                   "seconds": round(time.monotonic() - t_start, 3),
+                   "lockstep_acks": self.acks, "lockstep_timeouts": self.timeouts}
+        self.get_logger().info(
+            f"played {self.published} messages ({n_frames} frames) on {len(self.publishers_by_topic)} topics "
+            f"in {summary['seconds']:.2f} s" + (f"; lockstep acks {self.acks}, timeouts {self.timeouts}"
+                                                if self.lockstep_topic else ""))
+        return summary
+
+    def destroy_node(self) -> None:
+        self.reader.close()
+        super().destroy_node()
+
+
+def play(args: list[str] | None = None, *, parameter_overrides=None) -> dict | None:
+    """Init rclpy, play the bag with an executor spinning in the background, shut down."""
+    rclpy.init(args=args)
+    node = None
+    executor = SingleThreadedExecutor()
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    try:
+        node = BagPlayer(parameter_overrides=parameter_overrides or [])
+        executor.add_node(node)
+        spinner.start()
+        time.sleep(0.05)
+        return node.run()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return None
+    except BagError as exc:
+        print(f"player: {exc}", file=sys.stderr)
+        raise SystemExit(2)
+    finally:
+        executor.shutdown(timeout_sec=1.0)
+        if spinner.is_alive():
+            spinner.join(timeout=2.0)
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def main(args: list[str] | None = None) -> None:
+    play(args)
+
+
+if __name__ == "__main__":
+    main()

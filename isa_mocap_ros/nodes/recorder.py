@@ -1,0 +1,133 @@
+"""Recorder node: writes topics to an MCAP rosbag2 bag as they arrive.
+
+Run alone::
+
+    recorder_node --ros-args -p output:=out/run1 -p topics:="['/mocap/joint_states']"
+
+or through ``isa-mocap record OUT --topics ...`` / ``--all``. Subscriptions are raw (CDR bytes
+written untouched); publishers that appear later are discovered every ``discovery_period_s``;
+the bag is flushed at least every ``flush_period_s`` so a SIGKILL loses at most that much
+(``isa-mocap bag repair`` restores the index); SIGINT/SIGTERM close it cleanly with metadata.
+"""
+from __future__ import annotations
+
+import fnmatch
+import sys
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+
+import msg_adapters as ma
+from isa_mocap_ros.bag import BagError, BagWriter
+from isa_mocap_ros.nodes import qos
+
+# Topics every ROS graph has; recording them with --all only adds noise (ros2 bag skips them too).
+_ALWAYS_EXCLUDED = ("/rosout", "/parameter_events")
+
+
+def _desc(text: str, lo=None, hi=None, integer: bool = False) -> ParameterDescriptor:
+    d = ParameterDescriptor(description=text)
+    if lo is not None and integer:
+        d.integer_range = [IntegerRange(from_value=lo, to_value=hi, step=1)]
+    elif lo is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=lo, to_value=hi, step=0.0)]
+    return d
+
+
+class BagRecorder(Node):
+    """Subscribes (raw) to the selected topics and appends every message to a bag."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("recorder", **kwargs)
+        p = self.declare_parameter
+        output = p("output", "", _desc("rosbag2 directory to create")).value
+        self.patterns = [t for t in p("topics", [""], _desc("topics (or globs) to record")).value if t]
+        self.record_all = p("all", False, _desc("record every topic (except /rosout, /parameter_events)")).value
+        self.exclude = [t for t in p("exclude_topics", [""], _desc("topics (or globs) not to record")).value if t]
+        version = p("version", 9, _desc("rosbag2 metadata version (8 or 9)", 8, 9, integer=True)).value
+        compression = p("compression", "zstd", _desc("chunk compression: zstd, lz4 or none")).value
+        overwrite = p("overwrite", False, _desc("replace an existing output bag")).value
+        flush_s = p("flush_period_s", 1.0, _desc("flush to disk at least this often", 0.05, 60.0)).value
+        discovery_s = p("discovery_period_s", 0.5, _desc("look for new publishers this often", 0.05, 60.0)).value
+        if not output:
+            raise BagError("parameter 'output' is empty: give the bag directory to write (-p output:=DIR)")
+        if not self.patterns and not self.record_all:
+            raise BagError("nothing to record: set 'topics' or 'all'")
+        self.writer = BagWriter(output, version=version, compression=compression, overwrite=overwrite)
+        self.output = output
+        self.subscribed: dict[str, str] = {}
+        self.counts: dict[str, int] = {}
+        self._unsupported: set[str] = set()
+        self.create_timer(flush_s, self.writer.flush)
+        self.create_timer(discovery_s, self._discover)
+        self.get_logger().info(f"recording to {output}")
+        self._discover()
+
+    def _wanted(self, topic: str) -> bool:
+        if any(fnmatch.fnmatchcase(topic, e) for e in self.exclude):
+            return False
+        if self.record_all:
+            return topic not in _ALWAYS_EXCLUDED
+        return any(fnmatch.fnmatchcase(topic, t) for t in self.patterns)
+
+    def _discover(self) -> None:
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self.subscribed or topic in self._unsupported or not self._wanted(topic):
+                continue
+            type_name = types[0]
+            try:
+                msg_type = ma.message_type(type_name)
+            except ma.AdapterError as exc:
+                self._unsupported.add(topic)
+                self.get_logger().error(f"not recording {topic}: {exc}")
+                continue
+            infos = self.get_publishers_info_by_topic(topic)
+            if not infos:
+                continue  # only a subscriber so far; wait for a publisher to learn its QoS
+            offered = [i.qos_profile for i in infos]
+            try:
+                self.writer.add_topic(topic, type_name, qos=[qos.from_rclpy(o) for o in offered])
+            except BagError as exc:
+                self._unsupported.add(topic)
+                self.get_logger().error(f"not recording {topic}: {exc}")
+                continue
+            self.create_subscription(msg_type, topic, self._callback(topic), qos.subscription_qos_for(offered),
+                                     raw=True)
+            self.subscribed[topic] = type_name
+            self.counts[topic] = 0
+            self.get_logger().info(f"subscribed to {topic} [{type_name}]")
+
+    def _callback(self, topic: str):
+        def on_message(data: bytes) -> None:
+            self.writer.write(topic, data, self.get_clock().now().nanoseconds)
+            self.counts[topic] += 1
+        return on_message
+
+    def close(self) -> None:
+        self.writer.close()
+        total = sum(self.counts.values())
+        self.get_logger().info(f"closed {self.output}: {total} messages on {len(self.counts)} topics")
+
+
+def main(args: list[str] | None = None, *, parameter_overrides=None) -> None:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = BagRecorder(parameter_overrides=parameter_overrides or [])
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except BagError as exc:
+        print(f"recorder: {exc}", file=sys.stderr)
+        raise SystemExit(2)
+    finally:
+        if node is not None:
+            node.close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()
