@@ -6,14 +6,14 @@ conventions: REP-103, REP-104). This package imports nothing from ``isa_mocap_ro
 it to keep message handling out of the core. Every rejection raises :class:`AdapterError`
 (a ``ValueError``) whose message names the field, the expected and the received value.
 
-=====================================  ==========================================================
-``image_to_array`` / ``array_to_image``          ``sensor_msgs/Image`` ⇄ (H, W[, C]) ndarray
-``camera_info_to_intrinsics`` / ``intrinsics_to_camera_info``  ``CameraInfo`` ⇄ :class:`Intrinsics`
-``transform_to_rt`` / ``rt_to_transform``        ``TransformStamped`` ⇄ (R, t)
-``joint_state_to_arrays`` / ``arrays_to_joint_state``  ``JointState`` ⇄ (names, positions)
-``stamp_to_ns`` / ``ns_to_stamp`` / ``make_header``  ``Time``/``Header`` ⇄ int nanoseconds
-``to_cdr`` / ``from_cdr`` / ``message_type`` / ``header_stamp_ns_from_cdr``  CDR bytes
-=====================================  ==========================================================
+Adapters (details and speed: ``docs/msg_adapters.md``):
+
+- ``image_to_array`` / ``array_to_image``: ``sensor_msgs/Image`` ⇄ (H, W[, C]) ndarray
+- ``camera_info_to_intrinsics`` / ``intrinsics_to_camera_info``: ``CameraInfo`` ⇄ :class:`Intrinsics`
+- ``transform_to_rt`` / ``rt_to_transform``: ``TransformStamped`` ⇄ (R, t)
+- ``joint_state_to_arrays`` / ``arrays_to_joint_state``: ``JointState`` ⇄ (names, positions)
+- ``stamp_to_ns`` / ``ns_to_stamp`` / ``make_header``: ``Time``/``Header`` ⇄ int nanoseconds
+- ``to_cdr`` / ``from_cdr`` / ``message_type`` / ``header_stamp_ns_from_cdr``: CDR bytes
 """
 from .camera_info import DISTORTION_MODELS, Intrinsics, camera_info_to_intrinsics, intrinsics_to_camera_info
 from .cdr import from_cdr, header_stamp_ns_from_cdr, message_type, to_cdr, type_name_of

@@ -596,8 +596,8 @@ def test_from_cdr_rejects_truncated_messages():
 def test_to_cdr_rejections():
     with pytest.raises(AdapterError, match=r"msg: expected an rclpy message instance, received 'dict'"):
         ma.to_cdr({})
-    bad = Image()
-    bad.encoding = 5  # field checks are off by default, so rclpy lets this through
+    bad = Image(check_fields=False)
+    bad.encoding = 5  # without field checks (the default) rclpy lets this through
     with pytest.raises(AdapterError, match=r"sensor_msgs/msg/Image fields: expected values matching the message definition"):
         ma.to_cdr(bad)
 
