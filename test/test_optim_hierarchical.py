@@ -1,0 +1,81 @@
+"""Hierarchical driver: partitions, one partition at a time, budget split."""
+import numpy as np
+import pytest
+
+from isa_mocap_ros.optim import (Hierarchical, OptimError, make_optimizer, minimize,
+                                 split_budget)
+
+
+def sphere(X):
+    return np.sum((X - 1.0) ** 2, axis=1)
+
+
+PARTS = [np.array([0, 1, 2]), np.array([3, 4]), np.array([6])]   # coordinate 5 not covered
+
+
+@pytest.mark.parametrize("inner", ["isa", "apf", "cmaes", "de", "pso"])
+def test_only_one_partition_moves_at_a_time(inner):
+    x0 = np.zeros(7)
+    batches = []
+
+    def en(X):
+        batches.append(X.copy())
+        return sphere(X)
+
+    opt = Hierarchical(x0, 0.5, partitions=PARTS, optimizer=inner, rng=np.random.default_rng(0))
+    res = minimize(opt, en, max_evals=1200)
+    assert res.n_evals == sum(len(b) for b in batches) <= 1200
+    order = []
+    for X in batches:
+        moving = np.flatnonzero(np.ptp(X, axis=0) > 0)
+        if moving.size == 0:        # a collapsed population (possible with DE in 1-D)
+            continue
+        owner = [k for k, p in enumerate(PARTS) if set(moving) <= set(p.tolist())]
+        assert len(owner) == 1, f"batch moved coordinates {moving} across partitions"
+        if not order or order[-1] != owner[0]:
+            order.append(owner[0])
+    assert order == [0, 1, 2]                       # in the given order, each once
+    assert np.all(np.concatenate(batches)[:, 5] == 0.0) and res.x[5] == 0.0   # uncovered: fixed
+    assert sphere(res.x[None])[0] < sphere(x0[None])[0]
+
+
+def test_budget_split_is_proportional_with_remainder_to_the_first():
+    assert split_budget(1000, [3, 2, 1]) == [501, 333, 166]
+    assert sum(split_budget(997, [6, 3, 7, 7, 8, 8])) == 997
+    opt = Hierarchical(np.zeros(7), 0.5, partitions=PARTS, optimizer="pso",
+                       rng=np.random.default_rng(0))
+    minimize(opt, sphere, max_evals=1000)
+    assert [n for _, n in opt.partition_log] + [opt._inner_used] == [501, 333, 166]
+
+
+@pytest.mark.parametrize("parts,msg", [
+    ([[0, 1], [1, 2]], r"index 1 is in partitions\[0\] and partitions\[1\]"),
+    ([[0, 9]], r"partitions\[0\]: indices must lie in \[0, 4\)"),
+    ([[0], []], r"partitions\[1\]: expected a non-empty"),
+    ([[0, 0]], r"partitions\[0\]: repeated index"),
+    ([], "partitions: expected a non-empty list"),
+    ([[0.5, 1]], r"partitions\[0\]: expected integer indices"),
+])
+def test_inconsistent_partitions_raise(parts, msg):
+    with pytest.raises(OptimError, match=msg):
+        Hierarchical(np.zeros(4), 0.5, partitions=parts, rng=np.random.default_rng(0))
+
+
+def test_rotation_block_split_across_partitions_raises():
+    with pytest.raises(OptimError, match="rotation_blocks: triple .* split across partitions"):
+        Hierarchical(np.zeros(6), 0.5, partitions=[[0, 1], [2, 3, 4, 5]],
+                     rotation_blocks=[(1, 2, 3)], rng=np.random.default_rng(0))
+
+
+def test_share_smaller_than_inner_generation_raises():
+    with pytest.raises(OptimError, match=r"partition 2 .* fewer than one generation"):
+        minimize(make_optimizer("h-isa", np.zeros(7), 0.5, rng=np.random.default_rng(0),
+                                partitions=PARTS), sphere, max_evals=200)
+
+
+def test_hierarchical_needs_partitions_and_a_flat_inner_name():
+    with pytest.raises(OptimError, match="partitions: optimizer 'h-de' needs partitions"):
+        make_optimizer("h-de", np.zeros(3), 0.5, rng=np.random.default_rng(0))
+    with pytest.raises(OptimError, match="optimizer: expected a flat optimizer name"):
+        Hierarchical(np.zeros(3), 0.5, partitions=[[0]], optimizer="h-isa",
+                     rng=np.random.default_rng(0))
