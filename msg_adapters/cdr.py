@@ -23,7 +23,7 @@ from .errors import AdapterError, Received
 __all__ = ["to_cdr", "from_cdr", "message_type", "type_name_of", "header_stamp_ns_from_cdr"]
 
 NS_PER_S = 1_000_000_000
-_TYPE_RE = re.compile(r"^([A-Za-z][A-Za-z0-9_]*)/(?:(msg)/)?([A-Z][A-Za-z0-9_]*)$")
+_TYPE_RE = re.compile(r"^([A-Za-z][A-Za-z0-9_]*)/(?:(msg|srv|action)/)?([A-Z][A-Za-z0-9_]*)$")
 _STAMP_LE = struct.Struct("<iI")
 _STAMP_BE = struct.Struct(">iI")
 
@@ -34,13 +34,16 @@ def _is_message_class(cls: Any) -> bool:
 
 
 @functools.lru_cache(maxsize=256)
-def _import_type(pkg: str, name: str) -> type:
-    module = importlib.import_module(f"{pkg}.msg")
+def _import_type(pkg: str, kind: str, name: str) -> type:
+    module = importlib.import_module(f"{pkg}.{kind}")
     return getattr(module, name)
 
 
 def message_type(type_name: str) -> type:
     """The rclpy message class for ``"pkg/msg/Name"`` (or ``"pkg/Name"``).
+
+    The messages of services and actions that travel on topics (Jazzy service introspection
+    ``"pkg/srv/Name_Event"``, ``"pkg/action/Name_FeedbackMessage"``) resolve too.
 
     Raises
     ------
@@ -52,9 +55,9 @@ def message_type(type_name: str) -> type:
     m = _TYPE_RE.match(type_name)
     if m is None:
         raise AdapterError("type_name", "'pkg/msg/Name' or 'pkg/Name'", type_name)
-    pkg, _, name = m.groups()
+    pkg, kind, name = m.groups()
     try:
-        cls = _import_type(pkg, name)
+        cls = _import_type(pkg, kind or "msg", name)
     except Exception as exc:  # ImportError, AttributeError, or an error raised by the module itself
         raise AdapterError("type_name", "an installed ROS 2 message type",
                            Received(f"{type_name!r} ({type(exc).__name__}: {exc})")) from exc
@@ -70,7 +73,8 @@ def type_name_of(msg_or_type: Any) -> str:
     if not _is_message_class(cls):
         raise AdapterError("msg", "an rclpy message or message class", cls.__name__)
     parts = cls.__module__.split(".")
-    return f"{parts[0]}/msg/{cls.__name__}"
+    kind = parts[1] if len(parts) > 2 and parts[1] in ("msg", "srv", "action") else "msg"
+    return f"{parts[0]}/{kind}/{cls.__name__}"
 
 
 def to_cdr(msg: Any) -> bytes:

@@ -540,12 +540,17 @@ def test_message_type_by_name():
     assert ma.message_type("sensor_msgs/Image") is Image
     assert ma.message_type("geometry_msgs/msg/PoseStamped") is PoseStamped
     assert ma.type_name_of(Image()) == "sensor_msgs/msg/Image" and ma.type_name_of(JointState) == "sensor_msgs/msg/JointState"
+    event = ma.message_type("std_srvs/srv/Trigger_Event")  # Jazzy service introspection topics
+    assert ma.type_name_of(event) == "std_srvs/srv/Trigger_Event"
+    assert type(ma.from_cdr(ma.to_cdr(event()), "std_srvs/srv/Trigger_Event")) is event
 
 
 @pytest.mark.parametrize("name, pattern", [
     ("sensor_msgs/msg/NoSuchThing", r"type_name: expected an installed ROS 2 message type, received 'sensor_msgs/msg/NoSuchThing'"),
     ("no_such_pkg/msg/Image", r"type_name: expected an installed ROS 2 message type, received 'no_such_pkg/msg/Image'"),
-    ("sensor_msgs/srv/Image", r"type_name: expected 'pkg/msg/Name' or 'pkg/Name', received 'sensor_msgs/srv/Image'"),
+    ("sensor_msgs/srv/Image", r"type_name: expected an installed ROS 2 message type, received 'sensor_msgs/srv/Image'"),
+    ("sensor_msgs/foo/Image", r"type_name: expected 'pkg/msg/Name' or 'pkg/Name', received 'sensor_msgs/foo/Image'"),
+    ("std_srvs/srv/Trigger", r"type_name: expected an installed ROS 2 message type, .*\(not a message class\)"),
     ("Image", r"type_name: expected 'pkg/msg/Name'"),
     ("../etc/Passwd", r"type_name: expected 'pkg/msg/Name'"),
     ("sensor_msgs/msg/image_encodings", r"type_name: expected 'pkg/msg/Name'"),
