@@ -116,7 +116,7 @@ class SegmentationConfig:
     shadow_max_brightness: float = 1.0
     shadow_chroma_threshold: float = 3.0
     open_kernel: int = 3
-    close_kernel: int = 7
+    close_kernel: int = 3
     min_blob_area_px: int = 50
     history: int = 200
     knn_dist2_threshold: float = 400.0
@@ -157,7 +157,7 @@ def _ellipse(size: int) -> np.ndarray:
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (int(size), int(size)))
 
 
-def clean_mask(mask: np.ndarray, *, open_kernel: int = 3, close_kernel: int = 7,
+def clean_mask(mask: np.ndarray, *, open_kernel: int = 3, close_kernel: int = 3,
                min_blob_area_px: int = 50) -> np.ndarray:
     """Morphological clean-up of a raw foreground mask.
 
