@@ -61,6 +61,18 @@ def msgdef_for(type_name: str) -> tuple[str, str]:
     return text, rihs
 
 
+def _finish_chunk(writer: _McapWriter) -> None:
+    """Write the open chunk (with its message index) and flush the writer's stream.
+
+    mcap 1.6 (tested) has the public ``Writer.flush()``; for releases without it the private,
+    name-mangled ``__finalize_chunk`` is used, here and nowhere else.
+    """
+    if hasattr(writer, "flush"):
+        writer.flush()
+    else:  # pragma: no cover - older mcap releases
+        writer._Writer__finalize_chunk()
+
+
 def _remove_old_bag(path: Path) -> None:
     if path.is_file() or path.is_symlink():
         path.unlink()
@@ -246,7 +258,7 @@ class BagWriter:
     def flush(self) -> None:
         """Close the open chunk, write it with its message index and fsync the file."""
         self._check_open("flush")
-        self._mcap.flush()
+        _finish_chunk(self._mcap)
         self._sync()
 
     def _sync(self) -> None:
@@ -272,7 +284,7 @@ class BagWriter:
         self._closed = True
         md = self.bag_metadata()
         try:
-            self._mcap.flush()
+            _finish_chunk(self._mcap)
             self._mcap.add_metadata("rosbag2", {"serialized_metadata": md.to_yaml(wrapped=False)})
             self._mcap.finish()
             self._sync()
