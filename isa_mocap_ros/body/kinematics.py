@@ -117,6 +117,12 @@ def position_jacobian(model: BodyModel, X, joints) -> tuple[np.ndarray, np.ndarr
     P : (n, K, 3) ndarray
     Jac : (n, K, 3, D) ndarray
     """
+    P, JacDK = _position_jacobian_dk(model, X, joints)
+    return P, np.moveaxis(JacDK, 1, 3)
+
+
+def _position_jacobian_dk(model: BodyModel, X, joints) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`position_jacobian` with the Jacobian laid out ``(n, D, K, 3)`` (C-contiguous)."""
     X = _as_batch(model, X)
     joints = np.asarray(joints, dtype=int)
     if joints.ndim != 1 or np.any(joints < 0) or np.any(joints >= len(model.joint_names)):
@@ -124,14 +130,14 @@ def position_jacobian(model: BodyModel, X, joints) -> tuple[np.ndarray, np.ndarr
     _, Pall, axes = _fk(model, X, want_axes=True)
     P = Pall[:, joints]
     n, K = P.shape[:2]
-    JacT = np.zeros((n, K, model.dof, 3))
-    Jac = np.moveaxis(JacT, 2, 3)                       # (n, K, 3, D) view of JacT
-    Jac[:, :, [0, 1, 2], [0, 1, 2]] = 1.0
+    JacT = np.zeros((n, model.dof, K, 3))
+    for c in range(3):
+        JacT[:, c, :, c] = 1.0
     u = P - Pall[:, :1]
     # -[u]_x columns: d(δ × u)/dδ
-    Jac[:, :, 0, 4], Jac[:, :, 0, 5] = u[..., 2], -u[..., 1]
-    Jac[:, :, 1, 3], Jac[:, :, 1, 5] = -u[..., 2], u[..., 0]
-    Jac[:, :, 2, 3], Jac[:, :, 2, 4] = u[..., 1], -u[..., 0]
+    JacT[:, 4, :, 0], JacT[:, 5, :, 0] = u[..., 2], -u[..., 1]
+    JacT[:, 3, :, 1], JacT[:, 5, :, 1] = -u[..., 2], u[..., 0]
+    JacT[:, 3, :, 2], JacT[:, 4, :, 2] = u[..., 1], -u[..., 0]
     below = _descendant_mask(model)[:, joints]          # (J, K): joint k is below (or at) joint j
     for d in range(6, model.dof):
         j = model.dof_joint[d]
@@ -139,8 +145,11 @@ def position_jacobian(model: BodyModel, X, joints) -> tuple[np.ndarray, np.ndarr
         if not mask.any():
             continue
         lever = P[:, mask] - Pall[:, j][:, None]
-        JacT[:, mask, d] = np.cross(axes[:, d][:, None], lever)
-    return P, Jac
+        a = axes[:, d][:, None]
+        JacT[:, d, mask] = np.stack([a[..., 1] * lever[..., 2] - a[..., 2] * lever[..., 1],
+                                     a[..., 2] * lever[..., 0] - a[..., 0] * lever[..., 2],
+                                     a[..., 0] * lever[..., 1] - a[..., 1] * lever[..., 0]], axis=-1)
+    return P, JacT
 
 
 def _descendant_mask(model: BodyModel) -> np.ndarray:
