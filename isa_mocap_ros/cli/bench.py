@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 
-BENCHES: list[str] = ["ackley", "adapters"]
+BENCHES: list[str] = ["ackley", "adapters", "render"]
 
 
 def register(sub) -> None:

@@ -118,15 +118,12 @@ def make_background(width: int, height: int, *, rng: np.random.Generator, kind: 
         n_rays = int(rng.integers(10, 18))
         for xb in np.linspace(-1.5 * W, 2.5 * W, n_rays):
             cv2.line(img, (int(vx), horizon), (int(xb), H - 1), line, 1, cv2.LINE_AA)
-        z = rng.uniform(0.8, 1.2)  # depth of the first grid line (in units of the camera height)
-        while True:
-            y = horizon + int(fh * z / (z + 2.5))
-            if y >= H:
-                break
+        # floor lines at distances d0 * q^k project to rows horizon + fh / q^k (dense towards the horizon)
+        offset, q = fh * rng.uniform(0.75, 1.0), rng.uniform(1.25, 1.45)
+        while offset >= 1.5:
+            y = horizon + int(offset)
             cv2.line(img, (0, y), (W - 1, y), line, 1, cv2.LINE_AA)
-            z *= 1.6
-            if z > 200:
-                break
+            offset /= q
         cv2.line(img, (0, horizon), (W - 1, horizon), tuple(float(c) * 0.5 for c in wall), max(1, int(2 * scale)))
     # sensor noise and vignette
     img += rng.normal(0.0, 3.0, img.shape)
