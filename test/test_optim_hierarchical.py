@@ -79,3 +79,16 @@ def test_hierarchical_needs_partitions_and_a_flat_inner_name():
     with pytest.raises(OptimError, match="optimizer: expected a flat optimizer name"):
         Hierarchical(np.zeros(3), 0.5, partitions=[[0]], optimizer="h-isa",
                      rng=np.random.default_rng(0))
+
+
+def test_unbound_hierarchical_needs_shares_and_uses_them():
+    opt = Hierarchical(np.zeros(7), 0.5, partitions=PARTS, optimizer="pso",
+                       rng=np.random.default_rng(0))
+    with pytest.raises(OptimError, match="evals_per_partition: no budget to split"):
+        opt.ask()
+    opt = Hierarchical(np.zeros(7), 0.5, partitions=PARTS, optimizer="pso",
+                       evals_per_partition=[30, 20, 20], rng=np.random.default_rng(0))
+    while not opt.stop():
+        X = opt.ask()
+        opt.tell(X, sphere(X))
+    assert opt.n_evals == 70 and [n for _, n in opt.partition_log] + [opt._inner_used] == [30, 20, 20]

@@ -203,6 +203,9 @@ class Hierarchical(Optimizer):
 
     # --------------------------------------------------------------- protocol
     def _ask(self):
+        if self.shares is None:
+            raise OptimError("evals_per_partition: no budget to split; pass max_evals to "
+                             "minimize/bind or evals_per_partition= to Hierarchical")
         if not self._advance_if_done():
             raise OptimError("ask: every partition is finished")
         Xs = self._current().ask()
