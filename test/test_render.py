@@ -256,3 +256,32 @@ def test_render_bad_input(kwargs, match):
     args.update(kwargs)
     with pytest.raises(VisionError, match=match):
         render(**args)
+
+
+def test_solids_close_to_the_camera():
+    """Solids filling much of the view, near the camera (the tile culling must not lose any pixel)."""
+    cam = look_at([1.2, 0.0, 1.0], [0, 0, 1.0], fov_deg=80, width=64, height=48)
+    E = np.array([[[0.2, -0.5, 0.8], [0.3, 0.6, 1.2]], [[0.8, 0.1, 0.7], [0.7, 0.2, 1.1]], [[0.0, 0.0, 0.2], [0.0, 0.0, 2.0]]])
+    R = np.array([[0.2, 0.1], [0.05, 0.15], [0.25, 0.25]])
+    ref = reference_mask(cam, E, R, use_cv2_undistort=False)
+    got = render_mask(cam, E, R) > 0
+    assert ref.mean() > 0.3
+    assert (got != ref).sum() <= 2
+
+
+def test_body_model_in_default_views():
+    """The 39-DOF body at rest, standing at the centre, is seen whole by every default camera."""
+    body = pytest.importorskip("isa_mocap_ros.body")
+    from isa_mocap_ros.vision import default_rig
+
+    model = body.make_model(39)
+    E = body.capsule_endpoints(model, model.rest_pose()[None])[0]
+    for cam in default_rig():
+        mask = render_mask(cam, E, model.capsule_radii)
+        ys, xs = np.nonzero(mask)
+        assert len(ys) > 500
+        assert ys.min() > 0 and ys.max() < cam.height - 1 and xs.min() > 0 and xs.max() < cam.width - 1
+        # the silhouette is about as tall as the body (floor to head top) projected at the centre
+        floor, top = cam.project([[0, 0, 0], [0, 0, (E[..., 2] + model.capsule_radii[..., None]).max()]])
+        expected = floor[1] - top[1]
+        assert abs((ys.max() - ys.min()) - expected) < 0.15 * expected
