@@ -282,6 +282,6 @@ def test_body_model_in_default_views():
         assert len(ys) > 500
         assert ys.min() > 0 and ys.max() < cam.height - 1 and xs.min() > 0 and xs.max() < cam.width - 1
         # the silhouette is about as tall as the body (floor to head top) projected at the centre
-        floor, top = cam.project([[0, 0, 0], [0, 0, (E[..., 2] + model.capsule_radii[..., None]).max()]])
+        floor, top = cam.project([[0, 0, 0], [0, 0, (E[..., 2] + model.capsule_radii).max()]])
         expected = floor[1] - top[1]
         assert abs((ys.max() - ys.min()) - expected) < 0.15 * expected
