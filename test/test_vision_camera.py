@@ -193,3 +193,24 @@ def test_points_bad_shape():
     cam = Camera(**GOOD)
     with pytest.raises(VisionError, match=r"P: expected shape \(\.\.\., 3\)"):
         cam.project(np.zeros((4, 2)))
+
+
+def test_camera_info_and_transform_round_trip():
+    """Camera -> CameraInfo + TransformStamped (msg_adapters) -> Camera."""
+    ci = pytest.importorskip("msg_adapters.camera_info")
+    tf = pytest.importorskip("msg_adapters.transform")
+    rng = np.random.default_rng(8)
+    for n_dist in (0, 5, 8):
+        cam = random_camera(rng, n_dist=n_dist, name="cam3")
+        info = ci.intrinsics_to_camera_info(ci.Intrinsics(**cam.intrinsics_fields()), frame_id="cam3_optical_frame")
+        R_wc, t_wc = cam.pose_in_world()
+        msg = tf.rt_to_transform(R_wc, t_wc, parent_frame="world", child_frame="cam3_optical_frame")
+        assert info.distortion_model == cam.distortion_model and len(info.d) == (8 if n_dist == 8 else 5)
+        np.testing.assert_allclose(t_wc, cam.center)
+        intr = ci.camera_info_to_intrinsics(info)
+        R2, t2 = tf.transform_to_rt(msg)
+        back = Camera.from_intrinsics_and_pose("cam3", K=intr.K, D=intr.D, width=intr.width, height=intr.height,
+                                               R_wc=R2, t_wc=t2)
+        P = points_in_front(rng, cam, 20)
+        np.testing.assert_allclose(back.project(P), cam.project(P), atol=1e-6)
+        np.testing.assert_allclose(back.R, cam.R, atol=1e-12)

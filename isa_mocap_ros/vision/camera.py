@@ -213,6 +213,35 @@ class Camera:
     def has_distortion(self) -> bool:
         return bool(np.any(self.dist != 0))
 
+    # ------------------------------------------------------------------ ROS views (CameraInfo, TF)
+    def intrinsics_fields(self) -> dict[str, Any]:
+        """The numbers of a ``sensor_msgs/CameraInfo``: keys ``K, D, P, R, width, height, distortion_model``.
+
+        ``msg_adapters.camera_info.Intrinsics(**cam.intrinsics_fields())`` builds the adapter's value
+        (the core does not import ``msg_adapters``). ``D`` has 5 entries for ``plumb_bob``, 8 for
+        ``rational_polynomial``; ``R`` is the identity and ``P = [K | 0]`` (a monocular camera).
+        """
+        D = _dist8(self.dist)[: 8 if self.dist.size == 8 else 5].copy()
+        return {"K": self.K.copy(), "D": D, "P": np.hstack([self.K, np.zeros((3, 1))]), "R": np.eye(3),
+                "width": self.width, "height": self.height, "distortion_model": self.distortion_model}
+
+    def pose_in_world(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(R_wc, t_wc)``: the camera optical frame in the world, ``x_world = R_wc x_cam + t_wc``.
+
+        This is the ``TransformStamped`` with ``header.frame_id = world`` and ``child_frame_id =
+        <name>_optical_frame`` (tf convention: the child's pose in the parent): ``R_wc = R^T``,
+        ``t_wc = -R^T t`` (the camera centre).
+        """
+        return self.R.T.copy(), self.center
+
+    @classmethod
+    def from_intrinsics_and_pose(cls, name: str, *, K: Any, D: Any, width: int, height: int, R_wc: Any,
+                                 t_wc: Any) -> "Camera":
+        """Inverse of :meth:`intrinsics_fields` + :meth:`pose_in_world` (e.g. from CameraInfo + TF)."""
+        R_wc = _array("R_wc", R_wc, (3, 3))
+        t_wc = _array("t_wc", t_wc, (3,))
+        return cls(name, width, height, K, D, R_wc.T, -R_wc.T @ t_wc)
+
     # ------------------------------------------------------------------ geometry
     def to_camera(self, P: Any) -> np.ndarray:
         """World points ``(..., 3)`` -> camera optical frame ``(..., 3)``: ``R P + t``."""
