@@ -260,8 +260,9 @@ def test_render_bad_input(kwargs, match):
 
 def test_solids_close_to_the_camera():
     """Solids filling much of the view, near the camera (the tile culling must not lose any pixel)."""
-    cam = look_at([1.2, 0.0, 1.0], [0, 0, 1.0], fov_deg=80, width=64, height=48)
-    E = np.array([[[0.2, -0.5, 0.8], [0.3, 0.6, 1.2]], [[0.8, 0.1, 0.7], [0.7, 0.2, 1.1]], [[0.0, 0.0, 0.2], [0.0, 0.0, 2.0]]])
+    cam = look_at([1.2, 0.0, 1.0], [0, 0, 1.0], fov_deg=80, width=61, height=45)  # not multiples of the tile
+    E = np.array([[[0.2, -0.5, 0.8], [0.3, 0.6, 1.2]], [[0.8, 0.1, 0.7], [0.7, 0.2, 1.1]],
+                  [[0.0, 0.0, 0.2], [0.0, 0.0, 2.0]]])
     R = np.array([[0.2, 0.1], [0.05, 0.15], [0.25, 0.25]])
     ref = reference_mask(cam, E, R, use_cv2_undistort=False)
     got = render_mask(cam, E, R) > 0

@@ -84,10 +84,12 @@ def test_occluders_deterministic_and_edge_cases(image):
     (lambda im: pixel_noise(im, 1.5, rng=np.random.default_rng(0)), r"p: expected a probability in \[0, 1\]"),
     (lambda im: pixel_noise(im, -0.1, rng=np.random.default_rng(0)), "p: expected a probability"),
     (lambda im: pixel_noise(im, 0.5, rng=None), "rng: expected a numpy.random.Generator"),
-    (lambda im: pixel_noise(im.astype(np.float32), 0.5, rng=np.random.default_rng(0)), "img: expected a non-empty uint8"),
+    (lambda im: pixel_noise(im.astype(np.float32), 0.5, rng=np.random.default_rng(0)),
+     "img: expected a non-empty uint8"),
     (lambda im: occluders(im, -1, rng=np.random.default_rng(0)), "k: expected an integer >= 0"),
     (lambda im: occluders(im, 3, rng=np.random.default_rng(0), min_size=0), "min_size: expected an integer >= 1"),
-    (lambda im: occluders(im, 3, rng=np.random.default_rng(0), min_size=5, max_size=4), "max_size: expected >= min_size"),
+    (lambda im: occluders(im, 3, rng=np.random.default_rng(0), min_size=5, max_size=4),
+     "max_size: expected >= min_size"),
     (lambda im: occluders(im[0, 0], 3, rng=np.random.default_rng(0)), "img: expected"),
 ])
 def test_distort_bad_input(image, call, match):

@@ -121,7 +121,8 @@ def camera_from_dict(d: Any, *, where: str = "camera", require_extrinsics: bool 
     K = _read_matrix(d, "camera_matrix", where, (3, 3))
     model = d.get("distortion_model", "plumb_bob") or "plumb_bob"
     if model not in ("plumb_bob", "rational_polynomial"):
-        raise VisionError(f"{where}.distortion_model: expected 'plumb_bob' or 'rational_polynomial', received {model!r}")
+        raise VisionError(f"{where}.distortion_model: expected 'plumb_bob' or 'rational_polynomial', "
+                          f"received {model!r}")
     dist = _read_matrix(d, "distortion_coefficients", where, None).ravel() if "distortion_coefficients" in d \
         else np.zeros(5)
     if model == "rational_polynomial" and dist.size != 8:

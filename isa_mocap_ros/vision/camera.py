@@ -164,7 +164,8 @@ class Camera:
             raise VisionError(f"R: expected an orthonormal rotation (|R^T R - I| <= {_ORTHO_TOL}), "
                               f"received max deviation {err:.3g} (det {np.linalg.det(R):.3g})")
         if np.linalg.det(R) < 0:
-            raise VisionError(f"R: expected det(R) = +1 (a rotation), received det {np.linalg.det(R):.3g} (a reflection)")
+            raise VisionError(f"R: expected det(R) = +1 (a rotation), received det {np.linalg.det(R):.3g} "
+                              "(a reflection)")
         if not np.all(np.isfinite(self.t)):
             raise VisionError(f"t: expected finite numbers, received {self.t.tolist()}")
 
@@ -410,7 +411,8 @@ def _project_batch_kernel(Rs, ts, Ks, Ds, P, out):  # pragma: no cover - compile
                 y = yc / zc
                 if has_d:
                     r2 = x * x + y * y
-                    radial = (1.0 + r2 * (d[0] + r2 * (d[1] + r2 * d[4]))) / (1.0 + r2 * (d[5] + r2 * (d[6] + r2 * d[7])))
+                    radial = ((1.0 + r2 * (d[0] + r2 * (d[1] + r2 * d[4])))
+                              / (1.0 + r2 * (d[5] + r2 * (d[6] + r2 * d[7]))))
                     xd = x * radial + 2.0 * d[2] * x * y + d[3] * (r2 + 2.0 * x * x)
                     yd = y * radial + d[2] * (r2 + 2.0 * y * y) + 2.0 * d[3] * x * y
                     x, y = xd, yd
