@@ -1,6 +1,8 @@
 """A tiny downstream node for lockstep tests: echoes each image's stamp as a JointState.
 
-``python echo_node.py IN_TOPIC OUT_TOPIC DELAY_S`` — waits DELAY_S per message (a slow estimator).
+``python echo_node.py IN_TOPIC OUT_TOPIC DELAY_S`` — answers each image DELAY_S later (a slow
+estimator) without blocking, and prints ``image <stamp> <t>`` on arrival and ``echo <stamp> <t>``
+on publication (``t`` = monotonic seconds), so a test can check causality.
 """
 import sys
 import time
@@ -16,12 +18,26 @@ def main() -> None:
     rclpy.init()
     node = Node("echo")
     pub = node.create_publisher(JointState, out_topic, 10)
+    pending = []
+
+    def stamp_ns(header) -> int:
+        return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
 
     def on_image(msg: Image) -> None:
-        time.sleep(delay_s)
-        pub.publish(JointState(header=msg.header, name=["x"], position=[0.0]))
+        now = time.monotonic()
+        print(f"image {stamp_ns(msg.header)} {now:.6f}", flush=True)
+        pending.append((now + delay_s, msg.header))
+
+    def on_timer() -> None:
+        now = time.monotonic()
+        for item in list(pending):
+            if item[0] <= now:
+                pending.remove(item)
+                pub.publish(JointState(header=item[1], name=["x"], position=[0.0]))
+                print(f"echo {stamp_ns(item[1])} {time.monotonic():.6f}", flush=True)
 
     node.create_subscription(Image, in_topic, on_image, 10)
+    node.create_timer(0.005, on_timer)
     print("echo ready", flush=True)
     try:
         rclpy.spin(node)
