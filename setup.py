@@ -3,11 +3,22 @@
 Installable with ``pip install -e '.[test]'`` (what ``make venv`` does: ROS 2 Jazzy from the
 ``ros-jazzy-*`` PyPI wheels) or with colcon in a full ROS 2 workspace.
 """
-from glob import glob
+import os
 
 from setuptools import find_packages, setup
 
 package_name = "isa_mocap_ros"
+
+
+def tree(folder: str) -> list[tuple[str, list[str]]]:
+    """data_files entries installing every file under ``folder`` to share/<pkg>/<folder>/..."""
+    out = []
+    for root, _dirs, files in sorted(os.walk(folder)):
+        paths = sorted(os.path.join(root, f) for f in files if not f.startswith("."))
+        if paths:
+            out.append((os.path.join("share", package_name, root), paths))
+    return out
+
 
 # One console script per node, plus the ``isa-mocap`` CLI.
 NODES = ["player", "recorder"]
@@ -19,8 +30,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/config", glob("config/*.yaml")),
-    ],
+    ] + tree("config") + tree("bags") + tree("launch"),
     python_requires=">=3.10",
     install_requires=[
         "numpy>=1.26,<3",
