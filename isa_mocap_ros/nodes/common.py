@@ -1,0 +1,94 @@
+"""Shared plumbing for the thin rclpy nodes: Jazzy ``main()``, parameter descriptors, QoS, logging.
+
+Every node of the package:
+
+* declares its parameters with :func:`declare` (description + range), reads them once into a
+  frozen config dataclass for the core;
+* exposes ``QoSOverridingOptions.with_default_policies()`` on its publishers/subscriptions, so
+  ``qos_overrides./topic.publisher.reliability`` etc. work from a params file;
+* reports bad input with :class:`ProblemLog`: one clear line per problem kind, rate-limited, and
+  a counter for ``/diagnostics``;
+* runs through :func:`run_node` (the Jazzy ``main()`` shape of DESIGN §3).
+"""
+from __future__ import annotations
+
+import sys
+import time
+from typing import Any, Callable
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos_overriding_options import QoSOverridingOptions
+
+QOS_OVERRIDES = QoSOverridingOptions.with_default_policies()
+
+
+def declare(node: Node, name: str, default: Any, description: str, *, lo: float | None = None,
+            hi: float | None = None, read_only: bool = False) -> Any:
+    """Declare one parameter with a descriptor (and a range for numbers); return its value."""
+    d = ParameterDescriptor(description=description, read_only=read_only)
+    if lo is not None and isinstance(default, bool):
+        pass
+    elif lo is not None and isinstance(default, int):
+        d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
+    elif lo is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+    return node.declare_parameter(name, default, d).value
+
+
+class ProblemLog:
+    """Rate-limited "dropped bad input" logging with per-kind counters.
+
+    ``report(kind, text)`` logs ``text`` at most once every ``period_s`` per ``kind`` (the first time
+    always) and counts every occurrence; ``counts`` feeds the node's diagnostics.
+    """
+
+    def __init__(self, node: Node, *, period_s: float = 5.0) -> None:
+        self._logger = node.get_logger()
+        self._period_s = period_s
+        self._last: dict[str, float] = {}
+        self.counts: dict[str, int] = {}
+
+    def report(self, kind: str, text: str) -> None:
+        self.counts[kind] = self.counts.get(kind, 0) + 1
+        now = time.monotonic()
+        if now - self._last.get(kind, -1e18) >= self._period_s:
+            self._last[kind] = now
+            n = self.counts[kind]
+            self._logger.warn(text + (f" ({n} so far)" if n > 1 else ""))
+
+    @property
+    def total(self) -> int:
+        return sum(self.counts.values())
+
+
+def run_node(factory: Callable[..., Node], args: list[str] | None = None, *,
+             multithreaded: bool = False, **kwargs) -> int:
+    """Jazzy ``main()``: init, spin, catch Ctrl-C / external shutdown, destroy, ``try_shutdown``.
+
+    A ``ValueError`` raised while the node is built (bad parameters, unreadable files) is printed
+    as one line and gives exit code 2.
+    """
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = factory(**kwargs)
+        executor = MultiThreadedExecutor(num_threads=2) if multithreaded else SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ValueError as exc:
+        print(f"{getattr(factory, '__name__', 'node')}: {exc}", file=sys.stderr)
+        code = 2
+    finally:
+        if node is not None:
+            close = getattr(node, "close", None)
+            if callable(close):
+                close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
