@@ -14,6 +14,7 @@ import sys
 SUBCOMMANDS = [
     "play",
     "record",
+    "launch",
     "bag",
     "demo",
     "bench",

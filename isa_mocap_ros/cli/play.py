@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     ]
     summary = play([], parameter_overrides=params)
     if summary is None:
-        return 130
+        return 1  # interrupted, or replay stopped on an error already logged
     if args.json:
         print(json.dumps(summary))
     else:

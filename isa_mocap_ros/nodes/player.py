@@ -94,6 +94,30 @@ class BagPlayer(Node):
         self.acks = 0
         self.timeouts = 0
         self._bad_stamp_logged: set[str] = set()
+        self.summary: dict | None = None
+        self.done = threading.Event()
+        self._halt = threading.Event()
+        self._thread: threading.Thread | None = None
+        # Playback runs in its own thread, started once an executor spins this node, so the
+        # player works alone (``play()``) and inside a shared executor (``launch --single-process``).
+        self._kickoff_timer = self.create_timer(0.01, self._kickoff)
+
+    def _kickoff(self) -> None:
+        self._kickoff_timer.cancel()
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._play_thread, name="player", daemon=True)
+            self._thread.start()
+
+    def _play_thread(self) -> None:
+        try:
+            self.summary = self.run()
+        except BagError as exc:
+            self.get_logger().error(f"replay stopped: {exc}")
+        finally:
+            self.done.set()
+
+    def _running(self) -> bool:
+        return not self._halt.is_set() and rclpy.ok(context=self.context)
 
     # -- lockstep ------------------------------------------------------------------------------
     def _on_ack(self, data: bytes) -> None:
@@ -111,7 +135,7 @@ class BagPlayer(Node):
         with self._ack_cv:
             while stamp_ns not in self._acked:
                 left = deadline - time.monotonic()
-                if left <= 0 or not rclpy.ok(context=self.context):
+                if left <= 0 or not self._running():
                     return False
                 self._ack_cv.wait(min(left, 0.1))
             self._acked.discard(stamp_ns)
@@ -131,7 +155,7 @@ class BagPlayer(Node):
         if self.wait_for_subscribers_s <= 0:
             return
         deadline = time.monotonic() + self.wait_for_subscribers_s
-        while time.monotonic() < deadline and rclpy.ok(context=self.context):
+        while time.monotonic() < deadline and self._running():
             missing = [t for t, pub in self.publishers_by_topic.items() if pub.get_subscription_count() == 0]
             if not missing:
                 return
@@ -139,7 +163,7 @@ class BagPlayer(Node):
         self.get_logger().warn(f"no subscriber after {self.wait_for_subscribers_s:.1f} s on: {missing}")
 
     def _sleep_until(self, t: float) -> bool:
-        while rclpy.ok(context=self.context):
+        while self._running():
             left = t - time.monotonic()
             if left <= 0:
                 return True
@@ -163,12 +187,12 @@ class BagPlayer(Node):
         t_start = time.monotonic()
         start_ns = self.reader.start_ns + int(self.options.start_offset_s * 1e9)
         n_frames = 0
-        while rclpy.ok(context=self.context):
+        while self._running():
             wall0 = time.monotonic()
             for frame in frames(self.reader.messages(list(self.publishers_by_topic), start_ns=start_ns),
                                 stamped_topics=self.stamped, latched_topics=self.latched,
                                 stamp_of=self._stamp_of):
-                if not rclpy.ok(context=self.context):
+                if not self._running():
                     break
                 for msg in frame.messages:
                     if not self.lockstep_topic:
@@ -181,7 +205,7 @@ class BagPlayer(Node):
                     if self.lockstep_topic:
                         if self._wait_ack(frame.stamp_ns):
                             self.acks += 1
-                        elif rclpy.ok(context=self.context):
+                        elif self._running():
                             self.timeouts += 1
                             self.get_logger().warn(
                                 f"lockstep: no {self.lockstep_topic} with stamp {frame.stamp_ns} within "
@@ -197,34 +221,35 @@ class BagPlayer(Node):
                                                 if self.lockstep_topic else ""))
         return summary
 
-    def destroy_node(self) -> None:
+    def close(self) -> None:
+        """Stop playback (if running) and release the bag."""
+        self._halt.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5.0)
         self.reader.close()
-        super().destroy_node()
 
 
 def play(args: list[str] | None = None, *, parameter_overrides=None) -> dict | None:
-    """Init rclpy, play the bag with an executor spinning in the background, shut down."""
+    """Init rclpy, spin the player until the bag is played, shut down; returns the summary."""
     rclpy.init(args=args)
     node = None
     executor = SingleThreadedExecutor()
-    spinner = threading.Thread(target=executor.spin, daemon=True)
     try:
         node = BagPlayer(parameter_overrides=parameter_overrides or [])
         executor.add_node(node)
-        spinner.start()
-        time.sleep(0.05)
-        return node.run()
+        while not node.done.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.05)
+        return node.summary
     except (KeyboardInterrupt, ExternalShutdownException):
         return None
     except BagError as exc:
         print(f"player: {exc}", file=sys.stderr)
         raise SystemExit(2)
     finally:
-        executor.shutdown(timeout_sec=1.0)
-        if spinner.is_alive():
-            spinner.join(timeout=2.0)
         if node is not None:
+            node.close()
             node.destroy_node()
+        executor.shutdown(timeout_sec=1.0)
         rclpy.try_shutdown()
 
 
