@@ -1,0 +1,43 @@
+"""Prediction exactly as the node network computes it, for bit-identical offline replays.
+
+In the network, estimates travel as ``sensor_msgs/JointState`` whose root rotation is published as
+roll/pitch/yaw (:func:`isa_mocap_ros.body.pose_to_joint_state`), the prediction node turns them
+back into pose vectors, predicts, and publishes the prediction the same way; the estimator turns it
+into a pose vector again. :class:`PublishedPredictor` wraps any predictor with exactly those
+conversions, so ``isa-mocap track`` and the prediction node + estimator produce the same numbers.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from isa_mocap_ros.body import BodyModel, joint_state_to_pose, pose_to_joint_state
+
+
+def through_message(model: BodyModel, x: np.ndarray) -> np.ndarray:
+    """The pose vector a receiver gets for ``x`` sent as JointState positions."""
+    return joint_state_to_pose(model, pose_to_joint_state(model, x))
+
+
+class PublishedPredictor:
+    """``predictor`` fed and read through JointState conversions (see the module docstring)."""
+
+    def __init__(self, model: BodyModel, predictor) -> None:
+        self.model = model
+        self.predictor = predictor
+
+    def update_from_message(self, positions: np.ndarray) -> None:
+        """What the prediction node does with a received estimate (JointState positions)."""
+        self.predictor.update(joint_state_to_pose(self.model, positions))
+
+    def message(self) -> np.ndarray:
+        """JointState positions of the prediction, as the prediction node publishes them."""
+        return pose_to_joint_state(self.model, self.predictor.predict())
+
+    def update(self, x: np.ndarray) -> None:
+        self.update_from_message(pose_to_joint_state(self.model, x))
+
+    def predict(self) -> np.ndarray:
+        return joint_state_to_pose(self.model, self.message())
+
+    def reset(self) -> None:
+        self.predictor.reset()
