@@ -150,8 +150,8 @@ class BvhMotion:
             raise BodyError(f"fps: expected a positive number, got {fps!r}")
         F = self.n_frames
         duration = (F - 1) * self.frame_time
-        n_new = int(np.floor(duration * fps + 1e-9)) + 1
-        s = np.arange(n_new) / fps / self.frame_time        # fractional source frame index
+        n_new = int(np.floor(duration * fps + 1e-3)) + 1   # tolerate rounded frame times
+        s = np.minimum(np.arange(n_new) / fps / self.frame_time, F - 1)   # fractional source frame
         i0 = np.clip(np.floor(s).astype(int), 0, F - 1)
         i1 = np.minimum(i0 + 1, F - 1)
         a = (s - i0)[:, None]

@@ -17,8 +17,8 @@ lShldr/lForeArm/lHand/lThigh/lShin/lFoot``) layouts.
 
 Fit (:func:`retarget`): the root is initialised per frame from the hip line and the spine, joint
 angles at zero; then Levenberg-Marquardt on all frames at once (analytic Jacobian,
-:func:`.kinematics.position_jacobian`), clipped to the joint limits. A second pass restarts every
-frame from its predecessor's solution (warm start) and keeps whichever fit is better; root
+:func:`.kinematics.position_jacobian`), clipped to the joint limits. Further passes restart every
+frame from its predecessor's solution (warm start) and keep whichever fit is better; root
 frames where a shoulder or hip ends at a twist or hinge limit are restarted on the other twist
 branch (``z ± π``, hinge negated) and refitted; root rotation vectors are finally made continuous over time (``w`` vs. ``w (1 - 2π/‖w‖)``).
 """
@@ -408,6 +408,20 @@ def _flip_limbs(model: BodyModel, X: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return Xc, changed
 
 
+def _refit_flipped(model, X, cost, idx, target, *, iters, reg):
+    """Refit frames stuck at a limb limit from the other twist branch; keep what is better."""
+    Xf, changed = _flip_limbs(model, X)
+    if changed.any():
+        Xf, cf = _lm(model, Xf[changed], idx, target[changed], iters=iters, reg=reg)
+        better = cf < cost[changed] - 1e-12
+        sel = np.flatnonzero(changed)[better]
+        X = X.copy()
+        cost = cost.copy()
+        X[sel] = Xf[better]
+        cost[sel] = cf[better]
+    return X, cost
+
+
 def _unwrap_rotvecs(W: np.ndarray) -> np.ndarray:
     """Make a rotation-vector sequence continuous (choose w or its 2π-complement per frame)."""
     W = W.copy()
@@ -421,7 +435,8 @@ def _unwrap_rotvecs(W: np.ndarray) -> np.ndarray:
     return W
 
 
-def retarget(motion: BvhMotion, model: BodyModel, *, iters: int = 25, warm_iters: int = 8, reg: float = 1e-4,
+def retarget(motion: BvhMotion, model: BodyModel, *, iters: int = 25, warm_iters: int = 10,
+             warm_rounds: int = 4, reg: float = 1e-4,
              progress: Callable[[int, int], None] | None = None) -> tuple[np.ndarray, RetargetReport]:
     """Convert every BVH frame to a pose vector of ``model``.
 
@@ -437,6 +452,9 @@ def retarget(motion: BvhMotion, model: BodyModel, *, iters: int = 25, warm_iters
     warm_iters : int
         Iterations of the warm-started pass (every frame from its predecessor's solution;
         0 disables it).
+    warm_rounds : int
+        Maximum number of warm-started passes (each propagates good fits one frame further;
+        stops early when no frame improves by more than 0.1 %).
     progress : callable(done, total), optional
         Called after each stage (initialisation, each pass, report).
 
@@ -462,21 +480,18 @@ def retarget(motion: BvhMotion, model: BodyModel, *, iters: int = 25, warm_iters
     X, cost = _lm(model, X, idx, target, iters=iters, reg=reg)
     if progress:
         progress(2, total)
+    X, cost = _refit_flipped(model, X, cost, idx, target, iters=iters, reg=reg)
     if warm_iters > 0 and len(X) > 1:
-        for _ in range(2):
+        for _ in range(warm_rounds):
             Xw = np.vstack([X[:1], X[:-1]])
             Xw[:, :3] += target[:, 0] - target[np.r_[0, np.arange(len(X) - 1)], 0]
             Xw, cw = _lm(model, Xw, idx, target, iters=warm_iters, reg=reg)
-            better = cw < cost - 1e-12
+            better = cw < cost * (1.0 - 1e-3)
             X = np.where(better[:, None], Xw, X)
             cost = np.where(better, cw, cost)
-        Xf, changed = _flip_limbs(model, X)
-        if changed.any():
-            Xf, cf = _lm(model, Xf[changed], idx, target[changed], iters=iters, reg=reg)
-            better = cf < cost[changed] - 1e-12
-            sel = np.flatnonzero(changed)[better]
-            X[sel] = Xf[better]
-            cost[sel] = cf[better]
+            if not better.any():
+                break
+        X, cost = _refit_flipped(model, X, cost, idx, target, iters=iters, reg=reg)
     if progress:
         progress(3, total)
     X[:, 3:6] = _unwrap_rotvecs(X[:, 3:6])
