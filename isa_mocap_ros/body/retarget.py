@@ -75,7 +75,7 @@ def _normalize(name: str) -> tuple[str | None, str]:
 
 
 _KNOWN_PARTS = {"hand", "wrist", "foot", "ankle", "shldr", "shoulder", "forearm", "elbow", "collar",
-                "thigh", "shin", "knee", "hip", "uparm", "uparm", "arm", "leg", "upleg", "toe", "toebase"}
+                "thigh", "shin", "knee", "hip", "uparm", "arm", "leg", "upleg", "toe", "toebase"}
 
 
 def _find(motion: BvhMotion, side: str, parts) -> int | None:
@@ -155,47 +155,51 @@ def map_skeleton(motion: BvhMotion, *, lower_body_only: bool = False) -> dict[st
         need("pelvis", common[0] if common else None)
     else:
         missing.append("pelvis")
-    if not lower_body_only or True:
-        upper_missing: list[str] = []
-        upper: dict[str, int] = {}
-        for side in ("left", "right"):
-            wr = _find(motion, side, _WRIST_PARTS)
-            el = None if wr is None else _distinct_ancestor(motion, rest, wr)
-            sh = None if el is None else _distinct_ancestor(motion, rest, el)
-            for role, j in ((f"{side}_wrist", wr), (f"{side}_elbow", el), (f"{side}_shoulder", sh)):
-                (upper.__setitem__(role, j) if j is not None else upper_missing.append(role))
-        heads = [j for j, n in enumerate(motion.joint_names) if _normalize(n)[1] == "head" and not n.endswith("_end")]
-        head = heads[0] if heads else None
-        if head is None:
-            upper_missing.append("head")
-        else:
-            upper["head"] = head
-        if head is not None and "left_shoulder" in upper and "pelvis" in found:
-            hs = _ancestors(motion, head)
-            common = [a for a in _ancestors(motion, upper["left_shoulder"]) if a in set(hs)]
-            su = common[0] if common else None
-            if su is None or su == found["pelvis"]:
-                upper_missing.append("spine_upper")
+    # the upper body (required unless lower_body_only)
+    upper_missing: list[str] = []
+    upper: dict[str, int] = {}
+    for side in ("left", "right"):
+        wr = _find(motion, side, _WRIST_PARTS)
+        el = None if wr is None else _distinct_ancestor(motion, rest, wr)
+        sh = None if el is None else _distinct_ancestor(motion, rest, el)
+        for role, j in ((f"{side}_wrist", wr), (f"{side}_elbow", el), (f"{side}_shoulder", sh)):
+            if j is None:
+                upper_missing.append(role)
             else:
-                upper["spine_upper"] = su
-                path = [su] + _ancestors(motion, su)
-                if found["pelvis"] in path:
-                    below = path[: path.index(found["pelvis"])]
-                    upper["spine_lower"] = below[-1]
-                else:
-                    upper_missing.append("spine_lower")
-                chain = list(reversed(hs[: hs.index(su)])) if su in hs else []
-                necks = [j for j in chain if "neck" in _normalize(motion.joint_names[j])[1]
-                         and np.linalg.norm(rest[j] - rest[su]) >= _MIN_SEGMENT_M]
-                neck = necks[0] if necks else (chain[0] if chain else None)
-                (upper.__setitem__("neck", neck) if neck is not None else upper_missing.append("neck"))
+                upper[role] = j
+    heads = [j for j, n in enumerate(motion.joint_names) if _normalize(n)[1] == "head" and not n.endswith("_end")]
+    head = heads[0] if heads else None
+    if head is None:
+        upper_missing.append("head")
+    else:
+        upper["head"] = head
+    if head is not None and "left_shoulder" in upper and "pelvis" in found:
+        hs = _ancestors(motion, head)
+        common = [a for a in _ancestors(motion, upper["left_shoulder"]) if a in set(hs)]
+        su = common[0] if common else None
+        if su is None or su == found["pelvis"]:
+            upper_missing.append("spine_upper")
         else:
-            upper_missing += [r for r in ("spine_upper", "spine_lower", "neck") if r not in upper]
-        if lower_body_only:
-            found.update({k: v for k, v in upper.items()})
-        else:
-            found.update(upper)
-            missing += upper_missing
+            upper["spine_upper"] = su
+            path = [su] + _ancestors(motion, su)
+            if found["pelvis"] in path:
+                below = path[: path.index(found["pelvis"])]
+                upper["spine_lower"] = below[-1]
+            else:
+                upper_missing.append("spine_lower")
+            chain = list(reversed(hs[: hs.index(su)])) if su in hs else []
+            necks = [j for j in chain if "neck" in _normalize(motion.joint_names[j])[1]
+                     and np.linalg.norm(rest[j] - rest[su]) >= _MIN_SEGMENT_M]
+            neck = necks[0] if necks else (chain[0] if chain else None)
+            if neck is None:
+                upper_missing.append("neck")
+            else:
+                upper["neck"] = neck
+    else:
+        upper_missing += [r for r in ("spine_upper", "spine_lower", "neck") if r not in upper]
+    found.update(upper)
+    if not lower_body_only:
+        missing += upper_missing
     if missing:
         raise BodyError(f"unknown joint layout in {motion.source}: could not find {', '.join(sorted(set(missing)))} "
                         f"among the BVH joints ({', '.join(motion.joint_names)}); expected CMU, Motion-Builder "
