@@ -264,3 +264,20 @@ def test_lower_body_bvh_maps_for_18_dof_only():
     Y, rep = retarget(m, model_from_bvh(m, 18), reg=0.0)
     assert rep.mean_mm < 0.01 and rep.joints == ("pelvis", "left_hip", "left_knee", "left_ankle", "left_toe",
                                                  "right_hip", "right_knee", "right_ankle", "right_toe")
+
+
+def test_retarget_onto_default_model_and_progress(tmp_path):
+    """Any model with our joint names works (here the default shape); progress reports stages."""
+    source = make_model(39)
+    X = model_poses(source, 5, np.random.default_rng(5))
+    m = parse_bvh(write_bvh_from_model(source, X, POSER_NAMES, unit=0.0254))
+    calls = []
+    Y, rep = retarget(m, make_model(28), progress=lambda done, total: calls.append((done, total)))
+    assert calls[-1] == (4, 4) and [c[0] for c in calls] == [1, 2, 3, 4]
+    assert Y.shape == (5, 28) and rep.n_frames == 5 and "mean" in str(rep)
+    # sized model saved as a shape file and rebuilt gives the same offsets
+    from isa_mocap_ros.body import save_shape
+    sized = model_from_bvh(m, 39)
+    save_shape(sized.shape, tmp_path / "sized.yaml")
+    again = make_model(39, shape=tmp_path / "sized.yaml")
+    np.testing.assert_allclose(again.offsets, sized.offsets, atol=1e-6)
