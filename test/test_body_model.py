@@ -92,18 +92,29 @@ def reference_fk(model, x):
     return np.stack(T)
 
 
-def test_fk_matches_per_pose_reference(model):
+@pytest.mark.parametrize("backend", ["numba", "numpy"])
+def test_fk_matches_per_pose_reference(model, backend):
     rng = np.random.default_rng(0)
     X = random_poses(model, rng, 25)
-    T = forward_kinematics(model, X)
+    X[0, 3:6] = [1e-7, 0, 0]          # root rotation near 0 (Taylor branch of the kernel)
+    X[1, 3:6] = [0, np.pi, 0]         # and at π
+    T = forward_kinematics(model, X, backend=backend)
     assert T.shape == (25, len(model.joint_names), 4, 4)
     for x, Tx in zip(X, T):
         np.testing.assert_allclose(Tx, reference_fk(model, x), atol=1e-12)
-    np.testing.assert_allclose(joint_positions(model, X), T[..., :3, 3])
-    ends = capsule_endpoints(model, X)
+    np.testing.assert_allclose(joint_positions(model, X, backend=backend), T[..., :3, 3])
+    ends = capsule_endpoints(model, X, backend=backend)
     np.testing.assert_allclose(ends[:, :, 0], T[..., :3, 3][:, model.capsules[:, 0]])
     np.testing.assert_allclose(ends[:, :, 1], T[..., :3, 3][:, model.capsules[:, 1]])
-    np.testing.assert_allclose(forward_kinematics(model, X[3]), T[3:4])  # single pose
+    np.testing.assert_allclose(forward_kinematics(model, X[3], backend=backend), T[3:4])  # single pose
+    with pytest.raises(BodyError, match="backend: expected 'numba' or 'numpy', got 'gpu'"):
+        joint_positions(model, X, backend="gpu")
+
+
+def test_fk_backends_agree_on_large_batch():
+    m = make_model(39)
+    X = random_poses(m, np.random.default_rng(9), 2000)
+    np.testing.assert_allclose(forward_kinematics(m, X), forward_kinematics(m, X, backend="numpy"), atol=1e-12)
 
 
 def test_bone_lengths_preserved(model):

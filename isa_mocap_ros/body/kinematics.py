@@ -6,11 +6,13 @@ the root as the rigid body motion of ISA Eq. 13.20. For joint ``j`` with parent 
     R_j = R_p · R_a1(q1) R_a2(q2) ...      (local axes in the joint's chain order)
     p_j = p_p + R_p · offset_j             (the joint centre is fixed in the parent's frame)
 
-and the root: ``R_0 = exp(ŵ)``, ``p_0 = t`` for the pose ``x = (t, w, q...)``. Everything is
-vectorized over the ``n`` poses (a Python loop runs over the ~22 joints only).
+and the root: ``R_0 = exp(ŵ)``, ``p_0 = t`` for the pose ``x = (t, w, q...)``. Two backends:
+``"numba"`` (default; a compiled kernel, parallel over poses) and ``"numpy"`` (vectorized over
+the ``n`` poses, a Python loop over the ~22 joints; the reference the kernel is tested against).
 """
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from ..geometry import exp_so3
@@ -62,7 +64,94 @@ def _fk(model: BodyModel, X: np.ndarray, *, want_axes: bool = False):
     return R, P, axes
 
 
-def forward_kinematics(model: BodyModel, X) -> np.ndarray:
+@numba.njit(parallel=True, cache=True, fastmath=False)
+def _fk_kernel(X, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
+    n = X.shape[0]
+    J = parents.shape[0]
+    for i in numba.prange(n):
+        # root: Rodrigues (Eq. 13.20) with a Taylor series near 0
+        wx, wy, wz = X[i, 3], X[i, 4], X[i, 5]
+        t2 = wx * wx + wy * wy + wz * wz
+        th = np.sqrt(t2)
+        if th < 1e-4:
+            A = 1.0 - t2 / 6.0 + t2 * t2 / 120.0
+            B = 0.5 - t2 / 24.0 + t2 * t2 / 720.0
+        else:
+            A = np.sin(th) / th
+            B = (1.0 - np.cos(th)) / t2
+        R[i, 0, 0, 0] = 1.0 - B * (wy * wy + wz * wz)
+        R[i, 0, 1, 1] = 1.0 - B * (wx * wx + wz * wz)
+        R[i, 0, 2, 2] = 1.0 - B * (wx * wx + wy * wy)
+        R[i, 0, 0, 1] = -A * wz + B * wx * wy
+        R[i, 0, 1, 0] = A * wz + B * wx * wy
+        R[i, 0, 0, 2] = A * wy + B * wx * wz
+        R[i, 0, 2, 0] = -A * wy + B * wx * wz
+        R[i, 0, 1, 2] = -A * wx + B * wy * wz
+        R[i, 0, 2, 1] = A * wx + B * wy * wz
+        for c in range(3):
+            P[i, 0, c] = X[i, c]
+        for j in range(1, J):
+            p = parents[j]
+            for r in range(3):
+                P[i, j, r] = P[i, p, r] + R[i, p, r, 0] * offsets[j, 0] + R[i, p, r, 1] * offsets[j, 1] \
+                    + R[i, p, r, 2] * offsets[j, 2]
+                for c in range(3):
+                    R[i, j, r, c] = R[i, p, r, c]
+            for k in range(ptr[j], ptr[j + 1]):
+                a = axes[k]
+                q = X[i, dofs[k]]
+                co = np.cos(q)
+                si = np.sin(q)
+                u = (a + 1) % 3
+                v = (a + 2) % 3
+                for r in range(3):          # R ← R · R_a(q): columns u, v rotate
+                    mu = R[i, j, r, u]
+                    mv = R[i, j, r, v]
+                    R[i, j, r, u] = mu * co + mv * si
+                    R[i, j, r, v] = -mu * si + mv * co
+
+
+def _fk_numba(model: BodyModel, X: np.ndarray):
+    tables = _kernel_tables(model)
+    n, J = X.shape[0], len(model.joint_names)
+    R = np.empty((n, J, 3, 3))
+    P = np.empty((n, J, 3))
+    _fk_kernel(np.ascontiguousarray(X), *tables, R, P)
+    return R, P
+
+
+_TABLES: dict = {}
+
+
+def _kernel_tables(model: BodyModel):
+    key = id(model)
+    hit = _TABLES.get(key)
+    if hit is not None and hit[0] is model:
+        return hit[1]
+    ptr = np.zeros(len(model.joint_names) + 1, dtype=np.int64)
+    dofs, axes = [], []
+    for j in range(len(model.joint_names)):
+        ids = model.joint_dofs[j] if j else ()
+        dofs += list(ids)
+        axes += [int(model.dof_axis[d]) for d in ids]
+        ptr[j + 1] = len(dofs)
+    tables = (np.asarray(model.parents, dtype=np.int64), np.ascontiguousarray(model.offsets, dtype=float), ptr,
+              np.array(dofs, dtype=np.int64), np.array(axes, dtype=np.int64))
+    if len(_TABLES) > 64:
+        _TABLES.clear()
+    _TABLES[key] = (model, tables)
+    return tables
+
+
+def _rot_pos(model: BodyModel, X: np.ndarray, backend: str):
+    if backend == "numba":
+        return _fk_numba(model, X)
+    if backend == "numpy":
+        return _fk(model, X)[:2]
+    raise BodyError(f"backend: expected 'numba' or 'numpy', got {backend!r}")
+
+
+def forward_kinematics(model: BodyModel, X, *, backend: str = "numba") -> np.ndarray:
     """World transforms of all joints for a batch of poses.
 
     Parameters
@@ -70,6 +159,8 @@ def forward_kinematics(model: BodyModel, X) -> np.ndarray:
     model : BodyModel
     X : (n, D) or (D,) array_like
         Pose vectors (root translation, root rotation vector, joint angles).
+    backend : {"numba", "numpy"}
+        Compiled kernel (parallel over poses) or the vectorized numpy reference.
 
     Returns
     -------
@@ -77,7 +168,7 @@ def forward_kinematics(model: BodyModel, X) -> np.ndarray:
         Homogeneous world transform of each joint frame (``n = 1`` for a single pose).
     """
     X = _as_batch(model, X)
-    R, P, _ = _fk(model, X)
+    R, P = _rot_pos(model, X, backend)
     T = np.zeros(R.shape[:2] + (4, 4))
     T[..., :3, :3] = R
     T[..., :3, 3] = P
@@ -85,15 +176,15 @@ def forward_kinematics(model: BodyModel, X) -> np.ndarray:
     return T
 
 
-def joint_positions(model: BodyModel, X) -> np.ndarray:
-    """Joint centres in the world frame, ``(n, D) -> (n, J, 3)`` metres."""
+def joint_positions(model: BodyModel, X, *, backend: str = "numba") -> np.ndarray:
+    """Joint centres in the world frame, ``(n, D) -> (n, J, 3)`` metres (see :func:`forward_kinematics`)."""
     X = _as_batch(model, X)
-    return _fk(model, X)[1]
+    return _rot_pos(model, X, backend)[1]
 
 
-def capsule_endpoints(model: BodyModel, X) -> np.ndarray:
+def capsule_endpoints(model: BodyModel, X, *, backend: str = "numba") -> np.ndarray:
     """Capsule end points ``(n, C, 2, 3)``; radii in ``model.capsule_radii`` ``(C, 2)``."""
-    P = joint_positions(model, X)
+    P = joint_positions(model, X, backend=backend)
     return P[:, model.capsules]
 
 
