@@ -18,6 +18,7 @@ SUBCOMMANDS = [
     "bag",
     "demo",
     "bench",
+    "synth",
 ]
 
 
