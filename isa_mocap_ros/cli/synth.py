@@ -122,6 +122,25 @@ def _pose_array(positions, rotations, stamp_ns):
     return msg
 
 
+def _canonical(cdr: bytes, type_name: str) -> bytes:
+    """The CDR bytes of a message with zeroed alignment padding.
+
+    rclpy's serializer (Fast-CDR) leaves the padding bytes between fields uninitialised (and may
+    append a few bytes after the message), so two serializations of equal messages can differ; a
+    round trip through the rosbags typestore (which writes zeros) makes the bytes a function of the
+    message alone (byte-identical bags). Little-endian input, as rclpy writes on every platform we
+    run on.
+    """
+    from isa_mocap_ros.bag.writer import typestore
+
+    ts = typestore()
+    if cdr[:2] != b"\x00\x01":
+        raise ValueError(f"CDR of {type_name}: expected little-endian encapsulation 00 01, received {cdr[:2].hex()}")
+    msgdef = ts.get_msgdef(type_name)
+    msg, _ = msgdef.deserialize_cdr_le(memoryview(cdr)[4:], 0, msgdef.cls, ts)
+    return bytes(ts.serialize_cdr(msg, type_name))
+
+
 def write_bag(args) -> dict:
     """Do the work of ``isa-mocap synth`` (raises ValueError subclasses on bad input); return a summary."""
     from std_msgs.msg import String
@@ -130,7 +149,10 @@ def write_bag(args) -> dict:
     from isa_mocap_ros.bag import QOS_DEFAULT, QOS_LATCHED, BagWriter
     from isa_mocap_ros.body import pose_to_joint_state
     from isa_mocap_ros.synth import T0_NS, SceneRenderer, make_clip, model_yaml, synthesize
-    from msg_adapters import array_to_image, arrays_to_joint_state, rt_to_transform, to_cdr
+    from msg_adapters import array_to_image, arrays_to_joint_state, rt_to_transform, to_cdr, type_name_of
+
+    def cdr(msg) -> bytes:
+        return _canonical(to_cdr(msg), type_name_of(msg))
 
     out = Path(args.out)
     if (out.exists() or out.is_symlink()) and not args.overwrite:
@@ -164,28 +186,28 @@ def write_bag(args) -> dict:
         for i, cam in enumerate(rig.cameras):
             tf = rt_to_transform(cam.R.T, cam.center, parent_frame="world", child_frame=f"cam{i}_optical_frame",
                                  stamp_ns=T0_NS)
-            bag.write(f"{TOPIC}/cam{i}/extrinsics", to_cdr(tf), T0_NS)
+            bag.write(f"{TOPIC}/cam{i}/extrinsics", cdr(tf), T0_NS)
         text = model_yaml(clip, seed=args.seed, empty_frames=args.empty_frames, rig=rig, noise=args.noise,
                           occluders=args.occluders)
-        bag.write(f"{TOPIC}/ground_truth/model", to_cdr(String(data=text)), T0_NS)
+        bag.write(f"{TOPIC}/ground_truth/model", cdr(String(data=text)), T0_NS)
         bar = tqdm(total=frames_total, unit="frame", desc="synth", file=sys.stderr, disable=not show)
         for fr in synthesize(clip, renderer, empty_frames=args.empty_frames):
             s = fr.stamp_ns
             for i, cam in enumerate(rig.cameras):
                 fid = f"cam{i}_optical_frame"
-                bag.write(f"{TOPIC}/cam{i}/image_raw", to_cdr(array_to_image(fr.images[i], "rgb8", stamp_ns=s,
-                                                                             frame_id=fid)), s)
-                bag.write(f"{TOPIC}/cam{i}/camera_info", to_cdr(_camera_info(cam, s, fid)), s)
+                bag.write(f"{TOPIC}/cam{i}/image_raw", cdr(array_to_image(fr.images[i], "rgb8", stamp_ns=s,
+                                                                           frame_id=fid)), s)
+                bag.write(f"{TOPIC}/cam{i}/camera_info", cdr(_camera_info(cam, s, fid)), s)
                 if args.masks:
-                    bag.write(f"{TOPIC}/cam{i}/mask", to_cdr(array_to_image(fr.masks[i], "mono8", stamp_ns=s,
-                                                                            frame_id=fid)), s)
+                    bag.write(f"{TOPIC}/cam{i}/mask", cdr(array_to_image(fr.masks[i], "mono8", stamp_ns=s,
+                                                                          frame_id=fid)), s)
                 if not fr.empty and not fr.masks[i].any():
                     unseen[i] += 1
             if not fr.empty:
                 q = pose_to_joint_state(clip.model, fr.pose)
                 bag.write(f"{TOPIC}/ground_truth/joint_states",
-                          to_cdr(arrays_to_joint_state(names, q, stamp_ns=s, frame_id="world")), s)
-                bag.write(f"{TOPIC}/ground_truth/markers", to_cdr(_pose_array(fr.markers, fr.marker_rotations, s)), s)
+                          cdr(arrays_to_joint_state(names, q, stamp_ns=s, frame_id="world")), s)
+                bag.write(f"{TOPIC}/ground_truth/markers", cdr(_pose_array(fr.markers, fr.marker_rotations, s)), s)
             bar.update(1)
         bar.close()
     seconds = time.perf_counter() - t_start
