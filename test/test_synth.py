@@ -236,3 +236,33 @@ def test_bvh_input(cmu_walk, tmp_path):
     X = joint_state_to_pose(model, joint_state_to_arrays(js[7])[1])
     assert abs(X[0] - 0.0) < 3.0 and 0.7 < X[2] < 1.3                        # centred, pelvis at hip height
     assert all(m.any() for m in masks)
+
+
+BAGS = Path(__file__).resolve().parents[1] / "bags"
+
+
+def test_shipped_bags(tmp_path):
+    """bags/: under 25 MB; the fixture is what its recorded command makes (bags/README.md)."""
+    total = sum(f.stat().st_size for f in BAGS.rglob("*") if f.is_file())
+    assert total < 25e6
+    with BagReader(BAGS / "demo") as r:
+        counts = {n: t.message_count for n, t in r.topics.items()}
+        desc = yaml.safe_load(from_cdr(next(r.messages(["/mocap/ground_truth/model"])).data,
+                                       "std_msgs/msg/String").data)
+    assert all(counts[f"/mocap/cam{i}/image_raw"] == 145 for i in range(4))
+    assert counts["/mocap/ground_truth/joint_states"] == 135 and desc["motion"]["name"] == "walk_turns"
+    assert desc["model"]["dof"] == 39 and desc["sequence"]["empty_frames"] == 10
+    again = tmp_path / "fixture"
+    assert synth("walk", again, "--views", "4", "--width", "160", "--height", "120", "--duration-s", "0.4",
+                 "--empty-frames", "3", "--masks", "--seed", "0", "--no-progress") == 0
+    a, b = all_messages(BAGS / "fixture"), all_messages(again)
+    assert [(t, s) for t, s, _ in a] == [(t, s) for t, s, _ in b]
+    for (topic, _, da), (_, _, db) in zip(a, b):
+        if topic.endswith(("/image_raw", "/mask")):
+            ia = image_to_array(from_cdr(da, "sensor_msgs/msg/Image"))
+            ib = image_to_array(from_cdr(db, "sensor_msgs/msg/Image"))
+            assert ia.shape == ib.shape and np.mean(ia != ib) < 1e-3      # exact here; tolerant across machines
+        elif topic.endswith("/joint_states"):
+            qa = joint_state_to_arrays(from_cdr(da, "sensor_msgs/msg/JointState"))[1]
+            qb = joint_state_to_arrays(from_cdr(db, "sensor_msgs/msg/JointState"))[1]
+            np.testing.assert_allclose(qa, qb, atol=1e-9)
