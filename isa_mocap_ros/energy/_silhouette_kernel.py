@@ -1,0 +1,318 @@
+"""Compiled kernels of the fast silhouette energy (EA-vs-PF Eq. 4-5) and its forward kinematics.
+
+Everything here is numba (``cache=True``); :mod:`.silhouette` prepares the arrays. Geometry is done
+in the **normalized undistorted image plane** of each camera (``x = X_c / Z_c``, ``y = Y_c / Z_c``).
+Per particle and view:
+
+1. forward kinematics (same recursion as :mod:`isa_mocap_ros.body.kinematics`, positions only);
+2. each capsule (hull of the balls ``B(p0, r0)``, ``B(p1, r1)``, docs/vision.md) is projected to the
+   2-D hull of two discs: centres ``p_k`` projected, radii ``rho_k = (r_k / z_k) sqrt(l_k / z_k)``
+   (``z_k`` depth, ``l_k`` distance of the ball centre from the camera; the disc has the area of
+   the ball's projected ellipse to first order in ``r / l``);
+3. term 1 of Eq. 4 (model pixels not on foreground) from a fixed template of stratified points in
+   each capsule's bounding rectangle: a point counts for the silhouette if it lies in its own
+   capsule's 2-D hull, in no *earlier* capsule's hull (so overlaps count once) and inside the
+   image; it is weighted by ``area(rectangle) / k_c``; the term is the weighted mean of
+   ``1 - F(p)`` with ``F`` the (area-averaged, downsampled) foreground coverage at the point;
+4. term 2 (foreground pixels not covered) from a fixed sample of foreground pixel centres (drawn
+   per frame), each tested against the capsules' 2-D hulls until the first hit.
+
+``f_v = term1 / 2 + term2 / 2``; a view where the model covers no sampled point gets term 1 = 1/2
+(Eq. 4 is undefined there; the exact reference makes the same choice). The output is the mean
+over the views passed in (Eq. 5).
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+__all__ = ["fk_positions_batch", "silhouette_batch", "project_capsules"]
+
+
+@numba.njit(cache=True, inline="always")
+def _fk_one(x, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
+    """Joint positions ``P (J, 3)`` of pose ``x``; ``R (J, 3, 3)`` is scratch (world rotations)."""
+    wx, wy, wz = x[3], x[4], x[5]
+    t2 = wx * wx + wy * wy + wz * wz
+    th = np.sqrt(t2)
+    if th < 1e-4:
+        A = 1.0 - t2 / 6.0 + t2 * t2 / 120.0
+        B = 0.5 - t2 / 24.0 + t2 * t2 / 720.0
+    else:
+        A = np.sin(th) / th
+        B = (1.0 - np.cos(th)) / t2
+    R[0, 0, 0] = 1.0 - B * (wy * wy + wz * wz)
+    R[0, 1, 1] = 1.0 - B * (wx * wx + wz * wz)
+    R[0, 2, 2] = 1.0 - B * (wx * wx + wy * wy)
+    R[0, 0, 1] = -A * wz + B * wx * wy
+    R[0, 1, 0] = A * wz + B * wx * wy
+    R[0, 0, 2] = A * wy + B * wx * wz
+    R[0, 2, 0] = -A * wy + B * wx * wz
+    R[0, 1, 2] = -A * wx + B * wy * wz
+    R[0, 2, 1] = A * wx + B * wy * wz
+    P[0, 0], P[0, 1], P[0, 2] = x[0], x[1], x[2]
+    for j in range(1, parents.shape[0]):
+        p = parents[j]
+        for r in range(3):
+            P[j, r] = P[p, r] + R[p, r, 0] * offsets[j, 0] + R[p, r, 1] * offsets[j, 1] + R[p, r, 2] * offsets[j, 2]
+            for c in range(3):
+                R[j, r, c] = R[p, r, c]
+        for k in range(ptr[j], ptr[j + 1]):
+            a = axes[k]
+            q = x[dofs[k]]
+            co = np.cos(q)
+            si = np.sin(q)
+            u = (a + 1) % 3
+            v = (a + 2) % 3
+            for r in range(3):  # R <- R . R_a(q): columns u, v rotate
+                mu = R[j, r, u]
+                mv = R[j, r, v]
+                R[j, r, u] = mu * co + mv * si
+                R[j, r, v] = -mu * si + mv * co
+
+
+@numba.njit(parallel=True, cache=True)
+def fk_positions_batch(X, parents, offsets, ptr, dofs, axes):  # pragma: no cover - compiled
+    """Joint positions ``(n, J, 3)`` of poses ``X (n, D)`` (tested against ``body.joint_positions``)."""
+    n = X.shape[0]
+    J = parents.shape[0]
+    out = np.empty((n, J, 3))
+    for i in numba.prange(n):
+        R = np.empty((J, 3, 3))
+        _fk_one(X[i], parents, offsets, ptr, dofs, axes, R, out[i])
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def _project_caps(P, caps, radii, Rc, tc, G):  # pragma: no cover - compiled
+    """2-D hulls of the capsules in one view into ``G (C, 14)``; returns nothing.
+
+    ``G[c]``: ax, ay, ux, uy, L, ra, rb, sb, ca, ylo, yhi, xmax, valid, cone
+    and the bounding box is derived from it by the caller (see :func:`_bbox`).
+    """
+    C = caps.shape[0]
+    for c in range(C):
+        ja = caps[c, 0]
+        jb = caps[c, 1]
+        xa = Rc[0, 0] * P[ja, 0] + Rc[0, 1] * P[ja, 1] + Rc[0, 2] * P[ja, 2] + tc[0]
+        ya = Rc[1, 0] * P[ja, 0] + Rc[1, 1] * P[ja, 1] + Rc[1, 2] * P[ja, 2] + tc[1]
+        za = Rc[2, 0] * P[ja, 0] + Rc[2, 1] * P[ja, 1] + Rc[2, 2] * P[ja, 2] + tc[2]
+        xb = Rc[0, 0] * P[jb, 0] + Rc[0, 1] * P[jb, 1] + Rc[0, 2] * P[jb, 2] + tc[0]
+        yb = Rc[1, 0] * P[jb, 0] + Rc[1, 1] * P[jb, 1] + Rc[1, 2] * P[jb, 2] + tc[1]
+        zb = Rc[2, 0] * P[jb, 0] + Rc[2, 1] * P[jb, 1] + Rc[2, 2] * P[jb, 2] + tc[2]
+        r0 = radii[c, 0]
+        r1 = radii[c, 1]
+        if za <= 1.001 * r0 or zb <= 1.001 * r1:
+            G[c, 12] = 0.0  # a ball reaching the camera plane: no bounded projection; skipped
+            continue
+        la = np.sqrt(xa * xa + ya * ya + za * za)
+        lb = np.sqrt(xb * xb + yb * yb + zb * zb)
+        ax = xa / za
+        ay = ya / za
+        bx = xb / zb
+        by = yb / zb
+        ra = r0 / za * np.sqrt(la / za)
+        rb = r1 / zb * np.sqrt(lb / zb)
+        dx = bx - ax
+        dy = by - ay
+        L = np.sqrt(dx * dx + dy * dy)
+        if L > 1e-12:
+            ux = dx / L
+            uy = dy / L
+        else:
+            ux = 1.0
+            uy = 0.0
+        G[c, 0], G[c, 1], G[c, 2], G[c, 3], G[c, 4], G[c, 5], G[c, 6] = ax, ay, ux, uy, L, ra, rb
+        if L > abs(ra - rb) * (1.0 + 1e-9) + 1e-15:
+            sb = (ra - rb) / L
+            G[c, 7] = sb
+            G[c, 8] = np.sqrt(1.0 - sb * sb)
+            G[c, 13] = 1.0
+        else:
+            G[c, 7] = 0.0
+            G[c, 8] = 1.0
+            G[c, 13] = 0.0
+        G[c, 9] = min(-ra, L - rb)
+        G[c, 10] = max(ra, L + rb)
+        G[c, 11] = max(ra, rb)
+        G[c, 12] = 1.0
+
+
+@numba.njit(cache=True, inline="always")
+def _inside_local(xl, yl, g):  # pragma: no cover - compiled
+    """Point with axis coordinate ``yl`` and |across| ``xl`` (capsule frame) inside the 2-D hull ``g``."""
+    L = g[4]
+    ra = g[5]
+    rb = g[6]
+    if g[13] == 0.0:  # one disc contains the other: the bigger disc (or both, harmless)
+        if xl * xl + yl * yl <= ra * ra:
+            return True
+        return xl * xl + (yl - L) * (yl - L) <= rb * rb
+    sb = g[7]
+    ca = g[8]
+    k = -xl * sb + yl * ca      # Quilez' uneven capsule: which part of the boundary is nearest
+    if k < 0.0:
+        return xl * xl + yl * yl <= ra * ra
+    if k > ca * L:
+        return xl * xl + (yl - L) * (yl - L) <= rb * rb
+    return xl * ca + yl * sb <= ra
+
+
+@numba.njit(cache=True, inline="always")
+def _inside(px, py, g):  # pragma: no cover - compiled
+    dx = px - g[0]
+    dy = py - g[1]
+    yl = dx * g[2] + dy * g[3]
+    xl = abs(-dx * g[3] + dy * g[2])
+    return _inside_local(xl, yl, g)
+
+
+@numba.njit(cache=True)
+def project_capsules(P, caps, radii, Rc, tc):  # pragma: no cover - compiled
+    """Python-callable wrapper of the projection (tests): ``G (C, 14)`` for joint positions ``P (J, 3)``."""
+    G = np.zeros((caps.shape[0], 14))
+    _project_caps(P, caps, radii, Rc, tc, G)
+    return G
+
+
+@numba.njit(cache=True)
+def inside_points(G, pts):  # pragma: no cover - compiled
+    """``(m,)`` bool: normalized points ``pts (m, 2)`` inside the union of the 2-D hulls ``G`` (tests)."""
+    out = np.zeros(pts.shape[0], np.bool_)
+    for i in range(pts.shape[0]):
+        for c in range(G.shape[0]):
+            if G[c, 12] != 0.0 and _inside(pts[i, 0], pts[i, 1], G[c]):
+                out[i] = True
+                break
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def _lookup(x, y, K, D, hasd, cov, W, H):  # pragma: no cover - compiled
+    """Foreground coverage at the normalized point ``(x, y)``; -1 outside the (downsampled) image."""
+    if hasd:
+        r2 = x * x + y * y
+        radial = (1.0 + r2 * (D[0] + r2 * (D[1] + r2 * D[4]))) / (1.0 + r2 * (D[5] + r2 * (D[6] + r2 * D[7])))
+        xd = x * radial + 2.0 * D[2] * x * y + D[3] * (r2 + 2.0 * x * x)
+        yd = y * radial + D[2] * (r2 + 2.0 * y * y) + 2.0 * D[3] * x * y
+        x = xd
+        y = yd
+    u = K[0] * x + K[2] + 0.5
+    v = K[1] * y + K[3] + 0.5
+    if u < 0.0 or v < 0.0 or u >= W or v >= H:
+        return -1.0
+    return cov[int(v), int(u)]
+
+
+@numba.njit(parallel=True, cache=True, fastmath=True)
+def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
+                     cam_R, cam_t, cam_K, cam_D, cam_hasd, cov, cov_wh,
+                     tmpl, tmpl_ptr, fg, fg_n, n_chunks, out):  # pragma: no cover - compiled
+    """Fast Eq. 5 for poses ``X (n, D)`` into ``out (n,)``.
+
+    Parameters
+    ----------
+    X : (n, D) float64, finite rows only
+    parents, offsets, ptr, dofs, axes : kinematic tables (see ``body.kinematics._kernel_tables``)
+    caps : (C, 2) int64 joint indices;  radii : (C, 2) float64 metres
+    cam_R, cam_t : (V, 3, 3), (V, 3) world -> camera
+    cam_K : (V, 4) fx, fy, cx, cy of the downsampled camera;  cam_D : (V, 8);  cam_hasd : (V,) bool
+    cov : (V, Hmax, Wmax) float32 foreground coverage of the downsampled mask;  cov_wh : (V, 2) int64
+    tmpl : (T, 2) template points in [0, 1]^2;  tmpl_ptr : (C + 1,) int64 offsets per capsule
+    fg : (V, M, 2) normalized foreground sample points;  fg_n : (V,) int64 counts (>= 1)
+    n_chunks : int, work units of the parallel loop
+    out : (n,) float64
+    """
+    n = X.shape[0]
+    J = parents.shape[0]
+    C = caps.shape[0]
+    V = cam_R.shape[0]
+    for chunk in numba.prange(n_chunks):
+        lo = chunk * n // n_chunks
+        hi = (chunk + 1) * n // n_chunks
+        R = np.empty((J, 3, 3))
+        P = np.empty((J, 3))
+        G = np.empty((C, 14))
+        box = np.empty((C, 4))
+        near = np.empty((C, C), np.int64)   # near[c, :nn[c]]: earlier capsules whose boxes meet c's
+        nn = np.empty(C, np.int64)
+        for i in range(lo, hi):
+            _fk_one(X[i], parents, offsets, ptr, dofs, axes, R, P)
+            total = 0.0
+            for v in range(V):
+                _project_caps(P, caps, radii, cam_R[v], cam_t[v], G)
+                for c in range(C):
+                    if G[c, 12] == 0.0:
+                        box[c, 0] = 1.0
+                        box[c, 1] = -1.0
+                        box[c, 2] = 1.0
+                        box[c, 3] = -1.0
+                        continue
+                    ax, ay, L = G[c, 0], G[c, 1], G[c, 4]
+                    bx = ax + L * G[c, 2]
+                    by = ay + L * G[c, 3]
+                    ra, rb = G[c, 5], G[c, 6]
+                    box[c, 0] = min(ax - ra, bx - rb)
+                    box[c, 1] = max(ax + ra, bx + rb)
+                    box[c, 2] = min(ay - ra, by - rb)
+                    box[c, 3] = max(ay + ra, by + rb)
+                for c in range(C):
+                    k = 0
+                    for e in range(c):
+                        if (box[e, 0] <= box[c, 1] and box[c, 0] <= box[e, 1] and box[e, 2] <= box[c, 3]
+                                and box[c, 2] <= box[e, 3]):
+                            near[c, k] = e
+                            k += 1
+                    nn[c] = k
+                # term 1: model silhouette points not on foreground
+                W = cov_wh[v, 0]
+                H = cov_wh[v, 1]
+                num = 0.0
+                den = 0.0
+                for c in range(C):
+                    g = G[c]
+                    if g[12] == 0.0:
+                        continue
+                    ylo = g[9]
+                    ly = g[10] - ylo
+                    xm = g[11]
+                    k0 = tmpl_ptr[c]
+                    k1 = tmpl_ptr[c + 1]
+                    w = ly * 2.0 * xm / (k1 - k0)
+                    ax, ay, ux, uy = g[0], g[1], g[2], g[3]
+                    for k in range(k0, k1):
+                        yl = ylo + tmpl[k, 0] * ly
+                        xs = (2.0 * tmpl[k, 1] - 1.0) * xm
+                        if not _inside_local(abs(xs), yl, g):
+                            continue
+                        px = ax + yl * ux - xs * uy
+                        py = ay + yl * uy + xs * ux
+                        dup = False
+                        for q in range(nn[c]):
+                            e = near[c, q]
+                            if box[e, 0] <= px <= box[e, 1] and box[e, 2] <= py <= box[e, 3]:
+                                if _inside(px, py, G[e]):
+                                    dup = True
+                                    break
+                        if dup:
+                            continue
+                        f = _lookup(px, py, cam_K[v], cam_D[v], cam_hasd[v], cov[v], W, H)
+                        if f < 0.0:
+                            continue
+                        den += w
+                        num += w * (1.0 - f)
+                t1 = num / den if den > 0.0 else 1.0
+                # term 2: foreground points not covered by the model
+                m = fg_n[v]
+                hit = 0
+                for k in range(m):
+                    px = fg[v, k, 0]
+                    py = fg[v, k, 1]
+                    for c in range(C):
+                        if box[c, 0] <= px <= box[c, 1] and box[c, 2] <= py <= box[c, 3]:
+                            if _inside(px, py, G[c]):
+                                hit += 1
+                                break
+                t2 = 1.0 - hit / m
+                total += 0.5 * t1 + 0.5 * t2
+            out[i] = total / V

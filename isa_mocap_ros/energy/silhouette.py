@@ -1,0 +1,383 @@
+"""Silhouette overlap energy (EA-vs-PF Eq. 4-5): exact raster reference and a fast compiled estimate.
+
+Source: Yeguas et al., EA-vs-PF §3.2. For view ``v`` with foreground mask ``F_v`` and the model's
+silhouette ``M_v(x)``, over pixels (``D(.)`` = the pixels with value 1)::
+
+    f_v(x) = 1/(2|D(M_v(x))|) Σ_{p ∈ D(M_v(x))} (M_v(x,p) − F_v(p))
+           + 1/(2|D(F_v)|)    Σ_{p ∈ D(F_v)}    (F_v(p) − M_v(x,p))                  (4)
+    f(x)   = 1/V Σ_v f_v(x)                                                        (5)
+
+i.e. half the fraction of model pixels off the foreground plus half the fraction of foreground
+pixels the model misses; ``f`` is minimised and lies in ``[0, 1]``.
+
+* :func:`exact_view_energy` is Eq. 4 literally: the silhouette is rasterized with
+  :func:`isa_mocap_ros.vision.render_mask` (pixel-centre rays against the exact capsule solids,
+  docs/vision.md) and pixels are counted. A model with no pixel in the view gets ``f_v = 1``
+  (the first term is 0/0 there; we take its worst value 1/2).
+* :class:`SilhouetteEnergy` evaluates Eq. 5 over the usable views with either the exact
+  reference (``method="exact"``) or the compiled estimate of :mod:`._silhouette_kernel`
+  (``method="fast"``, the default): the same two terms from a fixed stratified template of points
+  in each capsule's projected area (overlaps counted once) looked up in a downsampled foreground
+  coverage image, and from a fixed sample of foreground pixels tested against the projected
+  capsules. See ``docs/energy.md`` for the approximations and the measured agreement.
+"""
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import cv2
+import numba
+import numpy as np
+
+from ..body import BodyModel, capsule_endpoints
+from ..vision import Camera, render_mask
+from . import _silhouette_kernel as _k
+
+__all__ = ["EnergyError", "SilhouetteEnergy", "exact_view_energy", "kinematic_tables"]
+
+#: default size of the model-point template per view (split over the capsules by area)
+N_MODEL_POINTS = 160
+#: default number of foreground pixels sampled per view and frame
+N_MASK_POINTS = 96
+
+
+class EnergyError(ValueError):
+    """Bad input to an energy (names the argument, the expected and the received value)."""
+
+
+# ---------------------------------------------------------------------- helpers
+def kinematic_tables(model: BodyModel) -> tuple[np.ndarray, ...]:
+    """``(parents, offsets, ptr, dofs, axes)`` for the compiled forward kinematics of ``model``.
+
+    ``ptr (J+1,)`` indexes ``dofs``/``axes``: joint ``j`` rotates by ``R_axes[k](x[dofs[k]])`` for
+    ``k`` in ``ptr[j]:ptr[j+1]`` in chain order (the same tables as ``body.kinematics``).
+    """
+    J = len(model.joint_names)
+    ptr = np.zeros(J + 1, dtype=np.int64)
+    dofs: list[int] = []
+    axes: list[int] = []
+    for j in range(J):
+        ids = model.joint_dofs[j] if j else ()
+        dofs += list(ids)
+        axes += [int(model.dof_axis[d]) for d in ids]
+        ptr[j + 1] = len(dofs)
+    return (np.asarray(model.parents, dtype=np.int64), np.ascontiguousarray(model.offsets, dtype=np.float64), ptr,
+            np.array(dofs, dtype=np.int64), np.array(axes, dtype=np.int64))
+
+
+def _check_model(model: Any) -> BodyModel:
+    if not isinstance(model, BodyModel):
+        raise EnergyError(f"model: expected a BodyModel, received {type(model).__name__}")
+    return model
+
+
+def _check_cameras(cameras: Any) -> tuple[Camera, ...]:
+    cams = tuple(getattr(cameras, "cameras", cameras)) if cameras is not None else ()
+    if not cams or not all(isinstance(c, Camera) for c in cams):
+        raise EnergyError(f"cameras: expected a non-empty sequence of Camera, received {cameras!r}")
+    return cams
+
+
+def _check_poses(model: BodyModel, X: Any) -> tuple[np.ndarray, np.ndarray]:
+    """``X`` as ``(n, D)`` float64 and the ``(n,)`` mask of finite rows."""
+    try:
+        X = np.asarray(X, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise EnergyError(f"X: expected a numeric array of shape (n, {model.dof}), received {X!r}") from exc
+    if X.ndim == 1:
+        X = X[None]
+    if X.ndim != 2 or X.shape[1] != model.dof:
+        raise EnergyError(f"X: expected shape (n, {model.dof}) for model {model.name}, received shape {X.shape}")
+    return np.ascontiguousarray(X), np.all(np.isfinite(X), axis=1)
+
+
+def _foreground(mask: np.ndarray) -> np.ndarray:
+    return np.asarray(mask) > 0
+
+
+def _mask_problem(mask: Any, camera: Camera) -> str | None:
+    """Why ``mask`` cannot be used for ``camera`` (None: usable)."""
+    if mask is None:
+        return "no mask (view missing)"
+    m = np.asarray(mask)
+    if m.dtype == object or not (np.issubdtype(m.dtype, np.number) or m.dtype == np.bool_):
+        return f"mask of dtype {m.dtype}, expected uint8 or bool"
+    if m.shape != (camera.height, camera.width):
+        return f"mask of shape {m.shape}, expected ({camera.height}, {camera.width}) for camera {camera.name}"
+    if not np.any(m > 0):
+        return "empty mask (nobody in view)"
+    return None
+
+
+def _view_terms(camera: Camera, F: np.ndarray, n_fg: int, E: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """Eq. 4 for each pose: ``E (n, C, 2, 3)`` end points, ``F (H, W)`` bool foreground."""
+    out = np.empty(E.shape[0])
+    for i in range(E.shape[0]):
+        M = render_mask(camera, E[i], radii) > 0
+        n_model = int(np.count_nonzero(M))
+        miss = int(np.count_nonzero(F & ~M))        # Σ_{p ∈ D(F)} F(p) − M(x, p)
+        if n_model == 0:
+            out[i] = 0.5 + 0.5 * miss / n_fg
+            continue
+        off = int(np.count_nonzero(M & ~F))         # Σ_{p ∈ D(M)} M(x, p) − F(p)
+        out[i] = 0.5 * off / n_model + 0.5 * miss / n_fg
+    return out
+
+
+def exact_view_energy(model: BodyModel, camera: Camera, mask: Any, X: Any) -> np.ndarray:
+    """Eq. 4 for one view, literally: rasterize the model's silhouette and count pixels.
+
+    Parameters
+    ----------
+    model : BodyModel
+    camera : Camera
+        The view; ``mask`` must have its size.
+    mask : (H, W) uint8 or bool
+        Foreground (nonzero = 1); must hold at least one foreground pixel.
+    X : (n, D) or (D,) array_like
+        Finite pose vectors.
+
+    Returns
+    -------
+    f : (n,) ndarray
+        ``f_v(x)`` in ``[0, 1]``; 1 when the model has no pixel in the view.
+    """
+    model = _check_model(model)
+    if not isinstance(camera, Camera):
+        raise EnergyError(f"camera: expected a Camera, received {type(camera).__name__}")
+    problem = _mask_problem(mask, camera)
+    if problem is not None:
+        raise EnergyError(f"mask: expected a non-empty ({camera.height}, {camera.width}) uint8 mask, "
+                          f"received {problem}")
+    X, ok = _check_poses(model, X)
+    if not ok.all():
+        raise EnergyError(f"X: expected finite poses, received non-finite values in row {int(np.argmin(ok))}")
+    F = _foreground(mask)
+    E = capsule_endpoints(model, X)
+    return _view_terms(camera, F, int(np.count_nonzero(F)), E, np.asarray(model.capsule_radii, dtype=np.float64))
+
+
+def _template(model: BodyModel, n_points: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Stratified (jittered-grid) points in ``[0, 1]^2`` per capsule, ``k_c`` proportional to its
+    rest silhouette area ``2 r L + π r^2`` (at least 4); returns ``(T, 2)`` points and ``(C+1,)`` offsets."""
+    rest = np.zeros((len(model.joint_names), 3))
+    for j in range(1, len(model.joint_names)):
+        rest[j] = rest[model.parents[j]] + model.offsets[j]
+    caps = np.asarray(model.capsules)
+    L = np.linalg.norm(rest[caps[:, 1]] - rest[caps[:, 0]], axis=1)
+    r = np.asarray(model.capsule_radii, dtype=float).max(axis=1)
+    area = 2.0 * r * L + np.pi * r * r
+    share = np.maximum(4, np.round(n_points * area / area.sum())).astype(int)
+    pts, ptr = [], [0]
+    for c in range(len(caps)):
+        length, width = L[c] + 2.0 * r[c], 2.0 * r[c]
+        nb = max(1, int(round(np.sqrt(share[c] * width / length))))
+        na = max(1, int(np.ceil(share[c] / nb)))
+        ia, ib = np.meshgrid(np.arange(na), np.arange(nb), indexing="ij")
+        u = rng.random((na * nb, 2))
+        p = np.stack([(ia.ravel() + u[:, 0]) / na, (ib.ravel() + u[:, 1]) / nb], axis=1)
+        pts.append(p)
+        ptr.append(ptr[-1] + len(p))
+    return np.ascontiguousarray(np.concatenate(pts)), np.array(ptr, dtype=np.int64)
+
+
+# ---------------------------------------------------------------------- the batch energy
+class SilhouetteEnergy:
+    """Batch silhouette energy ``f(x)`` of Eq. 5 (mean over usable views of Eq. 4), minimised, in [0, 1].
+
+    Parameters
+    ----------
+    model : BodyModel
+    cameras : sequence of Camera (or a Rig)
+        ``V`` calibrated views, full image size.
+    masks : sequence of (H, W) uint8 (or bool) or None, optional
+        One foreground mask per camera (nonzero = foreground); see :meth:`set_masks`. May be given
+        later; evaluating before any masks are set raises :class:`EnergyError`.
+    method : {"fast", "exact"}
+        ``"fast"``: the compiled sampled estimate (numba, parallel over poses). ``"exact"``: Eq. 4
+        per view by rasterizing with ``render_mask`` and counting pixels (slow; the reference).
+    downsample : int
+        Fast method only: term 1 reads the foreground **coverage** of the mask resized by
+        ``1 / downsample`` with area averaging (``cv2.INTER_AREA``; the fraction of foreground in
+        each block), through the camera ``scaled(1 / downsample)``. ``1`` reads the full-size mask.
+        Term 2 always samples full-resolution foreground pixels.
+    n_model_points : int
+        Fast method only: size of the per-view template of model points (split over the capsules
+        by rest silhouette area, at least 4 each; the actual total is ``self.n_template``).
+    n_mask_points : int
+        Fast method only: foreground pixels sampled per view and frame (systematic sample in raster
+        order with a random start; all pixels when the mask has fewer).
+    rng : numpy.random.Generator, optional
+        Source of the template jitter (drawn once here) and of the foreground samples (drawn at
+        each :meth:`set_masks`). Same generator state ⇒ same values. ``None``: ``default_rng(0)``.
+
+    Attributes
+    ----------
+    skipped_views : list of (int, str)
+        Views left out of the current frame and why (missing mask, empty mask, wrong size).
+    n_views_used : int
+        ``V`` minus the skipped views.
+    n_evals : int
+        Poses evaluated so far (every row of every call, including non-finite rows).
+
+    Notes
+    -----
+    ``energy(X)`` with ``X (n, D)`` (or ``(D,)``, read as one row) returns ``(n,)``; rows with NaN or
+    inf give ``+inf`` (the optimizers treat non-finite energies as the worst); a wrong width raises
+    :class:`EnergyError`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from isa_mocap_ros.body import make_model, capsule_endpoints
+    >>> from isa_mocap_ros.vision import default_rig, render_mask
+    >>> model, rig = make_model(39), default_rig()
+    >>> x = model.rest_pose()
+    >>> masks = [render_mask(c, capsule_endpoints(model, x)[0], model.capsule_radii) for c in rig]
+    >>> f = SilhouetteEnergy(model, rig, masks, method="exact")
+    >>> float(f(x[None])[0])
+    0.0
+    """
+
+    def __init__(self, model: BodyModel, cameras: Sequence[Camera], masks: Sequence[Any] | None = None, *,
+                 method: str = "fast", downsample: int = 2, n_model_points: int = N_MODEL_POINTS,
+                 n_mask_points: int = N_MASK_POINTS, rng: np.random.Generator | None = None) -> None:
+        self.model = _check_model(model)
+        self.cameras = _check_cameras(cameras)
+        if method not in ("fast", "exact"):
+            raise EnergyError(f"method: expected 'fast' or 'exact', received {method!r}")
+        self.method = method
+        for name, value, least in (("downsample", downsample, 1), ("n_model_points", n_model_points, 1),
+                                   ("n_mask_points", n_mask_points, 1)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+                raise EnergyError(f"{name}: expected an integer >= {least}, received {value!r}")
+        if rng is None:
+            rng = np.random.default_rng(0)
+        if not isinstance(rng, np.random.Generator):
+            raise EnergyError(f"rng: expected a numpy.random.Generator, received {type(rng).__name__}")
+        self.downsample = int(downsample)
+        self.n_mask_points = int(n_mask_points)
+        self.rng = rng
+        self._radii = np.ascontiguousarray(model.capsule_radii, dtype=np.float64)
+        self._caps = np.ascontiguousarray(model.capsules, dtype=np.int64)
+        self._kin = kinematic_tables(model)
+        self._tmpl, self._tmpl_ptr = _template(model, int(n_model_points), rng)
+        self.n_template = int(self._tmpl_ptr[-1])
+        self._small = tuple(c.scaled(1.0 / self.downsample) for c in self.cameras)
+        self.skipped_views: list[tuple[int, str]] = []
+        self.n_views_used = 0
+        self.n_evals = 0
+        self._used: list[int] = []
+        self._frame: dict | None = None
+        if masks is not None:
+            self.set_masks(masks)
+
+    # ------------------------------------------------------------------ frames
+    def set_masks(self, masks: Sequence[Any]) -> None:
+        """Take the foreground masks of a new frame, one per camera (``None`` allowed).
+
+        A view whose mask is ``None``, empty, not a numeric 2-D array or not of its camera's size
+        is skipped and listed in :attr:`skipped_views` as ``(view index, reason)``.
+
+        Raises
+        ------
+        EnergyError
+            ``masks`` is not a sequence of one entry per camera, or no view is usable.
+        """
+        try:
+            masks = list(masks)
+        except TypeError as exc:
+            raise EnergyError(f"masks: expected a sequence of {len(self.cameras)} masks, received "
+                              f"{type(masks).__name__}") from exc
+        if len(masks) != len(self.cameras):
+            raise EnergyError(f"masks: expected {len(self.cameras)} masks (one per camera, None for a missing "
+                              f"view), received {len(masks)}")
+        skipped, used = [], []
+        for v, (m, cam) in enumerate(zip(masks, self.cameras)):
+            problem = _mask_problem(m, cam)
+            if problem is None:
+                used.append(v)
+            else:
+                skipped.append((v, problem))
+        if not used:
+            self._frame = None
+            self.skipped_views, self._used, self.n_views_used = skipped, [], 0
+            raise EnergyError("masks: expected at least one usable view, received none: "
+                              + "; ".join(f"view {v}: {why}" for v, why in skipped))
+        F = {v: _foreground(masks[v]) for v in used}
+        frame: dict = {"F": F, "n_fg": {v: int(np.count_nonzero(F[v])) for v in used}}
+        if self.method == "fast":
+            frame.update(self._fast_frame(used, F))
+        self._frame = frame
+        self.skipped_views, self._used, self.n_views_used = skipped, used, len(used)
+
+    def _fast_frame(self, used: list[int], F: dict) -> dict:
+        V = len(used)
+        M = self.n_mask_points
+        small = [self._small[v] for v in used]
+        Hmax = max(c.height for c in small)
+        Wmax = max(c.width for c in small)
+        cov = np.zeros((V, Hmax, Wmax), np.float32)
+        fg = np.zeros((V, M, 2))
+        fg_n = np.zeros(V, np.int64)
+        for k, v in enumerate(used):
+            cam, sc = self.cameras[v], small[k]
+            f = F[v].astype(np.float32)
+            if self.downsample == 1:
+                cov[k, :sc.height, :sc.width] = f
+            else:
+                cov[k, :sc.height, :sc.width] = cv2.resize(f, (sc.width, sc.height), interpolation=cv2.INTER_AREA)
+            vv, uu = np.nonzero(F[v])                       # raster order
+            n = vv.size
+            if n > M:                                       # systematic sample, random start
+                idx = np.floor(self.rng.random() * (n / M) + np.arange(M) * (n / M)).astype(np.int64)
+                idx = np.minimum(idx, n - 1)
+                vv, uu = vv[idx], uu[idx]
+            x, y = cam.undistort_pixels(uu.astype(float), vv.astype(float))
+            fg[k, :x.size, 0], fg[k, :x.size, 1] = x, y
+            fg_n[k] = x.size
+        return {"cam_R": np.ascontiguousarray([self.cameras[v].R for v in used]),
+                "cam_t": np.ascontiguousarray([self.cameras[v].t for v in used]),
+                "cam_K": np.ascontiguousarray([[c.fx, c.fy, c.cx, c.cy] for c in small]),
+                "cam_D": np.ascontiguousarray([np.pad(c.dist, (0, 8 - c.dist.size)) for c in small]),
+                "cam_hasd": np.array([c.has_distortion for c in small]),
+                "cov": cov, "cov_wh": np.array([[c.width, c.height] for c in small], np.int64),
+                "fg": fg, "fg_n": fg_n}
+
+    # ------------------------------------------------------------------ evaluation
+    def __call__(self, X: Any) -> np.ndarray:
+        """Energies ``(n,)`` of poses ``X (n, D)``; non-finite rows give ``+inf``."""
+        X, ok = _check_poses(self.model, X)
+        if self._frame is None:
+            raise EnergyError("masks: expected masks to be set (constructor or set_masks) before evaluating, "
+                              "received none")
+        n = X.shape[0]
+        self.n_evals += n
+        out = np.full(n, np.inf)
+        if not ok.any():
+            return out
+        Xg = X if ok.all() else np.ascontiguousarray(X[ok])
+        out[ok] = self._fast(Xg) if self.method == "fast" else self._exact(Xg)
+        return out
+
+    def _exact(self, X: np.ndarray) -> np.ndarray:
+        E = capsule_endpoints(self.model, X)
+        fr = self._frame
+        total = np.zeros(X.shape[0])
+        for v in self._used:
+            total += _view_terms(self.cameras[v], fr["F"][v], fr["n_fg"][v], E, self._radii)
+        return total / len(self._used)
+
+    def _fast(self, X: np.ndarray) -> np.ndarray:
+        fr = self._frame
+        out = np.empty(X.shape[0])
+        n_chunks = max(1, min(X.shape[0], 8 * numba.get_num_threads()))
+        _k.silhouette_batch(X, *self._kin, self._caps, self._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"],
+                            fr["cam_D"], fr["cam_hasd"], fr["cov"], fr["cov_wh"], self._tmpl, self._tmpl_ptr,
+                            fr["fg"], fr["fg_n"], n_chunks, out)
+        return out
+
+    def __repr__(self) -> str:
+        return (f"SilhouetteEnergy(model={self.model.name!r}, views={len(self.cameras)}, method={self.method!r}, "
+                f"used={self.n_views_used}, downsample={self.downsample}, n_template={self.n_template}, "
+                f"n_mask_points={self.n_mask_points})")
