@@ -103,10 +103,17 @@ _JOG = _Gait(
 
 
 def motion_defaults(name: str) -> dict:
-    """Default parameters of a motion: ``{"speed_mps", "stride_m", "turn_deg_per_s"}`` (gaits) or ``{}``."""
+    """Default parameters of a motion: ``{"speed_mps", "stride_m", "turn_deg_per_s"}`` (gaits) or ``{}``.
+
+    Without ``stride_m`` the stride scales as ``(speed / default speed) ** 0.6``; without
+    ``speed_mps`` the speed follows the stride at the default cadence (both ±3-4 % random).
+    """
     name = _check_name(name)
-    if name in ("walk", "walk_turns"):
+    if name == "walk":
         return {"speed_mps": _WALK.speed, "stride_m": _WALK.stride, "turn_deg_per_s": 0.0}
+    if name == "walk_turns":
+        return {"speed_mps": 1.0, "stride_m": round(_WALK.stride * (1.0 / _WALK.speed) ** 0.6, 3),
+                "turn_deg_per_s": 0.0}
     if name == "jog":
         return {"speed_mps": _JOG.speed, "stride_m": _JOG.stride, "turn_deg_per_s": 0.0}
     return {}
@@ -163,10 +170,6 @@ class _Pose:
         i = self.index.get(name)
         if i is not None:
             self.X[:, i] += values
-
-    def get(self, name: str) -> np.ndarray:
-        i = self.index.get(name)
-        return self.X[:, i] if i is not None else np.zeros(self.X.shape[0])
 
     def spine(self, axis: str, total) -> None:
         """Spread a total rotation over the spine joints the model has (lower, upper)."""
@@ -396,7 +399,6 @@ def _stance_legs(p: _Pose, model, *, hip_flex, knee, hip_abd, foot_pitch=0.0) ->
         p.set(f"{side}_knee_y", knee)
         p.set(f"{side}_hip_x", sign * hip_abd)
         p.set(f"{side}_ankle_y", _flat_foot_angle(model, side) - foot_pitch - hip_y - knee)
-        p.set(f"{side}_ankle_z", -sign * hip_abd * 0.0)
 
 
 def _wave(model, t, *, heading, amplitude, rng) -> np.ndarray:

@@ -50,7 +50,8 @@ def register(sub) -> None:
                    help="K background-only frames first, without ground truth (default 0)")
     p.add_argument("--noise", type=float, default=0.0, metavar="P", help="pixel-noise probability (ISA §13.4.2)")
     p.add_argument("--occluders", type=int, default=0, metavar="K", help="occluding rectangles per image")
-    p.add_argument("--rig", default=None, metavar="FILE", help="camera rig YAML (default config/rigs/default_4cam.yaml)")
+    p.add_argument("--rig", default=None, metavar="FILE",
+                   help="camera rig YAML (default config/rigs/default_4cam.yaml)")
     p.add_argument("--seed", type=int, default=0, help="seed of motion, backgrounds and distortions (default 0)")
     p.add_argument("--bvh-scale", type=float, default=None, metavar="M", help="metres per BVH unit (default: detect)")
     p.add_argument("--masks", action="store_true", help="also write the exact silhouettes on /mocap/cam<i>/mask")
