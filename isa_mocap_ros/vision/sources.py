@@ -41,13 +41,17 @@ from typing import Any, Callable, Protocol, Sequence, runtime_checkable
 import cv2
 import numpy as np
 
-from .calibration import Rig
+from .calibration import Rig, default_rig, load_rig
 from .distort import occluders as _occluders
 from .distort import pixel_noise as _pixel_noise
 from .errors import VisionError
 
 __all__ = ["FrameSource", "EndOfSource", "SourceError", "SourceEvent", "DeviceSource", "VideoFileSource",
-           "ImageFolderSource", "SyntheticSource", "DistortedSource"]
+           "ImageFolderSource", "SyntheticSource", "DistortedSource", "ResizedSource", "SourceConfig",
+           "SOURCE_KINDS", "resolve_rig", "open_source"]
+
+#: the ``source`` values of :class:`SourceConfig`
+SOURCE_KINDS = ("synthetic", "device", "video", "images")
 
 
 class SourceError(VisionError):
@@ -64,7 +68,10 @@ class SourceEvent:
 
     Attributes
     ----------
-    kind : {"failed", "reconnected", "retry", "warning"}
+    kind : {"failed", "retry", "reconnected", "warning", "info"}
+        ``failed``: a view's device or file failed (first time); ``retry``: a reopen attempt failed;
+        ``reconnected``: a failed device works again; ``warning``: frames dropped or cut;
+        ``info``: nothing lost (e.g. a loop restarted).
     view : int
         View index (``-1`` for the whole source).
     text : str
@@ -309,7 +316,7 @@ class VideoFileSource(_EventMixin):
                 cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
                 ok, frame = cap.read()
                 if ok:
-                    self._emit("warning", v, f"video {self.paths[v].name} (view {v}) looped to its start")
+                    self._emit("info", v, f"video {self.paths[v].name} (view {v}) looped to its start")
             if not ok:
                 if self.loop:
                     self._emit("failed", v, f"video {self.paths[v].name} (view {v}) gives no frame even "
@@ -467,7 +474,7 @@ class SyntheticSource(_EventMixin):
         """Render the next frame in every view."""
         pose = self.pose_at(self.frame)
         if pose is not None and self.frame - self.empty_frames == self.clip.n_frames:
-            self._emit("warning", -1, f"synthetic motion looped after {self.clip.n_frames} frames")
+            self._emit("info", -1, f"synthetic motion looped after {self.clip.n_frames} frames")
         images, masks = self.renderer.render(pose, self.frame)
         self.last_pose = None if pose is None else pose.copy()
         self.last_masks = masks
@@ -525,3 +532,182 @@ class DistortedSource:
 
     def close(self) -> None:
         self.source.close()
+
+
+# ------------------------------------------------------------------------------------- resizing
+class ResizedSource:
+    """Any source with its images brought to the rig's sizes.
+
+    An image of another size but the same aspect ratio (within 1 %) is resized (``INTER_AREA``
+    shrinking, ``INTER_LINEAR`` enlarging), which is what :meth:`Camera.resized` assumes; one with
+    another aspect ratio is replaced by ``None`` and reported (event ``"warning"``), since no
+    scaling of the calibration would describe it.
+
+    Parameters
+    ----------
+    source : FrameSource
+    sizes : sequence of (width, height)
+        Wanted size per view.
+    """
+
+    def __init__(self, source: FrameSource, sizes: Sequence[tuple[int, int]],
+                 on_event: Callable[[SourceEvent], None] | None = None) -> None:
+        if len(sizes) != source.n_views:
+            raise SourceError(f"sizes: expected one (width, height) per view ({source.n_views}), received "
+                              f"{len(sizes)}")
+        self.source = source
+        self.n_views = source.n_views
+        self.sizes = [(int(w), int(h)) for w, h in sizes]
+        self._on_event = on_event
+        self.events: list[SourceEvent] = []
+
+    def drain_events(self) -> list[SourceEvent]:
+        drain = getattr(self.source, "drain_events", None)
+        out = (drain() if drain else []) + self.events
+        self.events = []
+        return out
+
+    def read(self) -> list[np.ndarray | None]:
+        """The wrapped source's frame set at the rig's sizes."""
+        out: list[np.ndarray | None] = []
+        for v, img in enumerate(self.source.read()):
+            w, h = self.sizes[v]
+            if img is None or img.shape[:2] == (h, w):
+                out.append(img)
+                continue
+            ih, iw = img.shape[:2]
+            if abs(iw * h - ih * w) > 0.01 * iw * h:
+                ev = SourceEvent("warning", v, f"view {v}: image is {iw}x{ih}, the calibration {w}x{h} "
+                                               "(another aspect ratio); frame dropped")
+                self.events.append(ev)
+                del self.events[:-1000]
+                if self._on_event is not None:
+                    self._on_event(ev)
+                out.append(None)
+                continue
+            interp = cv2.INTER_AREA if iw > w else cv2.INTER_LINEAR
+            out.append(cv2.resize(img, (w, h), interpolation=interp))
+        return out
+
+    def close(self) -> None:
+        self.source.close()
+
+
+# ------------------------------------------------------------------------------- configuration
+@dataclass(frozen=True)
+class SourceConfig:
+    """Everything the camera node needs to build its source (its ROS parameters, read once).
+
+    Attributes
+    ----------
+    source : {"synthetic", "device", "video", "images"}
+    devices : tuple of int
+        ``source="device"``: one device index per view.
+    videos, image_globs : tuple of str
+        ``source="video"`` / ``"images"``: one file / glob per view.
+    motion : str
+        ``source="synthetic"``: generated motion name or BVH path.
+    motion_duration_s : float
+        Seconds of motion (0 = the whole BVH / 5 s generated).
+    model_dof : int
+        Body model of the synthetic person (18, 28, 39).
+    rig_file : str
+        Rig file ('' = the default rig; only allowed for ``synthetic``).
+    views : int
+        Number of views (the first ``views`` cameras of the rig).
+    width, height : int
+        Image size published (0 = the rig file's own sizes).
+    fps : float
+    seed : int
+    noise : float
+    occluders : int
+    empty_frames : int
+    loop : bool
+    """
+
+    source: str = "synthetic"
+    devices: tuple[int, ...] = ()
+    videos: tuple[str, ...] = ()
+    image_globs: tuple[str, ...] = ()
+    motion: str = "walk"
+    motion_duration_s: float = 0.0
+    model_dof: int = 39
+    rig_file: str = ""
+    views: int = 4
+    width: int = 320
+    height: int = 240
+    fps: float = 30.0
+    seed: int = 0
+    noise: float = 0.0
+    occluders: int = 0
+    empty_frames: int = 10
+    loop: bool = True
+
+    def __post_init__(self) -> None:
+        if self.source not in SOURCE_KINDS:
+            raise SourceError(f"source: expected one of {', '.join(SOURCE_KINDS)}, received {self.source!r}")
+        if self.views < 1:
+            raise SourceError(f"views: expected an integer >= 1, received {self.views!r}")
+        if (self.width == 0) != (self.height == 0) or self.width < 0 or self.height < 0:
+            raise SourceError(f"width, height: expected both > 0, or both 0 (the rig's sizes), received "
+                              f"{self.width}x{self.height}")
+        if not self.fps > 0:
+            raise SourceError(f"fps: expected a number > 0, received {self.fps!r}")
+        inputs = {"device": ("devices", self.devices), "video": ("videos", self.videos),
+                  "images": ("image_globs", self.image_globs)}
+        if self.source in inputs:
+            name, values = inputs[self.source]
+            if len(values) != self.views:
+                raise SourceError(f"{name}: expected one entry per view (views={self.views}) for source "
+                                  f"{self.source!r}, received {len(values)}: {list(values)}")
+            if not self.rig_file:
+                raise SourceError(f"rig_file: source {self.source!r} needs a rig/calibration file; without one "
+                                  "the cameras' extrinsics are unknown (only the synthetic source has a "
+                                  "default rig)")
+
+
+def resolve_rig(cfg: SourceConfig) -> Rig:
+    """The rig whose first ``cfg.views`` cameras the node publishes, at ``cfg.width x cfg.height``.
+
+    Raises
+    ------
+    SourceError
+        A rig file with fewer cameras than ``views``; :class:`VisionError` for an unreadable file.
+    """
+    if not cfg.rig_file:
+        return default_rig(n_views=cfg.views, width=cfg.width or 320, height=cfg.height or 240)
+    path = Path(cfg.rig_file)
+    if not path.is_file():
+        raise SourceError(f"rig_file: {cfg.rig_file!r} does not exist")
+    rig = load_rig(path)
+    if len(rig) < cfg.views:
+        raise SourceError(f"views: the rig file {cfg.rig_file!r} has {len(rig)} cameras, views={cfg.views}")
+    rig = Rig(rig.cameras[:cfg.views], rig.name, rig.capture_volume)
+    if cfg.width and any((c.width, c.height) != (cfg.width, cfg.height) for c in rig.cameras):
+        rig = rig.resized(cfg.width, cfg.height)
+    return rig
+
+
+def open_source(cfg: SourceConfig, rig: Rig, *,
+                on_event: Callable[[SourceEvent], None] | None = None) -> FrameSource:
+    """Build the frame source of ``cfg`` for ``rig`` (distortions and resizing included).
+
+    The synthetic source renders at the rig's sizes and draws its own distortions; the others are
+    wrapped in :class:`ResizedSource` (to the rig's sizes) and, when ``noise`` or ``occluders`` is
+    set, :class:`DistortedSource`.
+    """
+    if cfg.source == "synthetic":
+        return SyntheticSource(rig, cfg.motion, fps=cfg.fps, model_dof=cfg.model_dof, seed=cfg.seed,
+                               noise=cfg.noise, occluders=cfg.occluders, empty_frames=cfg.empty_frames,
+                               duration_s=cfg.motion_duration_s or None, loop=cfg.loop, on_event=on_event)
+    if cfg.source == "device":
+        src: Any = DeviceSource(list(cfg.devices), width=rig.cameras[0].width, height=rig.cameras[0].height,
+                                fps=cfg.fps, on_event=on_event)
+    elif cfg.source == "video":
+        src = VideoFileSource(list(cfg.videos), loop=cfg.loop, on_event=on_event)
+    else:
+        src = ImageFolderSource(list(cfg.image_globs), loop=cfg.loop, on_event=on_event)
+    src = ResizedSource(src, [(c.width, c.height) for c in rig.cameras], on_event=on_event)
+    if cfg.noise > 0 or cfg.occluders > 0:
+        src = DistortedSource(src, seed=cfg.seed, noise=cfg.noise, occluders=cfg.occluders)
+    return src

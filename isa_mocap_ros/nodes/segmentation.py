@@ -1,0 +1,151 @@
+"""Segmentation node: one background model per view, ``cam<i>/image_raw`` -> ``cam<i>/mask``.
+
+Run alone (relative topic names; the network runs it in ``/mocap``)::
+
+    segmentation_node --ros-args -r __ns:=/mocap -p views:=4 -p method:=colour -p learn_frames:=10
+    python -m isa_mocap_ros.nodes.segmentation --ros-args -r __ns:=/mocap --params-file config/pipeline.yaml
+
+Per view ``i`` it subscribes to ``cam<i>/image_raw`` (sensor-data QoS) and keeps one
+:class:`~isa_mocap_ros.vision.segmentation.BackgroundSegmenter` (EA-vs-PF §3.2: a per-pixel colour
+model learnt from the first ``learn_frames`` images or from a clean plate; OpenCV MOG2/KNN as
+alternatives; morphological clean-up and small-blob removal). Each image gives one
+``cam<i>/mask`` (mono8, 0/255, reliable depth 10) with the source image's header (stamp and
+frame id), including the all-zero masks of the learning phase, so frame sets stay complete
+downstream. The parameters mirror :class:`~isa_mocap_ros.vision.segmentation.SegmentationConfig`.
+
+Accepted encodings: ``rgb8``, ``bgr8`` (turned into RGB) and ``mono8``. A malformed image (data
+length disagreeing with ``height * step``, unknown or unsupported encoding, a size other than the
+one the background was learnt at) is dropped for that view with one rate-limited log line; the
+node goes on with the next image.
+"""
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from collections import deque
+
+import cv2
+import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import Image
+
+import msg_adapters as ma
+from isa_mocap_ros.nodes import qos
+from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, run_node
+from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig, SegmentationError
+
+__all__ = ["SegmentationNode", "main", "ENCODINGS"]
+
+#: encodings the node segments
+ENCODINGS = ("rgb8", "bgr8", "mono8")
+
+# parameter name -> (description, lo, hi); names and defaults come from SegmentationConfig
+_PARAMS = {
+    "method": ("background model: colour (per-pixel Gaussian), mog2 or knn (OpenCV)", None, None),
+    "learn_frames": ("first images used only to learn the background (all-zero masks)", 1, 100000),
+    "threshold": ("colour: foreground beyond this many per-pixel std; mog2: sqrt(varThreshold)", 0.01, 1000.0),
+    "min_std": ("floor of the per-pixel std (intensity levels)", 0.01, 255.0),
+    "initial_std": ("per-pixel std assumed when starting from a clean plate", 0.01, 255.0),
+    "std_smoothing_px": ("box filter side applied to the learnt variance (0/1 = none)", 0, 101),
+    "update_rate": ("running update rate of the background outside the foreground (0 = frozen)", 0.0, 1.0),
+    "update_margin_px": ("foreground dilation before it is excluded from the update", 0, 100),
+    "max_foreground_fraction": ("above this foreground fraction a frame is a global change (update all)",
+                                0.001, 1.0),
+    "shadow_suppression": ("return shadows (darker, same chromaticity) as background", None, None),
+    "shadow_min_brightness": ("lowest brightness distortion of a shadow", 0.0, 1.0),
+    "shadow_max_brightness": ("highest brightness distortion of a shadow", 0.0, 2.0),
+    "shadow_chroma_threshold": ("largest chromaticity distortion of a shadow (std units)", 0.01, 1000.0),
+    "open_kernel": ("morphological opening size, px (0/1 = skip)", 0, 101),
+    "close_kernel": ("morphological closing size, px (0/1 = skip)", 0, 101),
+    "min_blob_area_px": ("connected foreground components smaller than this are removed", 0, 10**8),
+    "history": ("mog2/knn: OpenCV history", 1, 100000),
+    "knn_dist2_threshold": ("knn: OpenCV dist2Threshold", 0.01, 1e6),
+    "kernel": ("colour model implementation: numba or numpy", None, None),
+}
+
+
+def _read_plate(path: str) -> np.ndarray:
+    img = cv2.imread(path, cv2.IMREAD_COLOR)
+    if img is None:
+        raise ValueError(f"clean_plates: cannot read {path!r} as an image")
+    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+
+
+class SegmentationNode(Node):
+    """Thin node over :class:`BackgroundSegmenter`, one per view (see the module docstring)."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("segmentation", **kwargs)
+        self.n_views = declare(self, "views", 4, "number of camera views (cam0 .. cam<views-1>)", lo=1, hi=64)
+        values = {}
+        for f in dataclasses.fields(SegmentationConfig):
+            text, lo, hi = _PARAMS[f.name]
+            values[f.name] = declare(self, f.name, f.default, text, lo=lo, hi=hi)
+        plates = declare(self, "clean_plates", Parameter.Type.STRING_ARRAY,
+                         "optional clean-plate image per view ('' = learn from the first frames)") or []
+        self.config = SegmentationConfig(**values)
+        if plates and len(plates) != self.n_views:
+            raise ValueError(f"clean_plates: expected one entry per view ({self.n_views}), received {len(plates)}")
+        plates = list(plates) or [""] * self.n_views
+        self.segmenters = [BackgroundSegmenter(self.config, clean_plate=_read_plate(p) if p else None)
+                           for p in plates]
+        self.problems = ProblemLog(self)
+        self.mask_pubs = [self.create_publisher(Image, f"cam{i}/mask", qos.RELIABLE,
+                                                qos_overriding_options=QOS_OVERRIDES) for i in range(self.n_views)]
+        for i in range(self.n_views):
+            # one callback group per view: views are segmented in parallel, each view in order
+            self.create_subscription(Image, f"cam{i}/image_raw", self._callback(i), qos.SENSOR_DATA,
+                                     qos_overriding_options=QOS_OVERRIDES,
+                                     callback_group=MutuallyExclusiveCallbackGroup())
+        self.masks_published = [0] * self.n_views
+        self.latency_s: deque[float] = deque(maxlen=1000)
+        self.get_logger().info(
+            f"segmentation: {self.n_views} views, method {self.config.method}, "
+            + ("clean plates" if any(plates) else f"learning from the first {self.config.learn_frames} frames"))
+
+    def _callback(self, v: int):
+        seg, pub = self.segmenters[v], self.mask_pubs[v]
+
+        def cb(msg: Image) -> None:
+            t0 = time.perf_counter()
+            try:
+                if msg.encoding not in ENCODINGS:
+                    raise ma.AdapterError("Image.encoding", f"one of {', '.join(ENCODINGS)}", msg.encoding)
+                img = ma.image_to_array(msg)
+                if msg.encoding == "bgr8":
+                    img = img[:, :, ::-1]
+                if not img.flags.c_contiguous:
+                    img = np.ascontiguousarray(img)
+                mask = seg.apply(img)
+            except (ma.AdapterError, SegmentationError) as exc:
+                self.problems.report(f"image{v}", f"cam{v}/image_raw dropped: {exc}")
+                return
+            out = ma.array_to_image(mask, "mono8")
+            out.header = msg.header
+            pub.publish(out)
+            self.masks_published[v] += 1
+            self.latency_s.append(time.perf_counter() - t0)
+        return cb
+
+    def close(self) -> None:
+        """Log the masks published and the per-image processing time."""
+        lat = np.array(self.latency_s) * 1e3
+        text = (f"segmentation: {sum(self.masks_published)} masks published {self.masks_published}, "
+                f"{self.problems.total} images dropped"
+                + (f", {lat.mean():.2f} ms mean / {np.percentile(lat, 95):.2f} ms p95 per image" if lat.size else ""))
+        if self.context.ok():
+            self.get_logger().info(text)
+        else:
+            print(text, file=sys.stderr, flush=True)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console script ``segmentation_node``."""
+    return run_node(SegmentationNode, args, multithreaded=True)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
