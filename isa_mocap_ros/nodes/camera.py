@@ -21,6 +21,7 @@ from __future__ import annotations
 import sys
 import time
 
+import cv2
 from geometry_msgs.msg import TransformStamped
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -42,6 +43,9 @@ class CameraNode(Node):
         self.config = self._read_parameters()
         self.problems = ProblemLog(self)
         self.rig = resolve_rig(self.config)
+        if self.config.source == "device":
+            # OpenCV's own multi-line open warnings; the source reports failures itself, once per retry
+            cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
         self.source = open_source(self.config, self.rig, on_event=self._on_source_event)
         n = self.config.views
         self.frames = [f"{self.frame_id_prefix}cam{i}_optical_frame" for i in range(n)]
@@ -99,7 +103,7 @@ class CameraNode(Node):
         if ev.kind in ("reconnected", "info"):
             self.get_logger().info(ev.text)
         else:
-            self.problems.report(f"{ev.kind}{ev.view}", ev.text)
+            self.problems.report(f"source{ev.view}", ev.text)  # one rate-limited line per view
 
     def _tick(self) -> None:
         try:
@@ -110,13 +114,14 @@ class CameraNode(Node):
             return
         stamp = self.get_clock().now().nanoseconds
         for i, img in enumerate(images):
-            if img is None:
+            if img is None:  # the source has reported why (an event, logged rate-limited)
                 self.views_skipped += 1
-                self.problems.report(f"missing{i}", f"cam{i}: no image this frame; view skipped")
                 continue
             self.image_pubs[i].publish(ma.array_to_image(img, "rgb8", stamp_ns=stamp, frame_id=self.frames[i]))
             self.info_pubs[i].publish(ma.intrinsics_to_camera_info(self.intrinsics[i], stamp_ns=stamp,
                                                                    frame_id=self.frames[i]))
+        if all(img is None for img in images):
+            return
         self.sets_published += 1
         now = time.monotonic()
         if self._t0 is None:

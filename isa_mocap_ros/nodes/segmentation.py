@@ -92,6 +92,7 @@ class SegmentationNode(Node):
         plates = list(plates) or [""] * self.n_views
         self.segmenters = [BackgroundSegmenter(self.config, clean_plate=_read_plate(p) if p else None)
                            for p in plates]
+        self._warm_up()
         self.problems = ProblemLog(self)
         self.mask_pubs = [self.create_publisher(Image, f"cam{i}/mask", qos.RELIABLE,
                                                 qos_overriding_options=QOS_OVERRIDES) for i in range(self.n_views)]
@@ -105,6 +106,13 @@ class SegmentationNode(Node):
         self.get_logger().info(
             f"segmentation: {self.n_views} views, method {self.config.method}, "
             + ("clean plates" if any(plates) else f"learning from the first {self.config.learn_frames} frames"))
+
+    def _warm_up(self) -> None:
+        """Run the compiled kernels once on a tiny image, so the first real frame is not slow."""
+        seg = BackgroundSegmenter(self.config)
+        img = np.zeros((16, 16, 3), np.uint8)
+        for _ in range(self.config.learn_frames + 2):
+            seg.apply(img)
 
     def _callback(self, v: int):
         seg, pub = self.segmenters[v], self.mask_pubs[v]
@@ -120,8 +128,11 @@ class SegmentationNode(Node):
                 if not img.flags.c_contiguous:
                     img = np.ascontiguousarray(img)
                 mask = seg.apply(img)
-            except (ma.AdapterError, SegmentationError) as exc:
-                self.problems.report(f"image{v}", f"cam{v}/image_raw dropped: {exc}")
+            except ma.AdapterError as exc:  # one rate-limited line per view and offending field
+                self.problems.report(f"image{v}:{exc.field}", f"cam{v}/image_raw dropped: {exc}")
+                return
+            except SegmentationError as exc:
+                self.problems.report(f"image{v}:segmenter", f"cam{v}/image_raw dropped: {exc}")
                 return
             out = ma.array_to_image(mask, "mono8")
             out.header = msg.header
@@ -135,7 +146,7 @@ class SegmentationNode(Node):
         lat = np.array(self.latency_s) * 1e3
         text = (f"segmentation: {sum(self.masks_published)} masks published {self.masks_published}, "
                 f"{self.problems.total} images dropped"
-                + (f", {lat.mean():.2f} ms mean / {np.percentile(lat, 95):.2f} ms p95 per image" if lat.size else ""))
+                + (f", per image {np.median(lat):.2f} ms median / {np.percentile(lat, 95):.2f} ms p95 / {lat.max():.1f} ms max" if lat.size else ""))
         if self.context.ok():
             self.get_logger().info(text)
         else:

@@ -33,6 +33,7 @@ source without ``loop``, or a synthetic clip without ``loop``).
 from __future__ import annotations
 
 import glob as globlib
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -134,7 +135,9 @@ class _EventMixin:
 
 # --------------------------------------------------------------------------------------- devices
 def _open_device(index: int):
-    return cv2.VideoCapture(int(index))
+    """``cv2.VideoCapture`` of a device index (the V4L2 back end on Linux)."""
+    api = cv2.CAP_V4L2 if sys.platform.startswith("linux") else cv2.CAP_ANY
+    return cv2.VideoCapture(int(index), api)
 
 
 class DeviceSource(_EventMixin):

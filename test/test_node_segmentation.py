@@ -1,0 +1,187 @@
+"""Segmentation node as a real process: masks of the synthetic person, source headers, bad images."""
+from __future__ import annotations
+
+import contextlib
+import os
+import time
+
+import numpy as np
+import pytest
+import rclpy
+import yaml
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from sensor_msgs.msg import Image
+
+import msg_adapters as ma
+from isa_mocap_ros.nodes import qos
+from isa_mocap_ros.vision import default_rig
+from isa_mocap_ros.vision.sources import SyntheticSource
+
+pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
+NODE = ["-m", "isa_mocap_ros.nodes.segmentation", "--ros-args", "-r", "__ns:=/mocap"]
+LEARN = 6
+W, H = 320, 240  # the pipeline size (at 160x120 thin limbs lose IoU to the 3 px opening)
+
+
+@contextlib.contextmanager
+def ros_node(rosenv: dict[str, str], name: str):
+    """An rclpy node of the test process in the test's ROS domain (own context, env restored after)."""
+    saved = dict(os.environ)
+    os.environ.update({k: v for k, v in rosenv.items() if k.startswith(("ROS_", "RMW_"))})
+    ctx = Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node(name, context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    try:
+        yield node, ex
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+        os.environ.clear()
+        os.environ.update(saved)
+
+
+def spin_until(ex, cond, timeout: float) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if cond():
+            return True
+        ex.spin_once(timeout_sec=0.01)
+    return bool(cond())
+
+
+def iou(a: np.ndarray, b: np.ndarray) -> float:
+    a, b = a > 0, b > 0
+    return float((a & b).sum() / max(1, (a | b).sum()))
+
+
+class Harness:
+    """Publishes images on cam<v>/image_raw, collects cam<v>/mask by stamp."""
+
+    def __init__(self, node, ex, views: int):
+        self.node, self.ex = node, ex
+        self.pubs = [node.create_publisher(Image, f"/mocap/cam{v}/image_raw", qos.RELIABLE) for v in range(views)]
+        self.masks: list[dict[int, Image]] = [{} for _ in range(views)]
+        for v in range(views):
+            node.create_subscription(Image, f"/mocap/cam{v}/mask",
+                                     lambda m, v=v: self.masks[v].__setitem__(ma.stamp_to_ns(m.header), m),
+                                     qos.RELIABLE)
+
+    def connected(self) -> bool:
+        return all(p.get_subscription_count() > 0 for p in self.pubs) and all(
+            self.node.count_publishers(f"/mocap/cam{v}/mask") > 0 for v in range(len(self.pubs)))
+
+    def send(self, v: int, msg: Image, *, wait_for: int | None = None, timeout: float = 10.0) -> bool:
+        """Publish; with ``wait_for`` (a stamp) spin until its mask arrived."""
+        self.pubs[v].publish(msg)
+        if wait_for is None:
+            return spin_until(self.ex, lambda: False, 0.02)
+        return spin_until(self.ex, lambda: wait_for in self.masks[v], timeout)
+
+
+def _start(spawn, tmp_path, **extra):
+    params = {"views": 2, "learn_frames": LEARN, **extra}
+    path = tmp_path / "seg.yaml"
+    path.write_text(yaml.safe_dump({"/mocap/segmentation": {"ros__parameters": params}}))
+    seg = spawn("segmentation", *NODE, "--params-file", str(path))
+    assert seg.wait_for_output("segmentation: 2 views", 60), seg.output()
+    return seg
+
+
+def _source(frames_s: float = 1.0) -> SyntheticSource:
+    rig = default_rig(n_views=2, width=W, height=H)
+    return SyntheticSource(rig, "walk", fps=30, model_dof=18, seed=2, empty_frames=LEARN, duration_s=frames_s,
+                           loop=False)
+
+
+def test_masks_match_the_synthetic_person_with_the_source_header(spawn, rosenv, tmp_path):
+    seg = _start(spawn, tmp_path)
+    src = _source(1.0)
+    n = src.empty_frames + src.clip.n_frames
+    truth, sent = {}, {}
+    with ros_node(rosenv, "seg_test") as (node, ex):
+        h = Harness(node, ex, 2)
+        assert spin_until(ex, h.connected, 20)
+        for k in range(n):
+            images = src.read()
+            stamp = 1_000_000_000 + k * 33_333_333
+            for v, img in enumerate(images):
+                msg = ma.array_to_image(img, "rgb8", stamp_ns=stamp, frame_id=f"cam{v}_optical_frame")
+                truth[(v, stamp)] = src.last_masks[v]
+                sent[(v, stamp)] = msg.header
+                # wait for each mask: a lost best-effort image would shift the learning phase
+                assert h.send(v, msg, wait_for=stamp), (k, v, seg.output())
+    assert seg.popen.poll() is None
+    ious = []
+    for (v, stamp), want in truth.items():
+        msg = h.masks[v][stamp]
+        assert msg.encoding == "mono8" and msg.header == sent[(v, stamp)]
+        got = ma.image_to_array(msg)
+        assert set(np.unique(got)) <= {0, 255}
+        k = (stamp - 1_000_000_000) // 33_333_333
+        if k < LEARN:
+            assert not got.any()  # learning phase: empty masks, still published
+        elif want.sum() > 255 * 50:
+            ious.append(iou(got, want))
+    assert len(ious) >= 50
+    assert min(ious) >= 0.9, sorted(ious)[:5]
+    print(f"segmentation IoU over {len(ious)} masks: min {min(ious):.3f}, mean {np.mean(ious):.3f}")
+    assert seg.stop() == 0
+    out = seg.output()
+    assert "masks published" in out and "ms median" in out, out
+    print(out.strip().splitlines()[-1])
+
+
+def test_bad_images_are_dropped_with_one_line_each_and_good_ones_still_segmented(spawn, rosenv, tmp_path):
+    seg = _start(spawn, tmp_path)
+    src = _source(0.5)
+    stamp = [2_000_000_000]
+
+    def next_stamp():
+        stamp[0] += 33_333_333
+        return stamp[0]
+
+    with ros_node(rosenv, "seg_test") as (node, ex):
+        h = Harness(node, ex, 2)
+        assert spin_until(ex, h.connected, 20)
+        for _ in range(LEARN + 2):
+            images = src.read()
+            s = next_stamp()
+            for v in range(2):
+                assert h.send(v, ma.array_to_image(images[v], "rgb8", stamp_ns=s), wait_for=s)
+        good = src.read()
+        truth = src.last_masks[0]
+        # 1. data shorter than height * step
+        bad = ma.array_to_image(good[0], "rgb8", stamp_ns=next_stamp())
+        bad.data = bad.data[:-W * 3]
+        h.send(0, bad)
+        # 2. an encoding the node does not segment
+        rgba = np.dstack([good[0], np.full((H, W), 255, np.uint8)])
+        h.send(0, ma.array_to_image(rgba, "rgba8", stamp_ns=next_stamp()))
+        # 3. another size than the background was learnt at
+        h.send(0, ma.array_to_image(good[0][: H // 2, : W // 2].copy(), "rgb8", stamp_ns=next_stamp()))
+        # 4. an encoding string nobody knows
+        odd = ma.array_to_image(good[0], "rgb8", stamp_ns=next_stamp())
+        odd.encoding = "yuv422_yuy2_weird"
+        h.send(0, odd)
+        # the next good image of that view is segmented as before
+        s = next_stamp()
+        assert h.send(0, ma.array_to_image(good[0], "rgb8", stamp_ns=s), wait_for=s), seg.output()
+        assert iou(ma.image_to_array(h.masks[0][s]), truth) >= 0.9
+        # view 1 was never disturbed
+        s1 = next_stamp()
+        assert h.send(1, ma.array_to_image(good[1], "rgb8", stamp_ns=s1), wait_for=s1)
+    assert seg.popen.poll() is None, seg.output()
+    assert len(h.masks[0]) == LEARN + 2 + 1  # none of the 4 bad images gave a mask
+    out = seg.output()
+    lines = [ln for ln in out.splitlines() if "cam0/image_raw dropped" in ln]
+    # one line per problem kind (the two bad encodings are one kind, rate-limited to one line in 5 s)
+    assert len(lines) == 3, out
+    assert "Image.data: expected height * step" in lines[0]
+    assert "Image.encoding: expected one of rgb8, bgr8, mono8, received 'rgba8'" in lines[1]
+    assert "expected shape (240, 320, 3)" in lines[2] and "(120, 160, 3)" in lines[2]
+    assert seg.stop() == 0
+    assert "4 images dropped" in seg.output()
