@@ -119,8 +119,8 @@ class PredictionNode(Node):
         try:
             stamp = ma.stamp_to_ns(msg.header)
             names, q = ma.joint_state_to_arrays(msg, self.names)
-        except ma.AdapterError as exc:
-            self.problems.report("bad", f"joint_states dropped: {exc}")
+        except ma.AdapterError as exc:  # one rate-limited line per offending field (position, name, ...)
+            self.problems.report(exc.field.split(" of ")[0], f"joint_states dropped: {exc}")
             return
         if self.predictor is None:
             try:
