@@ -59,6 +59,9 @@ class BagPlayer(Node):
         self.wait_for_subscribers_s = p("wait_for_subscribers_s", 0.0, _desc(
             "before playing, wait up to this long until every topic has a subscriber", 0.0, 1e6)).value
         self.delay_s = p("delay_s", 0.0, _desc("sleep before playing (discovery)", 0.0, 1e6)).value
+        self.wait_for_acked_s = p("wait_for_all_acked_s", 10.0, _desc(
+            "at the end, wait up to this long until reliable subscribers acknowledged every message "
+            "(like ros2 bag play --wait-for-all-acked)", 0.0, 1e6)).value
         if not self.bag_path:
             raise BagError("parameter 'bag' is empty: give the bag to replay (-p bag:=PATH)")
         self.options = PlaybackOptions(
@@ -162,6 +165,21 @@ class BagPlayer(Node):
             time.sleep(0.05)
         self.get_logger().warn(f"no subscriber after {self.wait_for_subscribers_s:.1f} s on: {missing}")
 
+    def _wait_for_all_acked(self) -> None:
+        """Keep the writers alive until reliable readers acknowledged everything (bounded)."""
+        from rclpy.duration import Duration
+        deadline = time.monotonic() + self.wait_for_acked_s
+        for topic, pub in self.publishers_by_topic.items():
+            left = deadline - time.monotonic()
+            if left <= 0 or not self._running():
+                break
+            try:
+                if not pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
+                    self.get_logger().warn(f"{topic}: not every message was acknowledged "
+                                           f"within {self.wait_for_acked_s:.1f} s")
+            except Exception as exc:  # noqa: BLE001 - best effort (e.g. best-effort writers)
+                self.get_logger().debug(f"{topic}: wait_for_all_acked failed: {exc}")
+
     def _sleep_until(self, t: float) -> bool:
         while self._running():
             left = t - time.monotonic()
@@ -212,6 +230,7 @@ class BagPlayer(Node):
                                 f"{self.lockstep_timeout_s:.1f} s; continuing")
             if not self.options.loop:
                 break
+        self._wait_for_all_acked()
         summary = {"messages": self.published, "frames": n_frames, "topics": len(self.publishers_by_topic),
                    "seconds": round(time.monotonic() - t_start, 3),
                    "lockstep_acks": self.acks, "lockstep_timeouts": self.timeouts}

@@ -78,7 +78,9 @@ def playback_qos(profiles: Iterable[QosProfile]) -> QoSProfile:
         return RELIABLE
     chosen = next((p for p in profiles if p.durability == "transient_local"), profiles[0])
     qos = to_rclpy(chosen)
-    if qos.durability == DurabilityPolicy.TRANSIENT_LOCAL:
-        # Keep every latched sample of the bag available to late joiners (e.g. one per camera).
-        qos.depth = max(qos.depth, 1)
+    if qos.durability != DurabilityPolicy.TRANSIENT_LOCAL and qos.history == HistoryPolicy.KEEP_LAST:
+        # A replay publishes bursts (all views of a frame at once, or faster than real time): a
+        # deeper writer history lets a briefly busy reliable subscriber catch up instead of losing
+        # samples. Depth is not part of QoS matching, so compatibility is unchanged.
+        qos.depth = max(qos.depth, 100)
     return qos

@@ -12,7 +12,10 @@ the bag is flushed at least every ``flush_period_s`` so a SIGKILL loses at most 
 from __future__ import annotations
 
 import fnmatch
+import queue
 import sys
+import threading
+import time
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -60,7 +63,13 @@ class BagRecorder(Node):
         self.subscribed: dict[str, str] = {}
         self.counts: dict[str, int] = {}
         self._unsupported: set[str] = set()
-        self.create_timer(flush_s, self.writer.flush)
+        # Callbacks only enqueue; one writer thread owns the BagWriter (chunk compression never
+        # blocks the executor, so publishers' histories are drained while a chunk is written).
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._writer_lock = threading.Lock()
+        self._flush_s = flush_s
+        self._writer_thread = threading.Thread(target=self._write_loop, name="recorder-writer", daemon=True)
+        self._writer_thread.start()
         self.create_timer(discovery_s, self._discover)
         self.get_logger().info(f"recording to {output}")
         self._discover()
@@ -88,7 +97,8 @@ class BagRecorder(Node):
                 continue  # only a subscriber so far; wait for a publisher to learn its QoS
             offered = [i.qos_profile for i in infos]
             try:
-                self.writer.add_topic(topic, type_name, qos=[qos.from_rclpy(o) for o in offered])
+                with self._writer_lock:
+                    self.writer.add_topic(topic, type_name, qos=[qos.from_rclpy(o) for o in offered])
             except BagError as exc:
                 self._unsupported.add(topic)
                 self.get_logger().error(f"not recording {topic}: {exc}")
@@ -101,12 +111,32 @@ class BagRecorder(Node):
 
     def _callback(self, topic: str):
         def on_message(data: bytes) -> None:
-            self.writer.write(topic, data, self.get_clock().now().nanoseconds)
+            self._queue.put((topic, data, self.get_clock().now().nanoseconds))
             self.counts[topic] += 1
         return on_message
 
+    def _write_loop(self) -> None:
+        """Drain the queue into the bag; flush at least every ``flush_period_s``; stop on None."""
+        last_flush = time.monotonic()
+        while True:
+            try:
+                item = self._queue.get(timeout=min(0.1, self._flush_s))
+            except queue.Empty:
+                item = ()
+            if item is None:
+                return
+            with self._writer_lock:
+                if item:
+                    self.writer.write(*item)
+                if time.monotonic() - last_flush >= self._flush_s:
+                    self.writer.flush()
+                    last_flush = time.monotonic()
+
     def close(self) -> None:
-        self.writer.close()
+        self._queue.put(None)
+        self._writer_thread.join(timeout=60.0)
+        with self._writer_lock:
+            self.writer.close()
         total = sum(self.counts.values())
         self.get_logger().info(f"closed {self.output}: {total} messages on {len(self.counts)} topics")
 
