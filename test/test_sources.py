@@ -237,3 +237,15 @@ def test_distorted_source_is_reproducible_per_frame():
     np.testing.assert_array_equal(img, 100)  # input untouched
     with pytest.raises(SourceError, match="noise"):
         DistortedSource(_Const(img), noise=1.5)
+
+
+def test_synthetic_source_renders_a_bvh_motion(cmu_walk):
+    rig = default_rig(n_views=2, width=80, height=60)
+    src = SyntheticSource(rig, cmu_walk, fps=30, model_dof=18, seed=0, duration_s=0.2, loop=False)
+    assert src.clip.source == str(cmu_walk) and src.model.dof == 18
+    for _ in range(src.clip.n_frames):
+        images = src.read()
+        assert len(images) == 2 and src.last_pose is not None
+        assert all(m.any() for m in src.last_masks)  # the person is in both views
+    with pytest.raises(EndOfSource):
+        src.read()

@@ -136,7 +136,8 @@ class PredictionNode(Node):
                 self.get_logger().info(f"joint_states went back {back_s:.3f} s: a new sequence; history cleared")
             else:
                 self.problems.report("order", f"joint_states dropped: stamp {stamp} is not newer than the last "
-                                              f"estimate's {self.last_stamp_ns} (out of order by {back_s * 1e3:.1f} ms)")
+                                              f"estimate's {self.last_stamp_ns} "
+                                              f"(out of order by {back_s * 1e3:.1f} ms)")
                 return
         x_model = q[self._perm]
         try:

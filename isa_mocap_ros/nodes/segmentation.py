@@ -143,7 +143,8 @@ class SegmentationNode(Node):
         lat = np.array(self.latency_s) * 1e3
         text = (f"segmentation: {sum(self.masks_published)} masks published {self.masks_published}, "
                 f"{self.problems.total} images dropped"
-                + (f", per image {np.median(lat):.2f} ms median / {np.percentile(lat, 95):.2f} ms p95 / {lat.max():.1f} ms max" if lat.size else ""))
+                + (f", per image {np.median(lat):.2f} ms median / {np.percentile(lat, 95):.2f} ms p95 / "
+                   f"{lat.max():.1f} ms max" if lat.size else ""))
         if self.context.ok():
             self.get_logger().info(text)
         else:
