@@ -19,6 +19,7 @@ SUBCOMMANDS = [
     "demo",
     "bench",
     "synth",
+    "track",
 ]
 
 

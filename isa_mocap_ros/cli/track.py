@@ -1,0 +1,291 @@
+"""``isa-mocap track BAG --out DIR``: track a recorded multi-view bag offline (no ROS runtime).
+
+Reads the bag with :class:`isa_mocap_ros.bag.BagReader`, converts the messages with
+``msg_adapters`` into a :class:`isa_mocap_ros.sequence.Sequence`, takes the recorded masks
+(``/mocap/cam<i>/mask``, with ``--use-masks``) or segments the images with the segmentation node's
+code (:class:`~isa_mocap_ros.vision.segmentation.BackgroundSegmenter`, one per view, learning the
+background from the empty frames at the start), runs :class:`~isa_mocap_ros.tracking.Tracker` once
+per frame, and writes
+
+* ``DIR/estimates``: rosbag2 MCAP with ``/mocap/joint_states`` (``sensor_msgs/JointState``, the
+  tracking model's ``dof_names``, root as x, y, z, roll, pitch, yaw as the estimator node publishes
+  it), stamped with the frame stamp;
+* ``DIR/summary.json``: settings, speed and, with ground truth in the bag, the accuracy
+  (``mpjpe_mm``, ``knee_rmse_deg``, ``max_frame_error_mm``, ``frames``).
+
+Ground-truth joints: forward kinematics of the ground-truth pose with the ground-truth model (from
+the bag's ``/mocap/ground_truth/model``) and of the estimate with the tracking model, over the
+marker joints both models share (by name). Exit codes: 0 done, 2 bad input, 130 interrupted.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+TOPIC = "/mocap"
+
+
+def register(sub) -> None:
+    p = sub.add_parser("track", help="track a multi-view bag offline and report the accuracy",
+                       description="Track the person in BAG (masks or images of /mocap/cam<i>/...) frame by frame; "
+                                   "write DIR/estimates (MCAP) and DIR/summary.json.")
+    p.add_argument("bag", metavar="BAG", help="rosbag2 directory or .mcap file")
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    p.add_argument("--optimizer", default="isa", help="optimizer name (isa, apf, psapf, cmaes, de, pso, h-isa, "
+                                                     "h-apf, h-cmaes, h-de, h-pso; default isa)")
+    p.add_argument("--evals", type=int, default=1500, help="energy evaluations per frame (default 1500)")
+    p.add_argument("--params", default=None, metavar="JSON", help="optimizer parameters as a JSON object")
+    p.add_argument("--model", type=int, choices=(18, 28, 39), default=None,
+                   help="tracking model DOF (default: the bag's ground-truth model's, else 39)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the per-frame random streams (default 0)")
+    p.add_argument("--frames", type=int, default=None, metavar="N", help="track at most N frames")
+    p.add_argument("--start", type=int, default=0, metavar="K",
+                   help="first frame to track (frame index in the bag, empty frames included; default: the "
+                        "first frame after the background learning)")
+    p.add_argument("--use-masks", action="store_true", help="use /mocap/cam<i>/mask when the bag has it")
+    p.add_argument("--learn-frames", type=int, default=None, metavar="K",
+                   help="frames the segmenter learns the background from (default: the bag's empty frames, "
+                        "else 10)")
+    p.add_argument("--shape", choices=("truth", "default"), default="truth",
+                   help="body shape of the tracking model: the bag's ground-truth model's (default; a calibrated "
+                        "subject) or config/body/default.yaml")
+    p.add_argument("--init", choices=("auto", "truth"), default="auto",
+                   help="first pose: automatic from the masks (default) or the ground truth")
+    p.add_argument("--predictor", choices=("ar", "constant_pose", "constant_velocity"), default=None)
+    p.add_argument("--prior", default=None, metavar="NPZ", help="Parzen prior file (with --prior-eta)")
+    p.add_argument("--prior-eta", type=float, default=0.0, help="prior weight (0 = off)")
+    p.add_argument("--energy", choices=("fast", "exact"), default="fast", help="silhouette energy method")
+    p.add_argument("--overwrite", action="store_true", help="replace DIR/estimates if it exists")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def _fail(msg: str) -> int:
+    print(f"isa-mocap track: error: {msg}", file=sys.stderr)
+    return 2
+
+
+def read_sequence(path, *, want_images: bool, want_masks: bool):
+    """Read a bag into a :class:`~isa_mocap_ros.sequence.Sequence` (message conversion lives here)."""
+    from isa_mocap_ros.bag import BagReader
+    from isa_mocap_ros.sequence import SequenceBuilder, view_of_topic
+    from msg_adapters import (camera_info_to_intrinsics, from_cdr, image_to_array, joint_state_to_arrays,
+                              stamp_to_ns, transform_to_rt)
+
+    b = SequenceBuilder()
+    with BagReader(path) as bag:
+        wanted = []
+        for name in bag.topics:
+            vk = view_of_topic(name)
+            if vk is not None:
+                kind = vk[1]
+                if kind in ("camera_info", "extrinsics") or (kind == "image_raw" and want_images) \
+                        or (kind == "mask" and want_masks):
+                    wanted.append(name)
+            elif name in (f"{TOPIC}/ground_truth/joint_states", f"{TOPIC}/ground_truth/model"):
+                wanted.append(name)
+        seen_info: set[int] = set()
+        for m in bag.messages(wanted):
+            vk = view_of_topic(m.topic)
+            if vk is not None:
+                v, kind = vk
+                if kind == "camera_info":
+                    if v in seen_info:       # intrinsics are the same every frame: decode once
+                        continue
+                    seen_info.add(v)
+                    intr = camera_info_to_intrinsics(from_cdr(m.data, m.type))
+                    b.add_camera_info(v, K=intr.K, D=intr.D, width=intr.width, height=intr.height)
+                elif kind == "extrinsics":
+                    R, t = transform_to_rt(from_cdr(m.data, m.type))
+                    b.add_extrinsics(v, R, t)
+                else:
+                    msg = from_cdr(m.data, m.type)
+                    arr = np.array(image_to_array(msg), copy=True)
+                    stamp = stamp_to_ns(msg.header)
+                    (b.add_image if kind == "image_raw" else b.add_mask)(v, stamp, arr)
+            elif m.topic.endswith("/model"):
+                b.set_model_yaml(from_cdr(m.data, m.type).data)
+            else:
+                msg = from_cdr(m.data, m.type)
+                names, pos = joint_state_to_arrays(msg)
+                b.add_truth(stamp_to_ns(msg.header), names, pos)
+    return b.build()
+
+
+def _table(rows: list[tuple[str, str]]) -> str:
+    w = max(len(k) for k, _ in rows)
+    return "\n".join(f"  {k:<{w}}  {v}" for k, v in rows)
+
+
+def track_bag(args) -> dict:
+    """Do the work of ``isa-mocap track`` (raises ValueError subclasses on bad input); return the summary."""
+    from tqdm import tqdm
+
+    from isa_mocap_ros.bag import QOS_DEFAULT, BagReader, BagWriter
+    from isa_mocap_ros.body import make_model, pose_to_joint_state
+    from isa_mocap_ros.eval import (frame_errors_mm, knee_rmse_deg, marker_positions, max_frame_error_mm, mpjpe_mm,
+                                    shared_markers)
+    from isa_mocap_ros.tracking import Tracker, TrackerConfig
+    from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig
+    from msg_adapters import arrays_to_joint_state, to_cdr
+
+    if args.evals < 1:
+        raise ValueError(f"--evals: expected an integer >= 1, received {args.evals}")
+    if args.frames is not None and args.frames < 1:
+        raise ValueError(f"--frames: expected an integer >= 1, received {args.frames}")
+    if args.start < 0:
+        raise ValueError(f"--start: expected an integer >= 0, received {args.start}")
+    params = {}
+    if args.params:
+        try:
+            params = json.loads(args.params)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"--params: expected a JSON object, received {args.params!r} ({exc})") from None
+        if not isinstance(params, dict):
+            raise ValueError(f"--params: expected a JSON object, received {args.params!r}")
+    bag_path = Path(args.bag)
+    if not bag_path.exists():
+        raise ValueError(f"BAG: expected a rosbag2 directory or .mcap file, received {args.bag!r} (no such path)")
+    with BagReader(bag_path) as probe:
+        has_mask_topics = any(t.endswith("/mask") and t.startswith(f"{TOPIC}/cam") for t in probe.topics)
+    use_masks = bool(args.use_masks and has_mask_topics)
+    seq = read_sequence(bag_path, want_images=not use_masks, want_masks=use_masks)
+    if not seq.frames:
+        raise ValueError(f"BAG: expected frames with images{' or masks' if use_masks else ''}, received none")
+    dof = args.model or (seq.truth_model.dof if seq.truth_model is not None else 39)
+    if seq.truth_model is not None and args.shape == "truth":
+        # the subject's body shape is taken as calibrated (as the papers' subject-specific models)
+        model = make_model(dof, shape=dict(seq.truth_model.shape))
+    else:
+        model = make_model(dof)
+    notes = list(seq.notes)
+    if args.use_masks and not has_mask_topics:
+        notes.append("--use-masks: the bag has no mask topics; segmenting the images")
+
+    # masks per frame: recorded, or segmented with one background model per view
+    learn = 0
+    segmenters = None
+    if not use_masks:
+        learn = args.learn_frames if args.learn_frames is not None else (seq.empty_frames or 10)
+        if learn < 1:
+            raise ValueError(f"--learn-frames: expected an integer >= 1, received {learn}")
+        segmenters = [BackgroundSegmenter(SegmentationConfig(learn_frames=learn)) for _ in seq.cameras]
+    first = max(args.start, learn if not use_masks else 0)
+    stop = len(seq.frames) if args.frames is None else min(len(seq.frames), first + args.frames)
+    if first >= len(seq.frames):
+        raise ValueError(f"--start: expected a frame before the bag's end ({len(seq.frames)} frames, background "
+                         f"learning takes {learn}), received {args.start}")
+
+    prior = None
+    if args.prior_eta > 0:
+        if not args.prior:
+            raise ValueError("--prior-eta: expected --prior NPZ as well, received none")
+        from isa_mocap_ros.energy.prior import ParzenPrior
+        prior = ParzenPrior.load(args.prior)
+    cfg_kw = dict(optimizer=args.optimizer, evals_per_frame=args.evals, optimizer_params=params, seed=args.seed,
+                  energy_method=args.energy, prior_eta=args.prior_eta)
+    if args.predictor:
+        cfg_kw["predictor"] = args.predictor
+    cfg = TrackerConfig(**cfg_kw)
+    tracker = Tracker(model, seq.cameras, cfg, prior=prior)
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    est_path = out / "estimates"
+    if est_path.exists() and not args.overwrite:
+        raise FileExistsError(f"--out: {est_path} exists; pass --overwrite to replace it")
+    show = not args.no_progress
+    estimates: dict[int, np.ndarray] = {}
+    results = []
+    n_fell_back = 0
+    t_track = 0.0
+    with BagWriter(est_path, overwrite=args.overwrite) as bag:
+        bag.add_topic(f"{TOPIC}/joint_states", "sensor_msgs/msg/JointState", qos=[QOS_DEFAULT])
+        bar = tqdm(total=stop - first, unit="frame", desc="track", file=sys.stderr, disable=not show)
+        for fr in seq.frames[:stop]:
+            if use_masks:
+                masks = list(fr.masks)
+            else:
+                masks = [None if img is None else seg.apply(img) for seg, img in zip(segmenters, fr.images)]
+            if fr.index < first:
+                continue
+            t0 = time.perf_counter()
+            if args.init == "truth" and not tracker.initialized:
+                if fr.truth is None or seq.truth_model is None or seq.truth_model.dof != model.dof:
+                    raise ValueError("--init truth: expected ground truth of the tracking model's DOF at the first "
+                                     f"frame ({fr.index}), received none")
+                tracker.initialize(pose=fr.truth)
+                r = None
+                x = tracker.last_estimate
+            else:
+                r = tracker.step(masks, fr.index)
+                x = r.x
+            t_track += time.perf_counter() - t0
+            if r is not None:
+                results.append(r)
+                n_fell_back += int(r.fell_back)
+            if x is not None:
+                estimates[fr.index] = x
+                q = pose_to_joint_state(model, x)
+                bag.write(f"{TOPIC}/joint_states",
+                          to_cdr(arrays_to_joint_state(model.dof_names, q, stamp_ns=fr.stamp_ns, frame_id="world")),
+                          fr.stamp_ns)
+            if r is not None and show:
+                bar.set_postfix(E=f"{r.energy:.3f}", views=r.views_used)
+            bar.update(1)
+        bar.close()
+
+    n_tracked = stop - first
+    summary: dict = {"bag": str(bag_path), "out": str(out), "optimizer": args.optimizer, "evals_per_frame": args.evals,
+                     "optimizer_params": cfg.params(), "model_dof": model.dof, "seed": args.seed,
+                     "masks": "recorded" if use_masks else f"segmented (learned from {learn} frames)",
+                     "frames_tracked": n_tracked, "frames_estimated": len(estimates), "frames_fell_back": n_fell_back,
+                     "fps": n_tracked / t_track if t_track > 0 else float("nan"),
+                     "mean_energy": float(np.nanmean([r.energy for r in results])) if results else float("nan"),
+                     "notes": notes + sorted({n for r in results for n in r.notes
+                                              if not n.startswith("initialized")})[:20]}
+    inits = [n for r in results for n in r.notes if n.startswith("initialized")]
+    if inits:
+        summary["init"] = inits[0]
+    idx = [f.index for f in seq.frames[first:stop] if f.truth is not None and f.index in estimates]
+    if seq.has_truth and idx:
+        tm = seq.truth_model
+        truth = np.array([seq.frames[k].truth for k in idx])
+        est = np.array([estimates[k] for k in idx])
+        names = shared_markers(model, tm)
+        Pe = marker_positions(model, est, joints=names)
+        Pt = marker_positions(tm, truth, joints=names)
+        fe = frame_errors_mm(Pe, Pt)
+        summary.update({"frames": len(idx), "mpjpe_mm": mpjpe_mm(Pe, Pt), "max_frame_error_mm": max_frame_error_mm(Pe, Pt),
+                        "median_frame_error_mm": float(np.median(fe)),
+                        "knee_rmse_deg": knee_rmse_deg(est, truth, model, true_model=tm),
+                        "markers": list(names), "frame_errors_mm": [round(float(e), 2) for e in fe]})
+    else:
+        summary["frames"] = len(estimates)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        s = track_bag(args)
+    except (ValueError, FileExistsError) as exc:
+        return _fail(str(exc))
+    rows = [("bag", s["bag"]), ("optimizer", f"{s['optimizer']}, {s['evals_per_frame']} evaluations/frame"),
+            ("model", f"{s['model_dof']} DOF"), ("masks", s["masks"]),
+            ("frames", f"{s['frames_tracked']} tracked, {s['frames_fell_back']} fell back"),
+            ("speed", f"{s['fps']:.2f} frames/s")]
+    if "mpjpe_mm" in s:
+        rows += [("mean joint error (Eq. 20)", f"{s['mpjpe_mm']:.1f} mm over {s['frames']} frames"),
+                 ("max frame error", f"{s['max_frame_error_mm']:.1f} mm"),
+                 ("knee-angle RMSE", f"{s['knee_rmse_deg']:.2f} deg")]
+    else:
+        rows.append(("accuracy", "no ground truth in the bag"))
+    print("track: accuracy\n" + _table(rows))
+    print(f"track: wrote {Path(s['out']) / 'estimates'} and {Path(s['out']) / 'summary.json'}")
+    return 0

@@ -1,0 +1,606 @@
+"""The per-frame tracker: prediction → optimizer on the energy → estimate (+ diagnostics).
+
+Sources: yeguas_ea_vs_pf_mocap §3 (energy Eq. 4-5 over the V views, §3.3 hierarchy, search radius
+0.5 rad around the prediction for every joint, budgets in evaluations per frame), gall_isa_introduction
+§13.4.2 (prediction 13.28, prior 13.32-13.33: total energy ``E = E_data − η ln p(x)``).
+
+One call of :meth:`Tracker.step` per frame set:
+
+1. **Masks.** Views whose mask is missing (None), of the wrong size for its camera, or empty are
+   skipped (a note says which and why). No usable view: the frame *falls back* to the last
+   estimate (``fell_back=True``, no evaluation, the predictor is not updated, so a gap does not
+   teach it a zero velocity).
+2. **Prediction.** An external prediction (``prediction=``, e.g. from the prediction node) if it is
+   finite and of length D, else the tracker's own predictor (``"ar"``: 13.28 of order
+   ``predictor_order``; ``"constant_pose"``; ``"constant_velocity"``). A non-finite prediction is
+   replaced by the last estimate (note). It is then clipped into the model's limits.
+3. **Search box.** ``bounds = prediction ± radius``, clipped to the model limits, with radius
+   ``search_radius_rad`` for every joint angle (EA-vs-PF §5: 0.5 rad),
+   ``root_translation_radius_m`` for the root position and ``root_rotation_radius_rad`` for each
+   rotation-vector component. The optimizer starts around the prediction with standard deviation
+   ``joint_spread_rad`` (joints), ``root_translation_spread_m``, ``root_rotation_spread_rad``.
+4. **Optimizer.** :func:`~isa_mocap_ros.optim.make_optimizer` by name with ``optimizer_params``
+   (defaults per optimizer in :data:`DEFAULT_PARAMS`), hierarchical ones (``h-*``, ``psapf``) over
+   ``model.partitions`` in the order root, torso, left arm, right arm, left leg, right leg (§3.3);
+   exactly ``evals_per_frame`` evaluations (:func:`~isa_mocap_ros.optim.minimize`).
+5. **Estimate.** ``estimate="optimizer"``: the algorithm's own estimate (ISA/APF weighted mean,
+   CMA-ES mean, DE/PSO best); ``"best"``: the best evaluated particle. Then the predictor is updated.
+
+**Random streams.** Frame ``k`` (``frame_index``; the estimator node passes the stamp in ns, any
+non-negative integer works) draws everything from ``numpy.random.default_rng([seed, k])``
+(a ``SeedSequence`` of the pair), so a frame's result depends only on the seed, the frame key,
+its masks and the tracker's state (predictor history), never on timing: same seed and inputs ⇒
+identical estimates. The first frame's automatic initialization uses
+``default_rng([seed, k, 1])``.
+
+**First frame.** :meth:`Tracker.initialize` with ``pose=`` (given) or ``masks=`` (automatic,
+:mod:`.init`); if neither was called, the first ``step`` with usable masks initializes itself
+automatically and then tracks from that pose.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from .init import InitError, initial_pose
+from .predict import ArPredictor, ConstantPosePredictor, ConstantVelocityPredictor
+
+__all__ = ["TrackerError", "TrackerConfig", "FrameResult", "Tracker", "make_tracker", "DEFAULT_PARAMS",
+           "PREDICTORS", "frame_rng"]
+
+PREDICTORS = ("ar", "constant_pose", "constant_velocity")
+ESTIMATES = ("optimizer", "best")
+
+#: Optimizer parameters used unless ``optimizer_params`` sets them (tuned on the silhouette energy,
+#: see ``docs/tracking.md``); the library defaults apply to anything not listed.
+DEFAULT_PARAMS: Mapping[str, Mapping[str, Any]] = MappingProxyType({
+    "isa": MappingProxyType({"n_particles": 100, "kernel": "s2", "schedule": "adaptive", "target_ess": 0.3,
+                             "c": 0.5}),
+    "h-isa": MappingProxyType({"n_particles": 30, "kernel": "s2", "schedule": "adaptive", "target_ess": 0.3,
+                               "c": 0.5}),
+})
+
+
+class TrackerError(ValueError):
+    """Bad tracker configuration or argument (names the argument, the expected and the received value)."""
+
+
+def frame_rng(seed: int, frame_index: int, *extra: int) -> np.random.Generator:
+    """The generator of one frame: ``default_rng([seed, frame_index, *extra])``."""
+    return np.random.default_rng([int(seed), int(frame_index), *map(int, extra)])
+
+
+def _check_number(name: str, value, *, lo: float | None = None, strict: bool = False, integer: bool = False):
+    ok_type = (int, np.integer) if integer else (int, float, np.integer, np.floating)
+    if isinstance(value, bool) or not isinstance(value, ok_type) or not math.isfinite(value) \
+            or (lo is not None and (value <= lo if strict else value < lo)):
+        kind = "an integer" if integer else "a finite number"
+        bound = "" if lo is None else f" {'>' if strict else '>='} {lo}"
+        raise TrackerError(f"{name}: expected {kind}{bound}, received {value!r}")
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Fixed settings of a :class:`Tracker` (see the module docstring and ``docs/tracking.md``).
+
+    Attributes
+    ----------
+    optimizer : str
+        Registry name (``isa``, ``apf``, ``psapf``, ``cmaes``, ``de``, ``pso``, ``h-isa``, ...).
+    evals_per_frame : int
+        Energy evaluations per frame (EA-vs-PF: 500 / 1500 / 3000).
+    optimizer_params : mapping
+        Keyword arguments of the optimizer, over :data:`DEFAULT_PARAMS`.
+    search_radius_rad : float
+        Half-width of the search box of every joint angle around the prediction (EA-vs-PF: 0.5).
+    joint_spread_rad : float
+        Initial standard deviation of the joint angles around the prediction.
+    root_translation_radius_m, root_translation_spread_m : float
+        Search half-width and initial standard deviation of the root position, metres.
+    root_rotation_radius_rad, root_rotation_spread_rad : float
+        The same for each root rotation-vector component, radians.
+    predictor : {"ar", "constant_pose", "constant_velocity"}
+    predictor_order : int
+        AR order (13.28).
+    root_velocity_gain, joint_velocity_gain : float
+        The tracker's own prediction is ``x_k + g (p − x_k)`` with the predictor's ``p`` and the
+        last estimate ``x_k``: ``g = 1`` the predictor as it is, ``g = 0`` the last estimate
+        (constant pose), between: a damped extrapolation. The root's 6 DOF use the first gain,
+        the joint angles the second (see ``docs/tracking.md`` for the measured choice).
+    prior_eta : float
+        Weight η of the Parzen prior (13.33); 0 disables it.
+    prior_file : str or None
+        ``.npz`` written by :meth:`ParzenPrior.save` (used when no ``prior=`` object is given).
+    energy_method : {"fast", "exact"}
+    downsample : int
+        Mask downsampling of the fast energy.
+    estimate : {"optimizer", "best"}
+    include_prediction : bool
+        Make the prediction the first particle of the first generation (not for hierarchical
+        optimizers, whose partitions start from the current estimate anyway).
+    seed : int
+    init_yaw_steps : int
+        Headings of the automatic initialization's grid.
+    init_refine_evals : int
+        Evaluations of each of the initialization's two root refinements (0: none).
+    """
+
+    optimizer: str = "isa"
+    evals_per_frame: int = 1500
+    optimizer_params: Mapping[str, Any] = field(default_factory=dict)
+    search_radius_rad: float = 0.5
+    joint_spread_rad: float = 0.1
+    root_translation_radius_m: float = 0.25
+    root_translation_spread_m: float = 0.03
+    root_rotation_radius_rad: float = 0.5
+    root_rotation_spread_rad: float = 0.05
+    predictor: str = "ar"
+    predictor_order: int = 1
+    root_velocity_gain: float = 1.0
+    joint_velocity_gain: float = 1.0
+    prior_eta: float = 0.0
+    prior_file: str | None = None
+    energy_method: str = "fast"
+    downsample: int = 2
+    estimate: str = "optimizer"
+    include_prediction: bool = True
+    seed: int = 0
+    init_yaw_steps: int = 24
+    init_refine_evals: int = 600
+
+    def __post_init__(self) -> None:
+        from isa_mocap_ros.optim import OPTIMIZERS
+
+        if self.optimizer not in OPTIMIZERS:
+            raise TrackerError(f"optimizer: expected one of {', '.join(OPTIMIZERS)}, received {self.optimizer!r}")
+        _check_number("evals_per_frame", self.evals_per_frame, lo=1, integer=True)
+        if not isinstance(self.optimizer_params, Mapping):
+            raise TrackerError(f"optimizer_params: expected a mapping, received {type(self.optimizer_params).__name__}")
+        bad = [k for k in self.optimizer_params if k in ("bounds", "rng", "rotation_blocks", "partitions", "x0",
+                                                         "spread")]
+        if bad:
+            raise TrackerError(f"optimizer_params: expected algorithm parameters only, received {bad} "
+                               "(set by the tracker)")
+        object.__setattr__(self, "optimizer_params", MappingProxyType(dict(self.optimizer_params)))
+        for name in ("search_radius_rad", "joint_spread_rad", "root_translation_radius_m", "root_translation_spread_m",
+                     "root_rotation_radius_rad", "root_rotation_spread_rad"):
+            _check_number(name, getattr(self, name), lo=0.0, strict=True)
+        if self.predictor not in PREDICTORS:
+            raise TrackerError(f"predictor: expected one of {', '.join(PREDICTORS)}, received {self.predictor!r}")
+        _check_number("predictor_order", self.predictor_order, lo=1, integer=True)
+        for name in ("root_velocity_gain", "joint_velocity_gain"):
+            _check_number(name, getattr(self, name), lo=0.0)
+        _check_number("prior_eta", self.prior_eta, lo=0.0)
+        if self.prior_file is not None and not isinstance(self.prior_file, (str, Path)):
+            raise TrackerError(f"prior_file: expected a path or None, received {self.prior_file!r}")
+        if self.energy_method not in ("fast", "exact"):
+            raise TrackerError(f"energy_method: expected 'fast' or 'exact', received {self.energy_method!r}")
+        _check_number("downsample", self.downsample, lo=1, integer=True)
+        if self.estimate not in ESTIMATES:
+            raise TrackerError(f"estimate: expected one of {', '.join(ESTIMATES)}, received {self.estimate!r}")
+        if not isinstance(self.include_prediction, bool):
+            raise TrackerError(f"include_prediction: expected a bool, received {self.include_prediction!r}")
+        _check_number("seed", self.seed, lo=0, integer=True)
+        _check_number("init_yaw_steps", self.init_yaw_steps, lo=4, integer=True)
+        _check_number("init_refine_evals", self.init_refine_evals, lo=0, integer=True)
+
+    def params(self) -> dict:
+        """Optimizer keyword arguments: :data:`DEFAULT_PARAMS` of the optimizer, then ``optimizer_params``."""
+        out = dict(DEFAULT_PARAMS.get(self.optimizer, {}))
+        out.update(self.optimizer_params)
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class FrameResult:
+    """What one :meth:`Tracker.step` produced.
+
+    Attributes
+    ----------
+    x : (D,) ndarray or None
+        The estimate (None only when the tracker has never had an estimate: no usable masks yet).
+    energy : float
+        Energy of the estimate as the optimizer reports it (nan when no optimization ran).
+    n_evals : int
+        Evaluations this frame (initialization included).
+    spread : float
+        Final population spread (mean over coordinates of the standard deviation), nan if none.
+    time_s : float
+        Wall time of the call.
+    views_used : int
+        Views whose mask entered the energy.
+    notes : tuple of str
+        Everything skipped or replaced, and why (``"view 2: empty mask; skipped"``, ...).
+    fell_back : bool
+        True when no optimization ran and ``x`` is the last estimate.
+    prediction : (D,) ndarray or None
+        The prediction the search was centred on.
+    initialized : bool
+        True on the frame that ran the automatic initialization.
+    """
+
+    x: np.ndarray | None
+    energy: float
+    n_evals: int
+    spread: float
+    time_s: float
+    views_used: int
+    notes: tuple = ()
+    fell_back: bool = False
+    prediction: np.ndarray | None = None
+    initialized: bool = False
+
+
+def _make_predictor(config: TrackerConfig):
+    if config.predictor == "ar":
+        return ArPredictor(order=config.predictor_order)
+    if config.predictor == "constant_pose":
+        return ConstantPosePredictor()
+    return ConstantVelocityPredictor()
+
+
+class Tracker:
+    """Per-frame pose tracker (see the module docstring).
+
+    Parameters
+    ----------
+    model : BodyModel
+    cameras : sequence of Camera
+        One per view, in view order.
+    config : TrackerConfig
+    prior : ParzenPrior, optional
+        Used when ``config.prior_eta > 0`` (else ``config.prior_file`` is loaded).
+    energy : object, optional
+        Data term with ``set_masks(masks)`` and ``__call__(X (n, D)) -> (n,)``; default
+        :class:`~isa_mocap_ros.energy.silhouette.SilhouetteEnergy` with the config's method and
+        downsampling.
+    predictor : object, optional
+        With ``update(x)``, ``predict()``, ``reset()`` (e.g. :class:`.published.PublishedPredictor`
+        to reproduce the node network's numbers); default from ``config.predictor``.
+
+    Examples
+    --------
+    >>> tracker = Tracker(model, rig.cameras, TrackerConfig(seed=1))      # doctest: +SKIP
+    >>> tracker.initialize(masks=first_masks)                              # doctest: +SKIP
+    >>> for k, masks in enumerate(frames):                                 # doctest: +SKIP
+    ...     r = tracker.step(masks, k); print(r.x[:3], r.energy, r.notes)
+    """
+
+    def __init__(self, model, cameras: Sequence, config: TrackerConfig = TrackerConfig(), *, prior=None,
+                 energy=None, predictor=None):
+        if not isinstance(config, TrackerConfig):
+            raise TrackerError(f"config: expected a TrackerConfig, received {type(config).__name__}")
+        cams = list(cameras)
+        if not cams:
+            raise TrackerError("cameras: expected at least one camera, received none")
+        for i, c in enumerate(cams):
+            if not all(hasattr(c, a) for a in ("width", "height", "ray", "project")):
+                raise TrackerError(f"cameras[{i}]: expected a Camera, received {type(c).__name__}")
+        self.model = model
+        self.cameras = cams
+        self.config = config
+        self.prior = None
+        if config.prior_eta > 0:
+            if prior is None and config.prior_file:
+                from isa_mocap_ros.energy.prior import ParzenPrior
+
+                prior = ParzenPrior.load(config.prior_file)
+            if prior is None:
+                raise TrackerError("prior: expected a ParzenPrior (prior= or config.prior_file) when prior_eta > 0, "
+                                   "received none")
+            if getattr(prior, "n_dof", model.dof) != model.dof:
+                raise TrackerError(f"prior: expected a prior over {model.dof}-DOF poses, received one over "
+                                   f"{prior.n_dof}")
+            self.prior = prior
+        if energy is None:
+            from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
+
+            energy = SilhouetteEnergy(model, cams, None, method=config.energy_method, downsample=config.downsample,
+                                      rng=np.random.default_rng([config.seed, 2**32 - 1]))
+        if not (callable(energy) and hasattr(energy, "set_masks")):
+            raise TrackerError(f"energy: expected an object with set_masks() and __call__, received "
+                               f"{type(energy).__name__}")
+        self.energy = energy
+        self.predictor = _make_predictor(config) if predictor is None else predictor
+        self._last: np.ndarray | None = None
+        self._partitions = [np.asarray(model.partitions[k]) for k in
+                            ("root", "torso", "left_arm", "right_arm", "left_leg", "right_leg")
+                            if k in model.partitions]
+        self.frames = 0
+
+    # ------------------------------------------------------------------ state
+    @property
+    def initialized(self) -> bool:
+        """True once an estimate exists (given, automatic or tracked)."""
+        return self._last is not None
+
+    @property
+    def last_estimate(self) -> np.ndarray | None:
+        return None if self._last is None else self._last.copy()
+
+    def reset(self) -> None:
+        """Forget the estimates (the next step initializes again)."""
+        self._last = None
+        self.predictor.reset()
+
+    def total_energy(self, X) -> np.ndarray:
+        """Data term plus the prior ``−η ln p`` (13.33) of poses ``(n, D)`` under the current masks."""
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        E = np.asarray(self.energy(X), dtype=float)
+        if self.prior is not None and self.config.prior_eta > 0:
+            E = E + self.prior.energy(X, eta=self.config.prior_eta)
+        return E
+
+    # ------------------------------------------------------------------ masks
+    def _check_masks(self, masks) -> tuple[list, list[str]]:
+        """Per view a usable mask or None, and notes on what was skipped."""
+        V = len(self.cameras)
+        notes: list[str] = []
+        if masks is None:
+            return [None] * V, ["masks: none given"]
+        try:
+            masks = list(masks)
+        except TypeError:
+            return [None] * V, [f"masks: expected a sequence of {V} masks, received {type(masks).__name__}"]
+        if len(masks) != V:
+            notes.append(f"masks: expected {V} views, received {len(masks)}"
+                         + ("; missing views skipped" if len(masks) < V else "; extra views ignored"))
+            masks = (masks + [None] * V)[:V]
+        out: list = []
+        for v, (cam, m) in enumerate(zip(self.cameras, masks)):
+            if m is None:
+                notes.append(f"view {v}: no mask; skipped")
+                out.append(None)
+                continue
+            try:
+                a = np.asarray(m)
+            except Exception as exc:  # noqa: BLE001 - anything unreadable is skipped, with its reason
+                notes.append(f"view {v}: unreadable mask ({type(exc).__name__}); skipped")
+                out.append(None)
+                continue
+            if a.ndim != 2 or a.shape != (cam.height, cam.width):
+                notes.append(f"view {v}: mask shape {a.shape}, expected ({cam.height}, {cam.width}); skipped")
+                out.append(None)
+                continue
+            if a.dtype != np.uint8:
+                if not np.issubdtype(a.dtype, np.number) and a.dtype != bool:
+                    notes.append(f"view {v}: mask dtype {a.dtype}, expected numbers; skipped")
+                    out.append(None)
+                    continue
+                a = np.where(np.nan_to_num(a.astype(float)) > 0, 255, 0).astype(np.uint8)
+            if not a.any():
+                notes.append(f"view {v}: empty mask (nobody in view); skipped")
+                out.append(None)
+                continue
+            out.append(a)
+        return out, notes
+
+    def _set_masks(self, masks: list, notes: list[str], frame_index: int | None) -> int:
+        """Give the usable masks to the energy; returns the number of views it uses (0: none)."""
+        if not any(m is not None for m in masks):
+            return 0
+        if frame_index is not None and isinstance(getattr(self.energy, "rng", None), np.random.Generator):
+            # the energy samples foreground pixels at set_masks: draw them from this frame's stream
+            self.energy.rng = frame_rng(self.config.seed, frame_index, 2)
+        try:
+            self.energy.set_masks(masks)
+        except ValueError as exc:          # EnergyError and friends: nothing usable after all
+            notes.append(f"energy: masks rejected ({exc})")
+            return 0
+        for s in getattr(self.energy, "skipped_views", None) or ():
+            notes.append(f"energy skipped view {s[0]}: {s[1]}" if isinstance(s, tuple) and len(s) == 2
+                         else f"energy skipped view {s}")
+        used = getattr(self.energy, "n_views_used", None)
+        return int(used) if used is not None else sum(m is not None for m in masks)
+
+    # ------------------------------------------------------------------ initialization
+    def initialize(self, masks: Sequence | None = None, pose=None, *, frame_index: int = 0):
+        """Set the first estimate: ``pose`` if given, else automatically from ``masks``.
+
+        Parameters
+        ----------
+        masks : sequence of (H, W) array_like or None, optional
+        pose : (D,) array_like, optional
+        frame_index : int
+            Frame key of the initialization's random stream.
+
+        Returns
+        -------
+        InitResult or None
+            The automatic initialization's result (None for a given pose).
+
+        Raises
+        ------
+        TrackerError
+            Neither argument, a pose of the wrong length or not finite, or no usable foreground.
+        """
+        self.reset()
+        if pose is not None:
+            try:
+                x = np.asarray(self.model.validate_pose(pose, name="pose"), dtype=float)
+            except ValueError as exc:
+                raise TrackerError(str(exc)) from None
+            if x.ndim != 1:
+                raise TrackerError(f"pose: expected shape ({self.model.dof},), received {x.shape}")
+            x = np.clip(x, self.model.lower, self.model.upper)
+            self._accept(x)
+            return None
+        if masks is None:
+            raise TrackerError("initialize: expected masks= or pose=, received neither")
+        usable, notes = self._check_masks(masks)
+        if self._set_masks(usable, notes, frame_index) == 0:
+            raise TrackerError(f"masks: expected foreground in at least one view, received none ({'; '.join(notes)})")
+        cfg = self.config
+        try:
+            res = initial_pose(self.model, self.cameras, usable, self.total_energy,
+                               rng=frame_rng(cfg.seed, frame_index, 1), n_yaw=cfg.init_yaw_steps,
+                               refine_evals=cfg.init_refine_evals)
+        except InitError as exc:
+            raise TrackerError(f"masks: automatic initialization failed: {exc}") from None
+        self._accept(res.x)
+        return res
+
+    def _accept(self, x: np.ndarray) -> None:
+        self._last = np.array(x, dtype=float)
+        self.predictor.update(self._last)
+
+    # ------------------------------------------------------------------ one frame
+    def _prediction(self, external, notes: list[str]) -> np.ndarray:
+        D = self.model.dof
+        if external is not None:
+            try:
+                p = np.asarray(external, dtype=float)
+            except (TypeError, ValueError):
+                p = None
+            if p is None or p.shape != (D,):
+                notes.append(f"prediction: expected shape ({D},), received "
+                             f"{None if p is None else p.shape}; using the tracker's own")
+            elif not np.all(np.isfinite(p)):
+                notes.append("prediction: non-finite values; using the tracker's own")
+            else:
+                return p.copy()
+        try:
+            p = np.asarray(self.predictor.predict(), dtype=float)
+        except ValueError as exc:          # PredictionError: empty history (cannot happen once initialized)
+            notes.append(f"prediction: {exc}; using the last estimate")
+            return self._last.copy()
+        if p.shape != (D,) or not np.all(np.isfinite(p)):
+            notes.append("prediction: non-finite values; using the last estimate")
+            return self._last.copy()
+        cfg = self.config
+        gain = np.full(D, cfg.joint_velocity_gain)
+        gain[:6] = cfg.root_velocity_gain
+        return self._last + gain * (p - self._last)       # damped extrapolation
+
+    def search_box(self, center) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Bounds ``(lo, hi)`` and initial spreads ``(D,)`` around a (clipped) prediction."""
+        cfg, m = self.config, self.model
+        radius = np.full(m.dof, cfg.search_radius_rad)
+        radius[:3] = cfg.root_translation_radius_m
+        radius[3:6] = cfg.root_rotation_radius_rad
+        spread = np.full(m.dof, cfg.joint_spread_rad)
+        spread[:3] = cfg.root_translation_spread_m
+        spread[3:6] = cfg.root_rotation_spread_rad
+        c = np.clip(np.asarray(center, dtype=float), m.lower, m.upper)
+        lo = np.maximum(c - radius, m.lower)
+        hi = np.minimum(c + radius, m.upper)
+        tight = hi - lo < 1e-9                 # a prediction on a limit: keep a sliver of room
+        lo[tight] = np.maximum(m.lower[tight], hi[tight] - 1e-6)
+        hi[tight] = lo[tight] + 1e-6
+        return lo, hi, spread
+
+    def step(self, masks: Sequence, frame_index: int, *, prediction=None) -> FrameResult:
+        """Track one frame (see the module docstring). Never raises on bad masks or predictions.
+
+        Parameters
+        ----------
+        masks : sequence of (H, W) array_like or None
+            One per camera (nonzero = foreground).
+        frame_index : int
+            Non-negative frame key (index or stamp) of the per-frame random stream.
+        prediction : (D,) array_like, optional
+            External prediction; default the tracker's predictor.
+
+        Returns
+        -------
+        FrameResult
+        """
+        t0 = time.perf_counter()
+        if isinstance(frame_index, bool) or not isinstance(frame_index, (int, np.integer)) or frame_index < 0:
+            raise TrackerError(f"frame_index: expected an integer >= 0, received {frame_index!r}")
+        cfg = self.config
+        usable, notes = self._check_masks(masks)
+        views = self._set_masks(usable, notes, frame_index)
+        if views == 0:
+            notes.append("no usable view: falling back to the last estimate" if self._last is not None
+                         else "no usable view and no estimate yet: nothing to track")
+            return FrameResult(x=self.last_estimate, energy=float("nan"), n_evals=0, spread=float("nan"),
+                               time_s=time.perf_counter() - t0, views_used=0, notes=tuple(notes), fell_back=True)
+        n_evals = 0
+        initialized = False
+        if self._last is None:
+            try:
+                res0 = initial_pose(self.model, self.cameras, usable, self.total_energy,
+                                    rng=frame_rng(cfg.seed, frame_index, 1), n_yaw=cfg.init_yaw_steps,
+                                    refine_evals=cfg.init_refine_evals)
+            except InitError as exc:
+                notes.append(f"automatic initialization failed: {exc}")
+                return FrameResult(x=None, energy=float("nan"), n_evals=0, spread=float("nan"),
+                                   time_s=time.perf_counter() - t0, views_used=views, notes=tuple(notes),
+                                   fell_back=True)
+            notes.append(f"initialized automatically (yaw {np.rad2deg(res0.yaw):.0f} deg, {res0.variant}, "
+                         f"{res0.n_evals} evaluations)")
+            self._accept(res0.x)
+            n_evals += res0.n_evals
+            initialized = True
+            pred = res0.x.copy()
+        else:
+            pred = self._prediction(prediction, notes)
+        lo, hi, spread = self.search_box(pred)
+        x0 = np.clip(pred, lo, hi)
+        rng = frame_rng(cfg.seed, frame_index)
+        from isa_mocap_ros.optim import make_optimizer, minimize
+
+        params = cfg.params()
+        if cfg.optimizer == "psapf" or cfg.optimizer.startswith("h-"):
+            params.setdefault("partitions", self._partitions)
+        try:
+            hierarchical = cfg.optimizer == "psapf" or cfg.optimizer.startswith("h-")
+            if cfg.include_prediction and not hierarchical and "initial_population" not in params:
+                # first generation: the prediction itself plus draws around it (so the estimate
+                # can never be worse than the prediction by the energy's own measure)
+                n = make_optimizer(cfg.optimizer, x0, spread, rng=np.random.default_rng(0), bounds=(lo, hi),
+                                   **params).generation_size
+                P = np.clip(x0 + rng.standard_normal((n, x0.size)) * spread, lo, hi)
+                P[0] = x0
+                params["initial_population"] = P
+            opt = make_optimizer(cfg.optimizer, x0, spread, rng=rng, bounds=(lo, hi),
+                                 rotation_blocks=self.model.rotation_blocks, **params)
+            res = minimize(opt, self.total_energy, max_evals=cfg.evals_per_frame)
+        except ValueError as exc:
+            # a configuration the optimizer rejects (budget below one generation, bad parameter):
+            # report it on every frame instead of crashing the caller
+            notes.append(f"optimizer failed: {exc}; falling back to the last estimate")
+            return FrameResult(x=self.last_estimate, energy=float("nan"), n_evals=n_evals, spread=float("nan"),
+                               time_s=time.perf_counter() - t0, views_used=views, notes=tuple(notes), fell_back=True,
+                               prediction=pred, initialized=initialized)
+        n_evals += res.n_evals
+        if cfg.estimate == "best" or not np.all(np.isfinite(res.x)):
+            x, energy = res.best_x, res.best_energy
+        else:
+            x, energy = res.x, res.energy
+        x = np.clip(np.array(x, dtype=float), self.model.lower, self.model.upper)
+        if res.n_nonfinite:
+            notes.append(f"energy: {res.n_nonfinite} non-finite evaluations")
+        spread_out = res.history[-1].spread if res.history else float("nan")
+        self._last = x.copy()
+        self.predictor.update(x)
+        self.frames += 1
+        return FrameResult(x=x, energy=float(energy), n_evals=int(n_evals), spread=float(spread_out),
+                           time_s=time.perf_counter() - t0, views_used=views, notes=tuple(notes), fell_back=False,
+                           prediction=pred, initialized=initialized)
+
+
+def make_tracker(model, cameras: Sequence, *, optimizer: str = "isa", evals: int = 1500,
+                 params: Mapping | None = None, seed: int = 0, energy: str = "fast", downsample: int = 2,
+                 search_radius_rad: float = 0.5, predictor: str = "ar", predictor_order: int = 1,
+                 prior_eta: float = 0.0, prior_file: str | None = None, energy_fn: Callable | None = None,
+                 **config) -> Tracker:
+    """A :class:`Tracker` from flat settings (the estimator node's parameters).
+
+    ``optimizer, evals, params, seed, energy, downsample, search_radius_rad, predictor,
+    predictor_order, prior_eta, prior_file`` map onto :class:`TrackerConfig` fields (``prior_file``
+    ``""`` = none); further ``config`` keywords are passed to it as they are. ``energy_fn``: a data
+    term object (see :class:`Tracker`).
+    """
+    cfg = TrackerConfig(optimizer=optimizer, evals_per_frame=evals, optimizer_params=dict(params or {}), seed=seed,
+                        energy_method=energy, downsample=downsample, search_radius_rad=search_radius_rad,
+                        predictor=predictor, predictor_order=predictor_order, prior_eta=prior_eta,
+                        prior_file=prior_file or None, **config)
+    return Tracker(model, cameras, cfg, energy=energy_fn)
