@@ -2,7 +2,7 @@
 
 Run alone (relative topic names; the network runs it in ``/mocap``)::
 
-    prediction_node --ros-args -r __ns:=/mocap -p predictor:=ar -p order:=2
+    prediction_node --ros-args -r __ns:=/mocap -p predictor:=ar -p order:=1
     python -m isa_mocap_ros.nodes.prediction --ros-args -r __ns:=/mocap --params-file config/pipeline.yaml
 
 Subscribes ``joint_states`` (the estimator's estimates, reliable depth 10) and publishes
@@ -65,7 +65,7 @@ class PredictionNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("prediction", **kwargs)
         self.predictor_name = declare(self, "predictor", "ar", "ar (ISA 13.28), constant_pose or constant_velocity")
-        self.order = declare(self, "order", 2, "ar: number of past motions used", lo=1, hi=50)
+        self.order = declare(self, "order", 1, "ar: number of past motions used", lo=1, hi=50)
         damping = declare(self, "damping", Parameter.Type.DOUBLE_ARRAY,
                           "ar: weights of the past motions, oldest first, `order` values (unset = "
                           "proportional to recency)")

@@ -1,0 +1,382 @@
+"""Estimator node: synchronized multi-view masks + prediction -> body pose (the tracker, once per frame set).
+
+Subscribes (relative names, launched in ``/mocap``): ``cam<i>/mask`` (mono8, sensor-data QoS),
+``cam<i>/camera_info``, latched ``cam<i>/extrinsics`` (world -> camera optical frame),
+``prediction/joint_states`` and, with ``publish_overlay``, ``cam<i>/image_raw``.
+
+Publishes ``joint_states`` (JointState, ``model.dof_names``; root rotation as roll/pitch/yaw so
+the exported URDF draws it), ``root_pose`` (PoseStamped), ``markers`` (MarkerArray skeleton),
+``estimator/done`` (std_msgs/Header, one per processed frame set, tracked or not: the lockstep
+topic for the player), ``cam<i>/overlay`` (optional), ``/diagnostics`` and the REP-155 view
+``/humans/bodies/<id>/joint_states`` + latched ``/humans/bodies/<id>/urdf``.
+
+Frame sets are synchronized exactly or approximately (:mod:`isa_mocap_ros.tracking.sync`); a
+worker thread runs the tracker so callbacks never block. In real-time mode a frame set that waits
+while the tracker is busy is replaced by a newer one and counted as dropped; in lockstep mode every
+set is processed and the estimator waits up to ``prediction_wait_s`` for the prediction node's
+prediction of that frame.
+"""
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+import numpy as np
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point, PoseStamped
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import ColorRGBA, Header, String
+from geometry_msgs.msg import TransformStamped
+from visualization_msgs.msg import Marker, MarkerArray
+
+import msg_adapters as ma
+from isa_mocap_ros.body import capsule_endpoints, joint_positions, make_model, pose_to_joint_state
+from isa_mocap_ros.body.hri import hri_joint_names, hri_urdf
+from isa_mocap_ros.geometry import exp_so3
+from isa_mocap_ros.nodes import qos
+from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, run_node
+from isa_mocap_ros.tracking.sync import FrameSynchronizer, LatestSlot, SyncError
+from isa_mocap_ros.vision import Camera
+from isa_mocap_ros.vision.overlay import draw_overlay
+
+
+class EstimatorNode(Node):
+    """Thin node over :class:`isa_mocap_ros.tracking.tracker.Tracker` (see the module docstring)."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("estimator", **kwargs)
+        self.n_views = declare(self, "views", 4, "number of camera views", lo=1, hi=64)
+        dof = declare(self, "model_dof", 39, "body model: 18, 28 or 39 DOF", lo=18, hi=39)
+        shape = declare(self, "body_shape", "", "body-shape YAML file ('' = default shape)")
+        self.optimizer = declare(self, "optimizer", "isa", "isa, apf, psapf, cmaes, de, pso, h-isa, h-cmaes, ...")
+        self.evals = declare(self, "evals", 1500, "energy evaluations per frame", lo=10, hi=1_000_000)
+        params = declare(self, "optimizer_params", "{}", "optimizer parameters as a YAML/JSON mapping")
+        self.seed = declare(self, "seed", 0, "seed of the per-frame random streams", lo=0, hi=2**31 - 1)
+        energy = declare(self, "energy", "fast", "silhouette energy: fast or exact")
+        downsample = declare(self, "downsample", 2, "mask downsampling for the fast energy", lo=1, hi=16)
+        radius = declare(self, "search_radius_rad", 0.5, "joint-angle search radius around the prediction",
+                         lo=0.01, hi=3.2)
+        predictor = declare(self, "predictor", "ar", "ar, constant_pose or constant_velocity")
+        order = declare(self, "predictor_order", 1, "AR order (past motions used; keep equal to the prediction node's order)", lo=1, hi=20)
+        self.prior_eta = declare(self, "prior_eta", 0.0, "weight of the pose prior (0 = off)", lo=0.0, hi=1e6)
+        prior_file = declare(self, "prior_file", "", "Parzen prior .npz ('' = none)")
+        sync = declare(self, "sync", "exact", "frame-set matching: exact or approximate")
+        queue = declare(self, "queue_size", 10, "stamps kept per view while synchronizing", lo=1, hi=1000)
+        slop_s = declare(self, "slop_s", 0.01, "approximate sync window, seconds", lo=0.0, hi=10.0)
+        self.view_timeout_s = declare(self, "view_timeout_s", 1.0,
+                                      "emit a partial frame set after this wait (0 = never)", lo=0.0, hi=60.0)
+        min_views = declare(self, "min_views", 2, "views a partial frame set needs", lo=1, hi=64)
+        self.lockstep = declare(self, "lockstep", False, "process every frame set (no dropping) and wait "
+                                "for the prediction of each frame")
+        self.use_prediction = declare(self, "use_prediction", True, "use prediction/joint_states when it arrives")
+        self.prediction_wait_s = declare(self, "prediction_wait_s", 1.0,
+                                         "lockstep: longest wait for a frame's prediction", lo=0.0, hi=60.0)
+        self.frame_period_s = declare(self, "frame_period_s", 1.0 / 30.0,
+                                      "frame period, to match predictions to frames", lo=1e-4, hi=10.0)
+        self.overlay = declare(self, "publish_overlay", False, "publish cam<i>/overlay images")
+        self.overlay_every = declare(self, "overlay_every", 1, "overlay every n-th frame", lo=1, hi=10000)
+        self.body_id = declare(self, "body_id", "mocap", "REP-155 body id (/humans/bodies/<id>/...)")
+        self.world_frame = declare(self, "world_frame", "world", "frame of root_pose and markers")
+        self.problems = ProblemLog(self)
+        self.model = make_model(dof, shape=shape or None)
+        self.hri_names = hri_joint_names(self.model, self.body_id)
+        try:
+            self.optimizer_params = yaml.safe_load(params) or {}
+        except yaml.YAMLError as exc:
+            raise ValueError(f"optimizer_params is not YAML/JSON: {exc}") from None
+        if not isinstance(self.optimizer_params, dict):
+            raise ValueError(f"optimizer_params must be a mapping, got {params!r}")
+        if sync not in ("exact", "approximate"):
+            raise ValueError(f"sync must be 'exact' or 'approximate', got {sync!r}")
+        self.tracker_settings = dict(optimizer=self.optimizer, evals=self.evals, params=self.optimizer_params,
+                                     seed=self.seed, energy=energy, downsample=downsample,
+                                     search_radius_rad=radius, predictor=predictor, predictor_order=order,
+                                     prior_eta=self.prior_eta, prior_file=prior_file)
+        self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
+                                      slop_ns=0 if sync == "exact" else int(slop_s * 1e9),
+                                      max_wait_s=self.view_timeout_s, min_views=min(min_views, self.n_views))
+        self.slot = LatestSlot(keep_all=self.lockstep)
+        self._cv = threading.Condition()
+        self._intrinsics: list = [None] * self.n_views
+        self._extrinsics: list = [None] * self.n_views
+        self._images: list[dict[int, np.ndarray]] = [{} for _ in range(self.n_views)]
+        self._predictions: dict[int, np.ndarray] = {}
+        self.tracker = None
+        self.frames_done = 0
+        self.last_result = None
+        self.latencies_ms: list[float] = []
+        self._published_any = False
+        self._stop = threading.Event()
+
+        sensor = qos.SENSOR_DATA
+        for v in range(self.n_views):
+            self.create_subscription(Image, f"cam{v}/mask", self._mask_cb(v), sensor,
+                                     qos_overriding_options=QOS_OVERRIDES)
+            self.create_subscription(CameraInfo, f"cam{v}/camera_info", self._info_cb(v), sensor)
+            self.create_subscription(TransformStamped, f"cam{v}/extrinsics", self._extr_cb(v), qos.LATCHED)
+            if self.overlay:
+                self.create_subscription(Image, f"cam{v}/image_raw", self._image_cb(v), sensor)
+        self.create_subscription(JointState, "prediction/joint_states", self._prediction_cb, qos.RELIABLE)
+        self.pub_js = self.create_publisher(JointState, "joint_states", qos.RELIABLE,
+                                            qos_overriding_options=QOS_OVERRIDES)
+        self.pub_root = self.create_publisher(PoseStamped, "root_pose", qos.RELIABLE)
+        self.pub_markers = self.create_publisher(MarkerArray, "markers", qos.RELIABLE)
+        self.pub_done = self.create_publisher(Header, "estimator/done", qos.RELIABLE)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.RELIABLE)
+        self.pub_hri = self.create_publisher(JointState, f"/humans/bodies/{self.body_id}/joint_states", qos.RELIABLE)
+        self.pub_urdf = self.create_publisher(String, f"/humans/bodies/{self.body_id}/urdf", qos.LATCHED)
+        self.pub_urdf.publish(String(data=hri_urdf(self.model, self.body_id)))
+        self.pub_overlay = [self.create_publisher(Image, f"cam{v}/overlay", qos.RELIABLE)
+                            for v in range(self.n_views)] if self.overlay else []
+        self.create_timer(0.05, self._poll_partial)
+        self.create_timer(1.0, self._publish_diagnostics)
+        self._worker = threading.Thread(target=self._work, name="estimator", daemon=True)
+        self._worker.start()
+        self.get_logger().info(
+            f"estimator: {self.model.name} ({self.model.dof} DOF), {self.optimizer} with {self.evals} evaluations "
+            f"per frame, {self.n_views} views, seed {self.seed}, {'lockstep' if self.lockstep else 'real time'}")
+
+    # -- calibration --------------------------------------------------------------------------
+    def _info_cb(self, v: int):
+        def cb(msg: CameraInfo) -> None:
+            try:
+                self._intrinsics[v] = ma.camera_info_to_intrinsics(msg)
+            except ma.AdapterError as exc:
+                self.problems.report(f"info{v}", f"cam{v}/camera_info dropped: {exc}")
+        return cb
+
+    def _extr_cb(self, v: int):
+        def cb(msg: TransformStamped) -> None:
+            try:
+                self._extrinsics[v] = ma.transform_to_rt(msg)
+            except ma.AdapterError as exc:
+                self.problems.report(f"extr{v}", f"cam{v}/extrinsics dropped: {exc}")
+        return cb
+
+    def _cameras(self) -> list[Camera] | None:
+        if any(i is None for i in self._intrinsics) or any(e is None for e in self._extrinsics):
+            return None
+        cams = []
+        for v, (intr, (R, t)) in enumerate(zip(self._intrinsics, self._extrinsics)):
+            # extrinsics carry the camera pose in the world (TF: parent world, child optical frame)
+            cams.append(Camera.from_intrinsics_and_pose(f"cam{v}", K=intr.K, D=intr.D, width=intr.width,
+                                                        height=intr.height, R_wc=R, t_wc=t))
+        return cams
+
+    # -- inputs ---------------------------------------------------------------------------------
+    def _mask_cb(self, v: int):
+        def cb(msg: Image) -> None:
+            try:
+                mask = ma.image_to_array(msg)
+                if mask.ndim != 2 or mask.dtype != np.uint8:
+                    raise ma.AdapterError(f"cam{v}/mask.encoding", "mono8", msg.encoding)
+                stamp = ma.stamp_to_ns(msg.header)
+            except ma.AdapterError as exc:
+                self.problems.report(f"mask{v}", f"cam{v}/mask dropped: {exc}")
+                return
+            with self._cv:
+                try:
+                    sets = self.sync.add(v, stamp, mask, time.monotonic())
+                except SyncError as exc:
+                    self.problems.report(f"order{v}", f"cam{v}/mask dropped: {exc}")
+                    return
+                for s in sets:
+                    self.slot.put((s, time.monotonic()))
+                self._cv.notify_all()
+        return cb
+
+    def _image_cb(self, v: int):
+        def cb(msg: Image) -> None:
+            try:
+                img = ma.image_to_array(msg, copy=True)
+            except ma.AdapterError as exc:
+                self.problems.report(f"image{v}", f"cam{v}/image_raw dropped: {exc}")
+                return
+            store = self._images[v]
+            store[ma.stamp_to_ns(msg.header)] = img
+            while len(store) > 30:
+                del store[min(store)]
+        return cb
+
+    def _prediction_cb(self, msg: JointState) -> None:
+        try:
+            _, q = ma.joint_state_to_arrays(msg, self.model.dof_names)
+        except ma.AdapterError as exc:
+            self.problems.report("prediction", f"prediction dropped: {exc}")
+            return
+        with self._cv:
+            self._predictions[ma.stamp_to_ns(msg.header)] = q
+            while len(self._predictions) > 100:
+                del self._predictions[min(self._predictions)]
+            self._cv.notify_all()
+
+    def _poll_partial(self) -> None:
+        with self._cv:
+            for s in self.sync.poll(time.monotonic()):
+                self.problems.report("partial", f"frame set {s.stamp_ns} without views {list(s.missing)} "
+                                                f"after {self.view_timeout_s:.1f} s; tracking with the others")
+                self.slot.put((s, time.monotonic()))
+            self._cv.notify_all()
+
+    def _prediction_for(self, stamp_ns: int) -> np.ndarray | None:
+        """The prediction node's prediction for this frame (stamps within half a period), if any."""
+        half = self.frame_period_s * 0.5e9
+        best = [s for s in self._predictions if abs(s - stamp_ns) < half]
+        return self._predictions.get(best[0]) if best else None
+
+    # -- the work -------------------------------------------------------------------------------
+    def _warm_up(self) -> None:
+        """Compile the energy/kinematics kernels on a tiny synthetic frame, then say "ready"."""
+        t0 = time.monotonic()
+        try:
+            from isa_mocap_ros.body import capsule_endpoints as caps
+            from isa_mocap_ros.tracking.tracker import make_tracker
+            from isa_mocap_ros.vision import default_rig, render_mask
+            rig = default_rig(n_views=2, width=80, height=60)
+            x = self.model.rest_pose()
+            E = caps(self.model, x[None])[0]
+            masks = [render_mask(c, E, self.model.capsule_radii) for c in rig.cameras]
+            settings = dict(self.tracker_settings, evals=max(200, min(self.evals, 400)))
+            tracker = make_tracker(self.model, rig.cameras, **settings)
+            tracker.initialize(pose=x)
+            tracker.step(masks, 0)
+        except Exception as exc:  # noqa: BLE001 - warm-up is an optimisation, never fatal
+            self.get_logger().warn(f"warm-up failed ({type(exc).__name__}: {exc}); the first frame will be slow")
+        self.get_logger().info(f"estimator: ready (warm-up {time.monotonic() - t0:.1f} s)")
+
+    def _work(self) -> None:
+        self._warm_up()
+        while not self._stop.is_set():
+            with self._cv:
+                item = self.slot.take()
+                if item is None:
+                    self._cv.wait(0.1)
+                    continue
+                frame_set, t_ready = item
+                prediction = None
+                if self.use_prediction and self._published_any:
+                    deadline = time.monotonic() + (self.prediction_wait_s if self.lockstep else 0.0)
+                    while (prediction := self._prediction_for(frame_set.stamp_ns)) is None:
+                        left = deadline - time.monotonic()
+                        if left <= 0 or self._stop.is_set():
+                            break
+                        self._cv.wait(min(left, 0.05))
+                    if prediction is None and self.lockstep:
+                        self.problems.report("noprediction", f"no prediction for frame {frame_set.stamp_ns} "
+                                             f"within {self.prediction_wait_s:.2f} s; using the estimator's own")
+            try:
+                self._process(frame_set, prediction, t_ready)
+            except Exception as exc:  # noqa: BLE001 - a node must survive any one bad frame set
+                self.problems.report("error", f"frame set {frame_set.stamp_ns} failed: {type(exc).__name__}: {exc}")
+                self._done(frame_set.stamp_ns)
+
+    def _process(self, frame_set, prediction_msg, t_ready: float) -> None:
+        if self.tracker is None:
+            cams = self._cameras()
+            if cams is None:
+                missing = [v for v in range(self.n_views)
+                           if self._intrinsics[v] is None or self._extrinsics[v] is None]
+                self.problems.report("calib", f"frame set {frame_set.stamp_ns} dropped: no camera_info/extrinsics "
+                                              f"yet for views {missing}")
+                self._done(frame_set.stamp_ns)
+                return
+            from isa_mocap_ros.tracking.published import PublishedPredictor
+            from isa_mocap_ros.tracking.tracker import make_tracker
+            self.tracker = make_tracker(self.model, cams, **self.tracker_settings)
+            # The estimator's own prediction (used when the prediction node's is missing) goes
+            # through the same JointState conversions as the prediction node's.
+            self.tracker.predictor = PublishedPredictor(self.model, self.tracker.predictor)
+        prediction = None
+        if prediction_msg is not None:
+            from isa_mocap_ros.body import joint_state_to_pose
+            prediction = joint_state_to_pose(self.model, prediction_msg)
+        masks = list(frame_set.items)
+        result = self.tracker.step(masks, frame_set.stamp_ns, prediction=prediction)
+        self.frames_done += 1
+        self.last_result = result
+        if result.x is not None:
+            self._publish(frame_set.stamp_ns, result)
+            self._published_any = True
+        for note in result.notes:
+            self.problems.report(f"note:{note.split(':')[0]}", f"frame {frame_set.stamp_ns}: {note}")
+        self.latencies_ms.append((time.monotonic() - t_ready) * 1e3)
+        self._done(frame_set.stamp_ns)
+        if self.overlay and self.frames_done % self.overlay_every == 0 and result.x is not None:
+            self._publish_overlay(frame_set, result.x)
+
+    def _done(self, stamp_ns: int) -> None:
+        self.pub_done.publish(ma.make_header(stamp_ns, self.world_frame))
+
+    def _publish(self, stamp_ns: int, result) -> None:
+        q = pose_to_joint_state(self.model, result.x)
+        self.pub_js.publish(ma.arrays_to_joint_state(self.model.dof_names, q, stamp_ns=stamp_ns))
+        self.pub_hri.publish(ma.arrays_to_joint_state(self.hri_names, q, stamp_ns=stamp_ns))
+        pose = PoseStamped(header=ma.make_header(stamp_ns, self.world_frame))
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = map(float, result.x[:3])
+        qx, qy, qz, qw = ma.matrix_to_quaternion(exp_so3(result.x[3:6]))
+        pose.pose.orientation.x, pose.pose.orientation.y = float(qx), float(qy)
+        pose.pose.orientation.z, pose.pose.orientation.w = float(qz), float(qw)
+        self.pub_root.publish(pose)
+        self.pub_markers.publish(self._skeleton(stamp_ns, result.x))
+
+    def _skeleton(self, stamp_ns: int, x: np.ndarray) -> MarkerArray:
+        P = joint_positions(self.model, x[None])[0]
+        header = ma.make_header(stamp_ns, self.world_frame)
+        joints = Marker(header=header, ns="joints", id=0, type=Marker.SPHERE_LIST, action=Marker.ADD)
+        joints.scale.x = joints.scale.y = joints.scale.z = 0.05
+        joints.color = ColorRGBA(r=1.0, g=0.8, b=0.1, a=1.0)
+        joints.points = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in P]
+        bones = Marker(header=header, ns="bones", id=1, type=Marker.LINE_LIST, action=Marker.ADD)
+        bones.scale.x = 0.025
+        bones.color = ColorRGBA(r=0.1, g=0.9, b=0.3, a=1.0)
+        for j, parent in enumerate(self.model.parents):
+            if parent >= 0:
+                bones.points += [Point(x=float(c[0]), y=float(c[1]), z=float(c[2])) for c in (P[parent], P[j])]
+        return MarkerArray(markers=[joints, bones])
+
+    def _publish_overlay(self, frame_set, x: np.ndarray) -> None:
+        E = capsule_endpoints(self.model, x[None])[0]
+        for v, cam in enumerate(self.tracker.cameras):
+            img = self._images[v].get(frame_set.stamps_ns[v]) if frame_set.stamps_ns[v] is not None else None
+            if img is None:
+                continue
+            out = draw_overlay(img, cam, E, self.model.capsule_radii, mask=frame_set.items[v])
+            self.pub_overlay[v].publish(ma.array_to_image(out, "rgb8", stamp_ns=frame_set.stamp_ns,
+                                                          frame_id=f"cam{v}_optical_frame"))
+
+    def _publish_diagnostics(self) -> None:
+        st = DiagnosticStatus(name="isa_mocap_ros: estimator", hardware_id=self.body_id)
+        r = self.last_result
+        lat = np.array(self.latencies_ms[-300:])
+        p50, p95 = (float(np.percentile(lat, 50)), float(np.percentile(lat, 95))) if lat.size else (0.0, 0.0)
+        values = {
+            "frames": self.frames_done, "dropped_frame_sets": self.slot.dropped,
+            "sync_dropped_messages": self.sync.dropped, "bad_inputs": self.problems.total,
+            "optimizer": self.optimizer, "evals_per_frame": self.evals,
+            "energy": getattr(r, "energy", float("nan")), "evaluations": getattr(r, "n_evals", 0),
+            "views_used": getattr(r, "views_used", 0),
+            "latency_ms_p50": p50, "latency_ms_p95": p95,
+            "problems": json.dumps(self.problems.counts),
+        }
+        st.level = DiagnosticStatus.OK if self.problems.total == 0 else DiagnosticStatus.WARN
+        st.message = "tracking" if self.tracker is not None else "waiting for calibration and masks"
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+        self.pub_diag.publish(DiagnosticArray(header=ma.make_header(self.get_clock().now().nanoseconds),
+                                              status=[st]))
+
+    def close(self) -> None:
+        self._stop.set()
+        with self._cv:
+            self._cv.notify_all()
+        self._worker.join(timeout=5.0)
+
+
+def main(args: list[str] | None = None) -> None:
+    raise SystemExit(run_node(EstimatorNode, args))
+
+
+if __name__ == "__main__":
+    main()
