@@ -11,11 +11,15 @@ Per particle and view:
    the ball's projected ellipse to first order in ``r / l``);
 3. term 1 of Eq. 4 (model pixels not on foreground) from a fixed template of stratified points in
    each capsule's bounding rectangle: a point counts for the silhouette if it lies in its own
-   capsule's 2-D hull, in no *earlier* capsule's hull (so overlaps count once) and inside the
-   image; it is weighted by ``area(rectangle) / k_c``; the term is the weighted mean of
-   ``1 - F(p)`` with ``F`` the (area-averaged, downsampled) foreground coverage at the point;
+   capsule's 2-D hull, in no *earlier* capsule's hull (capsules in a fixed order, biggest first,
+   so overlaps count once) and inside the image; it is weighted by ``area(rectangle) / k_c``
+   (so the weighted count estimates the silhouette area without bias); the term is the weighted
+   mean of ``1 - F(p)`` with ``F`` the (area-averaged, downsampled) foreground coverage at ``p``;
 4. term 2 (foreground pixels not covered) from a fixed sample of foreground pixel centres (drawn
-   per frame), each tested against the capsules' 2-D hulls until the first hit.
+   per frame, sorted by y and binned so that each capsule visits only the run of points in its
+   box's y range), tested against the capsules' 2-D hulls with a branch-free (vectorized) test;
+   or, when no sample is given (``fg_n[v] == 0``), from the template points as
+   ``1 - (integral of F over the silhouette) / |F|``.
 
 ``f_v = term1 / 2 + term2 / 2``; a view where the model covers no sampled point gets term 1 = 1/2
 (Eq. 4 is undefined there; the exact reference makes the same choice). The output is the mean
@@ -84,7 +88,7 @@ def fk_positions_batch(X, parents, offsets, ptr, dofs, axes):  # pragma: no cove
 
 
 @numba.njit(cache=True, inline="always")
-def _project_caps(P, caps, radii, Rc, tc, G):  # pragma: no cover - compiled
+def _project_caps(P, caps, radii, Rs, ts, v, G):  # pragma: no cover - compiled
     """2-D hulls of the capsules in one view into ``G (C, 14)``; returns nothing.
 
     ``G[c]``: ax, ay, ux, uy, L, ra, rb, sb, ca, ylo, yhi, xmax, valid, cone
@@ -94,12 +98,12 @@ def _project_caps(P, caps, radii, Rc, tc, G):  # pragma: no cover - compiled
     for c in range(C):
         ja = caps[c, 0]
         jb = caps[c, 1]
-        xa = Rc[0, 0] * P[ja, 0] + Rc[0, 1] * P[ja, 1] + Rc[0, 2] * P[ja, 2] + tc[0]
-        ya = Rc[1, 0] * P[ja, 0] + Rc[1, 1] * P[ja, 1] + Rc[1, 2] * P[ja, 2] + tc[1]
-        za = Rc[2, 0] * P[ja, 0] + Rc[2, 1] * P[ja, 1] + Rc[2, 2] * P[ja, 2] + tc[2]
-        xb = Rc[0, 0] * P[jb, 0] + Rc[0, 1] * P[jb, 1] + Rc[0, 2] * P[jb, 2] + tc[0]
-        yb = Rc[1, 0] * P[jb, 0] + Rc[1, 1] * P[jb, 1] + Rc[1, 2] * P[jb, 2] + tc[1]
-        zb = Rc[2, 0] * P[jb, 0] + Rc[2, 1] * P[jb, 1] + Rc[2, 2] * P[jb, 2] + tc[2]
+        xa = Rs[v, 0, 0] * P[ja, 0] + Rs[v, 0, 1] * P[ja, 1] + Rs[v, 0, 2] * P[ja, 2] + ts[v, 0]
+        ya = Rs[v, 1, 0] * P[ja, 0] + Rs[v, 1, 1] * P[ja, 1] + Rs[v, 1, 2] * P[ja, 2] + ts[v, 1]
+        za = Rs[v, 2, 0] * P[ja, 0] + Rs[v, 2, 1] * P[ja, 1] + Rs[v, 2, 2] * P[ja, 2] + ts[v, 2]
+        xb = Rs[v, 0, 0] * P[jb, 0] + Rs[v, 0, 1] * P[jb, 1] + Rs[v, 0, 2] * P[jb, 2] + ts[v, 0]
+        yb = Rs[v, 1, 0] * P[jb, 0] + Rs[v, 1, 1] * P[jb, 1] + Rs[v, 1, 2] * P[jb, 2] + ts[v, 1]
+        zb = Rs[v, 2, 0] * P[jb, 0] + Rs[v, 2, 1] * P[jb, 1] + Rs[v, 2, 2] * P[jb, 2] + ts[v, 2]
         r0 = radii[c, 0]
         r1 = radii[c, 1]
         if za <= 1.001 * r0 or zb <= 1.001 * r1:
@@ -139,17 +143,17 @@ def _project_caps(P, caps, radii, Rc, tc, G):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always")
-def _inside_local(xl, yl, g):  # pragma: no cover - compiled
-    """Point with axis coordinate ``yl`` and |across| ``xl`` (capsule frame) inside the 2-D hull ``g``."""
-    L = g[4]
-    ra = g[5]
-    rb = g[6]
-    if g[13] == 0.0:  # one disc contains the other: the bigger disc (or both, harmless)
+def _inside_local(xl, yl, G, c):  # pragma: no cover - compiled
+    """Point with axis coordinate ``yl`` and |across| ``xl`` (frame of capsule ``c``) inside its 2-D hull."""
+    L = G[c, 4]
+    ra = G[c, 5]
+    rb = G[c, 6]
+    if G[c, 13] == 0.0:  # one disc contains the other: the bigger disc (testing both is harmless)
         if xl * xl + yl * yl <= ra * ra:
             return True
         return xl * xl + (yl - L) * (yl - L) <= rb * rb
-    sb = g[7]
-    ca = g[8]
+    sb = G[c, 7]
+    ca = G[c, 8]
     k = -xl * sb + yl * ca      # Quilez' uneven capsule: which part of the boundary is nearest
     if k < 0.0:
         return xl * xl + yl * yl <= ra * ra
@@ -159,19 +163,21 @@ def _inside_local(xl, yl, g):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always")
-def _inside(px, py, g):  # pragma: no cover - compiled
-    dx = px - g[0]
-    dy = py - g[1]
-    yl = dx * g[2] + dy * g[3]
-    xl = abs(-dx * g[3] + dy * g[2])
-    return _inside_local(xl, yl, g)
+def _inside(px, py, G, c):  # pragma: no cover - compiled
+    """Normalized point ``(px, py)`` inside the 2-D hull of capsule ``c``."""
+    dx = px - G[c, 0]
+    dy = py - G[c, 1]
+    yl = dx * G[c, 2] + dy * G[c, 3]
+    xl = abs(-dx * G[c, 3] + dy * G[c, 2])
+    return _inside_local(xl, yl, G, c)
 
 
 @numba.njit(cache=True)
-def project_capsules(P, caps, radii, Rc, tc):  # pragma: no cover - compiled
-    """Python-callable wrapper of the projection (tests): ``G (C, 14)`` for joint positions ``P (J, 3)``."""
+def project_capsules(P, caps, radii, Rs, ts, v):  # pragma: no cover - compiled
+    """Python-callable wrapper of the projection into view ``v`` of ``Rs (V, 3, 3)``, ``ts (V, 3)``
+    (tests): ``G (C, 14)`` for joint positions ``P (J, 3)``."""
     G = np.zeros((caps.shape[0], 14))
-    _project_caps(P, caps, radii, Rc, tc, G)
+    _project_caps(P, caps, radii, Rs, ts, v, G)
     return G
 
 
@@ -181,33 +187,71 @@ def inside_points(G, pts):  # pragma: no cover - compiled
     out = np.zeros(pts.shape[0], np.bool_)
     for i in range(pts.shape[0]):
         for c in range(G.shape[0]):
-            if G[c, 12] != 0.0 and _inside(pts[i, 0], pts[i, 1], G[c]):
+            if G[c, 12] != 0.0 and _inside(pts[i, 0], pts[i, 1], G, c):
                 out[i] = True
                 break
     return out
 
 
 @numba.njit(cache=True, inline="always")
-def _lookup(x, y, K, D, hasd, cov, W, H):  # pragma: no cover - compiled
-    """Foreground coverage at the normalized point ``(x, y)``; -1 outside the (downsampled) image."""
-    if hasd:
+def _lookup(x, y, v, K, D, hasd, cov, W, H):  # pragma: no cover - compiled
+    """Foreground coverage of view ``v`` at the normalized point ``(x, y)``; -1 outside the image."""
+    if hasd[v]:
         r2 = x * x + y * y
-        radial = (1.0 + r2 * (D[0] + r2 * (D[1] + r2 * D[4]))) / (1.0 + r2 * (D[5] + r2 * (D[6] + r2 * D[7])))
-        xd = x * radial + 2.0 * D[2] * x * y + D[3] * (r2 + 2.0 * x * x)
-        yd = y * radial + D[2] * (r2 + 2.0 * y * y) + 2.0 * D[3] * x * y
+        radial = ((1.0 + r2 * (D[v, 0] + r2 * (D[v, 1] + r2 * D[v, 4])))
+                  / (1.0 + r2 * (D[v, 5] + r2 * (D[v, 6] + r2 * D[v, 7]))))
+        xd = x * radial + 2.0 * D[v, 2] * x * y + D[v, 3] * (r2 + 2.0 * x * x)
+        yd = y * radial + D[v, 2] * (r2 + 2.0 * y * y) + 2.0 * D[v, 3] * x * y
         x = xd
         y = yd
-    u = K[0] * x + K[2] + 0.5
-    v = K[1] * y + K[3] + 0.5
-    if u < 0.0 or v < 0.0 or u >= W or v >= H:
+    u = K[v, 0] * x + K[v, 2] + 0.5
+    w = K[v, 1] * y + K[v, 3] + 0.5
+    if u < 0.0 or w < 0.0 or u >= W or w >= H:
         return -1.0
-    return cov[int(v), int(u)]
+    return cov[v, int(w), int(u)]
+
+
+@numba.njit(cache=True, inline="always")
+def _cover_run(X, Y, Fl, G, c):  # pragma: no cover - compiled
+    """``Fl[k] = max(Fl[k], 1 if (X[k], Y[k]) is inside capsule c)``, branch-free (vectorizes).
+
+    The 2-D hull is the union of disc a, disc b and the part of the strip between the normals at
+    the tangent points that lies inside the tangent lines (the same set as :func:`_inside_local`)."""
+    ax, ay, ux, uy = G[c, 0], G[c, 1], G[c, 2], G[c, 3]
+    L, ra, rb, sb, ca = G[c, 4], G[c, 5], G[c, 6], G[c, 7], G[c, 8]
+    cone = 1.0 if G[c, 13] != 0.0 else 0.0
+    ra2 = ra * ra
+    rb2 = rb * rb
+    caL = ca * L
+    for k in range(X.shape[0]):
+        dx = X[k] - ax
+        dy = Y[k] - ay
+        yl = dx * ux + dy * uy
+        xr = dy * ux - dx * uy
+        x2 = xr * xr
+        xl = np.sqrt(x2)
+        q = -xl * sb + yl * ca
+        a = 1.0 if x2 + yl * yl <= ra2 else 0.0
+        b = 1.0 if x2 + (yl - L) * (yl - L) <= rb2 else 0.0
+        cc = cone if (q >= 0.0) and (q <= caL) and (xl * ca + yl * sb <= ra) else 0.0
+        Fl[k] = max(Fl[k], max(a, max(b, cc)))
+
+
+@numba.njit(cache=True, inline="always")
+def _bin(y, y0, inv_dy, nb):  # pragma: no cover - compiled
+    """Bin of ``y`` among ``nb`` bins of width ``1 / inv_dy`` from ``y0``, clamped to ``[0, nb]``."""
+    b = (y - y0) * inv_dy
+    if b <= 0.0:
+        return 0
+    if b >= nb:
+        return nb
+    return int(b)
 
 
 @numba.njit(parallel=True, cache=True, fastmath=True)
 def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                      cam_R, cam_t, cam_K, cam_D, cam_hasd, cov, cov_wh,
-                     tmpl, tmpl_ptr, fg, fg_n, n_chunks, out):  # pragma: no cover - compiled
+                     order, tmpl, tmpl_ptr, fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_area, n_chunks, out):  # pragma: no cover - compiled
     """Fast Eq. 5 for poses ``X (n, D)`` into ``out (n,)``.
 
     Parameters
@@ -218,8 +262,13 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
     cam_R, cam_t : (V, 3, 3), (V, 3) world -> camera
     cam_K : (V, 4) fx, fy, cx, cy of the downsampled camera;  cam_D : (V, 8);  cam_hasd : (V,) bool
     cov : (V, Hmax, Wmax) float32 foreground coverage of the downsampled mask;  cov_wh : (V, 2) int64
+    order : (C,) int64 processing order of the capsules (a point counts for the first one containing it)
     tmpl : (T, 2) template points in [0, 1]^2;  tmpl_ptr : (C + 1,) int64 offsets per capsule
-    fg : (V, M, 2) normalized foreground sample points;  fg_n : (V,) int64 counts (>= 1)
+    fg_x, fg_y : (V, M) normalized foreground sample points, sorted by y;  fg_n : (V,) int64 counts;
+        ``fg_n[v] == 0`` selects the area estimate of term 2 for view ``v``
+    fg_tab : (V, NB + 1) int64, ``fg_tab[v, b]`` = first point with ``y >= y0 + b dy`` (``fg_n[v]`` at NB)
+    fg_bins : (V, 2) ``y0, 1 / dy`` of those bins
+    fg_area : (V,) area of the foreground in the normalized plane (full-resolution pixels)
     n_chunks : int, work units of the parallel loop
     out : (n,) float64
     """
@@ -236,11 +285,19 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
         box = np.empty((C, 4))
         near = np.empty((C, C), np.int64)   # near[c, :nn[c]]: earlier capsules whose boxes meet c's
         nn = np.empty(C, np.int64)
+        flag = np.empty(max(1, fg_x.shape[1]))
+        kmax = 1
+        for c in range(C):
+            kmax = max(kmax, tmpl_ptr[c + 1] - tmpl_ptr[c])
+        PX = np.empty(kmax)
+        PY = np.empty(kmax)
+        OWN = np.empty(kmax)
+        DUP = np.empty(kmax)
         for i in range(lo, hi):
             _fk_one(X[i], parents, offsets, ptr, dofs, axes, R, P)
             total = 0.0
             for v in range(V):
-                _project_caps(P, caps, radii, cam_R[v], cam_t[v], G)
+                _project_caps(P, caps, radii, cam_R, cam_t, v, G)
                 for c in range(C):
                     if G[c, 12] == 0.0:
                         box[c, 0] = 1.0
@@ -256,63 +313,72 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     box[c, 1] = max(ax + ra, bx + rb)
                     box[c, 2] = min(ay - ra, by - rb)
                     box[c, 3] = max(ay + ra, by + rb)
-                for c in range(C):
+                for ci in range(C):
+                    c = order[ci]
                     k = 0
-                    for e in range(c):
+                    for ei in range(ci):
+                        e = order[ei]
                         if (box[e, 0] <= box[c, 1] and box[c, 0] <= box[e, 1] and box[e, 2] <= box[c, 3]
                                 and box[c, 2] <= box[e, 3]):
                             near[c, k] = e
                             k += 1
                     nn[c] = k
-                # term 1: model silhouette points not on foreground
+                # term 1: model silhouette points not on foreground. Points of capsule c in its
+                # bounding rectangle; kept if inside c's hull and in no earlier capsule's hull
                 W = cov_wh[v, 0]
                 H = cov_wh[v, 1]
                 num = 0.0
                 den = 0.0
-                for c in range(C):
-                    g = G[c]
-                    if g[12] == 0.0:
+                for ci in range(C):
+                    c = order[ci]
+                    if G[c, 12] == 0.0:
                         continue
-                    ylo = g[9]
-                    ly = g[10] - ylo
-                    xm = g[11]
+                    ylo = G[c, 9]
+                    ly = G[c, 10] - ylo
+                    xm = G[c, 11]
                     k0 = tmpl_ptr[c]
-                    k1 = tmpl_ptr[c + 1]
-                    w = ly * 2.0 * xm / (k1 - k0)
-                    ax, ay, ux, uy = g[0], g[1], g[2], g[3]
-                    for k in range(k0, k1):
-                        yl = ylo + tmpl[k, 0] * ly
-                        xs = (2.0 * tmpl[k, 1] - 1.0) * xm
-                        if not _inside_local(abs(xs), yl, g):
-                            continue
-                        px = ax + yl * ux - xs * uy
-                        py = ay + yl * uy + xs * ux
-                        dup = False
-                        for q in range(nn[c]):
-                            e = near[c, q]
-                            if box[e, 0] <= px <= box[e, 1] and box[e, 2] <= py <= box[e, 3]:
-                                if _inside(px, py, G[e]):
-                                    dup = True
-                                    break
-                        if dup:
-                            continue
-                        f = _lookup(px, py, cam_K[v], cam_D[v], cam_hasd[v], cov[v], W, H)
-                        if f < 0.0:
-                            continue
-                        den += w
-                        num += w * (1.0 - f)
+                    nk = tmpl_ptr[c + 1] - k0
+                    w = ly * 2.0 * xm / nk
+                    ax, ay, ux, uy = G[c, 0], G[c, 1], G[c, 2], G[c, 3]
+                    for k in range(nk):
+                        yl = ylo + tmpl[k0 + k, 0] * ly
+                        xs = (2.0 * tmpl[k0 + k, 1] - 1.0) * xm
+                        PX[k] = ax + yl * ux - xs * uy
+                        PY[k] = ay + yl * uy + xs * ux
+                        OWN[k] = 0.0
+                        DUP[k] = 0.0
+                    _cover_run(PX[:nk], PY[:nk], OWN[:nk], G, c)
+                    for q in range(nn[c]):
+                        _cover_run(PX[:nk], PY[:nk], DUP[:nk], G, near[c, q])
+                    for k in range(nk):
+                        if OWN[k] > DUP[k]:
+                            f = _lookup(PX[k], PY[k], v, cam_K, cam_D, cam_hasd, cov, W, H)
+                            if f >= 0.0:
+                                den += w
+                                num += w * (1.0 - f)
                 t1 = num / den if den > 0.0 else 1.0
-                # term 2: foreground points not covered by the model
-                m = fg_n[v]
-                hit = 0
-                for k in range(m):
-                    px = fg[v, k, 0]
-                    py = fg[v, k, 1]
-                    for c in range(C):
-                        if box[c, 0] <= px <= box[c, 1] and box[c, 2] <= py <= box[c, 3]:
-                            if _inside(px, py, G[c]):
-                                hit += 1
-                                break
-                t2 = 1.0 - hit / m
+                if fg_n[v] == 0:
+                    # term 2 from the same points: |F minus M| / |F| = 1 - (integral of F over M) / |F|
+                    t2 = 1.0 - (den - num) / fg_area[v]
+                    t2 = min(1.0, max(0.0, t2))
+                else:
+                    # term 2: foreground points not covered by the model; the points are sorted by y,
+                    # so a capsule's box meets a contiguous run of them (binary search)
+                    m = fg_n[v]
+                    nb = fg_tab.shape[1] - 1
+                    for k in range(m):
+                        flag[k] = 0.0
+                    for ci in range(C):
+                        c = order[ci]
+                        if G[c, 12] == 0.0:
+                            continue
+                        k0 = fg_tab[v, _bin(box[c, 2], fg_bins[v, 0], fg_bins[v, 1], nb)]
+                        k1 = fg_tab[v, min(nb, _bin(box[c, 3], fg_bins[v, 0], fg_bins[v, 1], nb) + 1)]
+                        if k1 > k0:
+                            _cover_run(fg_x[v, k0:k1], fg_y[v, k0:k1], flag[k0:k1], G, c)
+                    hit = 0.0
+                    for k in range(m):
+                        hit += flag[k]
+                    t2 = 1.0 - hit / m
                 total += 0.5 * t1 + 0.5 * t2
             out[i] = total / V

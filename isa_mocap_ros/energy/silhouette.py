@@ -39,6 +39,7 @@ __all__ = ["EnergyError", "SilhouetteEnergy", "exact_view_energy", "kinematic_ta
 N_MODEL_POINTS = 160
 #: default number of foreground pixels sampled per view and frame
 N_MASK_POINTS = 96
+_N_BINS = 32
 
 
 class EnergyError(ValueError):
@@ -157,6 +158,22 @@ def exact_view_energy(model: BodyModel, camera: Camera, mask: Any, X: Any) -> np
     return _view_terms(camera, F, int(np.count_nonzero(F)), E, np.asarray(model.capsule_radii, dtype=np.float64))
 
 
+def _normalized_area(camera: Camera, u: np.ndarray, v: np.ndarray) -> float:
+    """Area of the pixels ``(u, v)`` in the normalized undistorted image plane of ``camera``.
+
+    ``1 / (fx fy)`` per pixel for a pinhole camera; with lens distortion the determinant of the
+    Jacobian of the undistortion at each pixel centre (central differences of ±0.5 px)."""
+    if not camera.has_distortion:
+        return u.size / (camera.fx * camera.fy)
+    u = u.astype(float)
+    v = v.astype(float)
+    xu0, yu0 = camera.undistort_pixels(u - 0.5, v)
+    xu1, yu1 = camera.undistort_pixels(u + 0.5, v)
+    xv0, yv0 = camera.undistort_pixels(u, v - 0.5)
+    xv1, yv1 = camera.undistort_pixels(u, v + 0.5)
+    return float(np.abs((xu1 - xu0) * (yv1 - yv0) - (xv1 - xv0) * (yu1 - yu0)).sum())
+
+
 def _template(model: BodyModel, n_points: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Stratified (jittered-grid) points in ``[0, 1]^2`` per capsule, ``k_c`` proportional to its
     rest silhouette area ``2 r L + π r^2`` (at least 4); returns ``(T, 2)`` points and ``(C+1,)`` offsets."""
@@ -248,7 +265,7 @@ class SilhouetteEnergy:
             raise EnergyError(f"method: expected 'fast' or 'exact', received {method!r}")
         self.method = method
         for name, value, least in (("downsample", downsample, 1), ("n_model_points", n_model_points, 1),
-                                   ("n_mask_points", n_mask_points, 1)):
+                                   ("n_mask_points", n_mask_points, 0)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
                 raise EnergyError(f"{name}: expected an integer >= {least}, received {value!r}")
         if rng is None:
@@ -262,6 +279,8 @@ class SilhouetteEnergy:
         self._caps = np.ascontiguousarray(model.capsules, dtype=np.int64)
         self._kin = kinematic_tables(model)
         self._tmpl, self._tmpl_ptr = _template(model, int(n_model_points), rng)
+        # bigger capsules first: their points need no overlap test, and they own the shared area
+        self._order = np.argsort(-np.diff(self._tmpl_ptr), kind="stable").astype(np.int64)
         self.n_template = int(self._tmpl_ptr[-1])
         self._small = tuple(c.scaled(1.0 / self.downsample) for c in self.cameras)
         self.skipped_views: list[tuple[int, str]] = []
@@ -318,8 +337,12 @@ class SilhouetteEnergy:
         Hmax = max(c.height for c in small)
         Wmax = max(c.width for c in small)
         cov = np.zeros((V, Hmax, Wmax), np.float32)
-        fg = np.zeros((V, M, 2))
+        fg_x = np.zeros((V, M))
+        fg_y = np.zeros((V, M))
         fg_n = np.zeros(V, np.int64)
+        fg_area = np.zeros(V)
+        fg_tab = np.zeros((V, _N_BINS + 1), np.int64)
+        fg_bins = np.zeros((V, 2))
         for k, v in enumerate(used):
             cam, sc = self.cameras[v], small[k]
             f = F[v].astype(np.float32)
@@ -329,12 +352,22 @@ class SilhouetteEnergy:
                 cov[k, :sc.height, :sc.width] = cv2.resize(f, (sc.width, sc.height), interpolation=cv2.INTER_AREA)
             vv, uu = np.nonzero(F[v])                       # raster order
             n = vv.size
+            fg_area[k] = _normalized_area(cam, uu, vv)
+            if M == 0:
+                continue
             if n > M:                                       # systematic sample, random start
                 idx = np.floor(self.rng.random() * (n / M) + np.arange(M) * (n / M)).astype(np.int64)
                 idx = np.minimum(idx, n - 1)
                 vv, uu = vv[idx], uu[idx]
             x, y = cam.undistort_pixels(uu.astype(float), vv.astype(float))
-            fg[k, :x.size, 0], fg[k, :x.size, 1] = x, y
+            order = np.argsort(y, kind="stable")
+            x, y = x[order], y[order]
+            fg_x[k, :x.size], fg_y[k, :x.size] = x, y
+            # y bins for the kernel: a capsule's box meets the run fg_tab[v, b0]:fg_tab[v, b1 + 1]
+            dy = max(float(y[-1] - y[0]), 1e-9) / _N_BINS
+            fg_bins[k] = y[0], 1.0 / dy
+            fg_tab[k] = np.searchsorted(y, y[0] + dy * np.arange(_N_BINS + 1), side="left")
+            fg_tab[k, -1] = y.size
             fg_n[k] = x.size
         return {"cam_R": np.ascontiguousarray([self.cameras[v].R for v in used]),
                 "cam_t": np.ascontiguousarray([self.cameras[v].t for v in used]),
@@ -342,7 +375,7 @@ class SilhouetteEnergy:
                 "cam_D": np.ascontiguousarray([np.pad(c.dist, (0, 8 - c.dist.size)) for c in small]),
                 "cam_hasd": np.array([c.has_distortion for c in small]),
                 "cov": cov, "cov_wh": np.array([[c.width, c.height] for c in small], np.int64),
-                "fg": fg, "fg_n": fg_n}
+                "fg_x": fg_x, "fg_y": fg_y, "fg_n": fg_n, "fg_tab": fg_tab, "fg_bins": fg_bins, "fg_area": fg_area}
 
     # ------------------------------------------------------------------ evaluation
     def __call__(self, X: Any) -> np.ndarray:
@@ -373,8 +406,8 @@ class SilhouetteEnergy:
         out = np.empty(X.shape[0])
         n_chunks = max(1, min(X.shape[0], 8 * numba.get_num_threads()))
         _k.silhouette_batch(X, *self._kin, self._caps, self._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"],
-                            fr["cam_D"], fr["cam_hasd"], fr["cov"], fr["cov_wh"], self._tmpl, self._tmpl_ptr,
-                            fr["fg"], fr["fg_n"], n_chunks, out)
+                            fr["cam_D"], fr["cam_hasd"], fr["cov"], fr["cov_wh"], self._order, self._tmpl,
+                            self._tmpl_ptr, fr["fg_x"], fr["fg_y"], fr["fg_n"], fr["fg_tab"], fr["fg_bins"], fr["fg_area"], n_chunks, out)
         return out
 
     def __repr__(self) -> str:
