@@ -9,7 +9,8 @@
 See ``docs/energy.md`` and ``docs/segmentation_prior_prediction.md``.
 """
 from .silhouette import EnergyError, SilhouetteEnergy, exact_view_energy
+from .correspondence import CorrespondenceEnergy, model_contour_points, plucker_lines
 from .prior import ParzenPrior, PriorError
 
-__all__ = ["EnergyError", "SilhouetteEnergy", "exact_view_energy",
-           "ParzenPrior", "PriorError"]
+__all__ = ["EnergyError", "SilhouetteEnergy", "exact_view_energy", "CorrespondenceEnergy", "plucker_lines",
+           "model_contour_points", "ParzenPrior", "PriorError"]
