@@ -36,8 +36,8 @@ def register(sub) -> None:
                                    "write DIR/estimates (MCAP) and DIR/summary.json.")
     p.add_argument("bag", metavar="BAG", help="rosbag2 directory or .mcap file")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
-    p.add_argument("--optimizer", default="isa", help="optimizer name (isa, apf, psapf, cmaes, de, pso, h-isa, "
-                                                     "h-apf, h-cmaes, h-de, h-pso; default isa)")
+    p.add_argument("--optimizer", default="h-isa", help="optimizer name (default h-isa; isa, apf, psapf, cmaes, de, pso, h-isa, "
+                                                     "h-apf, h-cmaes, h-de, h-pso)")
     p.add_argument("--evals", type=int, default=1500, help="energy evaluations per frame (default 1500)")
     p.add_argument("--params", default=None, metavar="JSON", help="optimizer parameters as a JSON object")
     p.add_argument("--model", type=int, choices=(18, 28, 39), default=None,
@@ -176,6 +176,11 @@ def track_bag(args) -> dict:
             raise ValueError(f"--learn-frames: expected an integer >= 1, received {learn}")
         segmenters = [BackgroundSegmenter(SegmentationConfig(learn_frames=learn)) for _ in seq.cameras]
     first = max(args.start, learn if not use_masks else 0)
+    if args.init == "truth":
+        with_truth = [f.index for f in seq.frames if f.truth is not None and f.index >= first]
+        if not with_truth:
+            raise ValueError("--init truth: expected ground truth in the bag, received none")
+        first = with_truth[0]
     stop = len(seq.frames) if args.frames is None else min(len(seq.frames), first + args.frames)
     if first >= len(seq.frames):
         raise ValueError(f"--start: expected a frame before the bag's end ({len(seq.frames)} frames, background "

@@ -21,9 +21,9 @@ Automatic initialization, in three steps:
    over 2π) × a few standing variants (:data:`STANDING_VARIANTS`: rest, arms out, left stride,
    right stride) at that root, in one batch.
 3. **Refinement** (optional, ``refine_evals > 0``): a short CMA-ES run (library optimizer) over the
-   6 root DOF only (posture kept), from the best candidate and from the best candidate facing at
-   least 90° away from it (a standing silhouette is nearly symmetric front/back; only the feet and
-   the arms' posture break the symmetry), spreads 0.1 m (x, y), 0.05 m (z), 0.1 rad (tilt), 0.2 rad
+   6 root DOF only (posture kept), from the best grid candidate of each of four heading sectors
+   (the best heading + 0°, 90°, 180°, 270°, each ±45°: a standing silhouette is nearly symmetric
+   front/back, and at low resolution side-on and frontal views are confused too), spreads 0.1 m (x, y), 0.05 m (z), 0.1 rad (tilt), 0.2 rad
    (yaw); the lower final energy wins. The joint angles are left to the tracker's first frame: a
    few hundred evaluations in all 39 DOF did not improve on the grid candidate (measured).
 
@@ -81,6 +81,9 @@ class InitResult:
         Views whose mask centroid entered the triangulation.
     notes : tuple of str
         Views skipped and why.
+    candidates : tuple of ((D,) ndarray, float)
+        The refined start of every heading sector and its energy, best first (``x`` is the first);
+        the tracker optimizes the whole pose from each on the first frame.
     """
 
     x: np.ndarray
@@ -91,6 +94,7 @@ class InitResult:
     n_evals: int
     views_used: int
     notes: tuple = ()
+    candidates: tuple = ()
 
 
 def mask_centroid(mask) -> tuple[float, float] | None:
@@ -253,7 +257,7 @@ def _wrap(a):
 
 
 def initial_pose(model, cameras: Sequence, masks: Sequence, energy: Callable, *, rng: np.random.Generator | None = None,
-                 n_yaw: int = 24, variants=None, refine_evals: int = 600) -> InitResult:
+                 n_yaw: int = 24, variants=None, refine_evals: int = 400) -> InitResult:
     """Automatic initial pose from foreground masks (see the module docstring).
 
     Parameters
@@ -272,7 +276,7 @@ def initial_pose(model, cameras: Sequence, masks: Sequence, energy: Callable, *,
     variants : mapping, optional
         Standing variants (default :data:`STANDING_VARIANTS`).
     refine_evals : int
-        Evaluations per refinement run (two runs; 0 = no refinement).
+        Evaluations per refinement run (four runs; 0 = no refinement).
 
     Returns
     -------
@@ -304,14 +308,19 @@ def initial_pose(model, cameras: Sequence, masks: Sequence, energy: Callable, *,
     if refine_evals > 0:
         from isa_mocap_ros.optim import make_optimizer, minimize
 
-        starts = [best]
-        for i in order[1:]:
-            if abs(_wrap(labels[i][0] - yaw0)) >= np.pi / 2 and np.isfinite(E[i]):
-                starts.append(int(i))
-                break
+        # one start per heading sector (best yaw + 0, 90, 180, 270 deg, each +-45 deg): the
+        # silhouettes of opposite and of side-on headings are easily confused at low resolution
+        starts = []
+        for sector in range(4):
+            centre = yaw0 + sector * np.pi / 2
+            for i in order:
+                if abs(_wrap(labels[i][0] - centre)) <= np.pi / 4 + 1e-9 and np.isfinite(E[i]):
+                    starts.append(int(i))
+                    break
         spread = np.array([0.1, 0.1, 0.05, 0.1, 0.1, 0.2])
         bounds = (model.lower[:6], model.upper[:6])
         e_best = np.inf
+        cands = []
         for i in starts:
             base = X[i]
 
@@ -326,9 +335,16 @@ def initial_pose(model, cameras: Sequence, masks: Sequence, energy: Callable, *,
             x_ref = base.copy()
             x_ref[:6] = res.best_x
             e, x = min([(float(res.best_energy), x_ref), (float(E[i]), base)], key=lambda t: t[0])
+            x = np.array(x, dtype=float)
+            x[3:6] = log_so3(exp_so3(x[3:6]))
+            cands.append((x, e))
             if e < e_best:
                 e_best, x_best = e, np.array(x, dtype=float)
-        # keep the rotation vector short (|w| <= pi) so the search around it starts well-conditioned
-        x_best[3:6] = log_so3(exp_so3(x_best[3:6]))
+        cands.sort(key=lambda t: t[1])
+    else:
+        cands = [(x_best, e_best)]
+    # keep the rotation vector short (|w| <= pi) so the search around it starts well-conditioned
+    x_best = cands[0][0].copy()
+    e_best = cands[0][1]
     return InitResult(x=x_best, energy=float(e_best), yaw=yaw0, variant=variant, root=root, n_evals=int(n_evals),
-                      views_used=n_views, notes=tuple(notes))
+                      views_used=n_views, notes=tuple(notes), candidates=tuple(cands))
