@@ -601,7 +601,7 @@ class Tracker:
                            prediction=pred, initialized=initialized)
 
 
-def make_tracker(model, cameras: Sequence, *, optimizer: str = "isa", evals: int = 1500,
+def make_tracker(model, cameras: Sequence, *, optimizer: str = "h-isa", evals: int = 1500,
                  params: Mapping | None = None, seed: int = 0, energy: str = "fast", downsample: int = 2,
                  search_radius_rad: float = 0.5, predictor: str = "ar", predictor_order: int = 1,
                  prior_eta: float = 0.0, prior_file: str | None = None, energy_fn: Callable | None = None,
