@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 
-BENCHES: list[str] = ["ackley", "adapters", "render"]
+BENCHES: list[str] = ["ackley", "adapters", "render", "energy"]
 
 
 def register(sub) -> None:

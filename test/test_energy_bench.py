@@ -1,0 +1,19 @@
+"""``isa-mocap bench energy --quick --json`` prints the documented JSON object."""
+from __future__ import annotations
+
+import argparse
+import json
+
+from isa_mocap_ros.cli import bench, bench_energy
+
+
+def test_bench_energy_quick_json(capsys):
+    assert "energy" in bench.BENCHES
+    p = argparse.ArgumentParser()
+    bench_energy.add_arguments(p)
+    assert bench_energy.run(p.parse_args(["--quick", "--json"])) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert list(out) == ["views", "dof", "batch", "fast_evals_per_s", "exact_evals_per_s", "ratio", "exact_batch"]
+    assert out["views"] == 4 and out["dof"] == 39 and out["batch"] == 64 and out["exact_batch"] == 4
+    assert out["fast_evals_per_s"] > 0 and out["exact_evals_per_s"] > 0
+    assert out["ratio"] > 0
