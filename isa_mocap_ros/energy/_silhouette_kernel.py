@@ -30,7 +30,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["fk_positions_batch", "silhouette_batch", "project_capsules"]
+__all__ = ["fk_positions_batch", "silhouette_batch", "project_capsules", "inside_points"]
 
 
 @numba.njit(cache=True, inline="always")
@@ -251,7 +251,8 @@ def _bin(y, y0, inv_dy, nb):  # pragma: no cover - compiled
 @numba.njit(parallel=True, cache=True, fastmath=True)
 def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                      cam_R, cam_t, cam_K, cam_D, cam_hasd, cov, cov_wh,
-                     order, tmpl, tmpl_ptr, fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_area, n_chunks, out):  # pragma: no cover - compiled
+                     order, tmpl, tmpl_ptr, fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_area, n_chunks,
+                     out):  # pragma: no cover - compiled
     """Fast Eq. 5 for poses ``X (n, D)`` into ``out (n,)``.
 
     Parameters

@@ -409,7 +409,8 @@ class SilhouetteEnergy:
         n_chunks = max(1, min(X.shape[0], 8 * numba.get_num_threads()))
         _k.silhouette_batch(X, *self._kin, self._caps, self._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"],
                             fr["cam_D"], fr["cam_hasd"], fr["cov"], fr["cov_wh"], self._order, self._tmpl,
-                            self._tmpl_ptr, fr["fg_x"], fr["fg_y"], fr["fg_n"], fr["fg_tab"], fr["fg_bins"], fr["fg_area"], n_chunks, out)
+                            self._tmpl_ptr, fr["fg_x"], fr["fg_y"], fr["fg_n"], fr["fg_tab"], fr["fg_bins"],
+                            fr["fg_area"], n_chunks, out)
         return out
 
     def __repr__(self) -> str:
