@@ -131,6 +131,7 @@ def track_bag(args) -> dict:
     from isa_mocap_ros.eval import (frame_errors_mm, knee_rmse_deg, marker_positions, max_frame_error_mm, mpjpe_mm,
                                     shared_markers)
     from isa_mocap_ros.tracking import Tracker, TrackerConfig
+    from isa_mocap_ros.tracking.published import PublishedPredictor
     from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig
     from msg_adapters import arrays_to_joint_state, to_cdr
 
@@ -198,6 +199,9 @@ def track_bag(args) -> dict:
         cfg_kw["predictor"] = args.predictor
     cfg = TrackerConfig(**cfg_kw)
     tracker = Tracker(model, seq.cameras, cfg, prior=prior)
+    # as the node network: the prediction travels as JointState (roll/pitch/yaw root) and the
+    # frame key is the stamp in ns, so `isa-mocap track` reproduces the estimator node's numbers
+    tracker.predictor = PublishedPredictor(model, tracker.predictor)
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -228,7 +232,7 @@ def track_bag(args) -> dict:
                 r = None
                 x = tracker.last_estimate
             else:
-                r = tracker.step(masks, fr.index)
+                r = tracker.step(masks, int(fr.stamp_ns))
                 x = r.x
             t_track += time.perf_counter() - t0
             if r is not None:
