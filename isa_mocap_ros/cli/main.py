@@ -15,6 +15,7 @@ SUBCOMMANDS = [
     "play",
     "record",
     "launch",
+    "run",
     "bag",
     "demo",
     "bench",

@@ -80,6 +80,9 @@ class EstimatorNode(Node):
         self.overlay_every = declare(self, "overlay_every", 1, "overlay every n-th frame", lo=1, hi=10000)
         self.body_id = declare(self, "body_id", "mocap", "REP-155 body id (/humans/bodies/<id>/...)")
         self.world_frame = declare(self, "world_frame", "world", "frame of root_pose and markers")
+        self.wait_for_inputs_s = declare(self, "wait_for_inputs_s", 0.0, "before saying ready, wait up to this "
+                                         "long until every cam<i>/mask (and the prediction) has a publisher",
+                                         lo=0.0, hi=600.0)
         self.problems = ProblemLog(self)
         self.model = make_model(dof, shape=shape or None)
         self.hri_names = hri_joint_names(self.model, self.body_id)
@@ -245,7 +248,25 @@ class EstimatorNode(Node):
             tracker.step(masks, 0)
         except Exception as exc:  # noqa: BLE001 - warm-up is an optimisation, never fatal
             self.get_logger().warn(f"warm-up failed ({type(exc).__name__}: {exc}); the first frame will be slow")
+        self._wait_for_inputs()
         self.get_logger().info(f"estimator: ready (warm-up {time.monotonic() - t0:.1f} s)")
+
+    def _wait_for_inputs(self) -> None:
+        """Wait (bounded) until the mask and prediction publishers are in the graph, so a replay
+        started on "ready" loses no frame to discovery."""
+        deadline = time.monotonic() + self.wait_for_inputs_s
+        topics = [f"cam{v}/mask" for v in range(self.n_views)] + (["prediction/joint_states"]
+                                                                  if self.use_prediction else [])
+        missing = topics
+        while self.wait_for_inputs_s > 0 and not self._stop.is_set():
+            missing = [t for t in topics if self.count_publishers(self.resolve_topic_name(t)) == 0]
+            if not missing or time.monotonic() > deadline:
+                break
+            time.sleep(0.1)
+        if self.wait_for_inputs_s > 0 and missing:
+            self.get_logger().warn(f"no publisher after {self.wait_for_inputs_s:.0f} s on {missing}")
+        elif self.wait_for_inputs_s > 0:
+            time.sleep(0.5)  # let the matched endpoints finish their handshake
 
     def _work(self) -> None:
         self._warm_up()

@@ -93,12 +93,15 @@ class BagRecorder(Node):
                 self.get_logger().error(f"not recording {topic}: {exc}")
                 continue
             infos = self.get_publishers_info_by_topic(topic)
-            if not infos:
-                continue  # only a subscriber so far; wait for a publisher to learn its QoS
+            if not infos and topic not in self.patterns:
+                continue  # a glob match with only subscribers so far: wait for a publisher's QoS
+            # An explicitly named topic is subscribed as soon as it exists in the graph, so the first
+            # messages of a publisher that appears later are not missed (reliable, default QoS recorded).
             offered = [i.qos_profile for i in infos]
             try:
                 with self._writer_lock:
-                    self.writer.add_topic(topic, type_name, qos=[qos.from_rclpy(o) for o in offered])
+                    self.writer.add_topic(topic, type_name,
+                                          qos=[qos.from_rclpy(o) for o in offered] if offered else None)
             except BagError as exc:
                 self._unsupported.add(topic)
                 self.get_logger().error(f"not recording {topic}: {exc}")

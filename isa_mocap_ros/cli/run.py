@@ -1,0 +1,152 @@
+"""``isa-mocap run [BAG] --out DIR``: the main job — the node network on a bag, recorded and evaluated.
+
+Starts segmentation, prediction and estimator nodes (each its own process, parameters from
+``config/pipeline.yaml`` plus the command's options) and a recorder, waits until the estimator is
+ready, replays the bag with the player (``--lockstep`` on the estimator's ``estimator/done`` topic for
+deterministic runs, or in real time at ``--rate``), then stops everything cleanly, evaluates the
+recorded estimates against the bag's ground truth and writes ``DIR/summary.json``, plots and overlay
+frames. Uses the caller's ``ROS_DOMAIN_ID`` when set (so you can subscribe to
+``/mocap/joint_states`` while it runs), a private one otherwise.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import threading
+import time
+from pathlib import Path
+
+from isa_mocap_ros.bag import BagReader
+from isa_mocap_ros.launcher import NodeSpec, Supervisor
+from isa_mocap_ros.resources import default_bag, resource_dir
+from isa_mocap_ros.rosenv import ros_env
+
+NS = "/mocap"
+RECORDED = ["/mocap/joint_states", "/mocap/estimator/done", "/mocap/root_pose", "/mocap/prediction/joint_states",
+            "/diagnostics", "/mocap/cam*/overlay", "/mocap/cam*/mask", "/mocap/cam0/image_raw", "/mocap/markers",
+            "/humans/bodies/*/joint_states", "/humans/bodies/*/urdf"]
+
+
+def register(sub) -> None:
+    p = sub.add_parser("run", help="run the node network on a bag, record and evaluate (the main job)")
+    add_run_arguments(p)
+    p.set_defaults(func=run)
+
+
+def add_run_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("bag", nargs="?", default=None, help="bag to process (default: the shipped demo bag)")
+    p.add_argument("--out", default="out/run", help="output directory (default out/run)")
+    p.add_argument("--optimizer", default=None, help="isa, h-isa, apf, psapf, cmaes, h-cmaes, de, h-de, pso, h-pso")
+    p.add_argument("--evals", type=int, default=None, help="energy evaluations per frame")
+    p.add_argument("--model", type=int, choices=(18, 28, 39), default=None, help="body model DOF")
+    p.add_argument("--seed", type=int, default=None, help="seed of the per-frame random streams")
+    p.add_argument("--lockstep", action="store_true",
+                   help="deterministic: replay frame k+1 only after the estimate of frame k")
+    p.add_argument("--rate", type=float, default=1.0, help="real-time playback rate (default 1.0)")
+    p.add_argument("--params", default=None, help="parameter file (default: the package's config/pipeline.yaml)")
+    p.add_argument("--learn-frames", type=int, default=None,
+                   help="frames the segmentation learns the background from (default: the bag's frames before "
+                        "its first ground truth, else the parameter file's learn_frames)")
+    p.add_argument("--overlay-frames", type=int, default=4, help="overlay frames to save as PNG")
+    p.add_argument("--quiet", action="store_true", help="do not echo node output")
+
+
+def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
+             learn_frames: int | None) -> list[NodeSpec]:
+    est = [("views", str(n_views)), ("lockstep", "true" if args.lockstep else "false"), ("wait_for_inputs_s", "60.0"),
+           # lockstep: wait for every view (a partial set would make results depend on machine load)
+           *([("view_timeout_s", "0.0")] if args.lockstep else []),
+           ("publish_overlay", "true" if args.overlay_frames > 0 else "false")]
+    for key, val in (("optimizer", args.optimizer), ("evals", args.evals), ("model_dof", args.model),
+                     ("seed", args.seed)):
+        if val is not None:
+            est.append((key, str(val)))
+    seg = [("views", str(n_views))] + ([("learn_frames", str(learn_frames))] if learn_frames else [])
+    if args.lockstep:
+        # Deterministic runs must not lose a frame: make the image and mask subscriptions reliable
+        # (they are best effort, qos_profile_sensor_data, by default).
+        seg += [(f"qos_overrides.{NS}/cam{v}/image_raw.subscription.reliability", "reliable") for v in range(n_views)]
+        est += [(f"qos_overrides.{NS}/cam{v}/mask.subscription.reliability", "reliable") for v in range(n_views)]
+    common = dict(namespace=NS, params_files=(params,))
+    return [
+        NodeSpec(exec="segmentation_node", name="segmentation", params=tuple(seg), **common),
+        NodeSpec(exec="prediction_node", name="prediction", **common),
+        NodeSpec(exec="estimator_node", name="estimator", params=tuple(est), **common),
+        NodeSpec(exec="recorder_node", name="recorder", namespace=NS,
+                 params=(("output", str(out / "estimates")), ("overwrite", "true"),
+                         ("topics", "[" + ",".join(f"'{t}'" for t in RECORDED) + "]"))),
+    ]
+
+
+def _inspect(bag: Path) -> tuple[int, int | None]:
+    """Views in the bag, and how many frames come before its first ground truth (background only)."""
+    import msg_adapters as ma
+    with BagReader(bag) as r:
+        n = sum(1 for t in r.topics if t.startswith("/mocap/cam") and t.endswith("/image_raw"))
+        if n == 0:
+            raise SystemExit(f"isa-mocap run: {bag} has no /mocap/cam<i>/image_raw topics")
+        gt = "/mocap/ground_truth/joint_states"
+        if gt not in r.topics:
+            return n, None
+        first_truth = next((ma.header_stamp_ns_from_cdr(m.data) for m in r.messages([gt])), None)
+        stamps = {ma.header_stamp_ns_from_cdr(m.data) for m in r.messages(["/mocap/cam0/image_raw"])}
+    return n, (sum(1 for s in stamps if s < first_truth) or None) if first_truth is not None else None
+
+
+def run(args: argparse.Namespace) -> int:
+    bag = Path(args.bag) if args.bag else default_bag()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    params = args.params or str(resource_dir("config") / "pipeline.yaml")
+    n_views, empty = _inspect(bag)
+    learn = args.learn_frames if args.learn_frames is not None else empty
+    env = ros_env(keep_caller_domain=True)
+    log = open(out / "nodes.log", "w")
+    ready = threading.Event()
+    lines_lock = threading.Lock()
+
+    def on_line(line: str) -> None:
+        with lines_lock:
+            log.write(line + "\n")
+            log.flush()
+        if "estimator: ready" in line:
+            ready.set()
+        if not args.quiet and ("[launch]" in line or "WARN" in line or "ERROR" in line or "estimator:" in line):
+            print(line, flush=True)
+
+    specs = _network(args, params, out, n_views, learn)
+    sup = Supervisor(specs, env=env, out=on_line)
+    runner = threading.Thread(target=sup.run, daemon=True)
+    print(f"run: {bag} ({n_views} views) -> {out}; ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}", flush=True)
+    runner.start()
+    t_start = time.monotonic()
+    try:
+        if not ready.wait(120):
+            print("run: the estimator did not become ready within 120 s; see nodes.log", file=sys.stderr)
+            return 1
+        play = [sys.executable, "-m", "isa_mocap_ros.cli.main", "play", str(bag), "--json",
+                "--topics", "/mocap/cam*/image_raw", "/mocap/cam*/camera_info", "/mocap/cam*/extrinsics",
+                "--wait-for-subscribers", "30", "--delay", "1.0"]
+        if args.lockstep:
+            play += ["--lockstep", f"{NS}/estimator/done", "--lockstep-type", "std_msgs/msg/Header",
+                     "--lockstep-timeout", "30"]
+        else:
+            play += ["--rate", str(args.rate)]
+        import subprocess
+        t_play = time.monotonic()
+        res = subprocess.run(play, env=env, capture_output=True, text=True)
+        play_s = time.monotonic() - t_play
+        on_line(f"[player] {res.stdout.strip()} {res.stderr.strip()}")
+        if res.returncode != 0:
+            print(f"run: replay failed:\n{res.stderr}", file=sys.stderr)
+            return 1
+        summary_play = json.loads(res.stdout.strip().splitlines()[-1])
+        time.sleep(2.0)  # let the last estimates reach the recorder
+    finally:
+        sup.stop()
+        runner.join(60)
+        log.close()
+    from isa_mocap_ros.cli.run_report import write_report
+    return write_report(bag, out, args=args, play_summary=summary_play, play_seconds=play_s,
+                        wall_seconds=time.monotonic() - t_start)

@@ -1,0 +1,116 @@
+"""The evaluation half of ``isa-mocap run``: read the recording, compare with the bag's ground truth,
+write ``summary.json``, plots and overlay frames, print a table.
+
+Latency is measured from the recording: the recorder's receive time of a frame's
+``/mocap/cam0/image_raw`` to its receive time of that frame's ``/mocap/joint_states`` (both arrive
+in the same process over the same DDS path the segmentation node uses)."""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from isa_mocap_ros.bag import BagReader
+
+
+def read_estimates(path: Path, model) -> dict:
+    """Estimates, latencies and diagnostics from a run's recording."""
+    import msg_adapters as ma
+    from isa_mocap_ros.body import joint_state_to_pose
+
+    poses: dict[int, np.ndarray] = {}
+    js_time: dict[int, int] = {}
+    img_time: dict[int, int] = {}
+    done: list[int] = []
+    overlays: list[tuple[int, str, np.ndarray]] = []
+    diag: dict[str, str] = {}
+    with BagReader(path) as bag:
+        for m in bag.messages():
+            if m.topic == "/mocap/joint_states":
+                msg = ma.from_cdr(m.data, m.type)
+                _, q = ma.joint_state_to_arrays(msg, model.dof_names)
+                s = ma.stamp_to_ns(msg.header)
+                poses[s] = joint_state_to_pose(model, q)
+                js_time[s] = m.log_time_ns
+            elif m.topic == "/mocap/cam0/image_raw":
+                img_time.setdefault(ma.header_stamp_ns_from_cdr(m.data), m.log_time_ns)
+            elif m.topic == "/mocap/estimator/done":
+                done.append(ma.header_stamp_ns_from_cdr(m.data))
+            elif m.topic.endswith("/overlay"):
+                msg = ma.from_cdr(m.data, m.type)
+                overlays.append((ma.stamp_to_ns(msg.header), m.topic, np.array(ma.image_to_array(msg))))
+            elif m.topic == "/diagnostics":
+                msg = ma.from_cdr(m.data, m.type)
+                for st in msg.status:
+                    if st.name.endswith("estimator"):
+                        diag = {kv.key: kv.value for kv in st.values}
+    lat = [(js_time[s] - img_time[s]) / 1e6 for s in js_time if s in img_time]
+    return {"poses": poses, "latencies_ms": lat, "done": done, "overlays": overlays, "diagnostics": diag}
+
+
+def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary: dict, play_seconds: float,
+                 wall_seconds: float) -> int:
+    import cv2
+
+    from isa_mocap_ros.body import make_model
+    from isa_mocap_ros.cli.track import read_sequence
+    from isa_mocap_ros.eval.report import accuracy, plot_sequence
+
+    model = make_model(args.model or 39)
+    rec = read_estimates(out / "estimates", model)
+    poses = rec["poses"]
+    lat = np.array(rec["latencies_ms"], dtype=float)
+    diag = rec["diagnostics"]
+    summary = {
+        "bag": str(bag), "out": str(out), "mode": "lockstep" if args.lockstep else f"real time x{args.rate}",
+        "optimizer": diag.get("optimizer", args.optimizer), "evals_per_frame": int(diag.get("evals_per_frame", 0) or 0),
+        "model_dof": model.dof, "seed": args.seed if args.seed is not None else 0,
+        "frame_sets_played": play_summary.get("frames"), "frames_processed": len(rec["done"]),
+        "frames_estimated": len(poses),
+        "fps": len(rec["done"]) / play_seconds if play_seconds > 0 else float("nan"),
+        "latency_ms_p50": float(np.percentile(lat, 50)) if lat.size else float("nan"),
+        "latency_ms_p95": float(np.percentile(lat, 95)) if lat.size else float("nan"),
+        "dropped_frames": int(diag.get("dropped_frame_sets", 0) or 0),
+        "bad_inputs": int(diag.get("bad_inputs", 0) or 0), "wall_seconds": round(wall_seconds, 1),
+    }
+    seq = read_sequence(bag, want_images=True, want_masks=False)
+    stamps = [f.stamp_ns for f in seq.frames if f.truth is not None and f.stamp_ns in poses]
+    if seq.has_truth and stamps:
+        truth = {f.stamp_ns: f.truth for f in seq.frames if f.truth is not None}
+        P = np.array([poses[s] for s in stamps])
+        T = np.array([truth[s] for s in stamps])
+        acc = accuracy(model, P, seq.truth_model, T)
+        summary.update(acc)
+        t = (np.array(stamps) - stamps[0]) / 1e9
+        plot_sequence(out / "knees_and_error.png", model, P, seq.truth_model, T, times_s=t,
+                      title=f"{summary['optimizer']}, {summary['evals_per_frame']} evals/frame, {model.dof} DOF")
+    else:
+        summary["frames"] = len(poses)
+    ov = rec["overlays"]
+    if ov and args.overlay_frames > 0:
+        stamps_ov = sorted({s for s, _, _ in ov})
+        pick = set(stamps_ov[i] for i in np.linspace(0, len(stamps_ov) - 1, min(args.overlay_frames, len(stamps_ov)),
+                                                      dtype=int))
+        (out / "overlays").mkdir(exist_ok=True)
+        for s, topic, img in ov:
+            if s in pick:
+                cam = topic.split("/")[-2]
+                cv2.imwrite(str(out / "overlays" / f"{s}_{cam}.png"), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    rows = [("frames (with ground truth)", summary.get("frames")), ("mean joint error (mm)", summary.get("mpjpe_mm")),
+            ("max frame error (mm)", summary.get("max_frame_error_mm")), ("knee RMSE (deg)", summary.get("knee_rmse_deg")),
+            ("frames/s", summary["fps"]), ("latency p50 / p95 (ms)", (summary["latency_ms_p50"], summary["latency_ms_p95"])),
+            ("dropped frame sets", summary["dropped_frames"]), ("optimizer", summary["optimizer"]),
+            ("evaluations per frame", summary["evals_per_frame"])]
+    print(f"\nrun summary ({summary['mode']}):")
+    for k, v in rows:
+        if isinstance(v, float):
+            v = f"{v:.2f}"
+        elif isinstance(v, tuple):
+            v = " / ".join(f"{x:.1f}" for x in v)
+        print(f"  {k:28s} {v}")
+    print(f"run: wrote {out / 'summary.json'}, {out / 'estimates'}"
+          + (f", {out / 'knees_and_error.png'}" if (out / 'knees_and_error.png').exists() else ""))
+    return 0
