@@ -140,6 +140,8 @@ def test_search_box_respects_radius_and_limits(scene):
     ({"optimizer_params": {"bounds": 1}}, r"optimizer_params: expected algorithm parameters only"),
     ({"energy_method": "slow"}, "energy_method: expected 'fast' or 'exact'"),
     ({"seed": -1}, "seed: expected an integer >= 0"),
+    ({"n_model_points": 0}, "n_model_points: expected an integer >= 1"),
+    ({"n_mask_points": -1}, "n_mask_points: expected an integer >= 0"),
 ])
 def test_config_errors(kw, match):
     with pytest.raises(TrackerError, match=match):
@@ -178,3 +180,13 @@ def test_hierarchical_and_prior(scene):
     assert not r.fell_back and r.n_evals == 600
     np.testing.assert_allclose(tr.total_energy(r.x[None]) - tr.energy(r.x[None]),
                                prior.energy(r.x[None], eta=0.01))
+
+
+def test_energy_sample_sizes_reach_the_default_energy(scene):
+    """The config's fast-energy sample sizes and downsampling are those of the energy it builds."""
+    model, cams, _, _ = scene
+    cfg = TrackerConfig(n_model_points=200, n_mask_points=50, downsample=1)
+    en = Tracker(model, cams, cfg).energy
+    assert en.downsample == 1
+    assert en.n_mask_points == 50
+    assert en.n_template >= 200          # the template holds at least the requested model points
