@@ -24,7 +24,7 @@ test: venv
 	$(PY) -m pytest -n 2 --timeout 600 $(PYTEST_ARGS)
 
 demo: venv
-	$(VENV)/bin/isa-mocap demo
+	$(VENV)/bin/isa-mocap run --lockstep --out out/demo
 
 bench: venv
 	$(VENV)/bin/isa-mocap bench all

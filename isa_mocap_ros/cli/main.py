@@ -17,7 +17,6 @@ SUBCOMMANDS = [
     "launch",
     "run",
     "bag",
-    "demo",
     "bench",
     "synth",
     "track",
