@@ -136,6 +136,9 @@ class TrackerConfig:
         Headings of the automatic initialization's grid.
     init_refine_evals : int
         Evaluations of each of the initialization's four root refinements (0: none).
+    init_spread_scale : float
+        Factor on the initial spreads on the automatically initialized frame (its start is a
+        standing pose, far from the tracked one's accuracy).
     """
 
     optimizer: str = "h-isa"
@@ -162,6 +165,7 @@ class TrackerConfig:
     seed: int = 0
     init_yaw_steps: int = 24
     init_refine_evals: int = 400
+    init_spread_scale: float = 2.0
 
     def __post_init__(self) -> None:
         from isa_mocap_ros.optim import OPTIMIZERS
@@ -200,6 +204,7 @@ class TrackerConfig:
         _check_number("seed", self.seed, lo=0, integer=True)
         _check_number("init_yaw_steps", self.init_yaw_steps, lo=4, integer=True)
         _check_number("init_refine_evals", self.init_refine_evals, lo=0, integer=True)
+        _check_number("init_spread_scale", self.init_spread_scale, lo=0.0, strict=True)
 
     def params(self) -> dict:
         """Optimizer keyword arguments: :data:`DEFAULT_PARAMS` of the optimizer, then ``optimizer_params``."""
@@ -309,8 +314,9 @@ class Tracker:
                 raise TrackerError(f"prior: expected a prior over {model.dof}-DOF poses, received one over "
                                    f"{prior.n_dof}")
             self.prior = prior
+        own_energy = energy is None
+        from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
         if energy is None:
-            from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
 
             energy = SilhouetteEnergy(model, cams, None, method=config.energy_method, downsample=config.downsample,
                                       n_model_points=config.n_model_points, n_mask_points=config.n_mask_points,
@@ -319,6 +325,12 @@ class Tracker:
             raise TrackerError(f"energy: expected an object with set_masks() and __call__, received "
                                f"{type(energy).__name__}")
         self.energy = energy
+        # the automatic initialization's grid scores rough standing poses: with the fine sample
+        # sizes it picked a heading 180 deg off on bags/demo, with the library's coarse ones not
+        self._init_energy = None
+        if own_energy and config.energy_method == "fast":
+            self._init_energy = SilhouetteEnergy(model, cams, None, method="fast", downsample=config.downsample,
+                                                 rng=np.random.default_rng([config.seed, 2**32 - 2]))
         self.predictor = _make_predictor(config) if predictor is None else predictor
         self._last: np.ndarray | None = None
         self._partitions = [np.asarray(model.partitions[k]) for k in
@@ -450,13 +462,31 @@ class Tracker:
             raise TrackerError(f"masks: expected foreground in at least one view, received none ({'; '.join(notes)})")
         cfg = self.config
         try:
-            res = initial_pose(self.model, self.cameras, usable, self.total_energy,
+            res = initial_pose(self.model, self.cameras, usable, self._init_energy_fn(usable, frame_index),
                                rng=frame_rng(cfg.seed, frame_index, 1), n_yaw=cfg.init_yaw_steps,
                                refine_evals=cfg.init_refine_evals)
         except InitError as exc:
             raise TrackerError(f"masks: automatic initialization failed: {exc}") from None
         self._accept(res.x)
         return res
+
+    def _init_energy_fn(self, usable: list, frame_index: int):
+        """The energy the automatic initialization scores its grid with (see ``__init__``)."""
+        if self._init_energy is None:
+            return self.total_energy
+        self._init_energy.rng = frame_rng(self.config.seed, frame_index, 4)
+        try:
+            self._init_energy.set_masks(usable)
+        except ValueError:
+            return self.total_energy
+
+        def fn(X):
+            X = np.atleast_2d(np.asarray(X, dtype=float))
+            E = np.asarray(self._init_energy(X), dtype=float)
+            if self.prior is not None and self.config.prior_eta > 0:
+                E = E + self.prior.energy(X, eta=self.config.prior_eta)
+            return E
+        return fn
 
     def _accept(self, x: np.ndarray) -> None:
         self._last = np.array(x, dtype=float)
@@ -507,12 +537,14 @@ class Tracker:
         hi[tight] = lo[tight] + 1e-6
         return lo, hi, spread
 
-    def _optimize(self, pred: np.ndarray, rng: np.random.Generator):
-        """One optimizer run of the frame budget around ``pred`` (raises the optimizer's errors)."""
+    def _optimize(self, pred: np.ndarray, rng: np.random.Generator, spread_scale: float = 1.0):
+        """One optimizer run of the frame budget around ``pred`` (raises the optimizer's errors);
+        ``spread_scale`` multiplies the initial spreads (the first frame starts from a rough pose)."""
         from isa_mocap_ros.optim import make_optimizer, minimize
 
         cfg = self.config
         lo, hi, spread = self.search_box(pred)
+        spread = spread * spread_scale
         x0 = np.clip(pred, lo, hi)
         params = cfg.params()
         hierarchical = cfg.optimizer == "psapf" or cfg.optimizer.startswith("h-")
@@ -561,7 +593,7 @@ class Tracker:
         initialized = False
         if self._last is None:
             try:
-                res0 = initial_pose(self.model, self.cameras, usable, self.total_energy,
+                res0 = initial_pose(self.model, self.cameras, usable, self._init_energy_fn(usable, frame_index),
                                     rng=frame_rng(cfg.seed, frame_index, 1), n_yaw=cfg.init_yaw_steps,
                                     refine_evals=cfg.init_refine_evals)
             except InitError as exc:
@@ -579,7 +611,8 @@ class Tracker:
         for j, pred in enumerate(starts):
             try:
                 res = self._optimize(pred, frame_rng(cfg.seed, frame_index) if j == 0
-                                     else frame_rng(cfg.seed, frame_index, 3, j))
+                                     else frame_rng(cfg.seed, frame_index, 3, j),
+                                     spread_scale=cfg.init_spread_scale if initialized else 1.0)
             except ValueError as exc:
                 # a configuration the optimizer rejects (budget below one generation, bad parameter):
                 # report it on every frame instead of crashing the caller
