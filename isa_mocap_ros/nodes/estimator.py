@@ -39,6 +39,7 @@ from isa_mocap_ros.geometry import exp_so3
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, run_node
 from isa_mocap_ros.tracking.sync import FrameSynchronizer, LatestSlot, SyncError
+from isa_mocap_ros.tracking.tracker import TrackerConfig
 from isa_mocap_ros.vision import Camera
 from isa_mocap_ros.vision.overlay import draw_overlay
 
@@ -51,16 +52,18 @@ class EstimatorNode(Node):
         self.n_views = declare(self, "views", 4, "number of camera views", lo=1, hi=64)
         dof = declare(self, "model_dof", 39, "body model: 18, 28 or 39 DOF", lo=18, hi=39)
         shape = declare(self, "body_shape", "", "body-shape YAML file ('' = default shape)")
-        self.optimizer = declare(self, "optimizer", "isa", "isa, apf, psapf, cmaes, de, pso, h-isa, h-cmaes, ...")
-        self.evals = declare(self, "evals", 1500, "energy evaluations per frame", lo=10, hi=1_000_000)
+        tc = TrackerConfig()  # the tracker's defaults are the node's defaults (one source of truth)
+        self.optimizer = declare(self, "optimizer", tc.optimizer, "isa, h-isa, apf, psapf, cmaes, h-cmaes, de, h-de, "
+                                 "pso, h-pso")
+        self.evals = declare(self, "evals", tc.evals_per_frame, "energy evaluations per frame", lo=10, hi=1_000_000)
         params = declare(self, "optimizer_params", "{}", "optimizer parameters as a YAML/JSON mapping")
         self.seed = declare(self, "seed", 0, "seed of the per-frame random streams", lo=0, hi=2**31 - 1)
-        energy = declare(self, "energy", "fast", "silhouette energy: fast or exact")
-        downsample = declare(self, "downsample", 2, "mask downsampling for the fast energy", lo=1, hi=16)
-        radius = declare(self, "search_radius_rad", 0.5, "joint-angle search radius around the prediction",
-                         lo=0.01, hi=3.2)
-        predictor = declare(self, "predictor", "ar", "ar, constant_pose or constant_velocity")
-        order = declare(self, "predictor_order", 1, "AR order (past motions used; keep equal to the prediction node's order)", lo=1, hi=20)
+        energy = declare(self, "energy", tc.energy_method, "silhouette energy: fast or exact")
+        downsample = declare(self, "downsample", tc.downsample, "mask downsampling for the fast energy", lo=1, hi=16)
+        radius = declare(self, "search_radius_rad", tc.search_radius_rad,
+                         "joint-angle search radius around the prediction", lo=0.01, hi=3.2)
+        predictor = declare(self, "predictor", tc.predictor, "ar, constant_pose or constant_velocity")
+        order = declare(self, "predictor_order", tc.predictor_order, "AR order (past motions used; keep equal to the prediction node's order)", lo=1, hi=20)
         self.prior_eta = declare(self, "prior_eta", 0.0, "weight of the pose prior (0 = off)", lo=0.0, hi=1e6)
         prior_file = declare(self, "prior_file", "", "Parzen prior .npz ('' = none)")
         sync = declare(self, "sync", "exact", "frame-set matching: exact or approximate")

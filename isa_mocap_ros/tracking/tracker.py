@@ -494,7 +494,14 @@ class Tracker:
 
     # ------------------------------------------------------------------ one frame
     def _prediction(self, external, notes: list[str]) -> np.ndarray:
+        """The (damped) prediction: ``external`` (e.g. the prediction node's) or the tracker's own.
+
+        Both are damped the same way towards the last estimate (``root/joint_velocity_gain``), so the
+        node network (prediction from the prediction node) and ``isa-mocap track`` (own predictor,
+        same conversions) give identical numbers.
+        """
         D = self.model.dof
+        p = None
         if external is not None:
             try:
                 p = np.asarray(external, dtype=float)
@@ -503,18 +510,19 @@ class Tracker:
             if p is None or p.shape != (D,):
                 notes.append(f"prediction: expected shape ({D},), received "
                              f"{None if p is None else p.shape}; using the tracker's own")
+                p = None
             elif not np.all(np.isfinite(p)):
                 notes.append("prediction: non-finite values; using the tracker's own")
-            else:
-                return p.copy()
-        try:
-            p = np.asarray(self.predictor.predict(), dtype=float)
-        except ValueError as exc:          # PredictionError: empty history (cannot happen once initialized)
-            notes.append(f"prediction: {exc}; using the last estimate")
-            return self._last.copy()
-        if p.shape != (D,) or not np.all(np.isfinite(p)):
-            notes.append("prediction: non-finite values; using the last estimate")
-            return self._last.copy()
+                p = None
+        if p is None:
+            try:
+                p = np.asarray(self.predictor.predict(), dtype=float)
+            except ValueError as exc:      # PredictionError: empty history (cannot happen once initialized)
+                notes.append(f"prediction: {exc}; using the last estimate")
+                return self._last.copy()
+            if p.shape != (D,) or not np.all(np.isfinite(p)):
+                notes.append("prediction: non-finite values; using the last estimate")
+                return self._last.copy()
         cfg = self.config
         gain = np.full(D, cfg.joint_velocity_gain)
         gain[:6] = cfg.root_velocity_gain
