@@ -20,6 +20,7 @@ SUBCOMMANDS = [
     "bench",
     "synth",
     "track",
+    "evaluate",
 ]
 
 
