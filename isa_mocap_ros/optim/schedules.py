@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _fast
 from ._base import OptimError
 from .resampling import ess, normalise_log
 
@@ -71,8 +72,10 @@ def beta_for_ess(energies, target: float, *, beta_max: float = 1e12, tol: float 
     if Ef.max() <= 0:
         return 0.0
 
-    def frac(beta):
-        return ess(normalise_log(-beta * Ef)) / n
+    buf = np.empty(Ef.size)
+
+    def frac(beta):   # = ess(normalise_log(-beta * Ef)) / n, compiled and bit-identical (see _fast)
+        return _fast.ess_fraction(Ef, float(beta), n, buf)
 
     if frac(0.0) <= target:  # non-finite rows already cost more than the target
         return 0.0
@@ -82,15 +85,7 @@ def beta_for_ess(energies, target: float, *, beta_max: float = 1e12, tol: float 
     hi = max(hi, lo + 1)
     if frac(10 ** hi) >= target:
         return float(10 ** hi)
-    for _ in range(100):
-        mid = 0.5 * (lo + hi)
-        if frac(10 ** mid) > target:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo < tol:
-            break
-    return float(10 ** (0.5 * (lo + hi)))
+    return float(_fast.bisect_log_beta(Ef, float(target), n, float(lo), float(hi), float(tol)))
 
 
 @dataclass(frozen=True)
