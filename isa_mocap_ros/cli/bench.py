@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 
-BENCHES: list[str] = ["ackley", "adapters", "render", "energy"]
+BENCHES: list[str] = ["ackley", "adapters", "render", "energy", "compare"]
 
 
 def register(sub) -> None:

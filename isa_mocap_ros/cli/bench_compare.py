@@ -1,0 +1,169 @@
+"""Optimizer comparison (EA-vs-PF §5.2-5.4): algorithms × models × budgets × seeds × sequences, Friedman/Holm.
+
+``isa-mocap bench compare [--quick | --full] [--json] [--jobs N] [--resume DIR] [--out DIR]
+[--write-results FILE]``. The designs are :func:`isa_mocap_ros.eval.compare.make_design`'s (see
+``docs/evaluation.md``): sequences are synthesized once into ``OUT/cache``, the cells run offline
+(no ROS) in a process pool with a progress bar, every finished cell is appended to
+``OUT/cells.jsonl`` (``--resume OUT`` skips the cells already there), and the summary (mean error per
+cell, the ranking tables per model and budget like Tables 4-5, per family like Tables 6-7, holistic
+vs hierarchical, 28 vs 39 DOF, ours vs the peers) is printed, written to ``OUT/summary.json`` and,
+with ``--write-results``, rendered as Markdown with the command and machine.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import os
+import platform
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--quick", action="store_true", help="tiny smoke design (2 algorithms, 1 model/budget/seed/sequence)")
+    g.add_argument("--full", action="store_true", help="the paper's protocol: 30 seeds, 2 s at 30 fps, 320x240")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("--jobs", type=int, default=2, metavar="N", help="worker processes (default 2; 1 = in process)")
+    p.add_argument("--out", default=None, metavar="DIR", help="results directory (default: a new temporary one)")
+    p.add_argument("--resume", default=None, metavar="DIR", help="continue the run in DIR (skip its finished cells)")
+    p.add_argument("--algorithms", default=None, metavar="A,B", help="restrict the design to these algorithms")
+    p.add_argument("--write-results", default=None, metavar="FILE", help="write the Markdown tables to FILE")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _init_worker() -> None:
+    # one thread per worker process: --jobs processes share the cores (set before the numeric
+    # libraries load, which happens in the first _work of a spawned worker)
+    for k in ("OMP_NUM_THREADS", "NUMBA_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[k] = "1"
+
+
+def _work(cell: dict, cache: str) -> dict:
+    from isa_mocap_ros.eval.compare import run_cell
+
+    return run_cell(cell, cache)
+
+
+def _machine() -> str:
+    try:
+        cpu = next((ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo") if ln.startswith("model name")), "")
+    except OSError:
+        cpu = ""
+    return f"{platform.node()}: {os.cpu_count()} CPUs {cpu}, {platform.system()} {platform.release()}, " \
+           f"Python {platform.python_version()}"
+
+
+def run_design(design, out: Path, *, jobs: int = 2, progress: bool = True) -> list[dict]:
+    """Run (or finish) ``design`` in ``out``; return all records of its cells."""
+    from tqdm import tqdm
+
+    from isa_mocap_ros.eval.compare import cell_key, prepare_sequence
+
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "design.json").write_text(json.dumps(design.to_dict(), indent=2) + "\n")
+    cache = {s.name: str(prepare_sequence(s, out / "cache")) for s in design.sequences}
+    jl = out / "cells.jsonl"
+    done: dict[str, dict] = {}
+    if jl.exists():
+        for ln in jl.read_text().splitlines():
+            if ln.strip():
+                try:
+                    r = json.loads(ln)
+                except json.JSONDecodeError:       # a line cut by an interruption
+                    continue
+                done[r["key"]] = r
+    cells = design.cells()
+    todo = [c for c in cells if cell_key(c) not in done]
+    bar = tqdm(total=len(cells), initial=len(cells) - len(todo), unit="cell", desc="compare", file=sys.stderr,
+               disable=not progress)
+    with open(jl, "a") as fh:
+        def finish(r):
+            fh.write(json.dumps(r) + "\n")
+            fh.flush()
+            done[r["key"]] = r
+            bar.set_postfix_str(f"{r['key']} {r['mpjpe_mm']:.1f} mm")
+            bar.update(1)
+
+        if jobs <= 1:
+            for c in todo:
+                finish(_work(c, cache[c["sequence"]]))
+        else:
+            # spawn, not fork: the parent has used OpenMP (synthesis), which forked children cannot
+            with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
+                                     initializer=_init_worker) as ex:
+                futs = [ex.submit(_work, c, cache[c["sequence"]]) for c in todo]
+                for f in as_completed(futs):
+                    finish(f.result())
+    bar.close()
+    keys = {cell_key(c) for c in cells}
+    return [r for k, r in done.items() if k in keys]
+
+
+def results_markdown(summary: dict, design, *, command: str, seconds: float) -> str:
+    from isa_mocap_ros.eval.compare import render_markdown
+
+    smoke = design.name == "quick"
+    head = ["# Optimizer comparison results", ""]
+    if smoke:
+        head += ["> **Smoke run** (`--quick` design: 2 algorithms, 1 model, 1 budget, 1 seed, 3 scored frames of",
+                 "> one sequence at 96 × 72). It checks the pipeline end to end; its numbers say nothing about",
+                 "> the algorithms. The default and full designs have not been run yet.", ""]
+    head += [f"- command: `{command}`", f"- machine: {_machine()}",
+             f"- design: {design.name} — algorithms {', '.join(design.algorithms)}; models {list(design.models)}; "
+             f"budgets {list(design.budgets)}; seeds {len(design.seeds)}; sequences "
+             f"{', '.join(s.name for s in design.sequences)}",
+             f"- wall time: {seconds:.0f} s; records: {summary['records']}; frames that fell back: "
+             f"{summary['fell_back_frames']}", "- protocol: see [docs/evaluation.md](evaluation.md)", ""]
+    for n in design.notes:
+        head.append(f"- note: {n}")
+    return "\n".join(head) + "\n" + render_markdown(summary)
+
+
+def run(args: argparse.Namespace) -> int:
+    from isa_mocap_ros.eval.compare import make_design, summarize
+
+    if args.jobs < 1:
+        print(f"isa-mocap bench compare: error: --jobs: expected an integer >= 1, received {args.jobs}", file=sys.stderr)
+        return 2
+    kind = "quick" if args.quick else "full" if args.full else "default"
+    design = make_design(kind)
+    if args.algorithms:
+        want = [a.strip() for a in args.algorithms.split(",") if a.strip()]
+        from dataclasses import replace
+        design = replace(design, algorithms=tuple(want))
+    for n in design.notes:
+        print(f"bench compare: {n}", file=sys.stderr)
+    out = Path(args.resume or args.out or tempfile.mkdtemp(prefix="isa_mocap_compare_"))
+    if args.resume and not (out / "cells.jsonl").exists():
+        print(f"isa-mocap bench compare: error: --resume: expected a previous run's directory with cells.jsonl, "
+              f"received {out}", file=sys.stderr)
+        return 2
+    t0 = time.perf_counter()
+    try:
+        records = run_design(design, out, jobs=args.jobs, progress=not args.no_progress)
+    except KeyboardInterrupt:
+        print(f"\nbench compare: interrupted; resume with --resume {out}", file=sys.stderr)
+        return 130
+    seconds = time.perf_counter() - t0
+    summary = summarize(records)
+    summary["design"] = design.to_dict()
+    summary["out"] = str(out)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    command = "isa-mocap bench compare " + " ".join(a for a in sys.argv[3:] if a) if sys.argv[1:3] == ["bench", "compare"] \
+        else f"isa-mocap bench compare{' --quick' if args.quick else ' --full' if args.full else ''}"
+    md = results_markdown(summary, design, command=command.strip(), seconds=seconds)
+    if args.write_results:
+        Path(args.write_results).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.write_results).write_text(md)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print(md)
+        print(f"bench compare: wrote {out / 'cells.jsonl'}, {out / 'summary.json'}"
+              + (f", {args.write_results}" if args.write_results else ""))
+    return 0
