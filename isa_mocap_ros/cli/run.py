@@ -94,6 +94,14 @@ def _inspect(bag: Path) -> tuple[int, int | None]:
     return n, (sum(1 for s in stamps if s < first_truth) or None) if first_truth is not None else None
 
 
+def _tail(path: Path, n: int = 25) -> None:
+    try:
+        lines = path.read_text(errors="replace").splitlines()[-n:]
+    except OSError:
+        return
+    print("\n".join(lines), file=sys.stderr)
+
+
 def run(args: argparse.Namespace) -> int:
     bag = Path(args.bag) if args.bag else default_bag()
     out = Path(args.out)
@@ -122,12 +130,14 @@ def run(args: argparse.Namespace) -> int:
     runner.start()
     t_start = time.monotonic()
     try:
-        if not ready.wait(120):
-            print("run: the estimator did not become ready within 120 s; see nodes.log", file=sys.stderr)
+        if not ready.wait(300):
+            print(f"run: the estimator did not become ready within 300 s; see {out / 'nodes.log'}", file=sys.stderr)
+            _tail(out / "nodes.log")
             return 1
         play = [sys.executable, "-m", "isa_mocap_ros.cli.main", "play", str(bag), "--json",
                 "--topics", "/mocap/cam*/image_raw", "/mocap/cam*/camera_info", "/mocap/cam*/extrinsics",
-                "--wait-for-subscribers", "30", "--delay", "1.0"]
+                # the readers may still be finishing discovery when the writers see them matched: settle
+                "--wait-for-subscribers", "30", "--delay", "3.0"]
         if args.lockstep:
             play += ["--lockstep", f"{NS}/estimator/done", "--lockstep-type", "std_msgs/msg/Header",
                      "--lockstep-timeout", "30"]
@@ -140,6 +150,7 @@ def run(args: argparse.Namespace) -> int:
         on_line(f"[player] {res.stdout.strip()} {res.stderr.strip()}")
         if res.returncode != 0:
             print(f"run: replay failed:\n{res.stderr}", file=sys.stderr)
+            _tail(out / "nodes.log")
             return 1
         summary_play = json.loads(res.stdout.strip().splitlines()[-1])
         time.sleep(2.0)  # let the last estimates reach the recorder
