@@ -294,8 +294,13 @@ class EstimatorNode(Node):
             try:
                 self._process(frame_set, prediction, t_ready)
             except Exception as exc:  # noqa: BLE001 - a node must survive any one bad frame set
+                if self._stop.is_set() or not self.context.ok():
+                    return  # shutting down: publishers are gone with the context
                 self.problems.report("error", f"frame set {frame_set.stamp_ns} failed: {type(exc).__name__}: {exc}")
-                self._done(frame_set.stamp_ns)
+                try:
+                    self._done(frame_set.stamp_ns)
+                except Exception:  # noqa: BLE001 - the context may have gone meanwhile
+                    return
 
     def _process(self, frame_set, prediction_msg, t_ready: float) -> None:
         if self.tracker is None:
