@@ -1,4 +1,4 @@
-"""ROS 2 environment for child processes: localhost-only discovery and a private domain.
+"""ROS 2 environment for child processes: localhost-only discovery, a private domain, our Fast DDS profile.
 
 Pure (no rclpy import): it only shapes environment variables, so the CLI, the launcher and the
 tests use one rule. A caller's ``ROS_DOMAIN_ID`` is honoured when ``keep_caller_domain`` is set
@@ -29,4 +29,19 @@ def ros_env(domain_id: int | None = None, *, keep_caller_domain: bool = False,
     elif not (keep_caller_domain and env.get("ROS_DOMAIN_ID")):
         env["ROS_DOMAIN_ID"] = str(private_domain_id())
     env.setdefault("PYTHONUNBUFFERED", "1")
+    profile = fastdds_profile()
+    if profile is not None and not (env.get("FASTRTPS_DEFAULT_PROFILES_FILE") or env.get("FASTDDS_DEFAULT_PROFILES_FILE")):
+        env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(profile)
     return env
+
+
+def fastdds_profile():
+    """The package's Fast DDS profile (``config/fastdds.xml``: large shared-memory segment and socket
+    buffers, 100 ms writer heartbeat, so multi-view image bursts are not repaired only every 3 s),
+    or None where it is not installed."""
+    from isa_mocap_ros.resources import resource_dir
+    try:
+        path = resource_dir("config") / "fastdds.xml"
+    except FileNotFoundError:
+        return None
+    return path if path.is_file() else None
