@@ -1,57 +1,24 @@
 """Camera node as a real process: frame sets with one stamp, latched extrinsics, file sources, faults."""
 from __future__ import annotations
 
-import contextlib
-import os
 import time
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
-import rclpy
 import yaml
 from geometry_msgs.msg import TransformStamped
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import CameraInfo, Image
 
 import msg_adapters as ma
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.vision import default_rig, save_rig
 from isa_mocap_ros.vision.sources import SyntheticSource
+from rosnode import ros_node, spin_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
 NODE = ["-m", "isa_mocap_ros.nodes.camera", "--ros-args", "-r", "__ns:=/mocap"]
-
-
-@contextlib.contextmanager
-def ros_node(rosenv: dict[str, str], name: str):
-    """An rclpy node of the test process in the test's ROS domain (own context, env restored after)."""
-    saved = dict(os.environ)
-    os.environ.update({k: v for k, v in rosenv.items() if k.startswith(("ROS_", "RMW_"))})
-    ctx = Context()
-    rclpy.init(context=ctx)
-    node = rclpy.create_node(name, context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-    try:
-        yield node, ex
-    finally:
-        ex.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=ctx)
-        os.environ.clear()
-        os.environ.update(saved)
-
-
-def spin_until(ex, cond, timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if cond():
-            return True
-        ex.spin_once(timeout_sec=0.02)
-    return bool(cond())
 
 
 def write_params(path: Path, **params) -> Path:

@@ -1,56 +1,22 @@
 """Prediction node as a real process: exact extrapolation, next-frame stamps, reordered names, faults."""
 from __future__ import annotations
 
-import contextlib
-import os
-import time
 
 import numpy as np
 import pytest
-import rclpy
 import yaml
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import JointState
 
 import msg_adapters as ma
 from isa_mocap_ros.body import make_model, pose_to_joint_state
 from isa_mocap_ros.geometry import exp_se3, matrix_to_pose, pose_to_matrix
 from isa_mocap_ros.nodes import qos
+from rosnode import ros_node, spin_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
 NODE = ["-m", "isa_mocap_ros.nodes.prediction", "--ros-args", "-r", "__ns:=/mocap"]
 PERIOD_NS = 40_000_000
 T0 = 1_700_000_000 * 10**9
-
-
-@contextlib.contextmanager
-def ros_node(rosenv: dict[str, str], name: str):
-    """An rclpy node of the test process in the test's ROS domain (own context, env restored after)."""
-    saved = dict(os.environ)
-    os.environ.update({k: v for k, v in rosenv.items() if k.startswith(("ROS_", "RMW_"))})
-    ctx = Context()
-    rclpy.init(context=ctx)
-    node = rclpy.create_node(name, context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-    try:
-        yield node, ex
-    finally:
-        ex.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=ctx)
-        os.environ.clear()
-        os.environ.update(saved)
-
-
-def spin_until(ex, cond, timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if cond():
-            return True
-        ex.spin_once(timeout_sec=0.01)
-    return bool(cond())
 
 
 def constant_twist_estimates(n: int, rng: np.random.Generator):

@@ -1,56 +1,22 @@
 """Segmentation node as a real process: masks of the synthetic person, source headers, bad images."""
 from __future__ import annotations
 
-import contextlib
-import os
-import time
 
 import numpy as np
 import pytest
-import rclpy
 import yaml
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import Image
 
 import msg_adapters as ma
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.vision import default_rig
 from isa_mocap_ros.vision.sources import SyntheticSource
+from rosnode import ros_node, spin_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
 NODE = ["-m", "isa_mocap_ros.nodes.segmentation", "--ros-args", "-r", "__ns:=/mocap"]
 LEARN = 6
 W, H = 320, 240  # the pipeline size (at 160x120 thin limbs lose IoU to the 3 px opening)
-
-
-@contextlib.contextmanager
-def ros_node(rosenv: dict[str, str], name: str):
-    """An rclpy node of the test process in the test's ROS domain (own context, env restored after)."""
-    saved = dict(os.environ)
-    os.environ.update({k: v for k, v in rosenv.items() if k.startswith(("ROS_", "RMW_"))})
-    ctx = Context()
-    rclpy.init(context=ctx)
-    node = rclpy.create_node(name, context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-    try:
-        yield node, ex
-    finally:
-        ex.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=ctx)
-        os.environ.clear()
-        os.environ.update(saved)
-
-
-def spin_until(ex, cond, timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if cond():
-            return True
-        ex.spin_once(timeout_sec=0.01)
-    return bool(cond())
 
 
 def iou(a: np.ndarray, b: np.ndarray) -> float:

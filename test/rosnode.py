@@ -1,0 +1,40 @@
+"""An rclpy node inside the test process, on the test's private ROS domain (shared by node tests)."""
+from __future__ import annotations
+
+import contextlib
+import os
+import time
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+
+
+@contextlib.contextmanager
+def ros_node(rosenv: dict[str, str], name: str):
+    """An rclpy node of the test process in the test's ROS domain (own context, env restored after)."""
+    saved = dict(os.environ)
+    os.environ.update({k: v for k, v in rosenv.items() if k.startswith(("ROS_", "RMW_", "FASTRTPS_", "FASTDDS_"))})
+    ctx = Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node(name, context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    try:
+        yield node, ex
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+        os.environ.clear()
+        os.environ.update(saved)
+
+
+def spin_until(ex, cond, timeout: float, *, step_s: float = 0.01) -> bool:
+    """Spin ``ex`` until ``cond()`` holds or ``timeout`` seconds pass; returns ``cond()``."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if cond():
+            return True
+        ex.spin_once(timeout_sec=step_s)
+    return bool(cond())
