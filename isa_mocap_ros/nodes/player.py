@@ -16,7 +16,6 @@ import threading
 import time
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor, FloatingPointRange
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
@@ -26,13 +25,7 @@ from isa_mocap_ros.bag import BagError, BagMessage, BagReader
 from isa_mocap_ros.bag.playback import (PlaybackOptions, first_field_is_header, frames,
                                         parse_remaps, select_topics)
 from isa_mocap_ros.nodes import qos
-
-
-def _desc(text: str, lo: float | None = None, hi: float | None = None) -> ParameterDescriptor:
-    d = ParameterDescriptor(description=text)
-    if lo is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=lo, to_value=hi, step=0.0)]
-    return d
+from isa_mocap_ros.nodes.common import declare
 
 
 class BagPlayer(Node):
@@ -40,28 +33,22 @@ class BagPlayer(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("player", **kwargs)
-        p = self.declare_parameter
-        self.bag_path = p("bag", "", _desc("rosbag2 directory or .mcap file to replay")).value
-        rate = p("rate", 1.0, _desc("playback rate (1.0 = recorded speed)", 0.001, 1000.0)).value
-        loop = p("loop", False, _desc("start again at the end")).value
-        start = p("start_offset_s", 0.0, _desc("skip this many seconds of the bag", 0.0, 1e9)).value
-        topics = p("topics", [""], _desc("topics (or globs) to replay; empty = all")).value
-        exclude = p("exclude_topics", [""], _desc("topics (or globs) not to replay")).value
-        remap = p("remap", [""], _desc("topic remaps 'old:=new'")).value
-        self.clock = p("clock", False, _desc("publish /clock from the bag's time")).value
-        self.clock_hz = p("clock_hz", 40.0, _desc("/clock rate between messages", 0.1, 1000.0)).value
-        self.lockstep_topic = p("lockstep_topic", "", _desc(
-            "wait for this topic to echo each frame's stamp before the next frame ('' = real time)")).value
-        self.lockstep_type = p("lockstep_type", "sensor_msgs/msg/JointState", _desc(
-            "message type on lockstep_topic (its first field must be a std_msgs/Header)")).value
-        self.lockstep_timeout_s = p("lockstep_timeout_s", 10.0, _desc(
-            "give up waiting for a lockstep echo after this long; replay continues", 0.0, 1e6)).value
-        self.wait_for_subscribers_s = p("wait_for_subscribers_s", 0.0, _desc(
-            "before playing, wait up to this long until every topic has a subscriber", 0.0, 1e6)).value
-        self.delay_s = p("delay_s", 0.0, _desc("sleep before playing (discovery)", 0.0, 1e6)).value
-        self.wait_for_acked_s = p("wait_for_all_acked_s", 10.0, _desc(
-            "at the end, wait up to this long until reliable subscribers acknowledged every message "
-            "(like ros2 bag play --wait-for-all-acked)", 0.0, 1e6)).value
+        self.bag_path = declare(self, "bag", "", "rosbag2 directory or .mcap file to replay")
+        rate = declare(self, "rate", 1.0, "playback rate (1.0 = recorded speed)", lo=0.001, hi=1000.0)
+        loop = declare(self, "loop", False, "start again at the end")
+        start = declare(self, "start_offset_s", 0.0, "skip this many seconds of the bag", lo=0.0, hi=1e9)
+        topics = declare(self, "topics", [""], "topics (or globs) to replay; empty = all")
+        exclude = declare(self, "exclude_topics", [""], "topics (or globs) not to replay")
+        remap = declare(self, "remap", [""], "topic remaps 'old:=new'")
+        self.clock = declare(self, "clock", False, "publish /clock from the bag's time")
+        self.clock_hz = declare(self, "clock_hz", 40.0, "/clock rate between messages", lo=0.1, hi=1000.0)
+        self.lockstep_topic = declare(self, "lockstep_topic", "", "wait for this topic to echo each frame's stamp before the next frame ('' = real time)")
+        self.lockstep_type = declare(self, "lockstep_type", "sensor_msgs/msg/JointState", "message type on lockstep_topic (its first field must be a std_msgs/Header)")
+        self.lockstep_timeout_s = declare(self, "lockstep_timeout_s", 10.0, "give up waiting for a lockstep echo after this long; replay continues", lo=0.0, hi=1e6)
+        self.wait_for_subscribers_s = declare(self, "wait_for_subscribers_s", 0.0, "before playing, wait up to this long until every topic has a subscriber", lo=0.0, hi=1e6)
+        self.delay_s = declare(self, "delay_s", 0.0, "sleep before playing (discovery)", lo=0.0, hi=1e6)
+        self.wait_for_acked_s = declare(self, "wait_for_all_acked_s", 10.0, "at the end, wait up to this long until reliable subscribers acknowledged every message "
+            "(like ros2 bag play --wait-for-all-acked)", lo=0.0, hi=1e6)
         if not self.bag_path:
             raise BagError("parameter 'bag' is empty: give the bag to replay (-p bag:=PATH)")
         self.options = PlaybackOptions(

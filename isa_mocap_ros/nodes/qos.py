@@ -7,7 +7,6 @@ from __future__ import annotations
 
 from typing import Iterable
 
-from rclpy.duration import Duration
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
                        qos_profile_sensor_data)
 

@@ -18,25 +18,16 @@ import threading
 import time
 
 import rclpy
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 import msg_adapters as ma
 from isa_mocap_ros.bag import BagError, BagWriter
 from isa_mocap_ros.nodes import qos
+from isa_mocap_ros.nodes.common import declare
 
 # Topics every ROS graph has; recording them with --all only adds noise (ros2 bag skips them too).
 _ALWAYS_EXCLUDED = ("/rosout", "/parameter_events")
-
-
-def _desc(text: str, lo=None, hi=None, integer: bool = False) -> ParameterDescriptor:
-    d = ParameterDescriptor(description=text)
-    if lo is not None and integer:
-        d.integer_range = [IntegerRange(from_value=lo, to_value=hi, step=1)]
-    elif lo is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=lo, to_value=hi, step=0.0)]
-    return d
 
 
 class BagRecorder(Node):
@@ -44,16 +35,15 @@ class BagRecorder(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("recorder", **kwargs)
-        p = self.declare_parameter
-        output = p("output", "", _desc("rosbag2 directory to create")).value
-        self.patterns = [t for t in p("topics", [""], _desc("topics (or globs) to record")).value if t]
-        self.record_all = p("all", False, _desc("record every topic (except /rosout, /parameter_events)")).value
-        self.exclude = [t for t in p("exclude_topics", [""], _desc("topics (or globs) not to record")).value if t]
-        version = p("version", 9, _desc("rosbag2 metadata version (8 or 9)", 8, 9, integer=True)).value
-        compression = p("compression", "zstd", _desc("chunk compression: zstd, lz4 or none")).value
-        overwrite = p("overwrite", False, _desc("replace an existing output bag")).value
-        flush_s = p("flush_period_s", 1.0, _desc("flush to disk at least this often", 0.05, 60.0)).value
-        discovery_s = p("discovery_period_s", 0.5, _desc("look for new publishers this often", 0.05, 60.0)).value
+        output = declare(self, "output", "", "rosbag2 directory to create")
+        self.patterns = [t for t in declare(self, "topics", [""], "topics (or globs) to record") if t]
+        self.record_all = declare(self, "all", False, "record every topic (except /rosout, /parameter_events)")
+        self.exclude = [t for t in declare(self, "exclude_topics", [""], "topics (or globs) not to record") if t]
+        version = declare(self, "version", 9, "rosbag2 metadata version (8 or 9)", lo=8, hi=9)
+        compression = declare(self, "compression", "zstd", "chunk compression: zstd, lz4 or none")
+        overwrite = declare(self, "overwrite", False, "replace an existing output bag")
+        flush_s = declare(self, "flush_period_s", 1.0, "flush to disk at least this often", lo=0.05, hi=60.0)
+        discovery_s = declare(self, "discovery_period_s", 0.5, "look for new publishers this often", lo=0.05, hi=60.0)
         if not output:
             raise BagError("parameter 'output' is empty: give the bag directory to write (-p output:=DIR)")
         if not self.patterns and not self.record_all:
