@@ -126,3 +126,29 @@ def test_recorder_sigterm_closes_the_bag_cleanly(spawn, tmp_path):
     assert (out / "metadata.yaml").exists()
     with BagReader(out) as r:
         assert r.topics["/mocap/cam0/image_raw"].message_count == 5
+
+
+def test_start_offset_clock_and_loop(spawn, tmp_path):
+    src = tmp_path / "src"
+    write_test_bag(src, views=1, frames=12, fps=30.0)
+    out = tmp_path / "rec"
+    rec = _start_recorder(spawn, out, "/clock", "/mocap/cam0/image_raw")
+    # 0.2 s offset at 30 fps skips frames 0..5 (stamps up to 0.1667 s); --clock publishes the bag time.
+    player = spawn("player", *CLI, "play", str(src), "--start-offset", "0.2", "--clock", "--topics",
+                   "/mocap/cam0/image_raw", "--wait-for-subscribers", "20", "--json")
+    assert player.popen.wait(60) == 0, player.output()
+    time.sleep(1.0)
+    rec.stop(signal.SIGINT)
+    import msg_adapters as ma
+    with BagReader(out) as r:
+        stamps = [ma.header_stamp_ns_from_cdr(m.data) for m in r.messages(["/mocap/cam0/image_raw"])]
+        clocks = [ma.stamp_to_ns(ma.from_cdr(m.data, m.type).clock) for m in r.messages(["/clock"])]
+    from bagfactory import frame_stamps
+    assert stamps == frame_stamps(12)[6:]
+    assert clocks and set(clocks) <= set(frame_stamps(12)[6:]) and clocks == sorted(clocks)
+    # --loop replays again from the start until stopped
+    loop = spawn("loop", *CLI, "play", str(src), "--loop", "--rate", "10", "--topics", "/mocap/cam0/image_raw")
+    time.sleep(4.0)                                       # the bag lasts 0.04 s at rate 10
+    assert loop.popen.poll() is None, loop.output()       # still running: it loops
+    assert loop.stop(signal.SIGINT, timeout=20) in (0, 1), loop.output()   # Ctrl-C ends it cleanly
+    assert "Traceback" not in loop.output()
