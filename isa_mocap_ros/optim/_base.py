@@ -435,3 +435,23 @@ def minimize(opt: Optimizer, energy: Callable, *, max_evals: int,
             opt._user_stop = "True"
             break
     return opt.result()
+
+
+class ParticleOptimizer(Optimizer):
+    """Shared state handling of the particle methods (ISA, APF).
+
+    Subclasses keep ``self._x`` (the weighted estimate), ``self._P``/``self._W`` (the last weighted
+    population and its weights, None before the first ``tell``), ``self.beta`` and ``self._ess``.
+    """
+
+    def _beta_ess(self):
+        return self.beta, self._ess
+
+    def _estimate(self):
+        return self._x.copy(), None
+
+    def _population(self):
+        if self._P is None:
+            P = self._ask()
+            return P, np.full(len(P), 1.0 / len(P))
+        return self._P, self._W

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import OptimError, Optimizer
+from ._base import OptimError, ParticleOptimizer
 from .isa import weighted_estimate
 from .resampling import SCHEMES, ess, normalise_log
 from .schedules import beta_for_ess
@@ -25,7 +25,7 @@ from .schedules import beta_for_ess
 __all__ = ["AnnealedParticleFilter", "PartitionedApf"]
 
 
-class AnnealedParticleFilter(Optimizer):
+class AnnealedParticleFilter(ParticleOptimizer):
     """APF with ``n_layers`` annealing layers (stops after the last one).
 
     Parameters
@@ -119,18 +119,6 @@ class AnnealedParticleFilter(Optimizer):
 
     def _stop(self):
         return {"n_layers": self.n_layers} if self.n_iter >= self.n_layers else {}
-
-    def _beta_ess(self):
-        return self.beta, self._ess
-
-    def _estimate(self):
-        return self._x.copy(), None
-
-    def _population(self):
-        if self._P is None:
-            P = self._ask()
-            return P, np.full(len(P), 1.0 / len(P))
-        return self._P, self._W
 
 
 def PartitionedApf(x0, spread, *, partitions, rng, **params):

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import OptimError, Optimizer
+from ._base import OptimError, ParticleOptimizer
 from ._rotations import rotation_mean
 from .resampling import SCHEMES, SELECTION_KERNELS, ess, normalise_log
 from .schedules import AdaptiveEss, make_schedule
@@ -44,7 +44,7 @@ def dynamic_variance(X: np.ndarray, c: float, rho: float) -> np.ndarray:
     return c / max(n - 1, 1) * np.sum(dev * dev, axis=0)
 
 
-class Isa(Optimizer):
+class Isa(ParticleOptimizer):
     """Interacting simulated annealing (Algorithm 6).
 
     Parameters
@@ -131,14 +131,3 @@ class Isa(Optimizer):
         Z = self.rng.standard_normal(Xs.shape)
         self._X = self.clip(Xs + Z * np.sqrt(var))                 # mutation K_t
 
-    def _beta_ess(self):
-        return self.beta, self._ess
-
-    def _estimate(self):
-        return self._x.copy(), None
-
-    def _population(self):
-        if self._P is None:
-            P = self._ask()
-            return P, np.full(len(P), 1.0 / len(P))
-        return self._P, self._W
