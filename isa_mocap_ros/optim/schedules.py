@@ -16,7 +16,6 @@ import numpy as np
 
 from . import _fast
 from ._base import OptimError
-from .resampling import ess, normalise_log
 
 __all__ = ["Polynomial", "Logarithmic", "AdaptiveEss", "beta_for_ess", "make_schedule"]
 
