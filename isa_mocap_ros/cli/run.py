@@ -144,9 +144,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             play += ["--rate", str(args.rate)]
         import subprocess
-        t_play = time.monotonic()
         res = subprocess.run(play, env=env, capture_output=True, text=True)
-        play_s = time.monotonic() - t_play
         on_line(f"[player] {res.stdout.strip()} {res.stderr.strip()}")
         if res.returncode != 0:
             print(f"run: replay failed:\n{res.stderr}", file=sys.stderr)
@@ -159,5 +157,5 @@ def run(args: argparse.Namespace) -> int:
         runner.join(60)
         log.close()
     from isa_mocap_ros.cli.run_report import write_report
-    return write_report(bag, out, args=args, play_summary=summary_play, play_seconds=play_s,
+    return write_report(bag, out, args=args, play_summary=summary_play,
                         wall_seconds=time.monotonic() - t_start)

@@ -50,7 +50,7 @@ def read_estimates(path: Path, model) -> dict:
     return {"poses": poses, "latencies_ms": lat, "done": done, "overlays": overlays, "diagnostics": diag}
 
 
-def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary: dict, play_seconds: float,
+def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary: dict,
                  wall_seconds: float) -> int:
     import cv2
 
