@@ -37,7 +37,11 @@ def test_evaluate_track_directory(tracked, capsys):
     assert list(ev["per_dof_rmse_deg"])[:2] == ["left_knee_y", "right_knee_y"]
     assert [f["error_mm"] for f in ev["per_frame"]] == s["frame_errors_mm"]
     assert (tracked / "knees_and_error.png").stat().st_size > 1000
-    assert "energy" not in ev          # a track summary has no per-frame energies
+    # the track summary's per-frame energies (ISA Fig. 13.14: energy and error over time)
+    assert len(s["frame_energies"]) == len(s["frame_stamps_ns"]) == s["frames_estimated"]
+    assert ev["energy"]["source"].startswith("per frame") and len(ev["energy"]["energy"]) == s["frames"]
+    assert ev["energy"]["energy"] == pytest.approx([e for e in s["frame_energies"]])
+    assert (tracked / "energy_and_error.png").stat().st_size > 1000
 
 
 def test_evaluate_estimates_bag_with_truth_and_energies(tracked, tmp_path, capsys):

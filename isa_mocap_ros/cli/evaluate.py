@@ -152,9 +152,16 @@ def evaluate(args) -> dict:
                         for s, ti, e in zip(stamps, t, acc["frame_errors_mm"])]}
     energies = None
     fe = summary.get("frame_energies")
-    if isinstance(fe, list) and fe and len(fe) == len(stamps):
-        energies = ("per frame (summary.json)", t, np.asarray(fe, dtype=float))
-    else:
+    fs = summary.get("frame_stamps_ns")
+    if isinstance(fe, list) and isinstance(fs, list) and fe and len(fe) == len(fs):
+        # `isa-mocap track`: one energy per estimated frame, matched to the evaluated stamps
+        by_stamp = {int(s): (np.nan if e is None else float(e)) for s, e in zip(fs, fe)}
+        ev_e = np.array([by_stamp.get(s, np.nan) for s in stamps], dtype=float)
+        if np.isfinite(ev_e).any():
+            energies = ("per frame (summary.json)", t, ev_e)
+    elif isinstance(fe, list) and fe and len(fe) == len(stamps):
+        energies = ("per frame (summary.json)", t, np.array([np.nan if e is None else e for e in fe], dtype=float))
+    if energies is None:
         de = _diag_energies(est_path)
         if de:
             js = sorted(poses)
@@ -166,34 +173,46 @@ def evaluate(args) -> dict:
             energies = ("/diagnostics (estimator, latest frame)", ev_t, np.array([d[1] for d in de]))
     if energies is not None:
         ev["energy"] = {"source": energies[0], "t_s": [round(float(x), 4) for x in energies[1]],
-                        "energy": [float(x) for x in energies[2]]}
+                        "energy": [float(x) if np.isfinite(x) else None for x in energies[2]]}
     out.mkdir(parents=True, exist_ok=True)
     plots = []
     if not args.no_plots:
         title = f"{summary.get('optimizer', '')} {summary.get('evals_per_frame', '')} evals/frame, {model.dof} DOF"
         plots.append(str(plot_sequence(out / "knees_and_error.png", model, P, tm, T, times_s=t, title=title.strip())))
         if energies is not None:
+            from isa_mocap_ros.eval import knee_errors_deg
+            ke = np.abs(knee_errors_deg(P, T, model, true_model=tm))
             plots.append(str(_plot_energy(out / "energy_and_error.png", energies, t,
-                                          np.array(acc["frame_errors_mm"]), title)))
+                                          np.array(acc["frame_errors_mm"]), title, knee_err_deg=ke)))
     ev["plots"] = plots
     (out / "evaluation.json").write_text(json.dumps(ev, indent=2) + "\n")
     ev["out"] = str(out)
     return ev
 
 
-def _plot_energy(path: Path, energies, t, fe, title: str) -> Path:
+def _plot_energy(path: Path, energies, t, fe, title: str, *, knee_err_deg=None) -> Path:
+    """PNG like the ISA paper's Fig. 13.14: energy of the estimate over time, and the error of the
+    estimate over time (absolute left/right knee-angle error, and the Eq. 20 error per frame)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
+    rows = 3 if knee_err_deg is not None else 2
+    fig, ax = plt.subplots(rows, 1, figsize=(9, 2.6 * rows + 0.5), sharex=True)
     ax[0].plot(energies[1], energies[2], "g.-")
     ax[0].set_ylabel("energy")
     ax[0].set_title(f"energy of the estimate ({energies[0]})", fontsize=9)
-    ax[1].plot(t, fe, "b-")
-    ax[1].set_ylabel("mean joint error (mm)")
-    ax[1].set_xlabel("time (s)")
-    ax[1].set_title(f"Eq. 20 per frame: mean {fe.mean():.1f} mm", fontsize=9)
+    if knee_err_deg is not None:
+        ke = np.asarray(knee_err_deg, dtype=float)
+        ax[1].plot(t, ke[:, 0], "r-", label="left knee")
+        ax[1].plot(t, ke[:, 1], "b-", label="right knee")
+        ax[1].set_ylabel("knee error (deg)")
+        ax[1].legend(loc="upper right", fontsize=8)
+        ax[1].set_title(f"knee-angle error: RMSE {np.sqrt(np.mean(ke ** 2)):.2f} deg", fontsize=9)
+    ax[-1].plot(t, fe, "k-")
+    ax[-1].set_ylabel("mean joint error (mm)")
+    ax[-1].set_xlabel("time (s)")
+    ax[-1].set_title(f"Eq. 20 per frame: mean {fe.mean():.1f} mm", fontsize=9)
     if title.strip():
         fig.suptitle(title.strip())
     fig.tight_layout()
@@ -223,8 +242,9 @@ def format_evaluation(ev: dict, rows: int = 15) -> str:
     for i in pick:
         lines.append(f"  {pf[i]['t_s']:8.3f} {pf[i]['error_mm']:8.1f}")
     if "energy" in ev:
-        e = np.array(ev["energy"]["energy"])
-        lines += ["", f"energy ({ev['energy']['source']}): {len(e)} values, mean {e.mean():.4f}"]
+        e = np.array([np.nan if x is None else x for x in ev["energy"]["energy"]], dtype=float)
+        lines += ["", f"energy ({ev['energy']['source']}): {int(np.isfinite(e).sum())} values, "
+                      f"mean {np.nanmean(e):.4f}"]
     lines.append("")
     lines.append(f"evaluate: wrote {Path(ev['out']) / 'evaluation.json'}"
                  + "".join(f", {p}" for p in ev["plots"]))

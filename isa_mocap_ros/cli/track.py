@@ -122,8 +122,14 @@ def _table(rows: list[tuple[str, str]]) -> str:
     return "\n".join(f"  {k:<{w}}  {v}" for k, v in rows)
 
 
-def track_bag(args) -> dict:
-    """Do the work of ``isa-mocap track`` (raises ValueError subclasses on bad input); return the summary."""
+def track_bag(args, *, collect: dict | None = None) -> dict:
+    """Do the work of ``isa-mocap track`` (raises ValueError subclasses on bad input); return the summary.
+
+    ``collect``, when given, receives the arrays behind the summary (for benchmarks that score
+    differently): ``model``, ``truth_model``, ``estimates`` / ``truth`` / ``energies`` (dicts frame
+    index -> pose / energy), ``init_frame`` (the index initialized from the ground truth with
+    ``--init truth``, else None) and ``stamps`` (frame index -> stamp in ns).
+    """
     from tqdm import tqdm
 
     from isa_mocap_ros.bag import QOS_DEFAULT, BagReader, BagWriter
@@ -210,6 +216,8 @@ def track_bag(args) -> dict:
         raise FileExistsError(f"--out: {est_path} exists; pass --overwrite to replace it")
     show = not args.no_progress
     estimates: dict[int, np.ndarray] = {}
+    energies: dict[int, float] = {}
+    init_frame = None
     results = []
     n_fell_back = 0
     t_track = 0.0
@@ -229,6 +237,7 @@ def track_bag(args) -> dict:
                     raise ValueError("--init truth: expected ground truth of the tracking model's DOF at the first "
                                      f"frame ({fr.index}), received none")
                 tracker.initialize(pose=fr.truth)
+                init_frame = fr.index
                 r = None
                 x = tracker.last_estimate
             else:
@@ -240,6 +249,8 @@ def track_bag(args) -> dict:
                 n_fell_back += int(r.fell_back)
             if x is not None:
                 estimates[fr.index] = x
+                if r is not None:
+                    energies[fr.index] = float(r.energy)
                 q = pose_to_joint_state(model, x)
                 bag.write(f"{TOPIC}/joint_states",
                           to_cdr(arrays_to_joint_state(model.dof_names, q, stamp_ns=fr.stamp_ns, frame_id="world")),
@@ -250,12 +261,22 @@ def track_bag(args) -> dict:
         bar.close()
 
     n_tracked = stop - first
+    stamp_of = {f.index: int(f.stamp_ns) for f in seq.frames[first:stop]}
+    if collect is not None:
+        collect.update(model=model, truth_model=seq.truth_model, estimates=dict(estimates), energies=dict(energies),
+                       truth={f.index: f.truth for f in seq.frames[first:stop] if f.truth is not None},
+                       init_frame=init_frame, stamps=stamp_of)
     summary: dict = {"bag": str(bag_path), "out": str(out), "optimizer": args.optimizer, "evals_per_frame": args.evals,
                      "optimizer_params": cfg.params(), "model_dof": model.dof, "seed": args.seed,
                      "masks": "recorded" if use_masks else f"segmented (learned from {learn} frames)",
                      "frames_tracked": n_tracked, "frames_estimated": len(estimates), "frames_fell_back": n_fell_back,
                      "fps": n_tracked / t_track if t_track > 0 else float("nan"),
                      "mean_energy": float(np.nanmean([r.energy for r in results])) if results else float("nan"),
+                     # per estimated frame, in order: its stamp and the energy of the estimate (null for a
+                     # frame initialized from the ground truth); `isa-mocap evaluate` plots them
+                     "frame_stamps_ns": [stamp_of[k] for k in sorted(estimates)],
+                     "frame_energies": [None if k not in energies or not np.isfinite(energies[k])
+                                        else round(energies[k], 6) for k in sorted(estimates)],
                      "notes": notes + sorted({n for r in results for n in r.notes
                                               if not n.startswith("initialized")})[:20]}
     inits = [n for r in results for n in r.notes if n.startswith("initialized")]
