@@ -1,0 +1,351 @@
+"""Robustness (ISA §13.4.2): clean, 50 % / 70 % pixel noise, 35 occluders; knee RMSE beside the paper.
+
+``isa-mocap bench robustness [--quick] [--json] [--cache DIR] [--out DIR] [--init truth|auto]``.
+
+Protocol (ISA §13.4.2, Figs. 13.15-13.17, with our tracker's best settings):
+
+* each sequence is rendered by ``isa-mocap synth``'s code (:func:`isa_mocap_ros.cli.synth.write_bag`)
+  once per condition into ``CACHE`` (reused afterwards): the same motion, backgrounds and seed, with
+  10 background-only frames first, then distorted as the paper did — every pixel replaced with
+  probability 0.5 or 0.7 by a uniform random colour, or 35 rectangles of random size (edges 1-40
+  px), position and grey value per image (:mod:`isa_mocap_ros.vision.distort`); every frame
+  (the background-only ones too) is distorted independently;
+* each bag is tracked offline by ``isa-mocap track``'s code (:func:`isa_mocap_ros.cli.track.track_bag`):
+  the images are segmented by the segmentation node's background model (learned from the 10
+  distorted background frames), default tracker settings (h-isa, 1500 evaluations per frame, 39
+  DOF, the subject's body shape, fast energy, no prior), seed 0;
+* initialization: ``--init truth`` (default) starts from the ground truth of the first frame, as a
+  manually initialized system (the papers'); that frame is not scored. ``--init auto`` uses the
+  automatic initialization (every frame scored);
+* scored per condition: knee-angle RMSE (the paper's measure; 2.74° clean, 2.97° / 4.51° at 50 % /
+  70 % noise, 5.21° with 35 occluders, on its 200-frame walk with a level-set segmentation and a
+  learned prior) and the mean joint error (EA-vs-PF Eq. 20).
+
+Designs: default — the CMU walk from 1 s (skipped with a message when
+``/work/shared/data/mocap/cmu_131_01_walk.bvh`` is absent) and the generated walk and jog, 4 s each
+at 30 fps (120 scored frames), 4 views 320×240, one seed; ``--quick`` — the generated walk, 6
+frames in 4 views of 160×120 at 300 evaluations per frame (a smoke test, < 1 min).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+CMU_WALK = Path("/work/shared/data/mocap/cmu_131_01_walk.bvh")
+EMPTY_FRAMES = 10
+
+#: (key, label, pixel-noise probability, occluders, the paper's knee RMSE in degrees)
+CONDITIONS = (("clean", "clean", 0.0, 0, 2.74), ("noise50", "50 % pixel noise", 0.5, 0, 2.97),
+              ("noise70", "70 % pixel noise", 0.7, 0, 4.51), ("occluders35", "35 occluding rectangles", 0.0, 35, 5.21))
+
+#: issue #7's targets: (condition, what, limit) on every walk sequence of the design
+TARGETS = (("clean", "mpjpe_mm", 25.0), ("clean", "knee_rmse_deg", 2.0), ("noise70", "knee_rmse_deg", 3.5),
+           ("occluders35", "knee_rmse_deg", 4.0))
+
+
+@dataclass(frozen=True)
+class RobustSequence:
+    name: str
+    motion: str
+    start_s: float = 0.0
+    duration_s: float = 4.0
+    fps: float = 30.0
+    views: int = 4
+    width: int = 320
+    height: int = 240
+    seed: int = 0
+
+    def bag_name(self, cond: str) -> str:
+        m = Path(self.motion).stem if self.motion.endswith(".bvh") else self.motion
+        return (f"{self.name}_{m}_{cond}_{self.duration_s:g}s_{self.fps:g}fps_from{self.start_s:g}_"
+                f"{self.width}x{self.height}_v{self.views}_e{EMPTY_FRAMES}_s{self.seed}")
+
+
+@dataclass(frozen=True)
+class RobustDesign:
+    name: str
+    sequences: tuple
+    conditions: tuple
+    optimizer: str = "h-isa"
+    evals: int = 1500
+    seed: int = 0
+    init: str = "truth"
+    notes: tuple = ()
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["sequences"] = [asdict(s) for s in self.sequences]
+        return d
+
+
+def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK, init: str = "truth",
+                optimizer: str = "h-isa", evals: int | None = None) -> RobustDesign:
+    """``"quick"`` or ``"default"`` (see the module docstring)."""
+    if kind == "quick":
+        seqs = (RobustSequence("walk", "walk", duration_s=6 / 30, views=4, width=160, height=120),)
+        return RobustDesign("quick", seqs, tuple(c[0] for c in CONDITIONS), optimizer, evals or 300, 0, init)
+    if kind != "default":
+        raise ValueError(f"kind: expected 'quick' or 'default', received {kind!r}")
+    seqs, notes = [], []
+    if cmu_path is not None and Path(cmu_path).is_file():
+        seqs.append(RobustSequence("cmu_walk", str(cmu_path), start_s=1.0))
+    else:
+        notes.append(f"CMU walk skipped: {cmu_path} not found")
+    seqs += [RobustSequence("walk", "walk"), RobustSequence("jog", "jog")]
+    return RobustDesign("default", tuple(seqs), tuple(c[0] for c in CONDITIONS), optimizer, evals or 1500, 0, init,
+                        tuple(notes))
+
+
+def _cond(key: str):
+    return next(c for c in CONDITIONS if c[0] == key)
+
+
+def prepare_bag(seq: RobustSequence, cond: str, cache: Path) -> Path:
+    """Render ``seq`` under condition ``cond`` into ``cache`` once (``isa-mocap synth``'s code)."""
+    from isa_mocap_ros.cli.synth import write_bag
+
+    cache.mkdir(parents=True, exist_ok=True)
+    path = cache / seq.bag_name(cond)
+    if (path / "metadata.yaml").is_file():
+        return path
+    _, _, noise, occl, _ = _cond(cond)
+    tmp = cache / (path.name + ".tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    write_bag(argparse.Namespace(
+        motion=seq.motion, out=str(tmp), views=seq.views, width=seq.width, height=seq.height, fps=seq.fps, model=39,
+        start_s=seq.start_s, duration_s=seq.duration_s, empty_frames=EMPTY_FRAMES, noise=noise, occluders=occl,
+        rig=None, seed=seq.seed, bvh_scale=None, masks=False, compression="zstd", chunk_mb=32.0, overwrite=True,
+        no_progress=True))
+    shutil.rmtree(path, ignore_errors=True)
+    tmp.rename(path)
+    return path
+
+
+def track_condition(bag: Path, out: Path, design: RobustDesign) -> dict:
+    """Track one bag with ``isa-mocap track``'s code; score the frames (not the truth-initialized one)."""
+    from isa_mocap_ros.cli.track import track_bag
+    from isa_mocap_ros.eval import knee_errors_deg
+    from isa_mocap_ros.eval.report import accuracy
+
+    ns = argparse.Namespace(
+        bag=str(bag), out=str(out), optimizer=design.optimizer, evals=design.evals, params=None, model=None,
+        seed=design.seed, frames=None, start=0, use_masks=False, learn_frames=None, shape="truth", init=design.init,
+        predictor=None, prior=None, prior_eta=0.0, energy="fast", overwrite=True, no_progress=True)
+    got: dict = {}
+    t0 = time.perf_counter()
+    s = track_bag(ns, collect=got)
+    seconds = time.perf_counter() - t0
+    model, tm = got["model"], got["truth_model"]
+    idx = [k for k in sorted(got["estimates"]) if k in got["truth"] and k != got["init_frame"]]
+    if not idx:
+        raise ValueError(f"{bag}: no scored frame (no estimate at a ground-truth frame)")
+    P = np.array([got["estimates"][k] for k in idx])
+    T = np.array([got["truth"][k] for k in idx])
+    acc = accuracy(model, P, tm, T)
+    t = [(got["stamps"][k] - got["stamps"][idx[0]]) / 1e9 for k in idx]
+    knees_e = np.degrees(P[:, model.knee_dofs])
+    knees_t = np.degrees(T[:, tm.knee_dofs])
+    ke = knee_errors_deg(P, T, model, true_model=tm)
+    return {"frames": acc["frames"], "mpjpe_mm": acc["mpjpe_mm"], "max_frame_error_mm": acc["max_frame_error_mm"],
+            "knee_rmse_deg": acc["knee_rmse_deg"], "fps": s["fps"], "frames_fell_back": s["frames_fell_back"],
+            "seconds": round(seconds, 2), "init": s.get("init", "ground truth" if design.init == "truth" else ""),
+            "t_s": [round(x, 4) for x in t], "frame_errors_mm": acc["frame_errors_mm"],
+            "knee_est_deg": np.round(knees_e, 2).tolist(), "knee_truth_deg": np.round(knees_t, 2).tolist(),
+            "knee_abs_err_deg": np.round(np.abs(ke), 2).tolist()}
+
+
+def collect(design: RobustDesign, *, cache: Path, out: Path, progress: bool = True) -> dict:
+    """Run the design; return the JSON-able results (runs, per-condition means, target checks)."""
+    runs = []
+    t0 = time.perf_counter()
+    for seq in design.sequences:
+        for cond in design.conditions:
+            ts = time.perf_counter()
+            bag = prepare_bag(seq, cond, cache)
+            t_synth = time.perf_counter() - ts
+            r = track_condition(bag, out / seq.bag_name(cond), design)
+            r.update(sequence=seq.name, condition=cond, synth_seconds=round(t_synth, 2))
+            runs.append(r)
+            if progress:
+                print(f"bench robustness: {seq.name:9s} {cond:12s} knee RMSE {r['knee_rmse_deg']:6.2f} deg, "
+                      f"{r['mpjpe_mm']:6.1f} mm over {r['frames']} frames ({r['fps']:.1f} frames/s)",
+                      file=sys.stderr, flush=True)
+    return {"design": design.to_dict(), "runs": runs, "conditions": summarize_conditions(runs),
+            "targets": check_targets(runs), "seconds": round(time.perf_counter() - t0, 1)}
+
+
+def summarize_conditions(runs: list[dict]) -> list[dict]:
+    """Per condition: mean over sequences of knee RMSE and mean joint error, with the paper's value."""
+    out = []
+    for key, lab, noise, occl, paper in CONDITIONS:
+        rs = [r for r in runs if r["condition"] == key]
+        if not rs:
+            continue
+        out.append({"condition": key, "label": lab, "noise": noise, "occluders": occl, "paper_knee_rmse_deg": paper,
+                    "knee_rmse_deg": float(np.mean([r["knee_rmse_deg"] for r in rs])),
+                    "mpjpe_mm": float(np.mean([r["mpjpe_mm"] for r in rs])),
+                    "per_sequence": {r["sequence"]: {"knee_rmse_deg": r["knee_rmse_deg"], "mpjpe_mm": r["mpjpe_mm"]}
+                                     for r in rs}})
+    return out
+
+
+def check_targets(runs: list[dict]) -> list[dict]:
+    """Issue #7's targets on every walk sequence (``cmu_walk``, ``walk``), met only if met on each."""
+    out = []
+    walks = sorted({r["sequence"] for r in runs if "walk" in r["sequence"]})
+    for cond, what, limit in TARGETS:
+        vals = {r["sequence"]: float(r[what]) for r in runs if r["condition"] == cond and r["sequence"] in walks}
+        if not vals:
+            continue
+        unit = "mm" if what.endswith("_mm") else "deg"
+        out.append({"condition": cond, "measure": what, "limit": limit, "unit": unit, "values": vals,
+                    "met": all(v <= limit for v in vals.values())})
+    return out
+
+
+def render_markdown(res: dict) -> str:
+    """Tables of :func:`collect`'s output."""
+    d = res["design"]
+    L = [f"Design `{d['name']}`: {d['optimizer']}, {d['evals']} evaluations per frame, init {d['init']}, seed "
+         f"{d['seed']}; sequences "
+         + ", ".join(f"{s['name']} ({round(s['duration_s'] * s['fps'])} frames, {s['views']} views "
+                     f"{s['width']}×{s['height']})" for s in d["sequences"]) + f"; wall time {res['seconds']:.0f} s.", ""]
+    for n in d.get("notes", []):
+        L += [f"- note: {n}", ""]
+    seqs = [s["name"] for s in d["sequences"]]
+    L += ["| condition | paper knee RMSE | knee RMSE (mean) | " + " | ".join(f"{s} knee / mm" for s in seqs)
+          + " | mean joint error |", "|---|---|---|" + "---|" * (len(seqs) + 1)]
+    for c in res["conditions"]:
+        cells = []
+        for s in seqs:
+            v = c["per_sequence"].get(s)
+            cells.append("" if v is None else f"{v['knee_rmse_deg']:.2f}° / {v['mpjpe_mm']:.1f}")
+        L.append(f"| {c['label']} | {c['paper_knee_rmse_deg']:.2f}° | {c['knee_rmse_deg']:.2f}° | " + " | ".join(cells)
+                 + f" | {c['mpjpe_mm']:.1f} mm |")
+    L += ["", "| sequence | condition | frames | max frame error | frames fell back | frames/s |",
+          "|---|---|---|---|---|---|"]
+    for r in res["runs"]:
+        fps = "-" if r["frames_fell_back"] >= r["frames"] or not np.isfinite(r["fps"]) else f"{r['fps']:.2f}"
+        L.append(f"| {r['sequence']} | {r['condition']} | {r['frames']} | {r['max_frame_error_mm']:.1f} mm | "
+                 f"{r['frames_fell_back']} | {fps} |")
+    L += ["", "A frame *falls back* when no view gave a usable silhouette (the tracker keeps its last estimate)."]
+    return "\n".join(L) + "\n"
+
+
+def render_targets(res: dict) -> list[tuple[str, str, bool]]:
+    """``(target, measured, met)`` rows of the robustness targets."""
+    names = {"clean": "clean walk", "noise70": "70 % noise", "occluders35": "35 occluders"}
+    rows = []
+    for t in res["targets"]:
+        meas = "knee RMSE" if t["measure"] == "knee_rmse_deg" else "mean joint error"
+        u = "°" if t["unit"] == "deg" else " mm"
+        vals = ", ".join(f"{s} {v:.2f}{u}" if u == "°" else f"{s} {v:.1f}{u}" for s, v in t["values"].items())
+        rows.append((f"{names.get(t['condition'], t['condition'])}: {meas} ≤ {t['limit']:g}{u}", vals, t["met"]))
+    return rows
+
+
+def plot(res: dict, path: Path) -> Path:
+    """Knee angles against the ground truth per condition (as ISA Fig. 13.15), first sequence."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    seq = res["design"]["sequences"][0]["name"]
+    runs = [r for r in res["runs"] if r["sequence"] == seq]
+    fig, ax = plt.subplots(len(runs), 2, figsize=(10, 2.1 * len(runs) + 0.6), sharex=True, squeeze=False)
+    for i, r in enumerate(runs):
+        ke, kt = np.array(r["knee_est_deg"]), np.array(r["knee_truth_deg"])
+        for j, side in enumerate(("left", "right")):
+            a = ax[i, j]
+            a.plot(r["t_s"], kt[:, j], "k-", lw=2, label="ground truth")
+            a.plot(r["t_s"], ke[:, j], "r--", lw=1.3, label="estimate")
+            a.set_title(f"{_cond(r['condition'])[1]}: {side} knee (knee RMSE {r['knee_rmse_deg']:.2f}°)", fontsize=8)
+            a.set_ylabel("deg", fontsize=8)
+            if i == 0 and j == 0:
+                a.legend(fontsize=7, loc="upper right")
+    for a in ax[-1]:
+        a.set_xlabel("time (s)")
+    fig.suptitle(f"robustness: {seq}, {res['design']['optimizer']} {res['design']['evals']} evals/frame")
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_bars(res: dict, path: Path) -> Path:
+    """Knee RMSE per condition and sequence beside the paper's values."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    conds = res["conditions"]
+    seqs = [s["name"] for s in res["design"]["sequences"]]
+    w = 0.8 / (len(seqs) + 1)
+    x = np.arange(len(conds))
+    fig, ax = plt.subplots(figsize=(7, 3.6))
+    ax.bar(x - 0.4 + w / 2, [c["paper_knee_rmse_deg"] for c in conds], w, color="0.6", label="ISA paper")
+    for i, sname in enumerate(seqs):
+        ax.bar(x - 0.4 + w * (i + 1.5), [c["per_sequence"].get(sname, {}).get("knee_rmse_deg", np.nan) for c in conds],
+               w, label=sname)
+    ax.set_xticks(x, [c["label"] for c in conds], fontsize=8)
+    ax.set_ylabel("knee-angle RMSE (deg)")
+    ax.set_yscale("log")
+    ax.set_title("robustness (ISA §13.4.2): knee RMSE per condition", fontsize=9)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return Path(path)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quick", action="store_true", help="smoke design: the generated walk, 6 frames, 160x120, 300 evals")
+    p.add_argument("--json", action="store_true", help="print the results as JSON")
+    p.add_argument("--cache", default="out/bench/cache/robustness", metavar="DIR",
+                   help="where the synthesized bags are kept (default out/bench/cache/robustness)")
+    p.add_argument("--out", default=None, metavar="DIR", help="tracking outputs (default: a temporary directory)")
+    p.add_argument("--init", choices=("truth", "auto"), default="truth",
+                   help="first pose: the ground truth (default; not scored) or the automatic initialization")
+    p.add_argument("--optimizer", default="h-isa", help="optimizer (default h-isa, the tracker's default)")
+    p.add_argument("--evals", type=int, default=None, help="evaluations per frame (default 1500; --quick 300)")
+
+
+def collect_from_args(args: argparse.Namespace) -> dict:
+    design = make_design("quick" if args.quick else "default", init=args.init, optimizer=args.optimizer,
+                         evals=args.evals)
+    for n in design.notes:
+        print(f"bench robustness: {n}", file=sys.stderr)
+    tmp = None
+    if args.out:
+        out = Path(args.out)
+    else:
+        tmp = out = Path(tempfile.mkdtemp(prefix="isa_mocap_robust_"))
+    try:
+        return collect(design, cache=Path(args.cache), out=out)
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.evals is not None and args.evals < 1:
+        print(f"isa-mocap bench robustness: error: --evals: expected an integer >= 1, received {args.evals}",
+              file=sys.stderr)
+        return 2
+    res = collect_from_args(args)
+    if args.json:
+        print(json.dumps(res))
+        return 0
+    print("robustness (ISA §13.4.2)\n")
+    print(render_markdown(res))
+    for name, vals, met in render_targets(res):
+        print(f"target {name}: {vals} -> {'met' if met else 'not met'}")
+    return 0
