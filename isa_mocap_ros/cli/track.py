@@ -128,7 +128,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     ``collect``, when given, receives the arrays behind the summary (for benchmarks that score
     differently): ``model``, ``truth_model``, ``estimates`` / ``truth`` / ``energies`` (dicts frame
     index -> pose / energy), ``init_frame`` (the index initialized from the ground truth with
-    ``--init truth``, else None) and ``stamps`` (frame index -> stamp in ns).
+    ``--init truth``, else None), ``stamps`` (frame index -> stamp in ns) and ``step_seconds`` (frame
+    index -> wall time of the tracker's step, segmentation excluded).
     """
     from tqdm import tqdm
 
@@ -217,6 +218,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     show = not args.no_progress
     estimates: dict[int, np.ndarray] = {}
     energies: dict[int, float] = {}
+    step_seconds: dict[int, float] = {}
     init_frame = None
     results = []
     n_fell_back = 0
@@ -243,8 +245,10 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
             else:
                 r = tracker.step(masks, int(fr.stamp_ns))
                 x = r.x
-            t_track += time.perf_counter() - t0
+            dt = time.perf_counter() - t0
+            t_track += dt
             if r is not None:
+                step_seconds[fr.index] = dt
                 results.append(r)
                 n_fell_back += int(r.fell_back)
             if x is not None:
@@ -265,13 +269,14 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     if collect is not None:
         collect.update(model=model, truth_model=seq.truth_model, estimates=dict(estimates), energies=dict(energies),
                        truth={f.index: f.truth for f in seq.frames[first:stop] if f.truth is not None},
-                       init_frame=init_frame, stamps=stamp_of)
+                       init_frame=init_frame, stamps=stamp_of, step_seconds=dict(step_seconds))
     summary: dict = {"bag": str(bag_path), "out": str(out), "optimizer": args.optimizer, "evals_per_frame": args.evals,
                      "optimizer_params": cfg.params(), "model_dof": model.dof, "seed": args.seed,
                      "masks": "recorded" if use_masks else f"segmented (learned from {learn} frames)",
                      "frames_tracked": n_tracked, "frames_estimated": len(estimates), "frames_fell_back": n_fell_back,
                      "fps": n_tracked / t_track if t_track > 0 else float("nan"),
-                     "mean_energy": float(np.nanmean([r.energy for r in results])) if results else float("nan"),
+                     "mean_energy": float(np.mean(fin)) if (fin := [r.energy for r in results if np.isfinite(r.energy)])
+                     else float("nan"),
                      # per estimated frame, in order: its stamp and the energy of the estimate (null for a
                      # frame initialized from the ground truth); `isa-mocap evaluate` plots them
                      "frame_stamps_ns": [stamp_of[k] for k in sorted(estimates)],
