@@ -104,6 +104,27 @@ def run_design(design, out: Path, *, jobs: int = 2, progress: bool = True) -> li
     return [r for k, r in done.items() if k in keys]
 
 
+def collect(kind: str, out: Path, *, jobs: int = 2, progress: bool = True, algorithms=None):
+    """Run (or resume) design ``kind`` in ``out``; return ``(summary, design, seconds)`` (``bench all``)."""
+    from dataclasses import replace
+
+    from isa_mocap_ros.eval.compare import make_design, summarize
+
+    design = make_design(kind)
+    if algorithms:
+        design = replace(design, algorithms=tuple(algorithms))
+    for n in design.notes:
+        print(f"bench compare: {n}", file=sys.stderr)
+    t0 = time.perf_counter()
+    records = run_design(design, Path(out), jobs=jobs, progress=progress)
+    seconds = time.perf_counter() - t0
+    summary = summarize(records)
+    summary["design"] = design.to_dict()
+    summary["out"] = str(out)
+    (Path(out) / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary, design, seconds
+
+
 def results_markdown(summary: dict, design, *, command: str, seconds: float) -> str:
     from isa_mocap_ros.eval.compare import render_markdown
 
