@@ -2,14 +2,14 @@
 
 Each benchmark is a module ``isa_mocap_ros.cli.bench_<name>`` exposing
 ``add_arguments(parser)`` and ``run(args) -> int``; add its name to ``BENCHES``.
-``bench all`` runs every benchmark with its defaults (what ``make bench`` calls).
+``bench all`` runs every benchmark with its defaults and regenerates ``docs/RESULTS.md`` (what
+``make bench`` calls; :mod:`isa_mocap_ros.cli.bench_results`).
 """
 from __future__ import annotations
 
-import argparse
 import importlib
 
-BENCHES: list[str] = ["ackley", "adapters", "render", "energy", "compare"]
+BENCHES: list[str] = ["ackley", "adapters", "render", "energy", "compare", "robustness", "speed"]
 
 
 def register(sub) -> None:
@@ -21,19 +21,8 @@ def register(sub) -> None:
         bp = bsub.add_parser(name, help=(mod.__doc__ or "").strip().splitlines()[0])
         mod.add_arguments(bp)
         bp.set_defaults(func=mod.run)
-    ap = bsub.add_parser("all", help="run every benchmark with its defaults (make bench)")
-    ap.set_defaults(func=_run_all)
+    from isa_mocap_ros.cli import bench_results
 
-
-def _run_all(args: argparse.Namespace) -> int:
-    if not BENCHES:
-        print("isa-mocap bench: no benchmarks registered yet")
-        return 0
-    rc = 0
-    for name in BENCHES:
-        mod = importlib.import_module(f"isa_mocap_ros.cli.bench_{name}")
-        bp = argparse.ArgumentParser()
-        mod.add_arguments(bp)
-        print(f"== bench {name}")
-        rc = max(rc, int(mod.run(bp.parse_args([])) or 0))
-    return rc
+    ap = bsub.add_parser("all", help="run every benchmark and regenerate docs/RESULTS.md (make bench)")
+    bench_results.add_arguments(ap)
+    ap.set_defaults(func=bench_results.run)
