@@ -88,35 +88,45 @@ def fk_positions_batch(X, parents, offsets, ptr, dofs, axes):  # pragma: no cove
 
 
 @numba.njit(cache=True, inline="always")
-def _project_caps(P, caps, radii, Rs, ts, v, G):  # pragma: no cover - compiled
-    """2-D hulls of the capsules in one view into ``G (C, 14)``; returns nothing.
+def _to_camera(P, Rs, ts, v, CP):  # pragma: no cover - compiled
+    """Joint positions ``P (J, 3)`` in the frame of camera ``v`` into ``CP (J, 4)``: x, y, z, distance."""
+    for j in range(P.shape[0]):
+        x = Rs[v, 0, 0] * P[j, 0] + Rs[v, 0, 1] * P[j, 1] + Rs[v, 0, 2] * P[j, 2] + ts[v, 0]
+        y = Rs[v, 1, 0] * P[j, 0] + Rs[v, 1, 1] * P[j, 1] + Rs[v, 1, 2] * P[j, 2] + ts[v, 1]
+        z = Rs[v, 2, 0] * P[j, 0] + Rs[v, 2, 1] * P[j, 1] + Rs[v, 2, 2] * P[j, 2] + ts[v, 2]
+        CP[j, 0] = x
+        CP[j, 1] = y
+        CP[j, 2] = z
+        CP[j, 3] = np.sqrt(x * x + y * y + z * z)
+
+
+@numba.njit(cache=True, inline="always")
+def _project_caps(CP, caps, radii, G):  # pragma: no cover - compiled
+    """2-D hulls of the capsules in one view into ``G (C, 14)`` from the joints in camera
+    coordinates ``CP (J, 4)`` (see :func:`_to_camera`); returns nothing.
 
     ``G[c]``: ax, ay, ux, uy, L, ra, rb, sb, ca, ylo, yhi, xmax, valid, cone
-    and the bounding box is derived from it by the caller (see :func:`_bbox`).
+    and the bounding box is derived from it by the caller.
     """
     C = caps.shape[0]
     for c in range(C):
         ja = caps[c, 0]
         jb = caps[c, 1]
-        xa = Rs[v, 0, 0] * P[ja, 0] + Rs[v, 0, 1] * P[ja, 1] + Rs[v, 0, 2] * P[ja, 2] + ts[v, 0]
-        ya = Rs[v, 1, 0] * P[ja, 0] + Rs[v, 1, 1] * P[ja, 1] + Rs[v, 1, 2] * P[ja, 2] + ts[v, 1]
-        za = Rs[v, 2, 0] * P[ja, 0] + Rs[v, 2, 1] * P[ja, 1] + Rs[v, 2, 2] * P[ja, 2] + ts[v, 2]
-        xb = Rs[v, 0, 0] * P[jb, 0] + Rs[v, 0, 1] * P[jb, 1] + Rs[v, 0, 2] * P[jb, 2] + ts[v, 0]
-        yb = Rs[v, 1, 0] * P[jb, 0] + Rs[v, 1, 1] * P[jb, 1] + Rs[v, 1, 2] * P[jb, 2] + ts[v, 1]
-        zb = Rs[v, 2, 0] * P[jb, 0] + Rs[v, 2, 1] * P[jb, 1] + Rs[v, 2, 2] * P[jb, 2] + ts[v, 2]
+        za = CP[ja, 2]
+        zb = CP[jb, 2]
         r0 = radii[c, 0]
         r1 = radii[c, 1]
         if za <= 1.001 * r0 or zb <= 1.001 * r1:
             G[c, 12] = 0.0  # a ball reaching the camera plane: no bounded projection; skipped
             continue
-        la = np.sqrt(xa * xa + ya * ya + za * za)
-        lb = np.sqrt(xb * xb + yb * yb + zb * zb)
-        ax = xa / za
-        ay = ya / za
-        bx = xb / zb
-        by = yb / zb
-        ra = r0 / za * np.sqrt(la / za)
-        rb = r1 / zb * np.sqrt(lb / zb)
+        iza = 1.0 / za
+        izb = 1.0 / zb
+        ax = CP[ja, 0] * iza
+        ay = CP[ja, 1] * iza
+        bx = CP[jb, 0] * izb
+        by = CP[jb, 1] * izb
+        ra = r0 * iza * np.sqrt(CP[ja, 3] * iza)
+        rb = r1 * izb * np.sqrt(CP[jb, 3] * izb)
         dx = bx - ax
         dy = by - ay
         L = np.sqrt(dx * dx + dy * dy)
@@ -177,7 +187,9 @@ def project_capsules(P, caps, radii, Rs, ts, v):  # pragma: no cover - compiled
     """Python-callable wrapper of the projection into view ``v`` of ``Rs (V, 3, 3)``, ``ts (V, 3)``
     (tests): ``G (C, 14)`` for joint positions ``P (J, 3)``."""
     G = np.zeros((caps.shape[0], 14))
-    _project_caps(P, caps, radii, Rs, ts, v, G)
+    CP = np.empty((P.shape[0], 4))
+    _to_camera(P, Rs, ts, v, CP)
+    _project_caps(CP, caps, radii, G)
     return G
 
 
@@ -194,7 +206,7 @@ def inside_points(G, pts):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always")
-def _lookup(x, y, v, K, D, hasd, cov, W, H):  # pragma: no cover - compiled
+def _lookup(x, y, v, K, D, hasd, cov, W, H, stride):  # pragma: no cover - compiled
     """Foreground coverage of view ``v`` at the normalized point ``(x, y)``; -1 outside the image."""
     if hasd[v]:
         r2 = x * x + y * y
@@ -208,33 +220,45 @@ def _lookup(x, y, v, K, D, hasd, cov, W, H):  # pragma: no cover - compiled
     w = K[v, 1] * y + K[v, 3] + 0.5
     if u < 0.0 or w < 0.0 or u >= W or w >= H:
         return -1.0
-    return cov[v, int(w), int(u)]
+    return cov[v, int(w) * stride + int(u)] * K[v, 4]
 
 
 @numba.njit(cache=True, inline="always")
-def _cover_run(X, Y, Fl, G, c):  # pragma: no cover - compiled
-    """``Fl[k] = max(Fl[k], 1 if (X[k], Y[k]) is inside capsule c)``, branch-free (vectorizes).
+def _hull32(G, G32, c):  # pragma: no cover - compiled
+    """Single-precision parameters of capsule ``c``'s 2-D hull for the point tests into ``G32[c]``:
+    ax, ay, ux, uy, L, ra, rb, sb, ca, ca L (-1 when one disc holds the other), ra^2, rb^2."""
+    for k in range(9):
+        G32[c, k] = G[c, k]
+    G32[c, 9] = G[c, 8] * G[c, 4] if G[c, 13] != 0.0 else -1.0
+    G32[c, 10] = G[c, 5] * G[c, 5]
+    G32[c, 11] = G[c, 6] * G[c, 6]
+
+
+@numba.njit(cache=True, inline="always")
+def _mark_run(X, Y, Fl, k0, k1, G32, c, val):  # pragma: no cover - compiled
+    """``Fl[k] = val`` for ``k`` in ``k0:k1`` where ``(X[k], Y[k])`` is inside capsule ``c``; float32,
+    branch-free (vectorizes). Index bounds rather than slices: a slice costs reference counting.
 
     The 2-D hull is the union of disc a, disc b and the part of the strip between the normals at
-    the tangent points that lies inside the tangent lines (the same set as :func:`_inside_local`)."""
-    ax, ay, ux, uy = G[c, 0], G[c, 1], G[c, 2], G[c, 3]
-    L, ra, rb, sb, ca = G[c, 4], G[c, 5], G[c, 6], G[c, 7], G[c, 8]
-    cone = 1.0 if G[c, 13] != 0.0 else 0.0
-    ra2 = ra * ra
-    rb2 = rb * rb
-    caL = ca * L
-    for k in range(X.shape[0]):
+    the tangent points that lies inside the tangent lines (the same set as :func:`_inside_local`;
+    with ``ca L = -1`` no point is in the strip, as there when one disc holds the other)."""
+    ax, ay, ux, uy = G32[c, 0], G32[c, 1], G32[c, 2], G32[c, 3]
+    L, ra, sb, ca = G32[c, 4], G32[c, 5], G32[c, 7], G32[c, 8]
+    caL, ra2, rb2 = G32[c, 9], G32[c, 10], G32[c, 11]
+    zero = np.float32(0.0)
+    for j in range(k1 - k0):
+        k = numba.uint64(k0 + j)   # unsigned: no negative-index wraparound, so the loop vectorizes
         dx = X[k] - ax
         dy = Y[k] - ay
         yl = dx * ux + dy * uy
         xr = dy * ux - dx * uy
         x2 = xr * xr
-        xl = np.sqrt(x2)
-        q = -xl * sb + yl * ca
-        a = 1.0 if x2 + yl * yl <= ra2 else 0.0
-        b = 1.0 if x2 + (yl - L) * (yl - L) <= rb2 else 0.0
-        cc = cone if (q >= 0.0) and (q <= caL) and (xl * ca + yl * sb <= ra) else 0.0
-        Fl[k] = max(Fl[k], max(a, max(b, cc)))
+        xl = abs(xr)
+        q = yl * ca - xl * sb
+        yb = yl - L
+        inside = ((x2 + yl * yl <= ra2) | (x2 + yb * yb <= rb2)
+                  | ((q >= zero) & (q <= caL) & (xl * ca + yl * sb <= ra)))
+        Fl[k] = val if inside else Fl[k]
 
 
 @numba.njit(cache=True, inline="always")
@@ -251,8 +275,8 @@ def _bin(y, y0, inv_dy, nb):  # pragma: no cover - compiled
 @numba.njit(parallel=True, cache=True, fastmath=True)
 def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                      cam_R, cam_t, cam_K, cam_D, cam_hasd, cov, cov_wh,
-                     order, tmpl, tmpl_ptr, fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_area, n_chunks,
-                     out):  # pragma: no cover - compiled
+                     order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_area,
+                     n_chunks, out):  # pragma: no cover - compiled
     """Fast Eq. 5 for poses ``X (n, D)`` into ``out (n,)``.
 
     Parameters
@@ -261,11 +285,16 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
     parents, offsets, ptr, dofs, axes : kinematic tables (see ``body.kinematics._kernel_tables``)
     caps : (C, 2) int64 joint indices;  radii : (C, 2) float64 metres
     cam_R, cam_t : (V, 3, 3), (V, 3) world -> camera
-    cam_K : (V, 4) fx, fy, cx, cy of the downsampled camera;  cam_D : (V, 8);  cam_hasd : (V,) bool
-    cov : (V, Hmax, Wmax) float32 foreground coverage of the downsampled mask;  cov_wh : (V, 2) int64
+    cam_K : (V, 5) fx, fy, cx, cy of the downsampled camera and the scale of ``cov``;
+    cam_D : (V, 8);  cam_hasd : (V,) bool
+    cov : (V, Hmax * Wmax) foreground coverage of the downsampled mask, rows of ``Wmax``, times
+        ``1 / cam_K[v, 4]`` (uint8 0/1 at full resolution, float32 fractions when downsampled)
+    cov_wh : (V, 3) int64 width, height of the downsampled image and ``Wmax``
     order : (C,) int64 processing order of the capsules (a point counts for the first one containing it)
-    tmpl : (T, 2) template points in [0, 1]^2;  tmpl_ptr : (C + 1,) int64 offsets per capsule
-    fg_x, fg_y : (V, M) normalized foreground sample points, sorted by y;  fg_n : (V,) int64 counts;
+    tmpl_a, tmpl_s : (T,) float32 template points, along the capsule axis in [0, 1] and across it in [-1, 1];
+        capsule ``c`` owns ``tmpl_ptr[c]:tmpl_ptr[c + 1]`` (``tmpl_ptr (C + 1,)``), laid out as
+        ``tmpl_na[c]`` strata along the axis (in increasing order) of equally many points each
+    fg_x, fg_y : (V * M,) float32 normalized foreground sample points, view ``v`` at ``v M``, sorted by y;  fg_n : (V,) int64 counts;
         ``fg_n[v] == 0`` selects the area estimate of term 2 for view ``v``
     fg_tab : (V, NB + 1) int64, ``fg_tab[v, b]`` = first point with ``y >= y0 + b dy`` (``fg_n[v]`` at NB)
     fg_bins : (V, 2) ``y0, 1 / dy`` of those bins
@@ -277,28 +306,32 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
     J = parents.shape[0]
     C = caps.shape[0]
     V = cam_R.shape[0]
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    fg_m = fg_x.shape[0] // V
     for chunk in numba.prange(n_chunks):
         lo = chunk * n // n_chunks
         hi = (chunk + 1) * n // n_chunks
         R = np.empty((J, 3, 3))
         P = np.empty((J, 3))
+        CP = np.empty((J, 4))
         G = np.empty((C, 14))
+        G32 = np.empty((C, 12), np.float32)
         box = np.empty((C, 4))
-        near = np.empty((C, C), np.int64)   # near[c, :nn[c]]: earlier capsules whose boxes meet c's
-        nn = np.empty(C, np.int64)
-        flag = np.empty(max(1, fg_x.shape[1]))
+        flag = np.empty(max(1, fg_x.shape[0]), np.float32)
         kmax = 1
         for c in range(C):
             kmax = max(kmax, tmpl_ptr[c + 1] - tmpl_ptr[c])
-        PX = np.empty(kmax)
-        PY = np.empty(kmax)
-        OWN = np.empty(kmax)
-        DUP = np.empty(kmax)
+        PX = np.empty(kmax, np.float32)
+        PY = np.empty(kmax, np.float32)
+        OWN = np.empty(kmax, np.float32)
+        IDX = np.empty(kmax, np.int32)
         for i in range(lo, hi):
             _fk_one(X[i], parents, offsets, ptr, dofs, axes, R, P)
             total = 0.0
             for v in range(V):
-                _project_caps(P, caps, radii, cam_R, cam_t, v, G)
+                _to_camera(P, cam_R, cam_t, v, CP)
+                _project_caps(CP, caps, radii, G)
                 for c in range(C):
                     if G[c, 12] == 0.0:
                         box[c, 0] = 1.0
@@ -306,6 +339,7 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                         box[c, 2] = 1.0
                         box[c, 3] = -1.0
                         continue
+                    _hull32(G, G32, c)
                     ax, ay, L = G[c, 0], G[c, 1], G[c, 4]
                     bx = ax + L * G[c, 2]
                     by = ay + L * G[c, 3]
@@ -314,20 +348,17 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     box[c, 1] = max(ax + ra, bx + rb)
                     box[c, 2] = min(ay - ra, by - rb)
                     box[c, 3] = max(ay + ra, by + rb)
-                for ci in range(C):
-                    c = order[ci]
-                    k = 0
-                    for ei in range(ci):
-                        e = order[ei]
-                        if (box[e, 0] <= box[c, 1] and box[c, 0] <= box[e, 1] and box[e, 2] <= box[c, 3]
-                                and box[c, 2] <= box[e, 3]):
-                            near[c, k] = e
-                            k += 1
-                    nn[c] = k
                 # term 1: model silhouette points not on foreground. Points of capsule c in its
                 # bounding rectangle; kept if inside c's hull and in no earlier capsule's hull
                 W = cov_wh[v, 0]
                 H = cov_wh[v, 1]
+                fx = np.float32(cam_K[v, 0])
+                fy = np.float32(cam_K[v, 1])
+                cx = np.float32(cam_K[v, 2] + 0.5)
+                cy = np.float32(cam_K[v, 3] + 0.5)
+                Wf = np.float32(W)
+                Hf = np.float32(H)
+                Wst = np.int32(cov_wh[v, 2])
                 num = 0.0
                 den = 0.0
                 for ci in range(C):
@@ -339,24 +370,77 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     xm = G[c, 11]
                     k0 = tmpl_ptr[c]
                     nk = tmpl_ptr[c + 1] - k0
-                    w = ly * 2.0 * xm / nk
-                    ax, ay, ux, uy = G[c, 0], G[c, 1], G[c, 2], G[c, 3]
-                    for k in range(nk):
-                        yl = ylo + tmpl[k0 + k, 0] * ly
-                        xs = (2.0 * tmpl[k0 + k, 1] - 1.0) * xm
+                    na = tmpl_na[c]
+                    ns = nk // na
+                    ax, ay, ux, uy = G32[c, 0], G32[c, 1], G32[c, 2], G32[c, 3]
+                    L, ra, sb, ca = G32[c, 4], G32[c, 5], G32[c, 7], G32[c, 8]
+                    caL, ra2, rb2 = G32[c, 9], G32[c, 10], G32[c, 11]
+                    ylo32 = np.float32(ylo)
+                    ly32 = np.float32(ly)
+                    xm32 = np.float32(xm)
+                    for k in range(nk):     # own hull test in the capsule's frame, then to the image
+                        yl = ylo32 + tmpl_a[k0 + k] * ly32
+                        xs = tmpl_s[k0 + k] * xm32
+                        xl = abs(xs)
+                        x2 = xs * xs
+                        q = yl * ca - xl * sb
+                        yb = yl - L
+                        inside = ((x2 + yl * yl <= ra2) | (x2 + yb * yb <= rb2)
+                                  | ((q >= zero) & (q <= caL) & (xl * ca + yl * sb <= ra)))
+                        OWN[k] = one if inside else zero
                         PX[k] = ax + yl * ux - xs * uy
                         PY[k] = ay + yl * uy + xs * ux
-                        OWN[k] = 0.0
-                        DUP[k] = 0.0
-                    _cover_run(PX[:nk], PY[:nk], OWN[:nk], G, c)
-                    for q in range(nn[c]):
-                        _cover_run(PX[:nk], PY[:nk], DUP[:nk], G, near[c, q])
-                    for k in range(nk):
-                        if OWN[k] > DUP[k]:
-                            f = _lookup(PX[k], PY[k], v, cam_K, cam_D, cam_hasd, cov, W, H)
-                            if f >= 0.0:
-                                den += w
-                                num += w * (1.0 - f)
+                    dax, day, dux, duy = G[c, 0], G[c, 1], G[c, 2], G[c, 3]
+                    for ei in range(ci):
+                        e = order[ei]
+                        if not (box[e, 0] <= box[c, 1] and box[c, 0] <= box[e, 1] and box[e, 2] <= box[c, 3]
+                                and box[c, 2] <= box[e, 3]):
+                            continue
+                        # capsule e in c's frame: its extent along c's axis selects a run of strata,
+                        # its extent across it may miss c's rectangle altogether
+                        dxa = G[e, 0] - dax
+                        dya = G[e, 1] - day
+                        dxb = dxa + G[e, 4] * G[e, 2]
+                        dyb = dya + G[e, 4] * G[e, 3]
+                        rea = G[e, 5]
+                        reb = G[e, 6]
+                        ta = dya * dux - dxa * duy
+                        tb = dyb * dux - dxb * duy
+                        if min(ta - rea, tb - reb) > xm or max(ta + rea, tb + reb) < -xm:
+                            continue
+                        sa = dxa * dux + dya * duy
+                        sb2 = dxb * dux + dyb * duy
+                        s0 = (min(sa - rea, sb2 - reb) - ylo) / ly * na - 1e-4
+                        s1 = (max(sa + rea, sb2 + reb) - ylo) / ly * na + 1e-4
+                        if s1 < 0.0 or s0 >= na:
+                            continue
+                        i0 = int(s0) if s0 > 0.0 else 0
+                        i1 = min(int(s1), na - 1)
+                        _mark_run(PX, PY, OWN, i0 * ns, (i1 + 1) * ns, G32, e, zero)
+                    cnt = 0.0
+                    fsum = 0.0
+                    if cam_hasd[v]:
+                        for k in range(nk):
+                            if OWN[k] != zero:
+                                f = _lookup(np.float64(PX[k]), np.float64(PY[k]), v, cam_K, cam_D, cam_hasd,
+                                            cov, W, H, cov_wh[v, 2])
+                                if f >= 0.0:
+                                    cnt += 1.0
+                                    fsum += f
+                    else:
+                        for k in range(nk):     # pixel index of each kept point (-1: none), vectorized
+                            u = fx * PX[k] + cx
+                            w = fy * PY[k] + cy
+                            ok = (OWN[k] != zero) & (u >= zero) & (w >= zero) & (u < Wf) & (w < Hf)
+                            IDX[k] = np.int32(w) * Wst + np.int32(u) if ok else np.int32(-1)
+                        for k in range(nk):
+                            if IDX[k] >= 0:
+                                cnt += 1.0
+                                fsum += cov[v, IDX[k]]
+                        fsum *= cam_K[v, 4]
+                    w = ly * 2.0 * xm / nk
+                    den += w * cnt
+                    num += w * (cnt - fsum)
                 t1 = num / den if den > 0.0 else 1.0
                 if fg_n[v] == 0:
                     # term 2 from the same points: |F minus M| / |F| = 1 - (integral of F over M) / |F|
@@ -366,9 +450,10 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     # term 2: foreground points not covered by the model; the points are sorted by y,
                     # so a capsule's box meets a contiguous run of them (binary search)
                     m = fg_n[v]
+                    base = v * fg_m
                     nb = fg_tab.shape[1] - 1
                     for k in range(m):
-                        flag[k] = 0.0
+                        flag[base + k] = zero
                     for ci in range(C):
                         c = order[ci]
                         if G[c, 12] == 0.0:
@@ -376,10 +461,10 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                         k0 = fg_tab[v, _bin(box[c, 2], fg_bins[v, 0], fg_bins[v, 1], nb)]
                         k1 = fg_tab[v, min(nb, _bin(box[c, 3], fg_bins[v, 0], fg_bins[v, 1], nb) + 1)]
                         if k1 > k0:
-                            _cover_run(fg_x[v, k0:k1], fg_y[v, k0:k1], flag[k0:k1], G, c)
+                            _mark_run(fg_x, fg_y, flag, base + k0, base + k1, G32, c, one)
                     hit = 0.0
                     for k in range(m):
-                        hit += flag[k]
+                        hit += flag[base + k]
                     t2 = 1.0 - hit / m
                 total += 0.5 * t1 + 0.5 * t2
             out[i] = total / V

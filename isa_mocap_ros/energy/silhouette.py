@@ -174,9 +174,12 @@ def _normalized_area(camera: Camera, u: np.ndarray, v: np.ndarray) -> float:
     return float(np.abs((xu1 - xu0) * (yv1 - yv0) - (xv1 - xv0) * (yu1 - yu0)).sum())
 
 
-def _template(model: BodyModel, n_points: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def _template(model: BodyModel, n_points: int,
+              rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Stratified (jittered-grid) points in ``[0, 1]^2`` per capsule, ``k_c`` proportional to its
-    rest silhouette area ``2 r L + π r^2`` (at least 4); returns ``(T, 2)`` points and ``(C+1,)`` offsets."""
+    rest silhouette area ``2 r L + π r^2`` (at least 4); returns ``(T, 2)`` points (first coordinate
+    along the capsule's axis), ``(C+1,)`` offsets and ``(C,)`` numbers of strata along the axis
+    (each capsule's points are its strata in increasing order, equally many points each)."""
     rest = np.zeros((len(model.joint_names), 3))
     for j in range(1, len(model.joint_names)):
         rest[j] = rest[model.parents[j]] + model.offsets[j]
@@ -185,7 +188,7 @@ def _template(model: BodyModel, n_points: int, rng: np.random.Generator) -> tupl
     r = np.asarray(model.capsule_radii, dtype=float).max(axis=1)
     area = 2.0 * r * L + np.pi * r * r
     share = np.maximum(4, np.round(n_points * area / area.sum())).astype(int)
-    pts, ptr = [], [0]
+    pts, ptr, strata = [], [0], []
     for c in range(len(caps)):
         length, width = L[c] + 2.0 * r[c], 2.0 * r[c]
         nb = max(1, int(round(np.sqrt(share[c] * width / length))))
@@ -195,7 +198,9 @@ def _template(model: BodyModel, n_points: int, rng: np.random.Generator) -> tupl
         p = np.stack([(ia.ravel() + u[:, 0]) / na, (ib.ravel() + u[:, 1]) / nb], axis=1)
         pts.append(p)
         ptr.append(ptr[-1] + len(p))
-    return np.ascontiguousarray(np.concatenate(pts)), np.array(ptr, dtype=np.int64)
+        strata.append(na)
+    return (np.ascontiguousarray(np.concatenate(pts)), np.array(ptr, dtype=np.int64),
+            np.array(strata, dtype=np.int64))
 
 
 # ---------------------------------------------------------------------- the batch energy
@@ -280,7 +285,10 @@ class SilhouetteEnergy:
         self._radii = np.ascontiguousarray(model.capsule_radii, dtype=np.float64)
         self._caps = np.ascontiguousarray(model.capsules, dtype=np.int64)
         self._kin = kinematic_tables(model)
-        self._tmpl, self._tmpl_ptr = _template(model, int(n_model_points), rng)
+        self._tmpl, self._tmpl_ptr, self._tmpl_na = _template(model, int(n_model_points), rng)
+        # the kernel's layout: along the axis in [0, 1], across it in [-1, 1]
+        self._tmpl_a = np.ascontiguousarray(self._tmpl[:, 0], dtype=np.float32)
+        self._tmpl_s = np.ascontiguousarray(2.0 * self._tmpl[:, 1] - 1.0, dtype=np.float32)
         # bigger capsules first: their points need no overlap test, and they own the shared area
         self._order = np.argsort(-np.diff(self._tmpl_ptr), kind="stable").astype(np.int64)
         self.n_template = int(self._tmpl_ptr[-1])
@@ -338,20 +346,21 @@ class SilhouetteEnergy:
         small = [self._small[v] for v in used]
         Hmax = max(c.height for c in small)
         Wmax = max(c.width for c in small)
-        cov = np.zeros((V, Hmax, Wmax), np.float32)
-        fg_x = np.zeros((V, M))
-        fg_y = np.zeros((V, M))
+        # full resolution: the mask itself as uint8 0/1 (4x less memory to read than float32)
+        cov = np.zeros((V, Hmax, Wmax), np.uint8 if self.downsample == 1 else np.float32)
+        fg_x = np.zeros((V, M), np.float32)
+        fg_y = np.zeros((V, M), np.float32)
         fg_n = np.zeros(V, np.int64)
         fg_area = np.zeros(V)
         fg_tab = np.zeros((V, _N_BINS + 1), np.int64)
         fg_bins = np.zeros((V, 2))
         for k, v in enumerate(used):
             cam, sc = self.cameras[v], small[k]
-            f = F[v].astype(np.float32)
             if self.downsample == 1:
-                cov[k, :sc.height, :sc.width] = f
+                cov[k, :sc.height, :sc.width] = F[v]
             else:
-                cov[k, :sc.height, :sc.width] = cv2.resize(f, (sc.width, sc.height), interpolation=cv2.INTER_AREA)
+                cov[k, :sc.height, :sc.width] = cv2.resize(F[v].astype(np.float32), (sc.width, sc.height),
+                                                           interpolation=cv2.INTER_AREA)
             vv, uu = np.nonzero(F[v])                       # raster order
             n = vv.size
             fg_area[k] = _normalized_area(cam, uu, vv)
@@ -373,11 +382,12 @@ class SilhouetteEnergy:
             fg_n[k] = x.size
         return {"cam_R": np.ascontiguousarray([self.cameras[v].R for v in used]),
                 "cam_t": np.ascontiguousarray([self.cameras[v].t for v in used]),
-                "cam_K": np.ascontiguousarray([[c.fx, c.fy, c.cx, c.cy] for c in small]),
+                "cam_K": np.ascontiguousarray([[c.fx, c.fy, c.cx, c.cy, 1.0] for c in small]),
                 "cam_D": np.ascontiguousarray([np.pad(c.dist, (0, 8 - c.dist.size)) for c in small]),
                 "cam_hasd": np.array([c.has_distortion for c in small]),
-                "cov": cov, "cov_wh": np.array([[c.width, c.height] for c in small], np.int64),
-                "fg_x": fg_x, "fg_y": fg_y, "fg_n": fg_n, "fg_tab": fg_tab, "fg_bins": fg_bins, "fg_area": fg_area}
+                "cov": cov.reshape(V, Hmax * Wmax),
+                "cov_wh": np.array([[c.width, c.height, Wmax] for c in small], np.int64),
+                "fg_x": fg_x.ravel(), "fg_y": fg_y.ravel(), "fg_n": fg_n, "fg_tab": fg_tab, "fg_bins": fg_bins, "fg_area": fg_area}
 
     # ------------------------------------------------------------------ evaluation
     def __call__(self, X: Any) -> np.ndarray:
@@ -408,8 +418,8 @@ class SilhouetteEnergy:
         out = np.empty(X.shape[0])
         n_chunks = max(1, min(X.shape[0], 8 * numba.get_num_threads()))
         _k.silhouette_batch(X, *self._kin, self._caps, self._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"],
-                            fr["cam_D"], fr["cam_hasd"], fr["cov"], fr["cov_wh"], self._order, self._tmpl,
-                            self._tmpl_ptr, fr["fg_x"], fr["fg_y"], fr["fg_n"], fr["fg_tab"], fr["fg_bins"],
+                            fr["cam_D"], fr["cam_hasd"], fr["cov"], fr["cov_wh"], self._order, self._tmpl_a,
+                            self._tmpl_s, self._tmpl_ptr, self._tmpl_na, fr["fg_x"], fr["fg_y"], fr["fg_n"], fr["fg_tab"], fr["fg_bins"],
                             fr["fg_area"], n_chunks, out)
         return out
 
