@@ -2,7 +2,9 @@
 
 Scene: the 39-DOF model in a walking-like pose at the centre of the default rig (4 views,
 320x240), masks rendered from it; a batch of poses spread around it (root ±5 cm, angles ±0.15 rad),
-as an optimizer generation would be. Both energies are timed in the same run: the fast kernel on
+as an optimizer generation would be. The fast energy uses the tracker's sample sizes
+(``TrackerConfig`` defaults: ``n_model_points``, ``n_mask_points``, ``downsample``; printed in the
+output). Both energies are timed in the same run: the fast kernel on
 the full batch (median of ``--repeats`` calls after a warm-up call that also loads the numba
 cache), the exact reference (``render_mask`` per pose and view, pixel counting) on ``--exact-batch``
 poses and scaled (it is linear in the batch size). Wall-clock time, all numba threads.
@@ -18,6 +20,7 @@ import numpy as np
 
 from isa_mocap_ros.body import capsule_endpoints, make_model
 from isa_mocap_ros.energy import SilhouetteEnergy
+from isa_mocap_ros.tracking.tracker import TrackerConfig
 from isa_mocap_ros.vision import default_rig, render_mask
 
 
@@ -45,7 +48,9 @@ def run(args: argparse.Namespace) -> int:
     rng = np.random.default_rng(args.seed)
     X = x0 + np.concatenate([rng.normal(0, 0.05, (args.batch, 6)),
                              rng.normal(0, 0.15, (args.batch, model.dof - 6))], axis=1)
-    fast = SilhouetteEnergy(model, rig, masks, rng=np.random.default_rng(args.seed))
+    tc = TrackerConfig()        # the sample sizes the tracker evaluates with
+    fast = SilhouetteEnergy(model, rig, masks, downsample=tc.downsample, n_model_points=tc.n_model_points,
+                            n_mask_points=tc.n_mask_points, rng=np.random.default_rng(args.seed))
     exact = SilhouetteEnergy(model, rig, masks, method="exact")
     fast(X)
     exact(X[:1])
@@ -63,13 +68,15 @@ def run(args: argparse.Namespace) -> int:
     exact_rate = nb / t_exact
     out = {"views": args.views, "dof": args.dof, "batch": args.batch, "fast_evals_per_s": round(fast_rate, 1),
            "exact_evals_per_s": round(exact_rate, 1), "ratio": round(fast_rate / exact_rate, 1),
-           "exact_batch": nb}
+           "exact_batch": nb, "n_model_points": tc.n_model_points, "n_template": fast.n_template,
+           "n_mask_points": fast.n_mask_points, "downsample": fast.downsample, "threads": numba.get_num_threads()}
     if args.json:
         print(json.dumps(out))
     else:
         print(f"silhouette energy, {args.views} views 320x240, {args.dof} DOF, batch {args.batch}, "
               f"{numba.get_num_threads()} threads")
-        print(f"  fast  : {fast_rate:12.0f} evals/s  (median of {args.repeats}; template {fast.n_template} points, "
+        print(f"  fast  : {fast_rate:12.0f} evals/s  (median of {args.repeats}; tracker sample sizes: "
+              f"n_model_points {tc.n_model_points} -> template {fast.n_template} points, "
               f"{fast.n_mask_points} foreground points per view, downsample {fast.downsample}; "
               f"fastest call {args.batch / min(times):.0f} evals/s)")
         print(f"  exact : {exact_rate:12.0f} evals/s  (measured on {nb} poses)")
