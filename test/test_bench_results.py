@@ -10,10 +10,11 @@ from isa_mocap_ros.cli.main import main
 def test_all_quick_writes_the_page(tmp_path):
     page = tmp_path / "docs" / "RESULTS.md"
     page.parent.mkdir()
-    assert main(["bench", "all", "--quick", "--results", str(page), "--out", str(tmp_path / "work"),
+    # --jobs 1: the comparison's two cells in process (no spawned workers to start)
+    assert main(["bench", "all", "--quick", "--jobs", "1", "--results", str(page), "--out", str(tmp_path / "work"),
                  "--no-progress"]) == 0
     md = page.read_text()
-    for head in ("# Results", "Smoke run", "- command: `isa-mocap bench all --quick", "- git commit:", "- machine:",
+    for head in ("# Results", "Smoke run", "- command: `isa-mocap bench all --quick --jobs 1", "- git commit:", "- machine:",
                  "GB RAM", "## Targets (issue #7), from the measured numbers",
                  "## The comparison paper's findings, checked on our data",
                  "## Ackley function", "## Optimizer comparison", "## Robustness", "## Speed", "## Silhouette energy speed",
@@ -33,6 +34,13 @@ def test_all_quick_writes_the_page(tmp_path):
         assert d["_seconds"] >= 0
     rob = json.loads((figs / "robustness.json").read_text())
     assert all(math.isfinite(c["knee_rmse_deg"]) for c in rob["conditions"])
+    # --only re-runs a subset; the page keeps (and names) the others' saved results
+    assert main(["bench", "all", "--quick", "--only", "energy", "--results", str(page), "--out", str(tmp_path / "work"),
+                 "--no-progress"]) == 0
+    md2 = page.read_text()
+    assert "not re-run this time (last saved results shown): ackley, adapters, compare, render, robustness, speed" in md2
+    assert "## Robustness" in md2 and "## Silhouette energy speed" in md2
+    assert main(["bench", "all", "--quick", "--only", "nope", "--results", str(page)]) == 2
 
 
 def test_findings_and_targets_from_data():

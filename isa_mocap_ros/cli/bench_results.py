@@ -10,8 +10,10 @@ order, ackley, adapters, render, energy, compare, robustness and speed with thei
 * ``PATH``'s folder ``results/``: the figures (PNG) and each bench's raw results (``<bench>.json``).
 
 Work files (the comparison's resumable ``cells.jsonl``, the robustness bags) go to ``--out``
-(default ``out/bench``; with ``--quick`` a temporary directory): an interrupted ``make bench`` resumes
-the comparison where it stopped when run again. ``--only`` runs a subset; the page then shows the
+(default ``out/bench``; with ``--quick`` a temporary directory): ``bench all --resume`` continues an
+interrupted comparison from its ``cells.jsonl`` (without it, the previous cells are moved to
+``cells.jsonl.prev`` so results of older code never mix with new ones); the robustness bags are
+cached there by their parameters. ``--only`` runs a subset; the page then shows the
 other benches' last saved raw results when ``results/<bench>.json`` exists (and says so).
 """
 from __future__ import annotations
@@ -49,6 +51,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="work directory (default out/bench; --quick: a temporary directory)")
     p.add_argument("--jobs", type=int, default=2, metavar="N", help="worker processes of the comparison (default 2)")
     p.add_argument("--only", default=None, metavar="A,B", help=f"run only these benches (of {', '.join(ORDER)})")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the comparison of the last run in --out (its cells.jsonl) instead of starting anew; "
+                        "only with unchanged code")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -374,6 +379,13 @@ def run(args: argparse.Namespace) -> int:
         out = Path("out/bench")
     out.mkdir(parents=True, exist_ok=True)
     fig_dir.mkdir(parents=True, exist_ok=True)
+    commit = git_commit()          # before anything is written
+    jl = out / "compare" / "cells.jsonl"
+    if "compare" in only and jl.exists() and not getattr(args, "resume", False):
+        # results of older code must not mix with this run's: start the comparison anew
+        jl.replace(jl.with_name("cells.jsonl.prev"))
+        print(f"bench all: moved the previous comparison cells to {jl.with_name('cells.jsonl.prev')} "
+              "(--resume continues them instead)", file=sys.stderr)
     ctx = {"out": out, "jobs": args.jobs, "progress": not args.no_progress}
     data: dict = {}
     stale: set = set()
@@ -403,8 +415,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"== bench {name}: {d['_seconds']:.0f} s", file=sys.stderr, flush=True)
         figs = figures(data, fig_dir)
         cmd = "isa-mocap bench all" + (" --quick" if args.quick else "") + (f" --only {args.only}" if args.only else "") \
-            + (f" --jobs {args.jobs}" if args.jobs != 2 else "") + (f" --results {args.results}" if args.results else "")
-        meta = {"command": cmd, "quick": bool(args.quick), "machine": machine(), "commit": git_commit(),
+            + (f" --jobs {args.jobs}" if args.jobs != 2 else "") + (" --resume" if args.resume else "") + (f" --results {args.results}" if args.results else "")
+        meta = {"command": cmd, "quick": bool(args.quick), "machine": machine(), "commit": commit,
                 "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
                 "seconds": time.perf_counter() - t_all}
         page.write_text(render_page(data, meta=meta, figs=figs, page=page, stale=stale))
