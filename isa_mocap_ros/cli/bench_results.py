@@ -201,9 +201,23 @@ def md_render(d: dict) -> str:
 def md_energy(d: dict) -> str:
     return "\n".join([
         f"{d['dof']} DOF, {d['views']} views 320×240, batch {d['batch']} (`isa-mocap bench energy`; the exact reference "
-        f"measured on {d['exact_batch']} poses).", "", "| energy | evaluations/s |", "|---|---|",
+        f"measured on {d['exact_batch']} poses){_energy_sizes(d)}.", "", "| energy | evaluations/s |", "|---|---|",
         f"| fast (compiled kernel) | {d['fast_evals_per_s']:.0f} |", f"| exact (raster reference) | {d['exact_evals_per_s']:.0f} |",
         f"| ratio | {d['ratio']:.0f}× |"]) + "\n"
+
+
+def _energy_sizes(d: dict) -> str:
+    """The fast energy's sample sizes and threads, when ``bench energy`` reports them."""
+    parts = []
+    if d.get("n_template") is not None:
+        parts.append(f"{d['n_template']} model points")
+    if d.get("n_mask_points") is not None:
+        parts.append(f"{d['n_mask_points']} foreground points per view")
+    if d.get("downsample") is not None:
+        parts.append(f"downsample {d['downsample']}")
+    if d.get("threads") is not None:
+        parts.append(f"{d['threads']} threads")
+    return "; fast energy: " + ", ".join(parts) if parts else ""
 
 
 def md_compare(d: dict) -> str:

@@ -154,9 +154,12 @@ def _f(v, fmt="{:.1f}"):
 
 
 def render_markdown(res: dict) -> str:
+    from isa_mocap_ros.cli.bench_results import _energy_sizes
+
     e = res["energy"]
     L = ["#### Silhouette energy", "",
-         f"{e['dof']} DOF, {e['views']} views, batch {e['batch']} (exact reference measured on {e['exact_batch']} poses).",
+         f"{e['dof']} DOF, {e['views']} views, batch {e['batch']} (exact reference measured on {e['exact_batch']} poses"
+         f"{_energy_sizes(e)}).",
          "", "| energy | evaluations/s |", "|---|---|",
          f"| fast (compiled kernel) | {e['fast_evals_per_s']:.0f} |", f"| exact (raster reference) | {e['exact_evals_per_s']:.0f} |",
          f"| ratio | {e['ratio']:.0f}× |", ""]
