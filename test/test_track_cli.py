@@ -34,6 +34,9 @@ def test_track_fixture_writes_estimates_and_summary(tmp_path, capsys, masks):
     with BagReader(out / "estimates") as bag:
         msgs = list(bag.messages(["/mocap/joint_states"]))
     assert len(msgs) == 5
+    # per-frame energies (ISA Fig. 13.14) by stamp; the ground-truth first frame has none
+    assert s["frame_stamps_ns"] == [m.log_time_ns for m in msgs]
+    assert s["frame_energies"][0] is None and all(np.isfinite(e) for e in s["frame_energies"][1:])
     names, pos = joint_state_to_arrays(from_cdr(msgs[0].data, msgs[0].type))
     assert len(names) == 39 and names[0] == "root_tx" and np.all(np.isfinite(pos))
     assert msgs[0].log_time_ns == from_cdr(msgs[0].data, msgs[0].type).header.stamp.sec * 10**9 + \
