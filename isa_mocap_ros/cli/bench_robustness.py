@@ -297,7 +297,6 @@ def plot_bars(res: dict, path: Path) -> Path:
                w, label=sname)
     ax.set_xticks(x, [c["label"] for c in conds], fontsize=8)
     ax.set_ylabel("knee-angle RMSE (deg)")
-    ax.set_yscale("log")
     ax.set_title("robustness (ISA §13.4.2): knee RMSE per condition", fontsize=9)
     ax.legend(fontsize=7)
     fig.tight_layout()
