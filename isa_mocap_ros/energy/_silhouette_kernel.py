@@ -89,15 +89,18 @@ def fk_positions_batch(X, parents, offsets, ptr, dofs, axes):  # pragma: no cove
 
 @numba.njit(cache=True, inline="always")
 def _to_camera(P, Rs, ts, v, CP):  # pragma: no cover - compiled
-    """Joint positions ``P (J, 3)`` in the frame of camera ``v`` into ``CP (J, 4)``: x, y, z, distance."""
+    """Joints ``P (J, 3)`` seen from camera ``v`` into ``CP (J, 4)``: normalized image point x / z,
+    y / z, depth z, and ``sqrt(l / z) / z`` (``l`` the distance from the camera; ``z > 0`` only), the
+    factor that turns a ball radius into the radius of its projected disc."""
     for j in range(P.shape[0]):
         x = Rs[v, 0, 0] * P[j, 0] + Rs[v, 0, 1] * P[j, 1] + Rs[v, 0, 2] * P[j, 2] + ts[v, 0]
         y = Rs[v, 1, 0] * P[j, 0] + Rs[v, 1, 1] * P[j, 1] + Rs[v, 1, 2] * P[j, 2] + ts[v, 1]
         z = Rs[v, 2, 0] * P[j, 0] + Rs[v, 2, 1] * P[j, 1] + Rs[v, 2, 2] * P[j, 2] + ts[v, 2]
-        CP[j, 0] = x
-        CP[j, 1] = y
+        iz = 1.0 / z if z > 0.0 else 0.0
+        CP[j, 0] = x * iz
+        CP[j, 1] = y * iz
         CP[j, 2] = z
-        CP[j, 3] = np.sqrt(x * x + y * y + z * z)
+        CP[j, 3] = iz * np.sqrt(np.sqrt(x * x + y * y + z * z) * iz)
 
 
 @numba.njit(cache=True, inline="always")
@@ -119,14 +122,12 @@ def _project_caps(CP, caps, radii, G):  # pragma: no cover - compiled
         if za <= 1.001 * r0 or zb <= 1.001 * r1:
             G[c, 12] = 0.0  # a ball reaching the camera plane: no bounded projection; skipped
             continue
-        iza = 1.0 / za
-        izb = 1.0 / zb
-        ax = CP[ja, 0] * iza
-        ay = CP[ja, 1] * iza
-        bx = CP[jb, 0] * izb
-        by = CP[jb, 1] * izb
-        ra = r0 * iza * np.sqrt(CP[ja, 3] * iza)
-        rb = r1 * izb * np.sqrt(CP[jb, 3] * izb)
+        ax = CP[ja, 0]
+        ay = CP[ja, 1]
+        bx = CP[jb, 0]
+        by = CP[jb, 1]
+        ra = r0 * CP[ja, 3]
+        rb = r1 * CP[jb, 3]
         dx = bx - ax
         dy = by - ay
         L = np.sqrt(dx * dx + dy * dy)
@@ -291,10 +292,11 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
         ``1 / cam_K[v, 4]`` (uint8 0/1 at full resolution, float32 fractions when downsampled)
     cov_wh : (V, 3) int64 width, height of the downsampled image and ``Wmax``
     order : (C,) int64 processing order of the capsules (a point counts for the first one containing it)
-    tmpl_a, tmpl_s : (T,) float32 template points, along the capsule axis in [0, 1] and across it in [-1, 1];
+    tmpl_a, tmpl_s : (T + 8,) float32 template points (8 padding points at the end), along the capsule axis in [0, 1] and across it in [-1, 1];
         capsule ``c`` owns ``tmpl_ptr[c]:tmpl_ptr[c + 1]`` (``tmpl_ptr (C + 1,)``), laid out as
         ``tmpl_na[c]`` strata along the axis (in increasing order) of equally many points each
-    fg_x, fg_y : (V * M,) float32 normalized foreground sample points, view ``v`` at ``v M``, sorted by y;  fg_n : (V,) int64 counts;
+    fg_x, fg_y : (V * M,) float32 normalized foreground sample points, view ``v`` at ``v M``, sorted by y,
+        ``M`` a multiple of 8, padded with points far outside the image;  fg_n : (V,) int64 counts;
         ``fg_n[v] == 0`` selects the area estimate of term 2 for view ``v``
     fg_tab : (V, NB + 1) int64, ``fg_tab[v, b]`` = first point with ``y >= y0 + b dy`` (``fg_n[v]`` at NB)
     fg_bins : (V, 2) ``y0, 1 / dy`` of those bins
@@ -318,10 +320,16 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
         G = np.empty((C, 14))
         G32 = np.empty((C, 12), np.float32)
         box = np.empty((C, 4))
+        BX0 = np.empty(C)
+        BX1 = np.empty(C)
+        BY0 = np.empty(C)
+        BY1 = np.empty(C)
+        NEAR = np.empty(C, np.int64)
         flag = np.empty(max(1, fg_x.shape[0]), np.float32)
         kmax = 1
         for c in range(C):
             kmax = max(kmax, tmpl_ptr[c + 1] - tmpl_ptr[c])
+        kmax = (kmax + 7) & ~7      # runs of whole 8-lane vectors: no scalar remainder loops
         PX = np.empty(kmax, np.float32)
         PY = np.empty(kmax, np.float32)
         OWN = np.empty(kmax, np.float32)
@@ -348,6 +356,9 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     box[c, 1] = max(ax + ra, bx + rb)
                     box[c, 2] = min(ay - ra, by - rb)
                     box[c, 3] = max(ay + ra, by + rb)
+                for ci in range(C):     # the boxes in processing order, for the overlap candidates
+                    c = order[ci]
+                    BX0[ci], BX1[ci], BY0[ci], BY1[ci] = box[c, 0], box[c, 1], box[c, 2], box[c, 3]
                 # term 1: model silhouette points not on foreground. Points of capsule c in its
                 # bounding rectangle; kept if inside c's hull and in no earlier capsule's hull
                 W = cov_wh[v, 0]
@@ -372,13 +383,14 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     nk = tmpl_ptr[c + 1] - k0
                     na = tmpl_na[c]
                     ns = nk // na
+                    nkp = (nk + 7) & ~7     # padded: points nk.. are dropped (OWN = 0)
                     ax, ay, ux, uy = G32[c, 0], G32[c, 1], G32[c, 2], G32[c, 3]
                     L, ra, sb, ca = G32[c, 4], G32[c, 5], G32[c, 7], G32[c, 8]
                     caL, ra2, rb2 = G32[c, 9], G32[c, 10], G32[c, 11]
                     ylo32 = np.float32(ylo)
                     ly32 = np.float32(ly)
                     xm32 = np.float32(xm)
-                    for k in range(nk):     # own hull test in the capsule's frame, then to the image
+                    for k in range(nkp):    # own hull test in the capsule's frame, then to the image
                         yl = ylo32 + tmpl_a[k0 + k] * ly32
                         xs = tmpl_s[k0 + k] * xm32
                         xl = abs(xs)
@@ -387,15 +399,23 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                         yb = yl - L
                         inside = ((x2 + yl * yl <= ra2) | (x2 + yb * yb <= rb2)
                                   | ((q >= zero) & (q <= caL) & (xl * ca + yl * sb <= ra)))
-                        OWN[k] = one if inside else zero
-                        PX[k] = ax + yl * ux - xs * uy
-                        PY[k] = ay + yl * uy + xs * ux
+                        OWN[k] = one if inside & (k < nk) else zero
+                        px = ax + yl * ux - xs * uy
+                        py = ay + yl * uy + xs * ux
+                        PX[k] = px
+                        PY[k] = py
+                        u = fx * px + cx        # pixel of the point (pinhole; -1: outside the image)
+                        w = fy * py + cy
+                        ok = (u >= zero) & (w >= zero) & (u < Wf) & (w < Hf)
+                        IDX[k] = np.int32(w) * Wst + np.int32(u) if ok else np.int32(-1)
                     dax, day, dux, duy = G[c, 0], G[c, 1], G[c, 2], G[c, 3]
+                    nn = 0      # earlier capsules whose boxes meet c's (branch-free compaction)
+                    bx0, bx1, by0, by1 = BX0[ci], BX1[ci], BY0[ci], BY1[ci]
                     for ei in range(ci):
-                        e = order[ei]
-                        if not (box[e, 0] <= box[c, 1] and box[c, 0] <= box[e, 1] and box[e, 2] <= box[c, 3]
-                                and box[c, 2] <= box[e, 3]):
-                            continue
+                        NEAR[nn] = ei
+                        nn += (BX0[ei] <= bx1) & (bx0 <= BX1[ei]) & (BY0[ei] <= by1) & (by0 <= BY1[ei])
+                    for q in range(nn):
+                        e = order[NEAR[q]]
                         # capsule e in c's frame: its extent along c's axis selects a run of strata,
                         # its extent across it may miss c's rectangle altogether
                         dxa = G[e, 0] - dax
@@ -416,7 +436,7 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                             continue
                         i0 = int(s0) if s0 > 0.0 else 0
                         i1 = min(int(s1), na - 1)
-                        _mark_run(PX, PY, OWN, i0 * ns, (i1 + 1) * ns, G32, e, zero)
+                        _mark_run(PX, PY, OWN, (i0 * ns) & ~7, min(nkp, ((i1 + 1) * ns + 7) & ~7), G32, e, zero)
                     cnt = 0.0
                     fsum = 0.0
                     if cam_hasd[v]:
@@ -428,16 +448,15 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                                     cnt += 1.0
                                     fsum += f
                     else:
-                        for k in range(nk):     # pixel index of each kept point (-1: none), vectorized
-                            u = fx * PX[k] + cx
-                            w = fy * PY[k] + cy
-                            ok = (OWN[k] != zero) & (u >= zero) & (w >= zero) & (u < Wf) & (w < Hf)
-                            IDX[k] = np.int32(w) * Wst + np.int32(u) if ok else np.int32(-1)
-                        for k in range(nk):
-                            if IDX[k] >= 0:
-                                cnt += 1.0
-                                fsum += cov[v, IDX[k]]
-                        fsum *= cam_K[v, 4]
+                        icnt = 0
+                        isum = zero
+                        for k in range(nkp):    # branch-free: a dropped point reads pixel 0 with weight 0
+                            ok = (OWN[k] != zero) & (IDX[k] >= 0)
+                            j = IDX[k] if ok else np.int32(0)
+                            icnt += ok
+                            isum += cov[v, j] if ok else zero
+                        cnt = float(icnt)
+                        fsum = float(isum) * cam_K[v, 4]
                     w = ly * 2.0 * xm / nk
                     den += w * cnt
                     num += w * (cnt - fsum)
@@ -452,7 +471,7 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     m = fg_n[v]
                     base = v * fg_m
                     nb = fg_tab.shape[1] - 1
-                    for k in range(m):
+                    for k in range(fg_m):
                         flag[base + k] = zero
                     for ci in range(C):
                         c = order[ci]
@@ -460,8 +479,9 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                             continue
                         k0 = fg_tab[v, _bin(box[c, 2], fg_bins[v, 0], fg_bins[v, 1], nb)]
                         k1 = fg_tab[v, min(nb, _bin(box[c, 3], fg_bins[v, 0], fg_bins[v, 1], nb) + 1)]
-                        if k1 > k0:
-                            _mark_run(fg_x, fg_y, flag, base + k0, base + k1, G32, c, one)
+                        if k1 > k0:     # whole vectors: the padding points lie outside every hull
+                            _mark_run(fg_x, fg_y, flag, base + (k0 & ~7), base + min(fg_m, (k1 + 7) & ~7), G32, c,
+                                      one)
                     hit = 0.0
                     for k in range(m):
                         hit += flag[base + k]

@@ -287,8 +287,11 @@ class SilhouetteEnergy:
         self._kin = kinematic_tables(model)
         self._tmpl, self._tmpl_ptr, self._tmpl_na = _template(model, int(n_model_points), rng)
         # the kernel's layout: along the axis in [0, 1], across it in [-1, 1]
-        self._tmpl_a = np.ascontiguousarray(self._tmpl[:, 0], dtype=np.float32)
-        self._tmpl_s = np.ascontiguousarray(2.0 * self._tmpl[:, 1] - 1.0, dtype=np.float32)
+        # (padded by 8: the kernel runs over whole 8-lane vectors and drops the extra points)
+        self._tmpl_a = np.zeros((len(self._tmpl) + 8), np.float32)
+        self._tmpl_s = np.zeros((len(self._tmpl) + 8), np.float32)
+        self._tmpl_a[:len(self._tmpl)] = self._tmpl[:, 0]
+        self._tmpl_s[:len(self._tmpl)] = 2.0 * self._tmpl[:, 1] - 1.0
         # bigger capsules first: their points need no overlap test, and they own the shared area
         self._order = np.argsort(-np.diff(self._tmpl_ptr), kind="stable").astype(np.int64)
         self.n_template = int(self._tmpl_ptr[-1])
@@ -348,8 +351,9 @@ class SilhouetteEnergy:
         Wmax = max(c.width for c in small)
         # full resolution: the mask itself as uint8 0/1 (4x less memory to read than float32)
         cov = np.zeros((V, Hmax, Wmax), np.uint8 if self.downsample == 1 else np.float32)
-        fg_x = np.zeros((V, M), np.float32)
-        fg_y = np.zeros((V, M), np.float32)
+        Mp = max(8, (M + 7) // 8 * 8)    # whole 8-lane vectors; the padding lies far outside the image
+        fg_x = np.full((V, Mp), 1e6, np.float32)
+        fg_y = np.full((V, Mp), 1e6, np.float32)
         fg_n = np.zeros(V, np.int64)
         fg_area = np.zeros(V)
         fg_tab = np.zeros((V, _N_BINS + 1), np.int64)
