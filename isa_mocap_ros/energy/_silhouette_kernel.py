@@ -276,7 +276,7 @@ def _bin(y, y0, inv_dy, nb):  # pragma: no cover - compiled
 @numba.njit(parallel=True, cache=True, fastmath=True)
 def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                      cam_R, cam_t, cam_K, cam_D, cam_hasd, cov, cov_wh,
-                     order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_area,
+                     order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_xr, fg_area,
                      n_chunks, out):  # pragma: no cover - compiled
     """Fast Eq. 5 for poses ``X (n, D)`` into ``out (n,)``.
 
@@ -295,11 +295,13 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
     tmpl_a, tmpl_s : (T + 8,) float32 template points (8 padding points at the end), along the capsule axis in [0, 1] and across it in [-1, 1];
         capsule ``c`` owns ``tmpl_ptr[c]:tmpl_ptr[c + 1]`` (``tmpl_ptr (C + 1,)``), laid out as
         ``tmpl_na[c]`` strata along the axis (in increasing order) of equally many points each
-    fg_x, fg_y : (V * M,) float32 normalized foreground sample points, view ``v`` at ``v M``, sorted by y,
-        ``M`` a multiple of 8, padded with points far outside the image;  fg_n : (V,) int64 counts;
+    fg_x, fg_y : (V * S * Ms,) float32 normalized foreground sample points in ``S`` vertical strips
+        (x quantiles) per view, strip ``r = v S + s`` at ``r Ms``, sorted by y; ``Ms`` a multiple of 8,
+        padded with points far outside the image;  fg_n : (V,) int64 sample size per view;
         ``fg_n[v] == 0`` selects the area estimate of term 2 for view ``v``
-    fg_tab : (V, NB + 1) int64, ``fg_tab[v, b]`` = first point with ``y >= y0 + b dy`` (``fg_n[v]`` at NB)
-    fg_bins : (V, 2) ``y0, 1 / dy`` of those bins
+    fg_tab : (V S, NB + 1) int64, ``fg_tab[r, b]`` = first point of strip ``r`` with ``y >= y0 + b dy``
+        (the strip's count at NB)
+    fg_bins : (V S, 2) ``y0, 1 / dy`` of those bins;  fg_xr : (V S, 2) x range of each strip
     fg_area : (V,) area of the foreground in the normalized plane (full-resolution pixels)
     n_chunks : int, work units of the parallel loop
     out : (n,) float64
@@ -310,7 +312,8 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
     V = cam_R.shape[0]
     one = np.float32(1.0)
     zero = np.float32(0.0)
-    fg_m = fg_x.shape[0] // V
+    n_strips = fg_tab.shape[0] // V
+    fg_ms = fg_x.shape[0] // fg_tab.shape[0]
     for chunk in numba.prange(n_chunks):
         lo = chunk * n // n_chunks
         hi = (chunk + 1) * n // n_chunks
@@ -391,15 +394,16 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     ly32 = np.float32(ly)
                     xm32 = np.float32(xm)
                     for k in range(nkp):    # own hull test in the capsule's frame, then to the image
-                        yl = ylo32 + tmpl_a[k0 + k] * ly32
-                        xs = tmpl_s[k0 + k] * xm32
+                        kk = numba.uint64(k0 + k)   # unsigned: no wraparound test, the loop vectorizes
+                        yl = ylo32 + tmpl_a[kk] * ly32
+                        xs = tmpl_s[kk] * xm32
                         xl = abs(xs)
                         x2 = xs * xs
                         q = yl * ca - xl * sb
                         yb = yl - L
                         inside = ((x2 + yl * yl <= ra2) | (x2 + yb * yb <= rb2)
                                   | ((q >= zero) & (q <= caL) & (xl * ca + yl * sb <= ra)))
-                        OWN[k] = one if inside & (k < nk) else zero
+                        OWN[k] = one if inside else zero
                         px = ax + yl * ux - xs * uy
                         py = ay + yl * uy + xs * ux
                         PX[k] = px
@@ -408,6 +412,8 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                         w = fy * py + cy
                         ok = (u >= zero) & (w >= zero) & (u < Wf) & (w < Hf)
                         IDX[k] = np.int32(w) * Wst + np.int32(u) if ok else np.int32(-1)
+                    for k in range(nk, nkp):
+                        OWN[k] = zero
                     dax, day, dux, duy = G[c, 0], G[c, 1], G[c, 2], G[c, 3]
                     nn = 0      # earlier capsules whose boxes meet c's (branch-free compaction)
                     bx0, bx1, by0, by1 = BX0[ci], BX1[ci], BY0[ci], BY1[ci]
@@ -468,23 +474,28 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                 else:
                     # term 2: foreground points not covered by the model; the points are sorted by y,
                     # so a capsule's box meets a contiguous run of them (binary search)
+                    # the strips of view v; a capsule visits those its box meets in x, and in each the
+                    # run of points in its box's y range (whole vectors)
                     m = fg_n[v]
-                    base = v * fg_m
                     nb = fg_tab.shape[1] - 1
-                    for k in range(fg_m):
-                        flag[base + k] = zero
+                    r0 = v * n_strips
+                    for k in range(n_strips * fg_ms):
+                        flag[numba.uint64(r0 * fg_ms + k)] = zero
                     for ci in range(C):
                         c = order[ci]
                         if G[c, 12] == 0.0:
                             continue
-                        k0 = fg_tab[v, _bin(box[c, 2], fg_bins[v, 0], fg_bins[v, 1], nb)]
-                        k1 = fg_tab[v, min(nb, _bin(box[c, 3], fg_bins[v, 0], fg_bins[v, 1], nb) + 1)]
-                        if k1 > k0:     # whole vectors: the padding points lie outside every hull
-                            _mark_run(fg_x, fg_y, flag, base + (k0 & ~7), base + min(fg_m, (k1 + 7) & ~7), G32, c,
-                                      one)
-                    hit = 0.0
-                    for k in range(m):
-                        hit += flag[base + k]
+                        for r in range(r0, r0 + n_strips):
+                            if box[c, 0] > fg_xr[r, 1] or box[c, 1] < fg_xr[r, 0]:
+                                continue
+                            k0 = fg_tab[r, _bin(box[c, 2], fg_bins[r, 0], fg_bins[r, 1], nb)]
+                            k1 = fg_tab[r, min(nb, _bin(box[c, 3], fg_bins[r, 0], fg_bins[r, 1], nb) + 1)]
+                            if k1 > k0:
+                                _mark_run(fg_x, fg_y, flag, r * fg_ms + (k0 & ~7), r * fg_ms + min(fg_ms, (k1 + 7) & ~7),
+                                          G32, c, one)
+                    hit = 0.0     # the padding is never inside a hull: sum whole strips
+                    for k in range(n_strips * fg_ms):
+                        hit += flag[numba.uint64(r0 * fg_ms + k)]
                     t2 = 1.0 - hit / m
                 total += 0.5 * t1 + 0.5 * t2
             out[i] = total / V
