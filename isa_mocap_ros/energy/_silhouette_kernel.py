@@ -333,10 +333,11 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
         for c in range(C):
             kmax = max(kmax, tmpl_ptr[c + 1] - tmpl_ptr[c])
         kmax = (kmax + 7) & ~7      # runs of whole 8-lane vectors: no scalar remainder loops
-        PX = np.empty(kmax, np.float32)
-        PY = np.empty(kmax, np.float32)
-        OWN = np.empty(kmax, np.float32)
+        PX = np.zeros(kmax + 8, np.float32)     # a point's frame coordinates: along, across
+        PY = np.zeros(kmax + 8, np.float32)
+        OWN = np.zeros(kmax + 8, np.float32)
         IDX = np.empty(kmax, np.int32)
+        E32 = np.empty((1, 12), np.float32)
         for i in range(lo, hi):
             _fk_one(X[i], parents, offsets, ptr, dofs, axes, R, P)
             total = 0.0
@@ -366,10 +367,6 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                 # bounding rectangle; kept if inside c's hull and in no earlier capsule's hull
                 W = cov_wh[v, 0]
                 H = cov_wh[v, 1]
-                fx = np.float32(cam_K[v, 0])
-                fy = np.float32(cam_K[v, 1])
-                cx = np.float32(cam_K[v, 2] + 0.5)
-                cy = np.float32(cam_K[v, 3] + 0.5)
                 Wf = np.float32(W)
                 Hf = np.float32(H)
                 Wst = np.int32(cov_wh[v, 2])
@@ -390,10 +387,17 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     ax, ay, ux, uy = G32[c, 0], G32[c, 1], G32[c, 2], G32[c, 3]
                     L, ra, sb, ca = G32[c, 4], G32[c, 5], G32[c, 7], G32[c, 8]
                     caL, ra2, rb2 = G32[c, 9], G32[c, 10], G32[c, 11]
+                    # the pixel as an affine map of the point's frame coordinates (pinhole)
+                    u0 = np.float32(cam_K[v, 0] * G[c, 0] + cam_K[v, 2] + 0.5)
+                    uya = np.float32(cam_K[v, 0] * G[c, 2])
+                    uxs = np.float32(-cam_K[v, 0] * G[c, 3])
+                    w0 = np.float32(cam_K[v, 1] * G[c, 1] + cam_K[v, 3] + 0.5)
+                    wya = np.float32(cam_K[v, 1] * G[c, 3])
+                    wxs = np.float32(cam_K[v, 1] * G[c, 2])
                     ylo32 = np.float32(ylo)
                     ly32 = np.float32(ly)
                     xm32 = np.float32(xm)
-                    for k in range(nkp):    # own hull test in the capsule's frame, then to the image
+                    for k in range(nkp):    # own hull test in the capsule's frame (PX along, PY across)
                         kk = numba.uint64(k0 + k)   # unsigned: no wraparound test, the loop vectorizes
                         yl = ylo32 + tmpl_a[kk] * ly32
                         xs = tmpl_s[kk] * xm32
@@ -404,12 +408,10 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                         inside = ((x2 + yl * yl <= ra2) | (x2 + yb * yb <= rb2)
                                   | ((q >= zero) & (q <= caL) & (xl * ca + yl * sb <= ra)))
                         OWN[k] = one if inside else zero
-                        px = ax + yl * ux - xs * uy
-                        py = ay + yl * uy + xs * ux
-                        PX[k] = px
-                        PY[k] = py
-                        u = fx * px + cx        # pixel of the point (pinhole; -1: outside the image)
-                        w = fy * py + cy
+                        PX[k] = yl
+                        PY[k] = xs
+                        u = u0 + yl * uya + xs * uxs    # pixel of the point (pinhole; -1: outside the image)
+                        w = w0 + yl * wya + xs * wxs
                         ok = (u >= zero) & (w >= zero) & (u < Wf) & (w < Hf)
                         IDX[k] = np.int32(w) * Wst + np.int32(u) if ok else np.int32(-1)
                     for k in range(nk, nkp):
@@ -442,14 +444,24 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                             continue
                         i0 = int(s0) if s0 > 0.0 else 0
                         i1 = min(int(s1), na - 1)
-                        _mark_run(PX, PY, OWN, (i0 * ns) & ~7, min(nkp, ((i1 + 1) * ns + 7) & ~7), G32, e, zero)
+                        # the hull of e in c's frame (a rotation: the rest of its parameters stays)
+                        E32[0, 0] = sa
+                        E32[0, 1] = ta
+                        E32[0, 2] = G[e, 2] * dux + G[e, 3] * duy
+                        E32[0, 3] = G[e, 3] * dux - G[e, 2] * duy
+                        for t in range(4, 12):
+                            E32[0, t] = G32[e, t]
+                        ka = i0 * ns            # whole vectors from the first stratum on (scratch has slack)
+                        _mark_run(PX, PY, OWN, ka, ka + (((i1 + 1) * ns - ka + 7) & ~7), E32, 0, zero)
                     cnt = 0.0
                     fsum = 0.0
                     if cam_hasd[v]:
                         for k in range(nk):
                             if OWN[k] != zero:
-                                f = _lookup(np.float64(PX[k]), np.float64(PY[k]), v, cam_K, cam_D, cam_hasd,
-                                            cov, W, H, cov_wh[v, 2])
+                                yl = np.float64(PX[k])
+                                xs = np.float64(PY[k])
+                                f = _lookup(G[c, 0] + yl * G[c, 2] - xs * G[c, 3], G[c, 1] + yl * G[c, 3] + xs * G[c, 2],
+                                            v, cam_K, cam_D, cam_hasd, cov, W, H, cov_wh[v, 2])
                                 if f >= 0.0:
                                     cnt += 1.0
                                     fsum += f
