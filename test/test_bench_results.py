@@ -15,7 +15,7 @@ def test_all_quick_writes_the_page(tmp_path):
                  "--no-progress"]) == 0
     md = page.read_text()
     for head in ("# Results", "Smoke run", "- command: `isa-mocap bench all --quick --jobs 1", "- git commit:", "- machine:",
-                 "GB RAM", "## Targets (issue #7), from the measured numbers",
+                 "GB RAM", "## Headline figures", "robustness, knee RMSE (ours vs the ISA paper)", "## Targets (issue #7), from the measured numbers",
                  "## The comparison paper's findings, checked on our data",
                  "## Ackley function", "## Optimizer comparison", "## Robustness", "## Speed", "## Silhouette energy speed",
                  "## Renderer speed", "## Message adapter speed", "Fried. Stat.", "70 % pixel noise", "#### Offline tracker"):

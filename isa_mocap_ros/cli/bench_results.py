@@ -290,6 +290,44 @@ def targets(data: dict) -> list[tuple[str, str, str]]:
     return rows
 
 
+def headlines(data: dict) -> list[str]:
+    """One line per bench with its main measured figure (for the page's top and the closing note)."""
+    out = []
+    c = data.get("compare")
+    if c and c.get("mean_over_sequences_mm"):
+        from isa_mocap_ros.eval.compare import PEER_ALGORITHMS, label
+        for d in c["models"]:
+            b = 1500 if 1500 in c["budgets"] else c["budgets"][-1]
+            cand = [(c["mean_over_sequences_mm"][label(a, d, b)], a) for a in c["algorithms"]
+                    if label(a, d, b) in c["mean_over_sequences_mm"] and a not in PEER_ALGORITHMS]
+            peers = {a: c["mean_over_sequences_mm"][label(a, d, b)] for a in c["algorithms"]
+                     if a in PEER_ALGORITHMS and label(a, d, b) in c["mean_over_sequences_mm"]}
+            if cand:
+                e, a = min(cand)
+                out.append(f"comparison, {d} DOF, {b} evaluations: best of ours {a} {e:.1f} mm mean joint error over "
+                           f"{len(c['sequences'])} sequence(s)"
+                           + "".join(f"; {p} {v:.1f} mm" for p, v in peers.items()))
+    r = data.get("robustness")
+    if r and r.get("conditions"):
+        out.append("robustness, knee RMSE (ours vs the ISA paper): " + "; ".join(
+            f"{x['label']} {x['knee_rmse_deg']:.2f}° vs {x['paper_knee_rmse_deg']:.2f}° ({x['mpjpe_mm']:.1f} mm)"
+            for x in r["conditions"]))
+    sp = data.get("speed")
+    if sp:
+        e = sp["energy"]
+        line = f"speed: fast energy {e['fast_evals_per_s']:.0f} evaluations/s ({e['ratio']:.0f}× the exact one); tracker " \
+            + ", ".join(f"{x['frames_per_s']:.2f} frames/s at {x['evals_per_frame']}" for x in sp["tracker"]["rows"])
+        for x in sp["network"]["rows"]:
+            if "error" not in x and x.get("fps") is not None:
+                line += f"; network {x['mode']} {x['fps']:.2f} frame sets/s, p95 latency {_f(x['latency_ms_p95'], '{:.0f}')} ms"
+        out.append(line)
+    a = data.get("ackley")
+    if a:
+        ok = sum(1 for x in a["rows"] if x["success_rate"] == 1.0)
+        out.append(f"Ackley: {ok} of {len(a['rows'])} rows reach δ in every run ({a['runs']} runs per row)")
+    return out
+
+
 SECTIONS = (("ackley", "Ackley function (ISA §13.4.1, Tables 13.1-13.2)", md_ackley),
             ("compare", "Optimizer comparison (EA-vs-PF §5.2-5.4, with pycma and scipy-DE)", md_compare),
             ("robustness", "Robustness: noise and occlusions (ISA §13.4.2)", md_robustness),
@@ -353,6 +391,9 @@ def render_page(data: dict, *, meta: dict, figs: dict, page: Path, stale: set) -
           f"{_f(m['ram_gb'], '{:.1f}')} GB RAM, {m['os']}, Python {m['python']} ({m['host']})", ""]
     if stale:
         L += [f"- not re-run this time (last saved results shown): {', '.join(sorted(stale))}", ""]
+    heads = headlines(data)
+    if heads:
+        L += ["## Headline figures", ""] + [f"- {h}" for h in heads] + [""]
     L += ["## Targets (issue #7), from the measured numbers", "", "| target | measured | status |", "|---|---|---|"]
     for name, vals, st in targets(data):
         L.append(f"| {name} | {vals} | **{st}** |")
