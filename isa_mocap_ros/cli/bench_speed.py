@@ -10,7 +10,8 @@ after the other on the same machine:
    first ``--frames`` (default 30) frames of ``bags/demo`` after its background frames: h-isa, 39
    DOF, images segmented as ``isa-mocap track`` does, first frame from the ground truth; the rate is
    frames over the summed wall time of the tracker's steps (segmentation and bag reading excluded),
-   and the whole call's wall time is reported too;
+   and the whole call's wall time is reported too (after an unreported warm-up call that loads or
+   compiles the compiled kernels);
 3. **network**: ``isa-mocap run``'s code (:mod:`isa_mocap_ros.cli.run`: segmentation, prediction and
    estimator nodes and a recorder, each its own process, over DDS on localhost) on ``bags/demo``,
    once in real time (rate 1.0: frames the estimator cannot keep up with are dropped) and once in
@@ -60,15 +61,19 @@ def tracker_speed(bag: Path, *, frames: int, budgets=BUDGETS, optimizer: str = "
     """Offline tracker frames/s per budget (``isa-mocap track``'s code)."""
     from isa_mocap_ros.cli.track import track_bag
 
+    def ns(b: int, n: int, name: str) -> argparse.Namespace:
+        return argparse.Namespace(
+            bag=str(bag), out=str(work / name), optimizer=optimizer, evals=int(b), params=None, model=None,
+            seed=0, frames=n, start=0, use_masks=use_masks, learn_frames=None, shape="truth", init="truth",
+            predictor=None, prior=None, prior_eta=0.0, energy="fast", overwrite=True, no_progress=True)
+
+    # warm-up (not reported): loads or compiles every numba function the tracker calls
+    track_bag(ns(min(budgets), 3, "track_warmup"))
     rows = []
     for b in budgets:
         got: dict = {}
-        ns = argparse.Namespace(
-            bag=str(bag), out=str(work / f"track_{b}"), optimizer=optimizer, evals=int(b), params=None, model=None,
-            seed=0, frames=frames + 1, start=0, use_masks=use_masks, learn_frames=None, shape="truth", init="truth",
-            predictor=None, prior=None, prior_eta=0.0, energy="fast", overwrite=True, no_progress=True)
         t0 = time.perf_counter()
-        s = track_bag(ns, collect=got)
+        s = track_bag(ns(b, frames + 1, f"track_{b}"), collect=got)
         wall = time.perf_counter() - t0
         steps = np.array(list(got["step_seconds"].values()), dtype=float)
         rows.append({"evals_per_frame": int(b), "frames": int(steps.size),
