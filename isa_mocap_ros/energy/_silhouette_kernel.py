@@ -417,6 +417,7 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     for k in range(nk, nkp):
                         OWN[k] = zero
                     dax, day, dux, duy = G[c, 0], G[c, 1], G[c, 2], G[c, 3]
+                    na_ly = na / ly     # strata per unit length along the axis
                     nn = 0      # earlier capsules whose boxes meet c's (branch-free compaction)
                     bx0, bx1, by0, by1 = BX0[ci], BX1[ci], BY0[ci], BY1[ci]
                     for ei in range(ci):
@@ -438,8 +439,8 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                             continue
                         sa = dxa * dux + dya * duy
                         sb2 = dxb * dux + dyb * duy
-                        s0 = (min(sa - rea, sb2 - reb) - ylo) / ly * na - 1e-4
-                        s1 = (max(sa + rea, sb2 + reb) - ylo) / ly * na + 1e-4
+                        s0 = (min(sa - rea, sb2 - reb) - ylo) * na_ly - 1e-4
+                        s1 = (max(sa + rea, sb2 + reb) - ylo) * na_ly + 1e-4
                         if s1 < 0.0 or s0 >= na:
                             continue
                         i0 = int(s0) if s0 > 0.0 else 0
@@ -468,11 +469,10 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     else:
                         icnt = 0
                         isum = zero
-                        for k in range(nkp):    # branch-free: a dropped point reads pixel 0 with weight 0
-                            ok = (OWN[k] != zero) & (IDX[k] >= 0)
-                            j = IDX[k] if ok else np.int32(0)
-                            icnt += ok
-                            isum += cov[v, j] if ok else zero
+                        for k in range(nk):     # nearly all points are kept: the branch predicts well
+                            if OWN[k] != zero and IDX[k] >= 0:
+                                icnt += 1
+                                isum += cov[v, IDX[k]]
                         cnt = float(icnt)
                         fsum = float(isum) * cam_K[v, 4]
                     w = ly * 2.0 * xm / nk
