@@ -236,16 +236,14 @@ def _hull32(G, G32, c):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always")
-def _mark_run(X, Y, Fl, k0, k1, G32, c, val):  # pragma: no cover - compiled
-    """``Fl[k] = val`` for ``k`` in ``k0:k1`` where ``(X[k], Y[k])`` is inside capsule ``c``; float32,
-    branch-free (vectorizes). Index bounds rather than slices: a slice costs reference counting.
+def _mark_hull(X, Y, Fl, k0, k1, ax, ay, ux, uy, L, ra, sb, ca, caL, ra2, rb2, val):  # pragma: no cover - compiled
+    """``Fl[k] = val`` for ``k`` in ``k0:k1`` where ``(X[k], Y[k])`` is inside the 2-D hull with
+    float32 parameters ``ax ... rb2`` (see :func:`_hull32`); branch-free (vectorizes). Index bounds
+    rather than slices: a slice costs reference counting.
 
     The 2-D hull is the union of disc a, disc b and the part of the strip between the normals at
     the tangent points that lies inside the tangent lines (the same set as :func:`_inside_local`;
     with ``ca L = -1`` no point is in the strip, as there when one disc holds the other)."""
-    ax, ay, ux, uy = G32[c, 0], G32[c, 1], G32[c, 2], G32[c, 3]
-    L, ra, sb, ca = G32[c, 4], G32[c, 5], G32[c, 7], G32[c, 8]
-    caL, ra2, rb2 = G32[c, 9], G32[c, 10], G32[c, 11]
     zero = np.float32(0.0)
     for j in range(k1 - k0):
         k = numba.uint64(k0 + j)   # unsigned: no negative-index wraparound, so the loop vectorizes
@@ -260,6 +258,13 @@ def _mark_run(X, Y, Fl, k0, k1, G32, c, val):  # pragma: no cover - compiled
         inside = ((x2 + yl * yl <= ra2) | (x2 + yb * yb <= rb2)
                   | ((q >= zero) & (q <= caL) & (xl * ca + yl * sb <= ra)))
         Fl[k] = val if inside else Fl[k]
+
+
+@numba.njit(cache=True, inline="always")
+def _mark_run(X, Y, Fl, k0, k1, G32, c, val):  # pragma: no cover - compiled
+    """:func:`_mark_hull` with the hull of capsule ``c`` in ``G32``."""
+    _mark_hull(X, Y, Fl, k0, k1, G32[c, 0], G32[c, 1], G32[c, 2], G32[c, 3], G32[c, 4], G32[c, 5], G32[c, 7],
+               G32[c, 8], G32[c, 9], G32[c, 10], G32[c, 11], val)
 
 
 @numba.njit(cache=True, inline="always")
@@ -337,7 +342,6 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
         PY = np.zeros(kmax + 8, np.float32)
         OWN = np.zeros(kmax + 8, np.float32)
         IDX = np.empty(kmax, np.int32)
-        E32 = np.empty((1, 12), np.float32)
         for i in range(lo, hi):
             _fk_one(X[i], parents, offsets, ptr, dofs, axes, R, P)
             total = 0.0
@@ -446,14 +450,11 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                         i0 = int(s0) if s0 > 0.0 else 0
                         i1 = min(int(s1), na - 1)
                         # the hull of e in c's frame (a rotation: the rest of its parameters stays)
-                        E32[0, 0] = sa
-                        E32[0, 1] = ta
-                        E32[0, 2] = G[e, 2] * dux + G[e, 3] * duy
-                        E32[0, 3] = G[e, 3] * dux - G[e, 2] * duy
-                        for t in range(4, 12):
-                            E32[0, t] = G32[e, t]
                         ka = i0 * ns            # whole vectors from the first stratum on (scratch has slack)
-                        _mark_run(PX, PY, OWN, ka, ka + (((i1 + 1) * ns - ka + 7) & ~7), E32, 0, zero)
+                        _mark_hull(PX, PY, OWN, ka, ka + (((i1 + 1) * ns - ka + 7) & ~7), np.float32(sa),
+                                   np.float32(ta), np.float32(G[e, 2] * dux + G[e, 3] * duy),
+                                   np.float32(G[e, 3] * dux - G[e, 2] * duy), G32[e, 4], G32[e, 5], G32[e, 7],
+                                   G32[e, 8], G32[e, 9], G32[e, 10], G32[e, 11], zero)
                     cnt = 0.0
                     fsum = 0.0
                     if cam_hasd[v]:
