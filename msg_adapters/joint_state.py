@@ -32,6 +32,9 @@ def _names(field_name: str, names: Any) -> list[str]:
     for i, n in enumerate(out):
         if not isinstance(n, str):
             raise AdapterError(f"{field_name}[{i}]", "a str", n)
+        if "\x00" in n:
+            # ROS strings are NUL-terminated on the wire: 'a\x00b' would arrive as 'a'
+            raise AdapterError(f"{field_name}[{i}]", "a str without NUL characters", n)
     return out
 
 

@@ -654,3 +654,11 @@ def test_msg_adapters_imports_nothing_from_isa_mocap_ros():
     code = ("import sys, msg_adapters; bad = [m for m in sys.modules if m.startswith('isa_mocap_ros')]; "
             "assert not bad, bad")
     subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
+
+
+def test_joint_names_with_nul_rejected():
+    # a NUL ends a ROS string on the wire, so ['', '\x00'] would arrive as two '' (found by the fuzz test)
+    with pytest.raises(ma.AdapterError, match=r"names\[1\].*without NUL"):
+        ma.arrays_to_joint_state(["", "\x00"], [0.0, 1.0])
+    with pytest.raises(ma.AdapterError, match="without NUL"):
+        ma.joint_state_to_arrays(JointState(name=["a\x00b"], position=[0.0]))
