@@ -469,7 +469,7 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                                     fsum += f
                     else:
                         icnt = 0
-                        isum = zero
+                        isum = cov[v, 0] - cov[v, 0]    # an integer for the uint8 mask: 1-cycle additions
                         for k in range(nk):     # nearly all points are kept: the branch predicts well
                             if OWN[k] != zero and IDX[k] >= 0:
                                 icnt += 1
