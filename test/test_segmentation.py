@@ -286,3 +286,125 @@ def test_rendered_body_over_synthetic_room():
                                 background=background)
             assert truth.any()
             assert iou(seg.apply(camera_noise(rgb)), truth) >= 0.9
+
+
+# --------------------------------------------------------------------------- robust mode (pixel noise)
+# ISA §13.4.2: every frame, the empty learning frames included, has each pixel replaced with
+# probability p by a uniform random colour. The plain model learns a variance of ~60 levels per pixel
+# and returns empty masks (robust="off" below, the model before the robust mode existed).
+
+def _noisy_run(scene, p: float, robust: str, n_track: int = 6, seed: int = 20):
+    from isa_mocap_ros.vision.distort import pixel_noise
+
+    rng = np.random.default_rng(seed)
+    seg = BackgroundSegmenter(SegmentationConfig(robust=robust))
+    for _ in range(10):
+        assert not seg.apply(pixel_noise(noisy(scene, rng), p, rng=rng)).any()
+    ious = []
+    for k in range(n_track):
+        truth = person_mask(60 + 35 * k)
+        ious.append(iou(seg.apply(pixel_noise(compose(scene, truth, rng), p, rng=rng)), truth))
+    return seg, ious
+
+
+@pytest.mark.parametrize("p, min_iou", [(0.5, 0.9), (0.7, 0.85)])
+def test_pixel_noise_switches_on_the_robust_mode(scene, p, min_iou):
+    # measured: min IoU 0.943 (p = 0.5) and 0.894 (p = 0.7) over 8 frames; robust="off": 0
+    seg, ious = _noisy_run(scene, p, "auto")
+    assert seg.robust_active
+    assert abs(seg.outlier_fraction - p) < 0.05      # about the noise probability
+    assert min(ious) >= min_iou, ious
+    plain, ious_off = _noisy_run(scene, p, "off", n_track=2)
+    assert not plain.robust_active and max(ious_off) < 0.1, ious_off
+
+
+def test_clean_images_keep_the_plain_model(scene):
+    runs = {}
+    for robust in ("auto", "off"):
+        rng = np.random.default_rng(21)
+        seg = BackgroundSegmenter(SegmentationConfig(robust=robust))
+        runs[robust] = [seg.apply(noisy(scene, rng) if k < 10 else compose(scene, person_mask(60 + 20 * k - 200), rng))
+                        for k in range(14)]
+        if robust == "auto":
+            assert not seg.robust_active and seg.outlier_fraction < 0.01
+    assert all((a == b).all() for a, b in zip(runs["auto"], runs["off"]))
+
+
+def test_robust_background_ignores_occluders_in_the_learning_frames(scene):
+    """Random grey rectangles in every learning frame: the per-pixel mode keeps the background."""
+    from isa_mocap_ros.vision.distort import occluders
+
+    rng = np.random.default_rng(22)
+    seg = BackgroundSegmenter(SegmentationConfig())
+    plain = BackgroundSegmenter(SegmentationConfig(robust="off"))
+    for _ in range(10):
+        img = occluders(noisy(scene, rng), 35, rng=rng)
+        seg.apply(img)
+        plain.apply(img)
+    err = np.abs(seg.background_image().astype(int) - scene).mean()
+    err_plain = np.abs(plain.background_image().astype(int) - scene).mean()
+    assert err < 3 < 2 * err_plain, (err, err_plain)
+    truth = person_mask(150)
+    img = compose(scene, truth, rng)           # a frame without occluders
+    assert iou(seg.apply(img), truth) >= 0.9
+    assert iou(plain.apply(img), truth) < 0.9  # the polluted mean / variance miss parts of the person
+
+
+def test_robust_mode_forced_on_with_a_clean_plate(scene):
+    from isa_mocap_ros.vision.distort import pixel_noise
+
+    rng = np.random.default_rng(23)
+    seg = BackgroundSegmenter(SegmentationConfig(robust="on"), clean_plate=scene)
+    assert seg.robust_active and seg.outlier_fraction is None
+    truth = person_mask(140)
+    out = seg.apply(pixel_noise(compose(scene, truth, rng), 0.5, rng=rng))
+    assert abs(seg.outlier_fraction - 0.5) < 0.05
+    assert iou(out, truth) >= 0.85
+
+
+@pytest.mark.parametrize("channels", [3, 1])
+def test_robust_background_numba_agrees_with_numpy(channels):
+    from isa_mocap_ros.vision.segmentation import _robust_background_numba, _robust_background_numpy
+
+    rng = np.random.default_rng(24)
+    base = rng.integers(0, 256, (1, 30, 40, channels)).astype(np.int16)
+    stack = base + rng.normal(0, 4, (7, 30, 40, channels)).round().astype(np.int16)
+    hit = rng.random((7, 30, 40)) < 0.6
+    stack[hit] = rng.integers(0, 256, (int(hit.sum()), channels))
+    stack = np.clip(stack, 0, 255).astype(np.uint8)
+    a = _robust_background_numba(stack, 20.0)
+    b = _robust_background_numpy(stack, 20.0)
+    np.testing.assert_array_equal(a[2], b[2])
+    np.testing.assert_allclose(a[0], b[0], atol=1e-3)
+    np.testing.assert_allclose(a[1], b[1], rtol=1e-4, atol=1e-3)
+    if channels == 3:
+        # where at least 2 samples agree, the mode is the clean value up to the camera noise (but for
+        # pixels with at most one clean sample where 2 random colours agree with each other; in grey
+        # images random values agree far more often)
+        ok = a[2] >= 2
+        err = np.abs(a[0][ok] - base[0][ok]).max(axis=-1)
+        assert ok.mean() > 0.5 and (err > 20).mean() < 0.02   # measured 1.2 %
+
+
+def test_robust_config_is_checked():
+    with pytest.raises(SegmentationError, match=r"robust: expected one of .*got 'yes'"):
+        SegmentationConfig(robust="yes")
+    with pytest.raises(SegmentationError, match=r"robust_detect_fraction"):
+        SegmentationConfig(robust_detect_fraction=0.0)
+    with pytest.raises(SegmentationError, match=r"robust_radius"):
+        SegmentationConfig(robust_radius=-1.0)
+    with pytest.raises(SegmentationError, match=r"vote_sigma_px"):
+        SegmentationConfig(vote_sigma_px=float("nan"))
+
+
+def test_pipeline_yaml_segmentation_section_matches_the_config_defaults():
+    import dataclasses
+    from pathlib import Path
+
+    import yaml
+
+    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "config" / "pipeline.yaml").read_text())
+    section = cfg["/mocap/segmentation"]["ros__parameters"]
+    defaults = {f.name: f.default for f in dataclasses.fields(SegmentationConfig)}
+    assert set(section) - {"views"} == set(defaults)
+    assert {k: section[k] for k in defaults} == defaults

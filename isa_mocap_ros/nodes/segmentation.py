@@ -8,7 +8,8 @@ Run alone (relative topic names; the network runs it in ``/mocap``)::
 Per view ``i`` it subscribes to ``cam<i>/image_raw`` (sensor-data QoS) and keeps one
 :class:`~isa_mocap_ros.vision.segmentation.BackgroundSegmenter` (EA-vs-PF §3.2: a per-pixel colour
 model learnt from the first ``learn_frames`` images or from a clean plate; OpenCV MOG2/KNN as
-alternatives; morphological clean-up and small-blob removal). Each image gives one
+alternatives; morphological clean-up and small-blob removal; an outlier-robust mode for images with
+impulsive pixel noise, ``robust``). Each image gives one
 ``cam<i>/mask`` (mono8, 0/255, reliable depth 10) with the source image's header (stamp and
 frame id), including the all-zero masks of the learning phase, so frame sets stay complete
 downstream. The parameters mirror :class:`~isa_mocap_ros.vision.segmentation.SegmentationConfig`.
@@ -63,6 +64,13 @@ _PARAMS = {
     "history": ("mog2/knn: OpenCV history", 1, 100000),
     "knn_dist2_threshold": ("knn: OpenCV dist2Threshold", 0.01, 1e6),
     "kernel": ("colour model implementation: numba or numpy", None, None),
+    "robust": ("colour: outlier-robust mode for pixel noise (mode background + neighbourhood vote): "
+               "auto, on or off", None, None),
+    "robust_detect_fraction": ("robust=auto: outlying share of the learning samples that switches it on",
+                               0.001, 0.999),
+    "robust_radius": ("robust background: samples agree within this many levels per channel", 0.0, 255.0),
+    "vote_sigma_px": ("robust mode: Gaussian vote window sigma, px (0 = from the measured noise level)",
+                      0.0, 50.0),
 }
 
 
@@ -113,6 +121,7 @@ class SegmentationNode(Node):
 
     def _callback(self, v: int):
         seg, pub = self.segmenters[v], self.mask_pubs[v]
+        reported = [False]   # the robust-mode decision is logged once per view
 
         def cb(msg: Image) -> None:
             t0 = time.perf_counter()
@@ -131,6 +140,11 @@ class SegmentationNode(Node):
             except SegmentationError as exc:
                 self.problems.report(f"image{v}:segmenter", f"cam{v}/image_raw dropped: {exc}")
                 return
+            if not reported[0] and not seg.learning and seg.outlier_fraction is not None:
+                reported[0] = True
+                self.get_logger().info(
+                    f"cam{v}: background learnt, outlying share {seg.outlier_fraction:.3f} -> robust mode "
+                    + ("on (neighbourhood vote)" if seg.robust_active else "off"))
             out = ma.array_to_image(mask, "mono8")
             out.header = msg.header
             pub.publish(out)
