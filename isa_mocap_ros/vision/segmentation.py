@@ -30,6 +30,34 @@ Methods
 Every method ends with the same clean-up (:func:`clean_mask`): morphological opening (removes
 speckle), closing (fills small gaps), removal of connected components smaller than
 ``min_blob_area_px``.
+
+Robust mode (``"colour"``, ``robust``)
+---------------------------------------
+For the ISA paper's pixel noise (§13.4.2: each pixel replaced with probability ``p`` = 0.5 or 0.7
+by a uniform random colour, in every frame, the empty learning frames included). The plain model
+then learns a standard deviation of ~60 levels everywhere and finds nothing.
+
+* Background: per pixel the *mode* of the learning samples (at most ``ROBUST_MAX_SAMPLES``): the
+  sample agreeing (every channel within ``robust_radius``) with the most others, ties to the
+  tightest group; ``mu`` / ``s^2`` are the mean / variance of the samples agreeing with it. Random
+  colours rarely agree with anything, camera-noise copies of the background do. Pixels where no
+  two samples agree are *unreliable*: filled from reliable neighbours and left out of the vote.
+* Decision: the share ``f`` of learning samples at reliable pixels that the robust model calls
+  foreground (``d > threshold``) is measured; ``robust="auto"`` uses the robust mode when
+  ``f > robust_detect_fraction`` (clean images: < 1 %), otherwise the plain model above (same
+  results as without this mode).
+* Per frame: the per-pixel test ``D = d > threshold`` is a coin flip of probability ``f`` on the
+  background and ~1 on the person. ``f`` is re-measured on every frame (reliable pixels outside the
+  previous dilated mask), and a pixel is foreground when the Gaussian-weighted share of ``D`` over
+  reliable pixels around it exceeds ``f + (1 - f) / 2``. The window's ``sigma`` (``vote_sigma_px``,
+  0 = automatic) is chosen from ``f`` so that the share on the background stays ``z = 2.5``
+  standard deviations below the threshold (:func:`_auto_sigma`: 1.4 px at ``f`` = 0.5, 2.2 px at
+  0.7). Then the usual clean-up.
+* Update: only pixels that match the model (``D = 0``) outside the dilated mask (a noisy pixel
+  must not pull the mean); a global change (lighting) is *not* learnt in this mode.
+
+Occluders (random rectangles) are foreground to any background model; the robust estimate only
+keeps those present in the learning frames out of the background.
 """
 from __future__ import annotations
 
