@@ -16,7 +16,8 @@ def test_estimator_section_matches_tracker_defaults():
     tc = TrackerConfig()
     pairs = {"optimizer": tc.optimizer, "evals": tc.evals_per_frame, "energy": tc.energy_method,
              "downsample": tc.downsample, "search_radius_rad": tc.search_radius_rad, "predictor": tc.predictor,
-             "predictor_order": tc.predictor_order, "prior_eta": tc.prior_eta, "seed": tc.seed}
+             "predictor_order": tc.predictor_order, "prior_eta": tc.prior_eta, "seed": tc.seed,
+             "pelvis_fraction": tc.pelvis_fraction}
     assert {k: est[k] for k in pairs} == pairs
 
 

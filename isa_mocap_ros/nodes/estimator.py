@@ -62,6 +62,8 @@ class EstimatorNode(Node):
         downsample = declare(self, "downsample", tc.downsample, "mask downsampling for the fast energy", lo=1, hi=16)
         radius = declare(self, "search_radius_rad", tc.search_radius_rad,
                          "joint-angle search radius around the prediction", lo=0.01, hi=3.2)
+        pelvis = declare(self, "pelvis_fraction", tc.pelvis_fraction, "share of the budget for the pelvis stage "
+                         "(root re-fit with its children held in the world; 0 = off)", lo=0.0, hi=0.9)
         predictor = declare(self, "predictor", tc.predictor, "ar, constant_pose or constant_velocity")
         order = declare(self, "predictor_order", tc.predictor_order, "AR order (past motions used; keep equal to the prediction node's order)", lo=1, hi=20)
         self.prior_eta = declare(self, "prior_eta", 0.0, "weight of the pose prior (0 = off)", lo=0.0, hi=1e6)
@@ -100,7 +102,7 @@ class EstimatorNode(Node):
         self.tracker_settings = dict(optimizer=self.optimizer, evals=self.evals, params=self.optimizer_params,
                                      seed=self.seed, energy=energy, downsample=downsample,
                                      search_radius_rad=radius, predictor=predictor, predictor_order=order,
-                                     prior_eta=self.prior_eta, prior_file=prior_file)
+                                     prior_eta=self.prior_eta, prior_file=prior_file, pelvis_fraction=pelvis)
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
                                       slop_ns=0 if sync == "exact" else int(slop_s * 1e9),
                                       max_wait_s=self.view_timeout_s, min_views=min(min_views, self.n_views))

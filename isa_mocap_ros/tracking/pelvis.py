@@ -1,0 +1,62 @@
+"""Pelvis stage: re-fit the root with the root's child joints held still in the world.
+
+Why (measured on the CMU walk, ``docs/tracking.md``): the pelvis is a small part of the silhouette,
+so its orientation is weakly observed. Along a sequence the estimated root rotation drifts (20-50°
+of pitch within 150 frames) while the spine and hips bend the opposite way, so the torso and the
+thighs still fit the masks. That compensated pose is a trap for the §3.3 hierarchy: moving the root
+alone turns the whole (well fitted) body and raises the energy 5×, moving any one partition to the
+truth raises it as well, although the straight line from the estimate to the truth descends all
+the way. The coordinated move that leaves the trap is "turn the pelvis, keep the children":
+
+    for a root candidate ``(t', r')``: every child joint ``c`` of the root with three distinct
+    rotation axes gets the local rotation ``L_c' = R(r')^T R(r) L_c``, so its world rotation
+    ``R(r) L_c`` is unchanged; its Euler angles are re-read in the joint's own axis order.
+
+Only the pelvis and the joint *centres* at its ends (hips, spine base) move; everything below the
+children turns with them rigidly. This is a change of coordinates of the root partition, not a new
+energy: the stage minimises the same total energy with the configured algorithm.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+__all__ = ["PelvisMove"]
+
+
+class PelvisMove:
+    """Poses for root candidates with the root's children kept in the world (see module docstring).
+
+    Parameters
+    ----------
+    model : BodyModel
+        Children of the root (joint 0) whose DOFs are three rotations about distinct axes are
+        compensated (the spine base and both hips of the 28/39-DOF models; the hips of the 18-DOF
+        model); others keep their angles.
+    """
+
+    def __init__(self, model) -> None:
+        self.model = model
+        self.children: list[tuple[list[int], str]] = []
+        for j in range(1, len(model.parents)):
+            if int(model.parents[j]) != 0:
+                continue
+            dofs = [int(k) for k in model.joint_dofs[j]]
+            axes = [int(model.dof_axis[k]) for k in dofs]
+            if len(dofs) == 3 and len(set(axes)) == 3:
+                self.children.append((dofs, "".join("XYZ"[a] for a in axes)))   # intrinsic sequence
+
+    def __call__(self, x: np.ndarray, roots: np.ndarray) -> np.ndarray:
+        """Poses ``(n, D)``: ``x`` with its root replaced by each row of ``roots (n, 6)`` and the
+        compensated child angles (not clipped to the limits)."""
+        x = np.asarray(x, dtype=float)
+        roots = np.atleast_2d(np.asarray(roots, dtype=float))
+        X = np.repeat(x[None, :], len(roots), axis=0)
+        X[:, :6] = roots
+        if not self.children:
+            return X
+        turn = Rotation.from_rotvec(roots[:, 3:6]).inv() * Rotation.from_rotvec(x[3:6])   # R(r')^T R(r)
+        for dofs, seq in self.children:
+            local = Rotation.from_euler(seq, x[dofs])
+            X[:, dofs] = (turn * local).as_euler(seq)
+        return X
