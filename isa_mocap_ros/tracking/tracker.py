@@ -560,10 +560,14 @@ class Tracker:
         hi[tight] = lo[tight] + 1e-6
         return lo, hi, spread
 
-    def _optimize(self, pred: np.ndarray, rng: np.random.Generator, spread_scale: float = 1.0, notes=None):
+    def _optimize(self, pred: np.ndarray, rng: np.random.Generator, spread_scale: float = 1.0, notes=None,
+                  pelvis_stage: bool = True):
         """One optimizer run of the frame budget around ``pred`` (raises the optimizer's errors), then
         the pelvis stage (``config.pelvis_fraction`` of the budget); ``spread_scale`` multiplies the
-        initial spreads (the first frame starts from a rough pose); skipped stages are noted in ``notes``."""
+        initial spreads (the first frame starts from a rough pose); skipped stages are noted in ``notes``.
+        The automatically initialized frame has no pelvis stage (``pelvis_stage=False``): from a rough
+        standing pose it turned the pelvis against the legs (bags/demo: 270-340 mm on the first
+        frames, measured)."""
         from isa_mocap_ros.optim import make_optimizer, minimize
 
         cfg = self.config
@@ -584,7 +588,7 @@ class Tracker:
             params["initial_population"] = P
         opt = make_optimizer(cfg.optimizer, x0, spread, rng=rng, bounds=(lo, hi),
                              rotation_blocks=self.model.rotation_blocks, **params)
-        stage = self._pelvis_stage_plan(lo, hi, spread, notes)
+        stage = self._pelvis_stage_plan(lo, hi, spread, notes) if pelvis_stage else None
         if stage is None:
             return minimize(opt, self.total_energy, max_evals=cfg.evals_per_frame)
         name, stage_params, share = stage
@@ -704,7 +708,7 @@ class Tracker:
                 res = self._optimize(pred, frame_rng(cfg.seed, frame_index) if j == 0
                                      else frame_rng(cfg.seed, frame_index, 3, j),
                                      spread_scale=cfg.init_spread_scale if initialized else 1.0,
-                                     notes=notes if j == 0 else None)
+                                     notes=notes if j == 0 else None, pelvis_stage=not initialized)
             except ValueError as exc:
                 # a configuration the optimizer rejects (budget below one generation, bad parameter):
                 # report it on every frame instead of crashing the caller
