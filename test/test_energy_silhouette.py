@@ -213,3 +213,32 @@ def test_distorted_camera_runs_and_is_small_at_truth(scene):
     x[0] += 0.1
     e = f(np.stack([x0, x]))
     assert e[0] < 0.05 and e[1] > e[0] + 0.1
+
+
+_HASH_SCRIPT = """
+import hashlib, numpy as np
+from isa_mocap_ros.body import capsule_endpoints, make_model
+from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
+from isa_mocap_ros.vision import default_rig, render_mask
+m = make_model(39); rig = default_rig(width=160, height=120); x = m.rest_pose()
+en = SilhouetteEnergy(m, rig.cameras, n_model_points=640, n_mask_points=384, rng=np.random.default_rng(0))
+en.set_masks([render_mask(c, capsule_endpoints(m, x)[0], m.capsule_radii) for c in rig.cameras])
+X = np.clip(x + np.random.default_rng(1).normal(0, 0.1, (300, m.dof)), m.lower, m.upper)
+print(hashlib.sha1(en(X).tobytes()).hexdigest())
+"""
+
+
+def test_fresh_and_cached_kernel_agree_bit_for_bit(tmp_path):
+    """A process that compiles the kernel and one that loads it from numba's cache must compute the
+    same bits (with fastmath "reassoc" they did not: lockstep network vs offline tracker differed)."""
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), NUMBA_NUM_THREADS="1")
+    runs = [subprocess.run([sys.executable, "-c", _HASH_SCRIPT], env=env, capture_output=True, text=True,
+                           timeout=300) for _ in range(2)]
+    for r in runs:
+        assert r.returncode == 0, r.stderr[-2000:]
+    assert any((tmp_path / "numba").rglob("*.nbc"))       # the second run loaded what the first compiled
+    assert runs[0].stdout == runs[1].stdout

@@ -278,7 +278,13 @@ def _bin(y, y0, inv_dy, nb):  # pragma: no cover - compiled
     return int(b)
 
 
-@numba.njit(parallel=True, cache=True, fastmath=True)
+# fastmath without "reassoc": with reassociation the freshly compiled kernel and the one loaded from
+# numba's cache gave energies differing in the last bit (measured), so a process that compiled it
+# and one that loaded it (estimator node vs `isa-mocap track`, bench workers) disagreed; ~5 % slower.
+DETERMINISTIC_FASTMATH = {"contract", "nnan", "ninf", "nsz", "arcp", "afn"}
+
+
+@numba.njit(parallel=True, cache=True, fastmath=DETERMINISTIC_FASTMATH)
 def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                      cam_R, cam_t, cam_K, cam_D, cam_hasd, cov, cov_wh,
                      order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_xr, fg_area,
@@ -388,7 +394,7 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     na = tmpl_na[c]
                     ns = nk // na
                     nkp = (nk + 7) & ~7     # padded: points nk.. are dropped (OWN = 0)
-                    ax, ay, ux, uy = G32[c, 0], G32[c, 1], G32[c, 2], G32[c, 3]
+                    ax, ay = G32[c, 0], G32[c, 1]
                     L, ra, sb, ca = G32[c, 4], G32[c, 5], G32[c, 7], G32[c, 8]
                     caL, ra2, rb2 = G32[c, 9], G32[c, 10], G32[c, 11]
                     # the pixel as an affine map of the point's frame coordinates (pinhole)
