@@ -147,8 +147,8 @@ class SegmentationNode(Node):
                     + ("on (neighbourhood vote)" if seg.robust_active else "off"))
             out = ma.array_to_image(mask, "mono8")
             out.header = msg.header
+            self.masks_published[v] += 1      # before publish(): a Ctrl-C right after it must not lose the count
             pub.publish(out)
-            self.masks_published[v] += 1
             self.latency_s.append(time.perf_counter() - t0)
         return cb
 
