@@ -39,6 +39,7 @@ automatically and then tracks from that pose.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -348,6 +349,7 @@ class Tracker:
         self.predictor = _make_predictor(config) if predictor is None else predictor
         self._last: np.ndarray | None = None
         self._pelvis = PelvisMove(model) if "root" in model.partitions else None
+        self._pelvis_generation: int | None = None
         self._partitions = [np.asarray(model.partitions[k]) for k in
                             ("root", "torso", "left_arm", "right_arm", "left_leg", "right_leg")
                             if k in model.partitions]
@@ -588,40 +590,40 @@ class Tracker:
             params["initial_population"] = P
         opt = make_optimizer(cfg.optimizer, x0, spread, rng=rng, bounds=(lo, hi),
                              rotation_blocks=self.model.rotation_blocks, **params)
-        stage = self._pelvis_stage_plan(lo, hi, spread, notes) if pelvis_stage else None
-        if stage is None:
+        share = self._pelvis_share(notes) if pelvis_stage else None
+        if share is None:
             return minimize(opt, self.total_energy, max_evals=cfg.evals_per_frame)
-        name, stage_params, share = stage
         res = minimize(opt, self.total_energy, max_evals=cfg.evals_per_frame - share)
-        return self._pelvis_stage(res, name, stage_params, share, lo, hi, spread, rng)
+        x, e, n = self.refit_pelvis(res.x, evals=share, rng=rng, bounds=(lo, hi), spread=spread)
+        return dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
 
-    def _pelvis_stage_plan(self, lo, hi, spread, notes):
-        """(flat algorithm, its parameters, evaluations) of the pelvis stage, or None (off or too small)."""
-        from isa_mocap_ros.optim import make_optimizer
-
+    def _flat_algorithm(self) -> tuple[str, dict]:
+        """The configured algorithm's flat form (``h-isa`` → ``isa``, ``psapf`` → ``apf``) and its parameters."""
         cfg = self.config
-        share = int(cfg.evals_per_frame * cfg.pelvis_fraction)
-        if cfg.pelvis_fraction <= 0 or self._pelvis is None or not self._pelvis.children:
-            return None
         name = "apf" if cfg.optimizer == "psapf" else cfg.optimizer.removeprefix("h-")
         params = {k: v for k, v in cfg.params().items()
                   if k not in ("partitions", "optimizer", "initial_population", "evals_per_partition")}
-        gen = make_optimizer(name, np.clip(self._last if self._last is not None else lo, lo, hi)[:6], spread[:6],
-                             rng=np.random.default_rng(0), bounds=(lo[:6], hi[:6]), **params).generation_size
-        if share - 1 < gen:       # one evaluation is kept for the final pose
+        return name, params
+
+    def _pelvis_share(self, notes) -> int | None:
+        """Evaluations of the pelvis stage, or None (off, no root children, or below one generation + 1)."""
+        from isa_mocap_ros.optim import make_optimizer
+
+        cfg = self.config
+        if cfg.pelvis_fraction <= 0 or self._pelvis is None or not self._pelvis.children:
+            return None
+        share = int(cfg.evals_per_frame * cfg.pelvis_fraction)
+        if self._pelvis_generation is None:      # depends on the algorithm and its parameters only
+            name, params = self._flat_algorithm()
+            m = self.model
+            self._pelvis_generation = make_optimizer(name, m.rest_pose()[:6], np.ones(6), rng=np.random.default_rng(0),
+                                                     bounds=(m.lower[:6], m.upper[:6]), **params).generation_size
+        if share - 1 < self._pelvis_generation:       # one evaluation is kept for the final pose
             if notes is not None:
                 notes.append(f"pelvis stage skipped: its share ({share} evaluations) is below one generation "
-                             f"of {name} ({gen}) + 1")
+                             f"of {self._flat_algorithm()[0]} ({self._pelvis_generation}) + 1")
             return None
-        return name, params, share
-
-    def _pelvis_stage(self, res, name, params, share, lo, hi, spread, rng):
-        """The pelvis stage after the main search: :meth:`refit_pelvis` of ``res.x`` with ``share`` evaluations."""
-        import dataclasses
-
-        x, e, n = self.refit_pelvis(res.x, evals=share, rng=rng, optimizer=name, params=params,
-                                    bounds=(lo, hi), spread=spread)
-        return dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
+        return share
 
     def refit_pelvis(self, x, *, evals: int, rng: np.random.Generator, optimizer: str | None = None,
                      params: Mapping | None = None, bounds=None, spread=None) -> tuple[np.ndarray, float, int]:
@@ -642,10 +644,7 @@ class Tracker:
         lo, hi = bounds if bounds is not None else self.search_box(x)[:2]
         spread = self.search_box(x)[2] if spread is None else np.asarray(spread, dtype=float)
         if optimizer is None:
-            cfg = self.config
-            optimizer = "apf" if cfg.optimizer == "psapf" else cfg.optimizer.removeprefix("h-")
-            params = {k: v for k, v in cfg.params().items()
-                      if k not in ("partitions", "optimizer", "initial_population", "evals_per_partition")}
+            optimizer, params = self._flat_algorithm()
         x1 = np.clip(x, lo, hi)
 
         def energy(roots):
