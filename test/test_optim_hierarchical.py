@@ -92,3 +92,11 @@ def test_unbound_hierarchical_needs_shares_and_uses_them():
         X = opt.ask()
         opt.tell(X, sphere(X))
     assert opt.n_evals == 70 and [n for _, n in opt.partition_log] + [opt._inner_used] == [30, 20, 20]
+
+
+def test_inner_optimizer_names():
+    from isa_mocap_ros.optim import OPTIMIZERS, inner_optimizer
+
+    assert inner_optimizer("h-isa") == "isa" and inner_optimizer("psapf") == "apf"
+    assert inner_optimizer("h-pso") == "pso" and inner_optimizer("cmaes") is None
+    assert all(inner_optimizer(k) in OPTIMIZERS for k in OPTIMIZERS if inner_optimizer(k) is not None)

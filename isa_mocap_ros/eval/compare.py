@@ -31,6 +31,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from isa_mocap_ros.optim import inner_optimizer
+
 from .stats import StatsError, ranking_table
 
 __all__ = ["ALGORITHMS", "PEER_ALGORITHMS", "HIERARCHICAL_PAIRS", "SequenceSpec", "Design", "make_design",
@@ -310,7 +312,7 @@ def summarize(records: Sequence[dict], *, alpha: float = 0.05) -> dict:
         cols = [(a, d, b) for d in dofs for b in budgets if any((a, d, b, s) in means for s in seqs)]
         t = _table(means, cols, [label(*c) for c in cols], seqs, alpha)
         if t is not None:
-            fam.append({"algorithm": a, "hierarchical": a.startswith("h-") or a == "psapf", **t[1]})
+            fam.append({"algorithm": a, "hierarchical": inner_optimizer(a) is not None, **t[1]})
     out["families"] = fam
     # holistic vs hierarchical, matched over (dof, budget, sequence)
     ctx = [(d, b, s) for d in dofs for b in budgets for s in seqs]
@@ -530,7 +532,7 @@ def plot_summary(summary: dict, path: Path | str) -> Path:
             bs = [b for b in summary["budgets"] if (alg, d, b) in cells]
             if not bs:
                 continue
-            style = "--" if alg in PEER_ALGORITHMS else ("-" if alg.startswith("h-") or alg == "psapf" else ":")
+            style = "--" if alg in PEER_ALGORITHMS else ("-" if inner_optimizer(alg) is not None else ":")
             a_.plot(bs, [np.mean(cells[(alg, d, b)]) for b in bs], style, marker="o", ms=3, label=alg)
         a_.set_title(f"{d} DOF", fontsize=9)
         a_.set_xlabel("evaluations per frame")

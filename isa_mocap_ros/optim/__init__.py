@@ -39,6 +39,14 @@ OPTIMIZERS = {
 }
 
 
+def inner_optimizer(name: str) -> str | None:
+    """The flat algorithm a hierarchical registry name runs per partition ("h-isa" -> "isa",
+    "psapf" -> "apf"); None for a flat name."""
+    if name == "psapf":
+        return "apf"
+    return name[2:] if name.startswith("h-") else None
+
+
 def make_optimizer(name: str, x0, spread, *, rng, **params) -> Optimizer:
     """An optimizer by registry name.
 
@@ -63,8 +71,8 @@ def make_optimizer(name: str, x0, spread, *, rng, **params) -> Optimizer:
     """
     if name not in OPTIMIZERS:
         raise OptimError(f"name: expected one of {', '.join(OPTIMIZERS)}, got {name!r}")
-    if name == "psapf" or name.startswith("h-"):
-        inner = "apf" if name == "psapf" else name[2:]
+    inner = inner_optimizer(name)
+    if inner is not None:
         if "partitions" not in params:
             raise OptimError(f"partitions: optimizer {name!r} needs partitions=[index arrays]")
         return Hierarchical(x0, spread, optimizer=inner, rng=rng, **params)
@@ -75,7 +83,7 @@ __all__ = [
     "OptimError", "Result", "GenerationInfo", "Optimizer", "minimize", "check_energies",
     "Isa", "AnnealedParticleFilter", "PartitionedApf", "CmaEs", "CmaEsParameters",
     "DifferentialEvolution", "Pso", "Hierarchical", "check_partitions", "split_budget",
-    "make_optimizer", "OPTIMIZERS",
+    "make_optimizer", "inner_optimizer", "OPTIMIZERS",
     "multinomial", "systematic", "residual", "stratified", "normalise_log", "ess",
     "select_s1", "select_s2", "select_s3", "SELECTION_KERNELS",
     "Polynomial", "Logarithmic", "AdaptiveEss", "beta_for_ess", "make_schedule",

@@ -98,10 +98,10 @@ class Hierarchical(Optimizer):
                                  f"{touched}")
             self._blocks.append((owner[0] if owner else None, blk))
         if isinstance(optimizer, str):
-            from . import make_optimizer, OPTIMIZERS
-            if optimizer not in OPTIMIZERS or optimizer.startswith("h-") or optimizer == "psapf":
+            from . import OPTIMIZERS, inner_optimizer, make_optimizer
+            if optimizer not in OPTIMIZERS or inner_optimizer(optimizer) is not None:
                 raise OptimError(f"optimizer: expected a flat optimizer name "
-                                 f"({', '.join(k for k in OPTIMIZERS if not k.startswith('h-') and k != 'psapf')}), "
+                                 f"({', '.join(k for k in OPTIMIZERS if inner_optimizer(k) is None)}), "
                                  f"got {optimizer!r}")
             name = optimizer
 

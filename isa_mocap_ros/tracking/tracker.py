@@ -148,8 +148,9 @@ class TrackerConfig:
         (:mod:`.pelvis`): the configured algorithm re-fits the 6 root DOF with the root's child
         joints held still in the world. It undoes the slow drift of the weakly observed pelvis
         orientation that the spine and hips otherwise compensate (CMU walk, 4 seeds: mean joint
-        error 34-64 mm → 28-29 mm, ``docs/tracking.md``). 0 disables it; skipped (with a note)
-        when its share is below one generation of the algorithm.
+        error 34-64 mm → 29-31 mm, ``docs/tracking.md``). 0 disables it; skipped (with a note)
+        when its share is below one generation of the algorithm, and on the automatically
+        initialized frame.
     """
 
     optimizer: str = "h-isa"
@@ -570,15 +571,14 @@ class Tracker:
         The automatically initialized frame has no pelvis stage (``pelvis_stage=False``): from a rough
         standing pose it turned the pelvis against the legs (bags/demo: 270-340 mm on the first
         frames, measured)."""
-        from isa_mocap_ros.optim import make_optimizer, minimize
+        from isa_mocap_ros.optim import inner_optimizer, make_optimizer, minimize
 
         cfg = self.config
         lo, hi, spread = self.search_box(pred)
         spread = spread * spread_scale
         x0 = np.clip(pred, lo, hi)
         params = cfg.params()
-        hierarchical = cfg.optimizer == "psapf" or cfg.optimizer.startswith("h-")
-        if hierarchical:
+        if inner_optimizer(cfg.optimizer) is not None:
             params.setdefault("partitions", self._partitions)
         elif cfg.include_prediction and "initial_population" not in params:
             # first generation: the prediction itself plus draws around it (so the estimate
@@ -599,8 +599,10 @@ class Tracker:
 
     def _flat_algorithm(self) -> tuple[str, dict]:
         """The configured algorithm's flat form (``h-isa`` → ``isa``, ``psapf`` → ``apf``) and its parameters."""
+        from isa_mocap_ros.optim import inner_optimizer
+
         cfg = self.config
-        name = "apf" if cfg.optimizer == "psapf" else cfg.optimizer.removeprefix("h-")
+        name = inner_optimizer(cfg.optimizer) or cfg.optimizer
         params = {k: v for k, v in cfg.params().items()
                   if k not in ("partitions", "optimizer", "initial_population", "evals_per_partition")}
         return name, params
