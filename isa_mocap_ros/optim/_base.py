@@ -26,6 +26,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from . import _fast
+
 __all__ = ["OptimError", "Result", "GenerationInfo", "Optimizer", "minimize", "check_energies"]
 
 
@@ -309,14 +311,13 @@ class Optimizer:
             self.best_x = X[i].copy()
         self._tell(X, E)
         self.n_iter += 1
-        fin = E[np.isfinite(E)]
         beta, ess = self._beta_ess()
         P, _ = self._population()
+        # E[isfinite(E)].mean() and np.mean(np.std(P, axis=0)) (nan if empty), compiled: bit-identical
+        mean_energy, spread = _fast.generation_stats(E, np.asarray(P, dtype=float))
         self.history.append(GenerationInfo(
             n_iter=self.n_iter, n_evals=self.n_evals, best_energy=float(self.best_energy),
-            mean_energy=float(fin.mean()) if fin.size else float("nan"),
-            spread=float(np.mean(np.std(P, axis=0))) if len(P) else float("nan"),
-            beta=float(beta), ess=float(ess)))
+            mean_energy=float(mean_energy), spread=float(spread), beta=float(beta), ess=float(ess)))
 
     def stop(self) -> dict:
         """Termination reasons, empty while the run should go on."""

@@ -1,23 +1,40 @@
 """Compiled helpers of the optimizers (numba), bit-identical to the numpy code they replace.
 
-The adaptive annealing schedule (:func:`.schedules.beta_for_ess`) bisects on ``log10 beta`` about 25
-times per generation; each step is ``ess(normalise_log(-beta * E)) / n``. With numpy that is a dozen
-small-array calls per step, ~0.4 ms per generation, more than a 30-particle generation of the
-silhouette energy. Here the same arithmetic runs compiled:
+A tracker frame runs ~54 small generations (30 particles); with numpy each generation paid ~100
+small-array calls of Python overhead (~0.7 ms), more than the silhouette energy of the generation.
+Here the per-generation arithmetic of ISA (gall_isa_introduction Alg. 6) runs compiled:
+
+* :func:`adaptive_beta` -- the adaptive schedule (:func:`.schedules.beta_for_ess`, yeguas Eq. 8),
+  bisecting on ``log10 beta`` about 25 times, each step ``ess(normalise_log(-beta * E)) / n``;
+* :func:`annealed_weights` -- the weights ``exp(-beta (E - min E))`` log-sum-exp normalised and
+  their ESS (:meth:`.isa.Isa.weights`, :func:`.resampling.ess`);
+* :func:`keep_mask` / :func:`select_mutate` -- selection kernels S1-S3 (13.8-13.10) with multinomial
+  replacement, the dynamic variance (13.16) and the clipped Gaussian mutation, fused. The random
+  numbers are drawn by the caller from the optimizer's ``numpy.random.Generator``, in the order the
+  numpy code draws them, and passed in;
+* :func:`generation_stats` -- the diagnostics of :class:`._base.GenerationInfo` (mean finite energy,
+  mean per-coordinate standard deviation).
+
+Bit equality with numpy holds because the same operations run in the same order:
 
 * ``exp`` is the C library's, as numpy's float64 ``exp`` on this (AVX2) machine;
-* sums follow numpy's pairwise summation (``pairwise_sum`` in numpy's ``loops_utils``: plain loop
-  below 8 elements, eight accumulators up to 128, halves beyond), starting from the identity 0;
-* max, negation, products and divisions are exact operations in the same order.
+* sums along a 1-D array follow numpy's pairwise summation (``pairwise_sum`` in numpy's
+  ``loops_utils``: plain loop below 8 elements, eight accumulators up to 128, halves beyond),
+  starting from the identity 0; column sums of a C-ordered ``(n, d)`` array (``axis=0``) are plain
+  row-by-row sums, as numpy reduces a non-contiguous axis (pairwise again for ``d = 1``);
+* max, negation, products, divisions, square roots and clips are exact operations in the same
+  order; no fastmath (no reassociation, no contraction into FMA).
 
-``test/test_optim_protocol.py`` checks bit equality with the numpy formulation on random inputs.
+``test/test_optim_fast.py`` checks bit equality with the numpy formulation on random inputs, and a
+process that compiles these functions against one that loads them from numba's cache.
 """
 from __future__ import annotations
 
 import numba
 import numpy as np
 
-__all__ = ["pairwise_sum", "ess_fraction", "bisect_log_beta"]
+__all__ = ["pairwise_sum", "ess_fraction", "bisect_log_beta", "adaptive_beta", "annealed_weights",
+           "keep_mask", "select_mutate", "generation_stats", "column_sums"]
 
 
 @numba.njit(cache=True)
@@ -95,6 +112,22 @@ def pairwise_sum(a):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
+def column_sums(A):  # pragma: no cover - compiled
+    """``A.sum(axis=0)`` of a C-ordered ``(n, d)`` array, bit-identical to numpy's: row by row, except
+    for ``d == 1``, where the column is contiguous and numpy sums it pairwise."""
+    n, d = A.shape
+    if d == 1:
+        out = np.empty(1)
+        out[0] = pairwise_sum(A[:, 0].copy())
+        return out
+    out = A[0].copy()
+    for i in range(1, n):
+        for q in range(d):
+            out[q] += A[i, q]
+    return out
+
+
+@numba.njit(cache=True)
 def ess_fraction(Ef, beta, n, buf):  # pragma: no cover - compiled
     """``ess(normalise_log(-beta * Ef)) / n`` for finite ``Ef`` (``buf``: scratch of ``Ef``'s size)."""
     m = Ef.size
@@ -126,3 +159,197 @@ def bisect_log_beta(Ef, target, n, lo, hi, tol):  # pragma: no cover - compiled
         if hi - lo < tol:
             break
     return 10.0 ** (0.5 * (lo + hi))
+
+
+@numba.njit(cache=True)
+def adaptive_beta(E, target, beta_max, tol):  # pragma: no cover - compiled
+    """:func:`.schedules.beta_for_ess` on raw energies ``E (n,)`` (non-finite ones get weight 0)."""
+    n = E.size
+    m = 0
+    e_min = np.inf
+    for i in range(n):
+        if np.isfinite(E[i]):
+            m += 1
+            if E[i] < e_min:
+                e_min = E[i]
+    if m < 2:
+        return 0.0
+    Ef = np.empty(m)
+    j = 0
+    e_max = -np.inf
+    n_pos = 0
+    for i in range(n):
+        if np.isfinite(E[i]):
+            Ef[j] = E[i] - e_min
+            if Ef[j] > e_max:
+                e_max = Ef[j]
+            if Ef[j] > 0:
+                n_pos += 1
+            j += 1
+    if e_max <= 0:
+        return 0.0
+    buf = np.empty(m)
+    if ess_fraction(Ef, 0.0, n, buf) <= target:   # non-finite rows already cost more than the target
+        return 0.0
+    pos = np.empty(n_pos)                          # np.median(Ef[Ef > 0]): the energy scale
+    j = 0
+    for i in range(m):
+        if Ef[i] > 0:
+            pos[j] = Ef[i]
+            j += 1
+    pos.sort()
+    h = n_pos // 2
+    median = pos[h] if n_pos % 2 == 1 else (pos[h - 1] + pos[h]) / 2.0
+    lo = -12.0 + np.log10(1.0 / median)
+    hi = max(np.log10(beta_max), lo + 1)
+    if ess_fraction(Ef, 10.0 ** hi, n, buf) >= target:
+        return 10.0 ** hi
+    return bisect_log_beta(Ef, target, n, lo, hi, tol)
+
+
+@numba.njit(cache=True)
+def annealed_weights(E, beta, W):  # pragma: no cover - compiled
+    """``W = normalise_log(where(isfinite(E), -beta * (E - E0), -inf))`` with ``E0`` the least finite
+    energy (0 if none); returns ``ess(W)`` (:func:`.resampling.ess`)."""
+    n = E.size
+    e0 = np.inf
+    for i in range(n):
+        if np.isfinite(E[i]) and E[i] < e0:
+            e0 = E[i]
+    if e0 == np.inf:
+        e0 = 0.0
+    nb = -beta
+    mx = -np.inf
+    for i in range(n):
+        lw = -np.inf
+        if np.isfinite(E[i]):
+            lw = nb * (E[i] - e0)
+            if np.isnan(lw):
+                lw = -np.inf
+        W[i] = lw
+        if lw > mx:
+            mx = lw
+    if not np.isfinite(mx):
+        for i in range(n):
+            W[i] = 1.0 / n
+    else:
+        for i in range(n):
+            W[i] = np.exp(W[i] - mx)
+        s = pairwise_sum(W)
+        for i in range(n):
+            W[i] = W[i] / s
+    sq = np.empty(n)
+    for i in range(n):
+        sq[i] = W[i] * W[i]
+    return 1.0 / pairwise_sum(sq)
+
+
+@numba.njit(cache=True)
+def _renormalised(W):  # pragma: no cover - compiled
+    """``W / W.sum()`` (what :func:`.resampling._check_W` hands on)."""
+    s = pairwise_sum(W)
+    out = np.empty(W.size)
+    for i in range(W.size):
+        out[i] = W[i] / s
+    return out
+
+
+@numba.njit(cache=True)
+def keep_mask(W, u, relative, keep):  # pragma: no cover - compiled
+    """Survivors of selection kernel S2 (``relative=False``: keep ``i`` if ``u_i <= W_i``) or S3
+    (``relative=True``: if ``u_i <= W_i / max W``), ``W`` renormalised first; writes ``keep (n,)``
+    and returns the number of replaced particles."""
+    W2 = _renormalised(W)
+    top = W2.max()
+    k = 0
+    for i in range(W2.size):
+        keep[i] = u[i] <= (W2[i] / top if relative else W2[i])
+        if not keep[i]:
+            k += 1
+    return k
+
+
+@numba.njit(cache=True)
+def select_mutate(X, W, keep, v, Z, c, rho, lo, hi):  # pragma: no cover - compiled
+    """Selection, dynamic variance (13.16) and mutation of one ISA generation; returns the next
+    particles ``(n, d)``.
+
+    Particle ``i`` with ``keep[i]`` stays, the others in order take the multinomial draws of the
+    sorted uniforms ``v`` from the renormalised ``W`` (:func:`.resampling.multinomial`). On the
+    selected ``Xs``: ``Sigma_jj = c / (n - 1) * sum_i max(|Xs_ij - mean_j|, rho)^2`` and the next
+    particles are ``clip(Xs + Z * sqrt(Sigma_jj), lo, hi)``.
+    """
+    n, d = X.shape
+    W3 = _renormalised(_renormalised(W))          # select_s*'s _check_W, then multinomial's
+    cdf = np.empty(n)
+    acc = 0.0
+    for i in range(n):
+        acc = W3[i] if i == 0 else acc + W3[i]
+        cdf[i] = acc
+    cdf[n - 1] = 1.0
+    A = np.empty(n, np.int64)
+    j = 0
+    for i in range(n):
+        if keep[i]:
+            A[i] = i
+        else:
+            a = 0                                   # searchsorted(cdf, v[j], side="right")
+            while a < n and cdf[a] <= v[j]:
+                a += 1
+            A[i] = min(a, n - 1)
+            j += 1
+    Xs = np.empty((n, d))
+    for i in range(n):
+        for q in range(d):
+            Xs[i, q] = X[A[i], q]
+    mean = column_sums(Xs)
+    for q in range(d):
+        mean[q] = mean[q] / n
+    sq = np.empty((n, d))
+    for i in range(n):
+        for q in range(d):
+            dev = max(abs(Xs[i, q] - mean[q]), rho)
+            sq[i, q] = dev * dev
+    ssq = column_sums(sq)
+    scale = c / max(n - 1, 1)
+    sd = np.empty(d)
+    for q in range(d):
+        sd[q] = np.sqrt(scale * ssq[q])
+    out = np.empty((n, d))
+    for i in range(n):
+        for q in range(d):
+            out[i, q] = min(max(Xs[i, q] + Z[i, q] * sd[q], lo[q]), hi[q])
+    return out
+
+
+@numba.njit(cache=True)
+def generation_stats(E, P):  # pragma: no cover - compiled
+    """``(mean of the finite E, mean over coordinates of P's standard deviation)``, nan when empty:
+    ``E[isfinite(E)].mean()`` and ``np.mean(np.std(P, axis=0))``."""
+    m = 0
+    for i in range(E.size):
+        if np.isfinite(E[i]):
+            m += 1
+    fin = np.empty(m)
+    j = 0
+    for i in range(E.size):
+        if np.isfinite(E[i]):
+            fin[j] = E[i]
+            j += 1
+    mean_energy = pairwise_sum(fin) / m if m else np.nan
+    n, d = P.shape
+    if n == 0:
+        return mean_energy, np.nan
+    mean = column_sums(P)
+    for q in range(d):
+        mean[q] = mean[q] / n
+    sq = np.empty((n, d))
+    for i in range(n):
+        for q in range(d):
+            dev = P[i, q] - mean[q]
+            sq[i, q] = dev * dev
+    ssq = column_sums(sq)
+    std = np.empty(d)
+    for q in range(d):
+        std[q] = np.sqrt(ssq[q] / n)
+    return mean_energy, pairwise_sum(std) / d

@@ -195,7 +195,7 @@ class Hierarchical(Optimizer):
         inner = self._inner
         idx = self.partitions[self.k]
         if inner is not None and inner.n_iter > 0:
-            self._x[idx] = inner.result().x
+            self._x[idx] = inner._estimate()[0]
         self.partition_log.append((self.k, self._inner_used))
         self.k += 1
         self._inner = None
@@ -232,10 +232,7 @@ class Hierarchical(Optimizer):
         inner._record(X[:, idx], E, n_counted=n, n_bad=0)
         self._inner_used += n
         self._counted = len(X)
-        Xin = inner.result().x
         self._last_pop = X
-        self._xcur = self._x.copy()
-        self._xcur[idx] = Xin
 
     def _stop(self):
         if self.k >= len(self.partitions):
@@ -250,7 +247,7 @@ class Hierarchical(Optimizer):
     def _estimate(self):
         x = self._x.copy()
         if self._inner is not None and self._inner.n_iter > 0 and self.k < len(self.partitions):
-            x[self.partitions[self.k]] = self._inner.result().x
+            x[self.partitions[self.k]] = self._inner._estimate()[0]
         return x, None
 
     def _population(self):

@@ -14,14 +14,21 @@ Note on (13.16): the book writes ``((x)_rho)_k = max(x_k, rho)`` applied to the 
 ``x - mu``; taken literally this would floor every negative deviation to ``rho``. We read it as a
 floor on the deviation's magnitude, ``max(|x_k - mu_k|, rho)``, which keeps the stated purpose
 ("the variance does not become zero": ``Sigma_kk >= c n rho^2 / (n - 1)``).
+
+Steps 1, 3 and 4 run compiled (:mod:`._fast`) with the random numbers drawn here, from the
+optimizer's generator and in the order of the numpy formulation, which is kept for the other
+resampling schemes and as the reference (``test/test_optim_fast.py``: bit-identical runs).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from . import _fast
 from ._base import OptimError, ParticleOptimizer
 from ._rotations import rotation_mean
-from .resampling import SCHEMES, SELECTION_KERNELS, ess, normalise_log
+from .resampling import SCHEMES, SELECTION_KERNELS, multinomial
 from .schedules import AdaptiveEss, make_schedule
 
 __all__ = ["Isa", "weighted_estimate", "dynamic_variance"]
@@ -88,7 +95,10 @@ class Isa(ParticleOptimizer):
         if resampling not in SCHEMES:
             raise OptimError(f"resampling: expected one of {sorted(SCHEMES)}, got {resampling!r}")
         self._scheme = SCHEMES[resampling]
+        # selection + variance + mutation compiled in one step (multinomial replacement only)
+        self._fused = self._scheme is multinomial
         self.schedule = make_schedule(schedule, b=b, target=target_ess)
+        self._monotone = isinstance(self.schedule, AdaptiveEss)
         if not (c > 0):
             raise OptimError(f"c: expected > 0, got {c}")
         if not (rho >= 0):
@@ -111,23 +121,38 @@ class Isa(ParticleOptimizer):
         return self._X
 
     def weights(self, E: np.ndarray) -> np.ndarray:
-        """Normalised weights ``exp(-beta_t E)`` of this generation (sets ``self.beta``)."""
+        """Normalised weights ``exp(-beta_t E)`` of this generation (sets ``self.beta`` and the ESS)."""
+        E = np.ascontiguousarray(E, dtype=float)
         beta = float(self.schedule(self.n_iter, E))
-        if isinstance(self.schedule, AdaptiveEss) and np.isfinite(self.beta):
+        if self._monotone and math.isfinite(self.beta):
             beta = max(beta, self.beta)
         self.beta = beta
-        fin = np.isfinite(E)
-        E0 = E[fin].min() if fin.any() else 0.0
-        return normalise_log(np.where(fin, -beta * (E - E0), -np.inf))
+        W = np.empty(E.size)
+        self._ess = float(_fast.annealed_weights(E, beta, W))
+        return W
 
     def _tell(self, X, E):
-        W = self.weights(E)
+        W = self.weights(E)                                        # pi_i (13.18/13.19 or target ESS)
         self._P, self._W = X, W
-        self._ess = ess(W)
-        self._x = weighted_estimate(X, W, self.rotation_blocks)
+        self._x = weighted_estimate(X, W, self.rotation_blocks)    # estimate, rotations by (13.24)
+        if self._fused:
+            self._X = self._select_mutate(X, W)
+            return
         A = self._select(W, self.rng, scheme=self._scheme)        # selection (13.8-13.10)
         Xs = X[A]
         var = dynamic_variance(Xs, self.c, self.rho)               # Sigma_t (13.16), diagonal
         Z = self.rng.standard_normal(Xs.shape)
         self._X = self.clip(Xs + Z * np.sqrt(var))                 # mutation K_t
 
+    def _select_mutate(self, X, W):
+        """The three lines above for multinomial replacement, compiled (:func:`._fast.select_mutate`);
+        the uniforms of the kept/replaced decision, the sorted uniforms of the replacements and the
+        normals of the mutation are drawn in that order, as the numpy path draws them."""
+        n = W.size
+        keep = np.zeros(n, dtype=bool)
+        k = n                                                      # S1 replaces every particle
+        if self.kernel != "s1":
+            k = _fast.keep_mask(W, self.rng.random(n), self.kernel == "s3", keep)
+        v = np.sort(self.rng.random(k)) if k else np.empty(0)
+        Z = self.rng.standard_normal(X.shape)
+        return _fast.select_mutate(X, W, keep, v, Z, self.c, self.rho, self.lo, self.hi)

@@ -52,8 +52,11 @@ class Logarithmic:
 def beta_for_ess(energies, target: float, *, beta_max: float = 1e12, tol: float = 1e-6) -> float:
     """``beta >= 0`` whose weights ``exp(-beta E)`` have ``ESS / n`` closest to ``target``.
 
-    Solves yeguas Eq. (8) by bisection on ``log beta`` (ESS is non-increasing in beta).
-    Non-finite energies get weight 0. Returns 0 when all finite energies are equal.
+    Solves yeguas Eq. (8) by bisection on ``log10 beta`` (ESS is non-increasing in beta) between
+    ``1e-12`` over the median positive energy gap and ``beta_max``; returns the upper end if even it
+    keeps the ESS above the target. Non-finite energies get weight 0 (they count in ``n``).
+    Returns 0 when fewer than two energies are finite, all finite energies are equal, or the
+    non-finite rows already push ``ESS / n`` below the target.
 
     Parameters
     ----------
@@ -62,29 +65,9 @@ def beta_for_ess(energies, target: float, *, beta_max: float = 1e12, tol: float 
     """
     if not (0.0 < target <= 1.0):
         raise OptimError(f"target: expected an ESS fraction in (0, 1], got {target}")
-    E = np.asarray(energies, dtype=float)
-    fin = np.isfinite(E)
-    n = E.size
-    if fin.sum() < 2:
-        return 0.0
-    Ef = E[fin] - E[fin].min()
-    if Ef.max() <= 0:
-        return 0.0
-
-    buf = np.empty(Ef.size)
-
-    def frac(beta):   # = ess(normalise_log(-beta * Ef)) / n, compiled and bit-identical (see _fast)
-        return _fast.ess_fraction(Ef, float(beta), n, buf)
-
-    if frac(0.0) <= target:  # non-finite rows already cost more than the target
-        return 0.0
-    lo, hi = -12.0, np.log10(beta_max)
-    scale = 1.0 / np.median(Ef[Ef > 0])  # bracket around the energy scale
-    lo += np.log10(scale)
-    hi = max(hi, lo + 1)
-    if frac(10 ** hi) >= target:
-        return float(10 ** hi)
-    return float(_fast.bisect_log_beta(Ef, float(target), n, float(lo), float(hi), float(tol)))
+    E = np.ascontiguousarray(energies, dtype=float).ravel()
+    # compiled, bit-identical to the numpy formulation (see _fast.adaptive_beta)
+    return float(_fast.adaptive_beta(E, float(target), float(beta_max), float(tol)))
 
 
 @dataclass(frozen=True)

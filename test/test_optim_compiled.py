@@ -1,0 +1,164 @@
+"""The compiled ISA generation (weights, selection, dynamic variance, mutation, diagnostics) and the
+compiled SO(3) helpers of the rotation mean are bit-identical to their numpy formulations, and a
+process that compiles them computes the same bits as one that loads them from numba's cache."""
+import numpy as np
+import pytest
+
+from isa_mocap_ros.optim import Isa, make_optimizer, minimize
+from isa_mocap_ros.optim import _fast, _fast_so3
+from isa_mocap_ros.optim._rotations import exp_so3, log_so3, rotation_mean
+from isa_mocap_ros.optim.resampling import ess, normalise_log
+
+
+def _energies(rng, n, trial):
+    E = rng.random(n) * 10.0 ** rng.uniform(-6, 3)
+    if trial % 3 == 0:
+        E[rng.random(n) < 0.2] = np.inf
+    if trial % 7 == 0:
+        E[rng.random(n) < 0.1] = np.nan
+    if trial % 11 == 0:
+        E[:] = np.inf
+    return E
+
+
+def test_annealed_weights_and_ess_are_the_numpy_formulation_bit_for_bit():
+    rng = np.random.default_rng(0)
+    for trial in range(400):
+        n = int(rng.integers(1, 200))
+        E = _energies(rng, n, trial)
+        E[~np.isfinite(E)] = np.inf               # as check_energies hands them on
+        beta = float(10.0 ** rng.uniform(-3, 6)) if trial % 13 else 0.0
+        fin = np.isfinite(E)
+        E0 = E[fin].min() if fin.any() else 0.0
+        with np.errstate(invalid="ignore"):
+            ref = normalise_log(np.where(fin, -beta * (E - E0), -np.inf))
+        W = np.empty(n)
+        e = _fast.annealed_weights(E, beta, W)
+        np.testing.assert_array_equal(W, ref)
+        assert e == ess(ref)
+
+
+def test_generation_stats_are_numpys_mean_and_std_bit_for_bit():
+    rng = np.random.default_rng(1)
+    for trial in range(300):
+        n, d = int(rng.integers(1, 60)), int(rng.integers(1, 45)) if trial % 4 else 1
+        E = _energies(rng, n, trial)
+        E[~np.isfinite(E)] = np.inf
+        P = rng.standard_normal((n, d)) * 10.0 ** rng.uniform(-4, 2, d) + rng.uniform(-5, 5, d)
+        fin = E[np.isfinite(E)]
+        mean_energy, spread = _fast.generation_stats(E, P)
+        assert (np.isnan(mean_energy) and fin.size == 0) or mean_energy == fin.mean()
+        assert spread == np.mean(np.std(P, axis=0))
+    assert np.isnan(_fast.generation_stats(np.ones(0), np.zeros((0, 3)))[1])
+
+
+def _run(kernel, fused, *, rotations, seed, d=7, evals=900, energies=None):
+    d = 1 if seed == 2 and not rotations else d
+    opt = Isa(np.full(d, 0.2), 0.4, n_particles=30, kernel=kernel, schedule="adaptive", target_ess=0.3,
+              c=0.5, rng=np.random.default_rng(seed), bounds=(np.full(d, -1.0), np.full(d, 1.5)),
+              rotation_blocks=((1, 2, 3),) if rotations else ())
+    opt._fused = fused
+
+    def f(X):
+        E = np.sum((X - 0.3) ** 2, axis=1) + 0.05 * np.sin(20 * X).sum(axis=1)
+        if energies == "some-nonfinite":
+            E[::7] = np.nan
+            E[3::11] = np.inf
+        return E
+    return minimize(opt, f, max_evals=evals)
+
+
+@pytest.mark.parametrize("kernel", ["s1", "s2", "s3"])
+@pytest.mark.parametrize("rotations", [False, True])
+@pytest.mark.parametrize("energies", ["finite", "some-nonfinite"])
+def test_fused_selection_and_mutation_give_the_numpy_run_bit_for_bit(kernel, rotations, energies):
+    for seed in range(3):
+        a = _run(kernel, True, rotations=rotations, seed=seed, energies=energies)
+        b = _run(kernel, False, rotations=rotations, seed=seed, energies=energies)
+        np.testing.assert_array_equal(a.x, b.x)
+        np.testing.assert_array_equal(a.population, b.population)
+        np.testing.assert_array_equal(a.weights, b.weights)
+        assert repr(a.history) == repr(b.history)        # repr: nan fields compare unequal
+
+
+def test_compiled_exp_and_log_are_the_numpy_reference_bit_for_bit():
+    rng = np.random.default_rng(2)
+    axes = rng.normal(size=(3000, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    angles = np.concatenate([[0.0, 1e-12, 1e-7, 1e-5, 1e-4, 2e-4], rng.uniform(0, np.pi, 2980),
+                             np.pi - np.array([0.0, 1e-7, 1e-5, 1e-4, 9e-4, 1.1e-3, 2e-3, 1e-2]),
+                             [3.0, 6.0, 10.0, 1e-3, 5e-5, 1e-9]])
+    r = axes * angles[:, None]
+    R = _fast_so3.exp_many(r)
+    np.testing.assert_array_equal(R, exp_so3(r))
+    for mean in (r[0], r[100], r[2990]):
+        np.testing.assert_array_equal(_fast_so3.relative_logs(mean, R), log_so3(exp_so3(mean).T @ R))
+    for a, b in zip(r[::97], r[5::97]):
+        np.testing.assert_array_equal(_fast_so3.compose(a, b), log_so3(exp_so3(a) @ exp_so3(b)))
+
+
+def _numpy_rotation_mean(rotvecs, weights, n_iter=20, tol=1e-12):
+    """rotation_mean as it was written with the numpy helpers (the reference)."""
+    r = np.asarray(rotvecs, dtype=float)
+    w = np.asarray(weights, dtype=float)
+    w = w / w.sum()
+    Ri = exp_so3(r)
+    mean = r[int(np.argmax(w))].copy()
+    for _ in range(n_iter):
+        M = exp_so3(mean)
+        step = w @ log_so3(M.T @ Ri)
+        mean = log_so3(M @ exp_so3(step))
+        if step @ step < tol:
+            break
+    return mean
+
+
+def test_rotation_mean_is_the_numpy_reference_bit_for_bit():
+    rng = np.random.default_rng(3)
+    for trial in range(300):
+        n = int(rng.integers(1, 40))
+        center = rng.normal(size=3) * rng.uniform(0, 3)
+        r = center + rng.normal(size=(n, 3)) * 10.0 ** rng.uniform(-4, 0)
+        w = rng.random(n) ** 3
+        np.testing.assert_array_equal(rotation_mean(r, w), _numpy_rotation_mean(r, w))
+
+
+_HASH_SCRIPT = """
+import hashlib, numpy as np
+from isa_mocap_ros.optim import make_optimizer, minimize
+h = hashlib.sha1()
+for name in ("h-isa", "isa"):
+    kw = {"partitions": [[0, 1, 2, 3, 4, 5], [6, 7, 8]]} if name == "h-isa" else {}
+    opt = make_optimizer(name, np.full(9, 0.2), 0.3, rng=np.random.default_rng(5), n_particles=30, kernel="s2",
+                         schedule="adaptive", target_ess=0.3, rotation_blocks=((3, 4, 5),), **kw)
+    r = minimize(opt, lambda X: np.sum((X - 0.5) ** 2, axis=1) + 0.1 * np.sin(9 * X).sum(axis=1), max_evals=1500)
+    h.update(r.x.tobytes()); h.update(r.population.tobytes())
+    h.update(np.array([(g.mean_energy, g.spread, g.beta, g.ess) for g in r.history]).tobytes())
+print(h.hexdigest())
+"""
+
+
+def test_fresh_and_cached_compiled_optimizer_agree_bit_for_bit(tmp_path):
+    """A process that compiles the optimizer's numba functions and one that loads them from the cache
+    must compute the same bits (no fastmath in optim)."""
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    runs = [subprocess.run([sys.executable, "-c", _HASH_SCRIPT], env=env, capture_output=True, text=True,
+                           timeout=600) for _ in range(2)]
+    for r in runs:
+        assert r.returncode == 0, r.stderr[-2000:]
+    assert any((tmp_path / "numba").rglob("*_fast*.nbc"))      # the second run loaded what the first compiled
+    assert runs[0].stdout == runs[1].stdout
+    assert len(runs[0].stdout.strip()) == 40
+
+
+def test_h_isa_runs_are_reproducible_for_a_seed():
+    kw = dict(partitions=[[0, 1, 2], [3, 4, 5]], n_particles=30, kernel="s2", schedule="adaptive",
+              rotation_blocks=((3, 4, 5),))
+    res = [minimize(make_optimizer("h-isa", np.zeros(6), 0.3, rng=np.random.default_rng(8), **kw),
+                    lambda X: np.sum((X - 0.2) ** 2, axis=1), max_evals=600) for _ in range(2)]
+    np.testing.assert_array_equal(res[0].x, res[1].x)
+    assert repr(res[0].history) == repr(res[1].history)
