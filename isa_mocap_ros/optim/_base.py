@@ -21,6 +21,7 @@ Conventions
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -123,6 +124,8 @@ def check_energies(E, n: int) -> tuple[np.ndarray, int]:
     if arr.shape != (n,):
         raise OptimError(f"energy: expected an array of shape ({n},) for {n} particles, "
                          f"got shape {arr.shape}")
+    if math.isfinite(arr.sum()):     # every value finite (cheaper than isfinite + sum)
+        return arr, 0
     bad = ~np.isfinite(arr)
     k = int(bad.sum())
     if k:
@@ -305,7 +308,7 @@ class Optimizer:
     def _record(self, X, E, *, n_counted: int, n_bad: int) -> None:
         self.n_evals += int(n_counted)
         self.n_nonfinite += int(n_bad)
-        i = int(np.argmin(E))
+        i = int(E.argmin())
         if E[i] < self.best_energy:
             self.best_energy = float(E[i])
             self.best_x = X[i].copy()

@@ -21,7 +21,8 @@ Bit equality with numpy holds because the same operations run in the same order:
 * sums along a 1-D array follow numpy's pairwise summation (``pairwise_sum`` in numpy's
   ``loops_utils``: plain loop below 8 elements, eight accumulators up to 128, halves beyond),
   starting from the identity 0; column sums of a C-ordered ``(n, d)`` array (``axis=0``) are plain
-  row-by-row sums, as numpy reduces a non-contiguous axis (pairwise again for ``d = 1``);
+  row-by-row sums, as numpy reduces a non-contiguous axis (pairwise again for ``d = 1`` and for
+  F-ordered arrays, e.g. the columns a hierarchical run hands its inner optimizer);
 * max, negation, products, divisions, square roots and clips are exact operations in the same
   order; no fastmath (no reassociation, no contraction into FMA).
 
@@ -112,13 +113,15 @@ def pairwise_sum(a):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def column_sums(A):  # pragma: no cover - compiled
-    """``A.sum(axis=0)`` of a C-ordered ``(n, d)`` array, bit-identical to numpy's: row by row, except
-    for ``d == 1``, where the column is contiguous and numpy sums it pairwise."""
+def column_sums(A, by_column):  # pragma: no cover - compiled
+    """``A.sum(axis=0)`` of an ``(n, d)`` array, bit-identical to numpy's: row by row when the rows are
+    contiguous (C order), each column pairwise when the columns are (``by_column``: F order, or
+    ``d = 1``), as numpy reduces along the contiguous axis."""
     n, d = A.shape
-    if d == 1:
-        out = np.empty(1)
-        out[0] = pairwise_sum(A[:, 0].copy())
+    if by_column:
+        out = np.empty(d)
+        for q in range(d):
+            out[q] = pairwise_sum(A[:, q].copy())
         return out
     out = A[0].copy()
     for i in range(1, n):
@@ -302,7 +305,7 @@ def select_mutate(X, W, keep, v, Z, c, rho, lo, hi):  # pragma: no cover - compi
     for i in range(n):
         for q in range(d):
             Xs[i, q] = X[A[i], q]
-    mean = column_sums(Xs)
+    mean = column_sums(Xs, d == 1)                 # Xs = X[A] is C-ordered
     for q in range(d):
         mean[q] = mean[q] / n
     sq = np.empty((n, d))
@@ -310,7 +313,7 @@ def select_mutate(X, W, keep, v, Z, c, rho, lo, hi):  # pragma: no cover - compi
         for q in range(d):
             dev = max(abs(Xs[i, q] - mean[q]), rho)
             sq[i, q] = dev * dev
-    ssq = column_sums(sq)
+    ssq = column_sums(sq, d == 1)
     scale = c / max(n - 1, 1)
     sd = np.empty(d)
     for q in range(d):
@@ -340,7 +343,8 @@ def generation_stats(E, P):  # pragma: no cover - compiled
     n, d = P.shape
     if n == 0:
         return mean_energy, np.nan
-    mean = column_sums(P)
+    by_column = d == 1 or (n > 1 and P.strides[0] < P.strides[1])   # np.std keeps P's order
+    mean = column_sums(P, by_column)
     for q in range(d):
         mean[q] = mean[q] / n
     sq = np.empty((n, d))
@@ -348,7 +352,7 @@ def generation_stats(E, P):  # pragma: no cover - compiled
         for q in range(d):
             dev = P[i, q] - mean[q]
             sq[i, q] = dev * dev
-    ssq = column_sums(sq)
+    ssq = column_sums(sq, by_column)
     std = np.empty(d)
     for q in range(d):
         std[q] = np.sqrt(ssq[q] / n)

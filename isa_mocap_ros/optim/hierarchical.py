@@ -89,6 +89,10 @@ class Hierarchical(Optimizer):
         super().__init__(x0, spread, rng=rng, bounds=bounds, initial_population=initial_population,
                          rotation_blocks=rotation_blocks, init=init, max_iter=max_iter)
         self.partitions = check_partitions(partitions, self.d)
+        # column selectors: a slice for a run of consecutive indices (a view, ~10x cheaper than
+        # fancy indexing per generation), else the index array
+        self._columns = [slice(int(p[0]), int(p[-1]) + 1) if np.array_equal(p, np.arange(p[0], p[-1] + 1))
+                         else p for p in self.partitions]
         self._blocks = []
         for blk in self.rotation_blocks:
             owner = [k for k, p in enumerate(self.partitions) if set(blk) <= set(p.tolist())]
@@ -209,8 +213,9 @@ class Hierarchical(Optimizer):
         if not self._advance_if_done():
             raise OptimError("ask: every partition is finished")
         Xs = self._current().ask()
-        X = np.repeat(self._x[None, :], len(Xs), axis=0)
-        X[:, self.partitions[self.k]] = Xs
+        X = np.empty((len(Xs), self.d))
+        X[:] = self._x
+        X[:, self._columns[self.k]] = Xs
         return X
 
     def _remaining(self):
@@ -227,9 +232,9 @@ class Hierarchical(Optimizer):
 
     def _tell(self, X, E):
         inner = self._current()
-        idx = self.partitions[self.k]
         n = getattr(self, "_counted", len(X))
-        inner._record(X[:, idx], E, n_counted=n, n_bad=0)
+        # F order, as X[:, index_array] gives: the inner weighted mean (BLAS) keeps its bits
+        inner._record(X[:, self._columns[self.k]].copy(order="F"), E, n_counted=n, n_bad=0)
         self._inner_used += n
         self._counted = len(X)
         self._last_pop = X

@@ -153,6 +153,7 @@ class Isa(ParticleOptimizer):
         k = n                                                      # S1 replaces every particle
         if self.kernel != "s1":
             k = _fast.keep_mask(W, self.rng.random(n), self.kernel == "s3", keep)
-        v = np.sort(self.rng.random(k)) if k else np.empty(0)
+        v = self.rng.random(k)
+        v.sort()
         Z = self.rng.standard_normal(X.shape)
         return _fast.select_mutate(X, W, keep, v, Z, self.c, self.rho, self.lo, self.hi)
