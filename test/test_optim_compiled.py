@@ -183,3 +183,26 @@ def test_h_isa_runs_are_reproducible_for_a_seed():
                     lambda X: np.sum((X - 0.2) ** 2, axis=1), max_evals=600) for _ in range(2)]
     np.testing.assert_array_equal(res[0].x, res[1].x)
     assert repr(res[0].history) == repr(res[1].history)
+
+
+@pytest.mark.parametrize("name, builds", [("isa", 3), ("de", 5), ("cmaes", 3)])
+def test_hierarchical_reuses_its_probes_only_when_building_them_drew_no_random_numbers(name, builds):
+    """bind() builds every partition's optimizer to validate the shares; they are reused unless
+    building them consumed random numbers (DE), and the run equals one that rebuilds them."""
+    def f(X):
+        return np.sum((X - 0.4) ** 2, axis=1)
+
+    built = []
+
+    def factory(x, s, **kw):
+        built.append(name)
+        return make_optimizer(name, x, s, **kw)
+    kw = dict(optimizer=factory, partitions=[[0, 1], [2, 3, 4], [5]], rotation_blocks=((2, 3, 4),))
+    reused = minimize(Hierarchical(np.zeros(6), 0.3, rng=np.random.default_rng(9), **kw), f, max_evals=900)
+    assert len(built) == builds
+    rebuilt = Hierarchical(np.zeros(6), 0.3, rng=np.random.default_rng(9), **kw).bind(f, max_evals=900)
+    rebuilt._probes = None                   # every later partition built when it starts
+    for _ in rebuilt:
+        pass
+    np.testing.assert_array_equal(reused.x, rebuilt.result().x)
+    assert repr(reused.history) == repr(rebuilt.result().history)

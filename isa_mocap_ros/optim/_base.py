@@ -140,9 +140,19 @@ def _as_vector(name: str, value, d: int | None = None) -> np.ndarray:
     if arr.ndim != 1 or (d is not None and arr.shape[0] != d):
         want = f"({d},)" if d is not None else "(d,)"
         raise OptimError(f"{name}: expected shape {want}, got {np.shape(value)}")
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         raise OptimError(f"{name}: expected finite values, got {arr}")
     return arr
+
+
+def _broadcast(name: str, value, d: int) -> np.ndarray:
+    """``value`` broadcast to a fresh ``(d,)`` float array (``np.broadcast_to(...).copy()``)."""
+    arr = np.array(value, dtype=float)
+    if arr.shape == (d,):
+        return arr
+    if arr.size == 1 and arr.ndim <= 1:
+        return np.full(d, float(arr.reshape(())))
+    raise OptimError(f"{name}: expected a float or shape ({d},), got shape {arr.shape}")
 
 
 class Optimizer:
@@ -185,8 +195,8 @@ class Optimizer:
         sp = np.array(spread, dtype=float)
         if sp.ndim > 1 or (sp.ndim == 1 and sp.shape[0] != d):
             raise OptimError(f"spread: expected a float or shape ({d},), got shape {sp.shape}")
-        sp = np.broadcast_to(sp, (d,)).copy()
-        if not np.all(np.isfinite(sp)) or np.any(sp <= 0):
+        sp = np.full(d, float(sp)) if sp.ndim == 0 else sp
+        if not np.isfinite(sp).all() or (sp <= 0).any():
             raise OptimError(f"spread: expected finite values > 0, got {sp}")
         self.spread = sp
         if bounds is None:
@@ -197,9 +207,8 @@ class Optimizer:
                 lo, hi = bounds
             except (TypeError, ValueError):
                 raise OptimError(f"bounds: expected a pair (lo, hi), got {bounds!r}") from None
-            lo = np.broadcast_to(np.array(lo, dtype=float), (d,)).copy()
-            hi = np.broadcast_to(np.array(hi, dtype=float), (d,)).copy()
-            if np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(lo >= hi):
+            lo, hi = _broadcast("bounds", lo, d), _broadcast("bounds", hi, d)
+            if np.isnan(lo).any() or np.isnan(hi).any() or (lo >= hi).any():
                 raise OptimError(f"bounds: expected lo < hi everywhere, got lo={lo}, hi={hi}")
             self.lo, self.hi = lo, hi
         self.x0 = self.clip(x0)
@@ -211,7 +220,7 @@ class Optimizer:
             P = np.array(initial_population, dtype=float, copy=True)
             if P.ndim != 2 or P.shape[1] != d or P.shape[0] < 1:
                 raise OptimError(f"initial_population: expected shape (n, {d}), got {P.shape}")
-            if not np.all(np.isfinite(P)):
+            if not np.isfinite(P).all():
                 raise OptimError("initial_population: expected finite values")
             initial_population = self.clip(P)
         self._initial_population = initial_population

@@ -41,11 +41,12 @@ def check_partitions(partitions, d: int) -> list[np.ndarray]:
             raise OptimError(f"partitions[{k}]: expected a non-empty 1-D index array, got {p!r}")
         if not np.issubdtype(a.dtype, np.integer):
             raise OptimError(f"partitions[{k}]: expected integer indices, got dtype {a.dtype}")
-        if a.min() < 0 or a.max() >= d:
-            raise OptimError(f"partitions[{k}]: indices must lie in [0, {d}), got {a.tolist()}")
-        if len(np.unique(a)) != a.size:
-            raise OptimError(f"partitions[{k}]: repeated index in {a.tolist()}")
-        for i in a.tolist():
+        idx = a.tolist()
+        if min(idx) < 0 or max(idx) >= d:
+            raise OptimError(f"partitions[{k}]: indices must lie in [0, {d}), got {idx}")
+        if len(set(idx)) != len(idx):
+            raise OptimError(f"partitions[{k}]: repeated index in {idx}")
+        for i in idx:
             if i in seen:
                 raise OptimError(f"partitions: index {i} is in partitions[{seen[i]}] and "
                                  f"partitions[{k}] (partitions must be disjoint)")
@@ -91,7 +92,7 @@ class Hierarchical(Optimizer):
         self.partitions = check_partitions(partitions, self.d)
         # column selectors: a slice for a run of consecutive indices (a view, ~10x cheaper than
         # fancy indexing per generation), else the index array
-        self._columns = [slice(int(p[0]), int(p[-1]) + 1) if np.array_equal(p, np.arange(p[0], p[-1] + 1))
+        self._columns = [slice(int(p[0]), int(p[-1]) + 1) if p.tolist() == list(range(p[0], p[-1] + 1))
                          else p for p in self.partitions]
         self._blocks = []
         for blk in self.rotation_blocks:
@@ -127,6 +128,7 @@ class Hierarchical(Optimizer):
         if evals_per_partition is not None:
             self.shares = self._check_shares(evals_per_partition)
         self._last_pop = None
+        self._probes: list[Optimizer | None] | None = None   # inner optimizers built by bind()
         self.partition_log: list[tuple[int, int]] = []   # (partition, evaluations spent)
 
     def _check_shares(self, eps):
@@ -165,11 +167,16 @@ class Hierarchical(Optimizer):
             if min(self.shares) < 1:
                 raise OptimError(f"max_evals: budget {max_evals} gives an empty share to a "
                                  f"partition (shares {self.shares})")
-            # validate every share now, so a too-small budget fails before any evaluation
-            for k in range(len(self.partitions)):
-                probe = self._make_inner(k, self.shares[k])
-                if k == 0:
-                    self._inner = probe
+            # validate every share now, so a too-small budget fails before any evaluation. A probe is
+            # the inner optimizer its partition will run if building the probes drew no random
+            # numbers (ISA, APF, CMA-ES): a partition's sub-vector of the estimate, its start, does
+            # not change before it runs, so a later build would give the same optimizer. Otherwise
+            # (DE draws at construction) later partitions are built again when they start.
+            state = self.rng.bit_generator.state
+            self._probes = [self._make_inner(k, self.shares[k]) for k in range(len(self.partitions))]
+            if self.rng.bit_generator.state != state:
+                self._probes[1:] = [None] * (len(self.partitions) - 1)
+            self._inner = self._probes[0]
             self._inner_used = 0
 
     @property
@@ -178,7 +185,9 @@ class Hierarchical(Optimizer):
 
     def _current(self) -> Optimizer:
         if self._inner is None:
-            self._inner = self._make_inner(self.k, None if self.shares is None else self.shares[self.k])
+            probe = self._probes[self.k] if self._probes is not None else None
+            self._inner = probe if probe is not None else \
+                self._make_inner(self.k, None if self.shares is None else self.shares[self.k])
         return self._inner
 
     def _share(self) -> int | None:
