@@ -389,9 +389,9 @@ class Optimizer:
         k = n if rem is None else max(0, min(n, rem))
         if k == 0:
             raise StopIteration
-        E = np.full(n, np.inf)
-        Ek, bad = check_energies(self._energy(X[:k]), k)
-        E[:k] = Ek
+        E, bad = check_energies(self._energy(X[:k]), k)
+        if k < n:       # the truncated last generation: rows beyond the budget get +inf
+            E = np.concatenate([E, np.full(n - k, np.inf)])
         self._record(X, E, n_counted=k, n_bad=bad)
         return self.history[-1]
 

@@ -221,11 +221,16 @@ class Hierarchical(Optimizer):
                              "minimize/bind or evals_per_partition= to Hierarchical")
         if not self._advance_if_done():
             raise OptimError("ask: every partition is finished")
-        Xs = self._current().ask()
+        Xs = self._current()._ask()                 # copied into X below
         X = np.empty((len(Xs), self.d))
         X[:] = self._x
         X[:, self._columns[self.k]] = Xs
         return X
+
+    def ask(self) -> np.ndarray:
+        """Next generation to evaluate, ``(n, d)``: the current estimate with the partition's columns
+        replaced by the inner optimizer's particles (a fresh array)."""
+        return self._ask()
 
     def _remaining(self):
         rem = super()._remaining()
