@@ -17,7 +17,8 @@ def test_estimator_section_matches_tracker_defaults():
     pairs = {"optimizer": tc.optimizer, "evals": tc.evals_per_frame, "energy": tc.energy_method,
              "downsample": tc.downsample, "search_radius_rad": tc.search_radius_rad, "predictor": tc.predictor,
              "predictor_order": tc.predictor_order, "prior_eta": tc.prior_eta, "seed": tc.seed,
-             "pelvis_fraction": tc.pelvis_fraction}
+             "pelvis_fraction": tc.pelvis_fraction, "limb_proposals": tc.limb_proposals,
+             "limb_proposal_limbs": list(tc.limb_proposal_limbs)}
     assert {k: est[k] for k in pairs} == pairs
 
 

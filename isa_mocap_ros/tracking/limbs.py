@@ -1,0 +1,116 @@
+"""Limb stage: twist-and-hinge proposals that re-open a folded or flipped limb.
+
+Why (measured on the CMU walk, ``docs/tracking.md``): when an arm moves fast, the tracker can end
+with the forearm folded back onto the upper arm (elbow at its −150° limit) while the real arm is
+stretched, the upper arm's *direction* still right within 5-20°. Its rotation about its own axis
+(the twist) is then 140-180° off. Stretching the elbow alone raises the energy at every angle (the
+forearm swings through the background in the wrong plane: 0.083 → 0.093-0.100 at CMU frame 204),
+the stretched arm's twist is far outside the search box (prediction ± 0.5 rad), and the arm stays
+folded for the rest of the sequence (right wrist 340-410 mm off over the last 50 frames, 4 of 4 seeds).
+
+The move that leaves it keeps the upper bone's direction and re-draws the two hidden coordinates:
+
+    for a limb with a three-axis base joint ``s`` (shoulder, hip) and a one-DOF hinge child ``h``
+    (elbow, knee): turn the base's world rotation ``R_s`` about its bone axis ``a = R_s u`` (``u``
+    the hinge's offset direction) by a twist ``φ``: ``R_s' = Rot(a, φ) R_s``; its local rotation
+    ``L_s' = R_p^T R_s'`` is re-read as Euler angles in the joint's own axis order; the hinge gets
+    ``θ``. ``φ ~ U[−π, π)`` and ``θ ~ U[lower, upper]`` of the hinge.
+
+Every proposal is evaluated with the rest of the pose held at the estimate; the best one replaces
+the limb when its energy is lower than the estimate's (the next frame's search refines it). This is
+a proposal distribution over the same energy, not a new energy.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+__all__ = ["LIMBS", "Limb", "LimbMove"]
+
+#: Partition names a limb can have (:attr:`BodyModel.partitions`).
+LIMBS = ("left_arm", "right_arm", "left_leg", "right_leg")
+
+
+@dataclass(frozen=True)
+class Limb:
+    """One limb of :class:`LimbMove`: its partition name, base joint (three rotation axes), the
+    base's DOFs and intrinsic Euler sequence, the hinge's DOF and the unit bone direction from the
+    base to the hinge in the base's frame."""
+
+    name: str
+    base: int
+    base_dofs: tuple
+    seq: str
+    hinge_dof: int
+    axis: np.ndarray
+
+    @property
+    def dofs(self) -> list[int]:
+        """The DOFs a proposal changes: the base's three and the hinge."""
+        return [*self.base_dofs, self.hinge_dof]
+
+
+class LimbMove:
+    """Twist-and-hinge proposals for the limbs of a model (see the module docstring).
+
+    Parameters
+    ----------
+    model : BodyModel
+        Limbs are the model's :data:`LIMBS` partitions whose first joint has three distinct
+        rotation axes and a one-DOF child joint (shoulder/elbow, hip/knee in the 28/39-DOF models;
+        hip/knee in the 18-DOF one).
+    """
+
+    def __init__(self, model) -> None:
+        self.model = model
+        self.limbs: list[Limb] = []
+        dof_joint = np.asarray(model.dof_joint)
+        for name in LIMBS:
+            if name not in model.partitions:
+                continue
+            joints = sorted({int(dof_joint[k]) for k in model.partitions[name]})
+            base = joints[0]
+            bd = tuple(int(k) for k in model.joint_dofs[base])
+            axes = [int(model.dof_axis[k]) for k in bd]
+            hinge = [j for j in joints if int(model.parents[j]) == base and len(model.joint_dofs[j]) == 1]
+            if len(bd) != 3 or len(set(axes)) != 3 or not hinge:
+                continue
+            u = np.array(model.offsets[hinge[0]], dtype=float)
+            if not np.linalg.norm(u) > 0:
+                continue
+            self.limbs.append(Limb(name, base, bd, "".join("XYZ"[a] for a in axes),
+                                   int(model.joint_dofs[hinge[0]][0]), u / np.linalg.norm(u)))
+
+    def limb(self, name: str) -> Limb:
+        """The limb called ``name`` (ValueError naming the model's limbs if it has none such)."""
+        for limb in self.limbs:
+            if limb.name == name:
+                return limb
+        raise ValueError(f"limb: expected one of {[v.name for v in self.limbs]}, received {name!r}")
+
+    def proposals(self, x: np.ndarray, limb: Limb, phi: np.ndarray, theta: np.ndarray) -> np.ndarray:
+        """Poses ``(n, D)``: ``x`` with the limb's base turned by twists ``phi (n,)`` about its
+        bone and the hinge at ``theta (n,)``, clipped to the model's limits."""
+        from isa_mocap_ros.body.kinematics import forward_kinematics
+
+        m = self.model
+        x = np.asarray(x, dtype=float)
+        T = forward_kinematics(m, x)[0]
+        Rp = T[int(m.parents[limb.base]), :3, :3]
+        Rs = T[limb.base, :3, :3]
+        turned = Rotation.from_rotvec(np.outer(np.asarray(phi, dtype=float), Rs @ limb.axis)) * Rotation.from_matrix(Rs)
+        local = Rotation.from_matrix(Rp.T) * turned
+        X = np.repeat(x[None, :], len(phi), axis=0)
+        X[:, list(limb.base_dofs)] = local.as_euler(limb.seq)
+        X[:, limb.hinge_dof] = theta
+        return np.clip(X, m.lower, m.upper)
+
+    def draw(self, x: np.ndarray, limb: Limb, n: int, rng: np.random.Generator) -> np.ndarray:
+        """``n`` proposals for ``limb`` around pose ``x``: twist uniform on the circle, hinge
+        uniform within its limits (both from ``rng``)."""
+        m, k = self.model, limb.hinge_dof
+        phi = rng.uniform(-np.pi, np.pi, n)
+        theta = rng.uniform(m.lower[k], m.upper[k], n)
+        return self.proposals(x, limb, phi, theta)

@@ -1,0 +1,130 @@
+"""Limb stage: twist-and-hinge proposals (the upper bone stays put, the hidden twist and the hinge
+are redrawn), and the tracker stage that uses them (budget, skip note, and what it is for: a
+folded arm whose real counterpart is stretched)."""
+import numpy as np
+import pytest
+
+from isa_mocap_ros.body import capsule_endpoints, joint_positions, make_model
+from isa_mocap_ros.body.motion import generate_motion
+from isa_mocap_ros.tracking import Tracker, TrackerConfig, TrackerError
+from isa_mocap_ros.tracking.limbs import LIMBS, LimbMove
+from isa_mocap_ros.tracking.tracker import frame_rng
+from isa_mocap_ros.vision import default_rig, render_mask
+
+
+@pytest.mark.parametrize("dof, limbs", [(39, LIMBS), (28, LIMBS), (18, ("left_leg", "right_leg"))])
+def test_limbs_of_each_model(dof, limbs):
+    lm = LimbMove(make_model(dof))
+    assert tuple(v.name for v in lm.limbs) == limbs
+    with pytest.raises(ValueError, match="limb: expected one of"):
+        lm.limb("tail")
+
+
+@pytest.mark.parametrize("name, base, hinge, tip", [("right_arm", "right_shoulder", "right_elbow", "right_wrist"),
+                                                    ("left_leg", "left_hip", "left_knee", "left_ankle")])
+def test_proposals_turn_the_limb_about_its_upper_bone(name, base, hinge, tip):
+    model = make_model(39)
+    rng = np.random.default_rng(3)
+    x = model.rest_pose().copy()
+    x[6:] += rng.normal(0.0, 0.15, model.dof - 6)
+    x = np.clip(x, model.lower, model.upper)
+    lm = LimbMove(model)
+    limb = lm.limb(name)
+    x[limb.hinge_dof] = 0.5 * (model.lower[limb.hinge_dof] + model.upper[limb.hinge_dof])   # bent, off its limits
+    names = list(model.joint_names)
+    b, h, t = names.index(base), names.index(hinge), names.index(tip)
+    # no twist and the current hinge angle give the pose back
+    np.testing.assert_allclose(lm.proposals(x, limb, np.zeros(1), x[[limb.hinge_dof]])[0], x, atol=1e-9)
+    phi = np.deg2rad([-40.0, -15.0, 10.0, 25.0, 45.0])
+    X = lm.proposals(x, limb, phi, np.full(5, x[limb.hinge_dof]))
+    J0, J = joint_positions(model, x[None])[0], joint_positions(model, X)
+    unclipped = [k for k in range(5) if np.all(X[k][limb.dofs] > model.lower[limb.dofs] + 1e-9)
+                 and np.all(X[k][limb.dofs] < model.upper[limb.dofs] - 1e-9)]
+    assert len(unclipped) >= 3                               # proposals the limits did not bend
+    for k in unclipped:
+        np.testing.assert_allclose(J[k, h], J0[h], atol=1e-9)             # the upper bone did not move
+        d0, d = J0[t] - J0[h], J[k, t] - J[k, h]
+        assert np.linalg.norm(d) == pytest.approx(np.linalg.norm(d0), abs=1e-9)
+        axis = (J0[h] - J0[b]) / np.linalg.norm(J0[h] - J0[b])
+        # the lower bone turned about the upper one by the twist (same angle to the axis)
+        assert d @ axis == pytest.approx(d0 @ axis, abs=1e-9)
+    assert not np.allclose(J[unclipped, t], J0[t], atol=1e-3)
+    # every other joint angle is untouched
+    others = [k for k in range(model.dof) if k not in limb.dofs]
+    np.testing.assert_array_equal(X[:, others], np.repeat(x[None, others], 5, 0))
+    # proposals are always inside the model's limits
+    X = lm.draw(x, limb, 50, rng)
+    assert np.all(X >= model.lower) and np.all(X <= model.upper)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    model = make_model(39)
+    rig = default_rig(width=160, height=120)
+    walk = generate_motion("walk", model, duration_s=0.2, fps=30, rng=np.random.default_rng(1))
+    truth = walk[3].copy()
+    k = model.joint_index("right_elbow")
+    truth[model.joint_dofs[k][0]] = np.deg2rad(-20.0)     # a nearly stretched right arm
+    masks = [render_mask(c, capsule_endpoints(model, truth)[0], model.capsule_radii) for c in rig.cameras]
+    return model, rig.cameras, walk, truth, masks
+
+
+def test_stage_reopens_a_folded_arm(scene):
+    """The trap the stage exists for: the forearm folded onto the upper arm (elbow at its limit) and
+    the upper arm twisted 180 deg, where the real arm is nearly straight. The upper bone is right, so
+    the proposals only have to find the twist and the hinge."""
+    model, cams, walk, truth, masks = scene
+    lm = LimbMove(model)
+    limb = lm.limb("right_arm")
+    trapped = lm.proposals(truth, limb, np.array([np.pi]), model.lower[[limb.hinge_dof]])[0]
+    w = model.joint_index("right_wrist")
+    wrist_err = lambda x: float(np.linalg.norm(joint_positions(model, x[None])[0, w]
+                                               - joint_positions(model, truth[None])[0, w]))
+    assert wrist_err(trapped) > 0.2
+    tr = Tracker(model, cams, TrackerConfig(seed=1))
+    tr.initialize(pose=trapped)
+    tr.step(masks, 3)                                       # sets the masks
+    e0 = tr.total_energy(trapped[None])[0]
+    fixed = 0
+    for s in range(3):
+        x, e, n, changed = tr.propose_limbs(trapped, n=200, rng=frame_rng(s, 3), limbs=["left_arm", "right_arm"])
+        assert n == 2 * 200 + 2 and e == pytest.approx(tr.total_energy(x[None])[0], rel=1e-12)
+        assert e <= e0 and np.all(x >= model.lower) and np.all(x <= model.upper)
+        fixed += changed == ["right_arm"] and wrist_err(x) < 0.06
+    assert fixed == 3
+    # the hierarchy's own search, from the trapped pose with the same number of evaluations, stays folded
+    tr = Tracker(model, cams, TrackerConfig(seed=1, evals_per_frame=402, pelvis_fraction=0.0, limb_proposals=0))
+    tr.initialize(pose=trapped)
+    r = tr.step(masks, 4, prediction=trapped)
+    assert wrist_err(r.x) > 0.15
+
+
+def test_stage_budget_skip_note_and_off(scene):
+    model, cams, walk, truth, masks = scene
+    for cfg, note in [(TrackerConfig(evals_per_frame=700, seed=1), False),
+                      (TrackerConfig(evals_per_frame=330, seed=1, pelvis_fraction=0.0), True),   # 34 > 33
+                      (TrackerConfig(evals_per_frame=700, seed=1, limb_proposals=0), False)]:
+        tr = Tracker(model, cams, cfg)
+        tr.initialize(pose=walk[2])
+        r = tr.step(masks, 3)
+        assert r.n_evals == cfg.evals_per_frame and not r.fell_back
+        assert any(n.startswith("limb stage skipped: its share (34 evaluations)") for n in r.notes) == note
+
+
+def test_not_on_the_automatically_initialized_frame(scene, monkeypatch):
+    model, cams, walk, truth, masks = scene
+    calls = []
+    monkeypatch.setattr(Tracker, "propose_limbs", lambda self, *a, **k: calls.append(1))
+    tr = Tracker(model, cams, TrackerConfig(seed=1, evals_per_frame=600, init_refine_evals=50, init_yaw_steps=8))
+    r = tr.step(masks, 0)
+    assert r.initialized and not calls
+
+
+@pytest.mark.parametrize("kw, match", [({"limb_proposals": -1}, "limb_proposals"),
+                                       ({"limb_proposals": 2.5}, "limb_proposals"),
+                                       ({"limb_proposal_limbs": ("left_arm", "tail")}, "limb_proposal_limbs"),
+                                       ({"limb_proposal_limbs": "left_arm"}, "limb_proposal_limbs"),
+                                       ({"limb_proposal_limbs": ("left_arm", "left_arm")}, "limb_proposal_limbs")])
+def test_bad_settings(kw, match):
+    with pytest.raises(TrackerError, match=match):
+        TrackerConfig(**kw)
