@@ -26,8 +26,9 @@ Bit equality with numpy holds because the same operations run in the same order:
 * max, negation, products, divisions, square roots and clips are exact operations in the same
   order; no fastmath (no reassociation, no contraction into FMA).
 
-``test/test_optim_fast.py`` checks bit equality with the numpy formulation on random inputs, and a
-process that compiles these functions against one that loads them from numba's cache.
+``test/test_optim_fast.py`` and ``test/test_optim_compiled.py`` check bit equality with the numpy
+formulation on random inputs and whole runs, and a process that compiles these functions against
+one that loads them from numba's cache.
 """
 from __future__ import annotations
 

@@ -15,9 +15,11 @@ Note on (13.16): the book writes ``((x)_rho)_k = max(x_k, rho)`` applied to the 
 floor on the deviation's magnitude, ``max(|x_k - mu_k|, rho)``, which keeps the stated purpose
 ("the variance does not become zero": ``Sigma_kk >= c n rho^2 / (n - 1)``).
 
-Steps 1, 3 and 4 run compiled (:mod:`._fast`) with the random numbers drawn here, from the
-optimizer's generator and in the order of the numpy formulation, which is kept for the other
-resampling schemes and as the reference (``test/test_optim_fast.py``: bit-identical runs).
+Steps 1, 3 and 4 run compiled (:mod:`._fast`; 3 and 4 fused for multinomial replacement) with the
+random numbers drawn here, from the optimizer's generator and in the order of the numpy
+formulation, which is kept for the other resampling schemes and as the reference; the rotation mean
+of step 2 uses the compiled SO(3) maps of :mod:`._fast_so3`. ``test/test_optim_compiled.py``
+checks that the runs are bit-identical to the numpy formulation.
 """
 from __future__ import annotations
 
