@@ -48,7 +48,8 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--learn-frames", type=int, default=None,
                    help="frames the segmentation learns the background from (default: the bag's frames before "
                         "its first ground truth, else the parameter file's learn_frames)")
-    p.add_argument("--overlay-frames", type=int, default=4, help="overlay frames to save as PNG")
+    p.add_argument("--overlay-frames", type=int, default=4,
+                   help="overlay frames to save as PNG (drawn after the run from the recording)")
     p.add_argument("--quiet", action="store_true", help="do not echo node output")
 
 
@@ -56,8 +57,9 @@ def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
              learn_frames: int | None) -> list[NodeSpec]:
     est = [("views", str(n_views)), ("lockstep", "true" if args.lockstep else "false"), ("wait_for_inputs_s", "60.0"),
            # lockstep: wait for every view (a partial set would make results depend on machine load)
-           *([("view_timeout_s", "0.0")] if args.lockstep else []),
-           ("publish_overlay", "true" if args.overlay_frames > 0 else "false")]
+           *([("view_timeout_s", "0.0")] if args.lockstep else [])]
+    # No publish_overlay: the overlay PNGs are drawn after the run from the recording (run_report), so
+    # the estimator neither subscribes to the images nor draws and publishes 4 overlays per frame set.
     for key, val in (("optimizer", args.optimizer), ("evals", args.evals), ("model_dof", args.model),
                      ("seed", args.seed)):
         if val is not None:

@@ -3,7 +3,12 @@ write ``summary.json``, plots and overlay frames, print a table.
 
 Latency is measured from the recording: the recorder's receive time of a frame's
 ``/mocap/cam0/image_raw`` to its receive time of that frame's ``/mocap/joint_states`` (both arrive
-in the same process over the same DDS path the segmentation node uses)."""
+in the same process over the same DDS path the segmentation node uses).
+
+Overlay frames (``overlays/<stamp>_cam<i>.png``) are drawn here, after the run, from the bag's
+images, the recorded masks and the recorded estimates, for ``--overlay-frames`` frames spread over
+the estimated ones: the same picture the estimator's ``cam<i>/overlay`` shows, without the network
+drawing, publishing and recording four overlay images for every frame set while it runs."""
 from __future__ import annotations
 
 import argparse
@@ -50,6 +55,50 @@ def read_estimates(path: Path, model) -> dict:
     return {"poses": poses, "latencies_ms": lat, "done": done, "overlays": overlays, "diagnostics": diag}
 
 
+def read_masks(path: Path) -> dict[tuple[int, int], bytes]:
+    """The recorded ``/mocap/cam<i>/mask`` messages as CDR bytes, keyed ``(stamp_ns, view)``."""
+    import msg_adapters as ma
+    from isa_mocap_ros.sequence import view_of_topic
+
+    masks: dict[tuple[int, int], bytes] = {}
+    with BagReader(path) as bag:
+        topics = [t for t in bag.topics if (vk := view_of_topic(t)) is not None and vk[1] == "mask"]
+        for m in bag.messages(topics):
+            masks[(ma.header_stamp_ns_from_cdr(m.data), view_of_topic(m.topic)[0])] = m.data
+    return masks
+
+
+def write_overlays(folder: Path, model, seq, poses: dict[int, np.ndarray], masks: dict[tuple[int, int], bytes],
+                   n_frames: int) -> list[Path]:
+    """Draw the estimate on the images of ``n_frames`` estimated frames (spread evenly), the mask the
+    estimator used shaded in, as ``folder/<stamp>_cam<i>.png``; returns the files written."""
+    import cv2
+
+    import msg_adapters as ma
+    from isa_mocap_ros.body import capsule_endpoints
+    from isa_mocap_ros.vision.overlay import draw_overlay
+
+    images = {f.stamp_ns: f.images for f in seq.frames if f.images is not None}
+    stamps = sorted(s for s in poses if s in images)
+    if not stamps or n_frames <= 0:
+        return []
+    pick = sorted({stamps[i] for i in np.linspace(0, len(stamps) - 1, min(n_frames, len(stamps)), dtype=int)})
+    folder.mkdir(parents=True, exist_ok=True)
+    written = []
+    for s in pick:
+        E = capsule_endpoints(model, poses[s][None])[0]
+        for v, (cam, img) in enumerate(zip(seq.cameras, images[s])):
+            if img is None:
+                continue
+            data = masks.get((s, v))
+            mask = None if data is None else ma.image_to_array(ma.from_cdr(data, "sensor_msgs/msg/Image"))
+            out = draw_overlay(img, cam, E, model.capsule_radii, mask=mask)
+            path = folder / f"{s}_cam{v}.png"
+            cv2.imwrite(str(path), cv2.cvtColor(out, cv2.COLOR_RGB2BGR))
+            written.append(path)
+    return written
+
+
 def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary: dict,
                  wall_seconds: float) -> int:
     import cv2
@@ -91,7 +140,7 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
     else:
         summary["frames"] = len(poses)
     ov = rec["overlays"]
-    if ov and args.overlay_frames > 0:
+    if ov and args.overlay_frames > 0:  # the estimator published overlays (publish_overlay in --params)
         stamps_ov = sorted({s for s, _, _ in ov})
         pick = set(stamps_ov[i] for i in np.linspace(0, len(stamps_ov) - 1, min(args.overlay_frames, len(stamps_ov)),
                                                       dtype=int))
@@ -100,6 +149,8 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
             if s in pick:
                 cam = topic.split("/")[-2]
                 cv2.imwrite(str(out / "overlays" / f"{s}_{cam}.png"), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
+    elif poses and args.overlay_frames > 0:
+        write_overlays(out / "overlays", model, seq, poses, read_masks(out / "estimates"), args.overlay_frames)
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     rows = [("frames (with ground truth)", summary.get("frames")), ("mean joint error (mm)", summary.get("mpjpe_mm")),
             ("max frame error (mm)", summary.get("max_frame_error_mm")), ("knee RMSE (deg)", summary.get("knee_rmse_deg")),
