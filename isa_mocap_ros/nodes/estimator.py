@@ -44,6 +44,16 @@ from isa_mocap_ros.vision import Camera
 from isa_mocap_ros.vision.overlay import draw_overlay
 
 
+def _camera_info_key(msg: CameraInfo) -> tuple | None:
+    """The fields :func:`msg_adapters.camera_info_to_intrinsics` reads, as bytes (a cheap equality key;
+    ~10 µs instead of ~0.2 ms for the conversion), or None when a field is not a plain buffer."""
+    try:
+        return (msg.width, msg.height, msg.distortion_model, bytes(memoryview(msg.k)), bytes(memoryview(msg.d)),
+                bytes(memoryview(msg.r)), bytes(memoryview(msg.p)))
+    except (TypeError, ValueError):
+        return None
+
+
 class EstimatorNode(Node):
     """Thin node over :class:`isa_mocap_ros.tracking.tracker.Tracker` (see the module docstring)."""
 
@@ -154,11 +164,18 @@ class EstimatorNode(Node):
 
     # -- calibration --------------------------------------------------------------------------
     def _info_cb(self, v: int):
+        last_key = [None]  # the fields of the last good camera info: a camera sends the same one every frame
+
         def cb(msg: CameraInfo) -> None:
+            key = _camera_info_key(msg)
+            if key is not None and key == last_key[0]:
+                return  # unchanged (bit for bit): the stored intrinsics are this message's
             try:
                 self._intrinsics[v] = ma.camera_info_to_intrinsics(msg)
             except ma.AdapterError as exc:
                 self.problems.report(f"info{v}", f"cam{v}/camera_info dropped: {exc}")
+                return
+            last_key[0] = key
         return cb
 
     def _extr_cb(self, v: int):
