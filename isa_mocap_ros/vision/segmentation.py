@@ -250,7 +250,8 @@ def clean_mask(mask: np.ndarray, *, open_kernel: int = 3, close_kernel: int = 3,
         if n > 1:
             keep = np.bincount(labels.ravel(), minlength=n) >= min_blob_area_px
             keep[0] = False  # label 0 is the background
-            out = np.take(np.where(keep, np.uint8(255), np.uint8(0)), labels)
+            if not keep[1:].all():  # else nothing to remove: out is already 255 exactly on the labels > 0
+                out = np.take(np.where(keep, np.uint8(255), np.uint8(0)), labels)
     return out
 
 
