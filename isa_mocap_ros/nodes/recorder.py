@@ -53,6 +53,7 @@ class BagRecorder(Node):
         self.subscribed: dict[str, str] = {}
         self.counts: dict[str, int] = {}
         self._unsupported: set[str] = set()
+        self._wanted_cache: dict[str, bool] = {}
         # Callbacks only enqueue; one writer thread owns the BagWriter (chunk compression never
         # blocks the executor, so publishers' histories are drained while a chunk is written).
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
@@ -65,6 +66,13 @@ class BagRecorder(Node):
         self._discover()
 
     def _wanted(self, topic: str) -> bool:
+        """Whether ``topic`` is recorded (memoized: the patterns never change, discovery runs at 2 Hz)."""
+        wanted = self._wanted_cache.get(topic)
+        if wanted is None:
+            wanted = self._wanted_cache[topic] = self._match(topic)
+        return wanted
+
+    def _match(self, topic: str) -> bool:
         if any(fnmatch.fnmatchcase(topic, e) for e in self.exclude):
             return False
         if self.record_all:
