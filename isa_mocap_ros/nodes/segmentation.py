@@ -113,11 +113,18 @@ class SegmentationNode(Node):
             + ("clean plates" if any(plates) else f"learning from the first {self.config.learn_frames} frames"))
 
     def _warm_up(self) -> None:
-        """Run the compiled kernels once on a tiny image, so the first real frame is not slow."""
-        seg = BackgroundSegmenter(self.config)
-        img = np.zeros((16, 16, 3), np.uint8)
-        for _ in range(self.config.learn_frames + 2):
-            seg.apply(img)
+        """Run the compiled kernels once on a tiny image, so the first real frame is not slow.
+
+        Both a writable and a read-only image: the callback hands the segmenter a read-only view
+        on the message's buffer, and numba compiles (or loads from its cache, ~0.2 s) a separate
+        specialization for read-only arrays, which would otherwise stall the first frame after the
+        background is learnt."""
+        for writeable in (True, False):
+            seg = BackgroundSegmenter(self.config)
+            img = np.zeros((16, 16, 3), np.uint8)
+            img.flags.writeable = writeable
+            for _ in range(self.config.learn_frames + 2):
+                seg.apply(img)
 
     def _callback(self, v: int):
         seg, pub = self.segmenters[v], self.mask_pubs[v]
