@@ -12,9 +12,11 @@ Every node of the package:
 """
 from __future__ import annotations
 
+import os
 import sys
 import time
-from typing import Any, Callable
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -23,6 +25,26 @@ from rclpy.node import Node
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
 QOS_OVERRIDES = QoSOverridingOptions.with_default_policies()
+
+
+@contextmanager
+def one_numba_thread() -> Iterator[None]:
+    """Run the compiled (numba ``parallel=True``) kernels called inside on the calling thread only.
+
+    For the one-pose kernel calls of a node (the skeleton marker, an overlay): a parallel region
+    wakes numba's OpenMP workers, which then spin; at one pose that costs ~4 ms of the caller's CPU
+    and as much again in the workers, for ~10 µs of work. The thread count is numba's per-thread
+    setting, so a tracker stepping on another thread is not affected, and each pose is computed by
+    the same code, so the results are identical.
+    """
+    import numba
+
+    n = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(n)
 
 
 def declare(node: Node, name: str, default: Any, description: str, *, lo: float | None = None,
@@ -71,6 +93,10 @@ def run_node(factory: Callable[..., Node], args: list[str] | None = None, *,
     A ``ValueError`` raised while the node is built (bad parameters, unreadable files) is printed
     as one line and gives exit code 2.
     """
+    # Idle OpenMP workers of numba's parallel kernels sleep instead of spinning (read by the OpenMP
+    # runtime when the first parallel kernel runs, so setting it here is in time): the nodes share
+    # the cores, and spinning workers take the CPU the other nodes need (see launcher.Supervisor).
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     rclpy.init(args=args)
     node = None
     code = 0

@@ -37,7 +37,7 @@ from isa_mocap_ros.body import capsule_endpoints, joint_positions, make_model, p
 from isa_mocap_ros.body.hri import hri_joint_names, hri_urdf
 from isa_mocap_ros.geometry import exp_so3
 from isa_mocap_ros.nodes import qos
-from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, run_node
+from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, one_numba_thread, run_node
 from isa_mocap_ros.tracking.sync import FrameSynchronizer, LatestSlot, SyncError
 from isa_mocap_ros.tracking.tracker import TrackerConfig
 from isa_mocap_ros.vision import Camera
@@ -351,14 +351,16 @@ class EstimatorNode(Node):
         self.frames_done += 1
         self.last_result = result
         if result.x is not None:
-            self._publish(frame_set.stamp_ns, result)
+            with one_numba_thread():
+                self._publish(frame_set.stamp_ns, result)
             self._published_any = True
         for note in result.notes:
             self.problems.report(f"note:{note.split(':')[0]}", f"frame {frame_set.stamp_ns}: {note}")
         self.latencies_ms.append((time.monotonic() - t_ready) * 1e3)
         self._done(frame_set.stamp_ns)
         if self.overlay and self.frames_done % self.overlay_every == 0 and result.x is not None:
-            self._publish_overlay(frame_set, result.x)
+            with one_numba_thread():
+                self._publish_overlay(frame_set, result.x)
 
     def _done(self, stamp_ns: int) -> None:
         self.pub_done.publish(ma.make_header(stamp_ns, self.world_frame))
