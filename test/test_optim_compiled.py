@@ -4,6 +4,7 @@ process that compiles them computes the same bits as one that loads them from nu
 import numpy as np
 import pytest
 
+from isa_mocap_ros.geometry import nearest_rotvec
 from isa_mocap_ros.optim import Hierarchical, Isa, make_optimizer, minimize
 from isa_mocap_ros.optim import _fast, _fast_so3
 from isa_mocap_ros.optim._rotations import exp_so3, log_so3, rotation_mean
@@ -154,7 +155,18 @@ def _numpy_rotation_mean(rotvecs, weights, n_iter=20, tol=1e-12):
         mean = log_so3(M @ exp_so3(step))
         if step @ step < tol:
             break
-    return mean
+    return nearest_rotvec(mean, r[int(np.argmax(w))])
+
+
+def test_rotation_mean_keeps_the_particles_side_of_a_half_turn():
+    """Particles around a yaw of 180° (|r| near pi, on both sides): the mean stays on the side of
+    the particle of largest weight instead of jumping to the canonical |r| <= pi representative."""
+    r = np.array([[0.0, 0.0, 3.10], [0.0, 0.0, 3.14], [0.0, 0.0, 3.20], [0.01, 0.0, 3.16]])
+    m = rotation_mean(r, np.ones(4))
+    np.testing.assert_allclose(m, [0.0025, 0.0, 3.15], atol=1e-3)
+    m = rotation_mean(-r, np.ones(4))
+    np.testing.assert_allclose(m, [-0.0025, 0.0, -3.15], atol=1e-3)
+    np.testing.assert_allclose(rotation_mean(np.array([[0.0, 0.0, 0.4]]), np.ones(1)), [0.0, 0.0, 0.4], atol=1e-12)
 
 
 def test_rotation_mean_is_the_numpy_reference_bit_for_bit():

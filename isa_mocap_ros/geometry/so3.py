@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["GeometryError", "hat", "vee", "exp_so3", "log_so3", "rotation_mean",
+__all__ = ["GeometryError", "hat", "vee", "exp_so3", "log_so3", "rotation_mean", "nearest_rotvec",
            "rot_x", "rot_y", "rot_z"]
 
 _SMALL = 1e-4          # below this angle, Taylor series for the Rodrigues coefficients
@@ -170,6 +170,26 @@ def _axis_rotation(a, axis: int) -> np.ndarray:
     R[..., i, j] = -s
     R[..., j, i] = s
     return R
+
+
+def nearest_rotvec(w: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """The rotation vector ``(θ + 2πm) ω`` of the rotation ``w = θ ω`` that is nearest to ``ref``.
+
+    ``w`` itself (the same object) when that is ``m = 0``. With ``ref = 0`` it is the canonical
+    ``‖w‖ ≤ π`` one. Used where rotation vectors must stay continuous through ``θ = π`` (a body
+    turning through 180°): predictions near the last estimate, means near their particles.
+
+    Examples
+    --------
+    >>> nearest_rotvec(np.array([0.0, 0.0, -3.0]), np.array([0.0, 0.0, 3.1])).round(4).tolist()
+    [0.0, 0.0, 3.2832]
+    """
+    theta = float(np.sqrt(w @ w))
+    if theta < 1e-12:
+        return w
+    axis = w / theta
+    m = np.round((float(axis @ ref) - theta) / (2.0 * np.pi))
+    return w if m == 0 else axis * (theta + 2.0 * np.pi * m)
 
 
 def rotation_mean(rotvecs, weights=None, *, iters: int = 10, tol: float = 1e-10) -> np.ndarray:

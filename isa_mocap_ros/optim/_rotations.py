@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from isa_mocap_ros.geometry import nearest_rotvec
+
 from . import _fast_so3
 
 
@@ -68,16 +70,21 @@ def rotation_mean(rotvecs, weights, *, n_iter: int = 20, tol: float = 1e-12) -> 
     """Weighted mean rotation ``(3,)`` of rotation vectors ``(n, 3)`` by iteration (13.24).
 
     Starts from the rotation vector of largest weight; stops when the update is below ``tol``.
+    The result is the representative ``(θ + 2πm) ω`` of the mean rotation nearest to that start,
+    so rotation vectors near ``|r| = π`` (a body turning through 180°) keep their side: the
+    composition itself returns ``|r| ≤ π``, and a mean of particles at ``(0, 0, 3.1)`` came back as
+    ``(0, 0, −3.18)``, which a search box around the particles then clipped 30° away.
     """
     r = np.ascontiguousarray(rotvecs, dtype=float)
     w = np.asarray(weights, dtype=float)
     w = w / w.sum()
     Ri = _fast_so3.exp_many(r)
-    mean = r[int(np.argmax(w))].copy()
+    start = r[int(np.argmax(w))]
+    mean = start.copy()
     for _ in range(n_iter):
         delta = _fast_so3.relative_logs(mean, Ri)  # r_hat^{-1} * r_i
         step = w @ delta
         mean = _fast_so3.compose(mean, step)       # r_hat * step
         if step @ step < tol:
             break
-    return mean
+    return nearest_rotvec(mean, start)

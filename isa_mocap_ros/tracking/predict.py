@@ -40,7 +40,7 @@ from typing import Sequence
 
 import numpy as np
 
-from isa_mocap_ros.geometry import adjoint, exp_se3, log_se3, matrix_to_pose, pose_to_matrix
+from isa_mocap_ros.geometry import adjoint, exp_se3, log_se3, matrix_to_pose, nearest_rotvec, pose_to_matrix
 
 __all__ = ["PredictionError", "ArPredictor", "ConstantPosePredictor", "ConstantVelocityPredictor"]
 
@@ -55,16 +55,6 @@ def _se3_inverse(T: np.ndarray) -> np.ndarray:
     Ti[:3, :3] = T[:3, :3].T
     Ti[:3, 3] = -T[:3, :3].T @ T[:3, 3]
     return Ti
-
-
-def _nearest_rotvec(w: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """The rotation vector ``(θ + 2πm) ω`` equivalent to ``w`` that is nearest to ``ref``."""
-    theta = float(np.linalg.norm(w))
-    if theta < 1e-12:
-        return w
-    axis = w / theta
-    m = np.round((float(axis @ ref) - theta) / (2.0 * np.pi))
-    return axis * (theta + 2.0 * np.pi * m)
 
 
 class _HistoryPredictor:
@@ -261,7 +251,7 @@ class ArPredictor(_HistoryPredictor):
                 xi_cur = adjoint(G) @ (lam[i - 1] * xi)      # ξ'_i = Ad_G λ_i ξ_i
                 T = exp_se3(xi_cur) @ T                      # exp(ξ'_i) ... exp(ξ'_1) M
             root = matrix_to_pose(T)
-            root[3:] = _nearest_rotvec(root[3:], X[-1, self.root_slice][3:])
+            root[3:] = nearest_rotvec(root[3:], X[-1, self.root_slice][3:])
             out[self.root_slice] = root
         # q_pred = q_k + Σ λ_i (q_i - q_{i-1})
         out[joint] = X[-1, joint] + lam @ np.diff(X[:, joint], axis=0)

@@ -53,6 +53,8 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from isa_mocap_ros.geometry import nearest_rotvec
+
 from .init import InitError, initial_pose
 from .limbs import LIMBS, LimbMove
 from .pelvis import PelvisMove
@@ -570,6 +572,13 @@ class Tracker:
                 notes.append("prediction: non-finite values; using the last estimate")
                 return self._last.copy()
         cfg = self.config
+        for blk in self.model.rotation_blocks:
+            # a prediction that went through a JointState (roll/pitch/yaw) has |r| <= pi: near a
+            # half turn it can lie on the other side of pi from the last estimate (demo, frame 127:
+            # 174° vs -179° gave -72° after damping, and the track was lost)
+            idx = list(blk)
+            p = p.copy() if p is external else p
+            p[idx] = nearest_rotvec(p[idx], self._last[idx])
         gain = np.full(D, cfg.joint_velocity_gain)
         gain[:6] = cfg.root_velocity_gain
         return self._last + gain * (p - self._last)       # damped extrapolation
@@ -700,14 +709,15 @@ class Tracker:
         if optimizer is None:
             optimizer, params = self._flat_algorithm()
         x1 = np.clip(x, lo, hi)
+        move = self._pelvis.around(x1)
 
         def energy(roots):
-            return self.total_energy(np.clip(self._pelvis(x1, roots), m.lower, m.upper))
+            return self.total_energy(np.clip(move(roots), m.lower, m.upper))
 
         opt = make_optimizer(optimizer, x1[:6], spread[:6] * PELVIS_SPREAD_SCALE, rng=rng, bounds=(lo[:6], hi[:6]),
                              rotation_blocks=((3, 4, 5),), **dict(params or {}))
         r = minimize(opt, energy, max_evals=int(evals) - 1)
-        out = np.clip(self._pelvis(x1, r.x)[0], m.lower, m.upper)
+        out = np.clip(move(r.x)[0], m.lower, m.upper)
         return out, float(self.total_energy(out[None, :])[0]), r.n_evals + 1
 
     def propose_limbs(self, x, *, n: int, rng: np.random.Generator,
@@ -810,6 +820,9 @@ class Tracker:
         else:
             x, energy = res.x, res.energy
         x = np.clip(np.array(x, dtype=float), self.model.lower, self.model.upper)
+        for blk in self.model.rotation_blocks:      # |r| <= pi: turning on and on never meets the limits
+            idx = list(blk)
+            x[idx] = nearest_rotvec(x[idx], np.zeros(3))
         if res.n_nonfinite:
             notes.append(f"energy: {res.n_nonfinite} non-finite evaluations")
         spread_out = res.history[-1].spread if res.history else float("nan")
