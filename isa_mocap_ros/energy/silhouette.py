@@ -92,7 +92,10 @@ def _check_poses(model: BodyModel, X: Any) -> tuple[np.ndarray, np.ndarray]:
         X = X[None]
     if X.ndim != 2 or X.shape[1] != model.dof:
         raise EnergyError(f"X: expected shape (n, {model.dof}) for model {model.name}, received shape {X.shape}")
-    return np.ascontiguousarray(X), np.all(np.isfinite(X), axis=1)
+    X = np.ascontiguousarray(X)
+    if np.isfinite(X.sum()):                  # one reduction for the usual all-finite batch
+        return X, np.ones(X.shape[0], bool)
+    return X, np.all(np.isfinite(X), axis=1)
 
 
 def _foreground(mask: np.ndarray) -> np.ndarray:
@@ -344,6 +347,7 @@ class SilhouetteEnergy:
         if self.method == "fast":
             frame.update(self._fast_frame(used, F))
         self._frame = frame
+        self._threads = numba.get_num_threads()      # per set_masks: the call costs ~20 µs
         self.skipped_views, self._used, self.n_views_used = skipped, used, len(used)
 
     def _fast_frame(self, used: list[int], F: dict) -> dict:
@@ -417,11 +421,12 @@ class SilhouetteEnergy:
                               "received none")
         n = X.shape[0]
         self.n_evals += n
+        if ok.all():
+            return self._fast(X) if self.method == "fast" else self._exact(X)
         out = np.full(n, np.inf)
-        if not ok.any():
-            return out
-        Xg = X if ok.all() else np.ascontiguousarray(X[ok])
-        out[ok] = self._fast(Xg) if self.method == "fast" else self._exact(Xg)
+        if ok.any():
+            Xg = np.ascontiguousarray(X[ok])
+            out[ok] = self._fast(Xg) if self.method == "fast" else self._exact(Xg)
         return out
 
     def _exact(self, X: np.ndarray) -> np.ndarray:
@@ -435,7 +440,7 @@ class SilhouetteEnergy:
     def _fast(self, X: np.ndarray) -> np.ndarray:
         fr = self._frame
         out = np.empty(X.shape[0])
-        n_chunks = max(1, min(X.shape[0], 8 * numba.get_num_threads()))
+        n_chunks = max(1, min(X.shape[0], 8 * self._threads))
         _k.silhouette_batch(X, *self._kin, self._caps, self._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"],
                             fr["cam_D"], fr["cam_hasd"], fr["cov"], fr["cov_wh"], self._order, self._tmpl_a,
                             self._tmpl_s, self._tmpl_ptr, self._tmpl_na, fr["fg_x"], fr["fg_y"], fr["fg_n"], fr["fg_tab"], fr["fg_bins"], fr["fg_xr"],

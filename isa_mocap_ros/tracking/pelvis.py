@@ -49,14 +49,23 @@ class PelvisMove:
     def __call__(self, x: np.ndarray, roots: np.ndarray) -> np.ndarray:
         """Poses ``(n, D)``: ``x`` with its root replaced by each row of ``roots (n, 6)`` and the
         compensated child angles (not clipped to the limits)."""
-        x = np.asarray(x, dtype=float)
-        roots = np.atleast_2d(np.asarray(roots, dtype=float))
-        X = np.repeat(x[None, :], len(roots), axis=0)
-        X[:, :6] = roots
-        if not self.children:
+        return self.around(x)(roots)
+
+    def around(self, x: np.ndarray):
+        """``roots -> poses`` for a fixed ``x`` (what :meth:`__call__` computes, with the parts that
+        depend on ``x`` only — its root rotation and the children's local rotations — computed once;
+        the pelvis stage calls it once per generation)."""
+        x = np.array(x, dtype=float)
+        root = Rotation.from_rotvec(x[3:6])                                              # R(r)
+        local = [(dofs, seq, Rotation.from_euler(seq, x[dofs])) for dofs, seq in self.children]   # L_c
+
+        def poses(roots: np.ndarray) -> np.ndarray:
+            roots = np.atleast_2d(np.asarray(roots, dtype=float))
+            X = np.repeat(x[None, :], len(roots), axis=0)
+            X[:, :6] = roots
+            if local:
+                turn = Rotation.from_rotvec(roots[:, 3:6]).inv() * root                 # R(r')^T R(r)
+                for dofs, seq, L in local:
+                    X[:, dofs] = (turn * L).as_euler(seq)
             return X
-        turn = Rotation.from_rotvec(roots[:, 3:6]).inv() * Rotation.from_rotvec(x[3:6])   # R(r')^T R(r)
-        for dofs, seq in self.children:
-            local = Rotation.from_euler(seq, x[dofs])
-            X[:, dofs] = (turn * local).as_euler(seq)
-        return X
+        return poses
