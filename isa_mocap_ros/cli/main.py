@@ -9,7 +9,13 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
+
+# Idle OpenMP workers of numba's parallel kernels sleep instead of spinning on the cores (set before
+# numba is imported; a caller's own setting wins). On this shared 2-core machine `isa-mocap track`
+# ran 3-5x slower with spinning workers under load (docs/nodes.md, "Where the CPU goes").
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 SUBCOMMANDS = [
     "play",
