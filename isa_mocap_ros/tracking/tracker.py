@@ -164,7 +164,7 @@ class TrackerConfig:
         over its whole range, the rest of the pose held; the best proposal replaces the limb when
         it lowers the energy. It re-opens an arm the search left folded (forearm on the upper arm,
         twist 140-180° off) — a trap the ±0.5 rad search box cannot leave (CMU walk, 8 seeds: mean
-        joint error 35.2 → 28.8 mm, no frame above 100 mm, ``docs/tracking.md``). Takes
+        joint error 35.2 → 31.7 mm, the folded right arm gone; ``docs/tracking.md``). Takes
         ``limb_proposals × limbs + 2`` evaluations of the budget; 0 disables it; skipped (with a
         note) when that is more than a tenth of the budget, and on the automatically initialized
         frame.
