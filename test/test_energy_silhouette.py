@@ -231,14 +231,8 @@ print(hashlib.sha1(en(X).tobytes()).hexdigest())
 def test_fresh_and_cached_kernel_agree_bit_for_bit(tmp_path):
     """A process that compiles the kernel and one that loads it from numba's cache must compute the
     same bits (with fastmath "reassoc" they did not: lockstep network vs offline tracker differed)."""
-    import os
-    import subprocess
-    import sys
+    from numba_cache import stdout_compiled_then_cached
 
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), NUMBA_NUM_THREADS="1")
-    runs = [subprocess.run([sys.executable, "-c", _HASH_SCRIPT], env=env, capture_output=True, text=True,
-                           timeout=300) for _ in range(2)]
-    for r in runs:
-        assert r.returncode == 0, r.stderr[-2000:]
+    out = stdout_compiled_then_cached(_HASH_SCRIPT, tmp_path / "numba", timeout=300, NUMBA_NUM_THREADS="1")
     assert any((tmp_path / "numba").rglob("*.nbc"))       # the second run loaded what the first compiled
-    assert runs[0].stdout == runs[1].stdout
+    assert out[0] == out[1]

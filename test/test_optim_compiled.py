@@ -197,18 +197,12 @@ print(h.hexdigest())
 def test_fresh_and_cached_compiled_optimizer_agree_bit_for_bit(tmp_path):
     """A process that compiles the optimizer's numba functions and one that loads them from the cache
     must compute the same bits (no fastmath in optim)."""
-    import os
-    import subprocess
-    import sys
+    from numba_cache import stdout_compiled_then_cached
 
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
-    runs = [subprocess.run([sys.executable, "-c", _HASH_SCRIPT], env=env, capture_output=True, text=True,
-                           timeout=600) for _ in range(2)]
-    for r in runs:
-        assert r.returncode == 0, r.stderr[-2000:]
+    out = stdout_compiled_then_cached(_HASH_SCRIPT, tmp_path / "numba", timeout=600)
     assert any((tmp_path / "numba").rglob("*_fast*.nbc"))      # the second run loaded what the first compiled
-    assert runs[0].stdout == runs[1].stdout
-    assert len(runs[0].stdout.strip()) == 40
+    assert out[0] == out[1]
+    assert len(out[0].strip()) == 40
 
 
 def test_h_isa_runs_are_reproducible_for_a_seed():

@@ -18,7 +18,17 @@ import numpy as np
 from ..geometry import exp_so3
 from .model import BodyError, BodyModel
 
-__all__ = ["forward_kinematics", "joint_positions", "capsule_endpoints", "position_jacobian"]
+__all__ = ["forward_kinematics", "joint_positions", "capsule_endpoints", "position_jacobian", "euler_sequence"]
+
+
+def euler_sequence(model: BodyModel, joint: int) -> str | None:
+    """The intrinsic Euler sequence (e.g. ``"YXZ"``, scipy's upper-case convention) of a joint whose
+    local rotation is three rotations about distinct axes in chain order — ``R_a1(q1) R_a2(q2)
+    R_a3(q3)`` as above — or None for any other joint (hinges, two-axis joints, the root)."""
+    axes = [int(model.dof_axis[k]) for k in model.joint_dofs[joint]]
+    if len(axes) != 3 or len(set(axes)) != 3 or min(axes) < 0:
+        return None
+    return "".join("XYZ"[a] for a in axes)
 
 
 def _axis_rot(q: np.ndarray, axis: int) -> np.ndarray:

@@ -64,6 +64,8 @@ class LimbMove:
     """
 
     def __init__(self, model) -> None:
+        from isa_mocap_ros.body.kinematics import euler_sequence
+
         self.model = model
         self.limbs: list[Limb] = []
         dof_joint = np.asarray(model.dof_joint)
@@ -72,15 +74,14 @@ class LimbMove:
                 continue
             joints = sorted({int(dof_joint[k]) for k in model.partitions[name]})
             base = joints[0]
-            bd = tuple(int(k) for k in model.joint_dofs[base])
-            axes = [int(model.dof_axis[k]) for k in bd]
+            seq = euler_sequence(model, base)
             hinge = [j for j in joints if int(model.parents[j]) == base and len(model.joint_dofs[j]) == 1]
-            if len(bd) != 3 or len(set(axes)) != 3 or not hinge:
+            if seq is None or not hinge:
                 continue
             u = np.array(model.offsets[hinge[0]], dtype=float)
             if not np.linalg.norm(u) > 0:
                 continue
-            self.limbs.append(Limb(name, base, bd, "".join("XYZ"[a] for a in axes),
+            self.limbs.append(Limb(name, base, tuple(int(k) for k in model.joint_dofs[base]), seq,
                                    int(model.joint_dofs[hinge[0]][0]), u / np.linalg.norm(u)))
 
     def limb(self, name: str) -> Limb:

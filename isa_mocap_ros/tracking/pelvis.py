@@ -36,15 +36,14 @@ class PelvisMove:
     """
 
     def __init__(self, model) -> None:
+        from isa_mocap_ros.body.kinematics import euler_sequence
+
         self.model = model
         self.children: list[tuple[list[int], str]] = []
         for j in range(1, len(model.parents)):
-            if int(model.parents[j]) != 0:
-                continue
-            dofs = [int(k) for k in model.joint_dofs[j]]
-            axes = [int(model.dof_axis[k]) for k in dofs]
-            if len(dofs) == 3 and len(set(axes)) == 3:
-                self.children.append((dofs, "".join("XYZ"[a] for a in axes)))   # intrinsic sequence
+            seq = euler_sequence(model, j) if int(model.parents[j]) == 0 else None
+            if seq is not None:
+                self.children.append(([int(k) for k in model.joint_dofs[j]], seq))
 
     def __call__(self, x: np.ndarray, roots: np.ndarray) -> np.ndarray:
         """Poses ``(n, D)``: ``x`` with its root replaced by each row of ``roots (n, 6)`` and the

@@ -737,7 +737,7 @@ class Tracker:
         if int(n) < 1 or not chosen:
             return x, float(self.total_energy(x[None, :])[0]), 1, []
         n = int(n)
-        batches = [self._limbs.draw(x, limb, int(n), rng) for limb in chosen]
+        batches = [self._limbs.draw(x, limb, n, rng) for limb in chosen]
         E = self.total_energy(np.vstack([x[None, :]] + batches))
         out, changed = x.copy(), []
         for k, (limb, P) in enumerate(zip(chosen, batches)):
