@@ -25,11 +25,22 @@ def _worker_index() -> int:
     return int(wid[2:]) if wid.startswith("gw") and wid[2:].isdigit() else 0
 
 
+def domain_for(worker: int, workers: int, run: int, k: int) -> int:
+    """ROS_DOMAIN_ID (10..99) of a worker's ``k``-th test: worker ``w`` of ``W`` only ever uses ids
+    ``≡ w (mod W)``, so tests running at the same time on different workers never share a domain
+    (a hash of pid and worker did, now and then: a recorder then got another test's masks); ``run``
+    shifts where the cycle starts, so consecutive runs do not reuse the same ids first."""
+    workers = max(1, workers)
+    slots = 90 // workers
+    return 10 + ((run + k) % slots) * workers + worker % workers
+
+
 @pytest.fixture
 def ros_domain() -> int:
-    """A ROS_DOMAIN_ID of its own for each test (10..99), spread by worker and pid."""
-    k = next(_domain_counter)
-    return 10 + (os.getpid() * 13 + _worker_index() * 45 + k * 7) % 90
+    """A ROS_DOMAIN_ID of its own for each test (see :func:`domain_for`)."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    run = os.getppid() if "PYTEST_XDIST_WORKER" in os.environ else os.getpid()   # the xdist controller's pid
+    return domain_for(_worker_index(), workers, run, next(_domain_counter))
 
 
 @pytest.fixture
