@@ -34,6 +34,29 @@ __all__ = ["fk_positions_batch", "silhouette_batch", "project_capsules", "inside
 
 
 @numba.njit(cache=True, inline="always")
+def _fk_joint(x, j, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
+    """Position ``P[j]`` and world rotation ``R[j]`` of joint ``j > 0`` from its parent's (one step of
+    :func:`_fk_one`; the restricted kernel recomputes only the joints that move)."""
+    p = parents[j]
+    for r in range(3):
+        P[j, r] = P[p, r] + R[p, r, 0] * offsets[j, 0] + R[p, r, 1] * offsets[j, 1] + R[p, r, 2] * offsets[j, 2]
+        for c in range(3):
+            R[j, r, c] = R[p, r, c]
+    for k in range(ptr[j], ptr[j + 1]):
+        a = axes[k]
+        q = x[dofs[k]]
+        co = np.cos(q)
+        si = np.sin(q)
+        u = (a + 1) % 3
+        v = (a + 2) % 3
+        for r in range(3):  # R <- R . R_a(q): columns u, v rotate
+            mu = R[j, r, u]
+            mv = R[j, r, v]
+            R[j, r, u] = mu * co + mv * si
+            R[j, r, v] = -mu * si + mv * co
+
+
+@numba.njit(cache=True, inline="always")
 def _fk_one(x, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
     """Joint positions ``P (J, 3)`` of pose ``x``; ``R (J, 3, 3)`` is scratch (world rotations)."""
     wx, wy, wz = x[3], x[4], x[5]
@@ -56,23 +79,7 @@ def _fk_one(x, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - c
     R[0, 2, 1] = A * wx + B * wy * wz
     P[0, 0], P[0, 1], P[0, 2] = x[0], x[1], x[2]
     for j in range(1, parents.shape[0]):
-        p = parents[j]
-        for r in range(3):
-            P[j, r] = P[p, r] + R[p, r, 0] * offsets[j, 0] + R[p, r, 1] * offsets[j, 1] + R[p, r, 2] * offsets[j, 2]
-            for c in range(3):
-                R[j, r, c] = R[p, r, c]
-        for k in range(ptr[j], ptr[j + 1]):
-            a = axes[k]
-            q = x[dofs[k]]
-            co = np.cos(q)
-            si = np.sin(q)
-            u = (a + 1) % 3
-            v = (a + 2) % 3
-            for r in range(3):  # R <- R . R_a(q): columns u, v rotate
-                mu = R[j, r, u]
-                mv = R[j, r, v]
-                R[j, r, u] = mu * co + mv * si
-                R[j, r, v] = -mu * si + mv * co
+        _fk_joint(x, j, parents, offsets, ptr, dofs, axes, R, P)
 
 
 @numba.njit(parallel=True, cache=True)
@@ -93,14 +100,20 @@ def _to_camera(P, Rs, ts, v, CP):  # pragma: no cover - compiled
     y / z, depth z, and ``sqrt(l / z) / z`` (``l`` the distance from the camera; ``z > 0`` only), the
     factor that turns a ball radius into the radius of its projected disc."""
     for j in range(P.shape[0]):
-        x = Rs[v, 0, 0] * P[j, 0] + Rs[v, 0, 1] * P[j, 1] + Rs[v, 0, 2] * P[j, 2] + ts[v, 0]
-        y = Rs[v, 1, 0] * P[j, 0] + Rs[v, 1, 1] * P[j, 1] + Rs[v, 1, 2] * P[j, 2] + ts[v, 1]
-        z = Rs[v, 2, 0] * P[j, 0] + Rs[v, 2, 1] * P[j, 1] + Rs[v, 2, 2] * P[j, 2] + ts[v, 2]
-        iz = 1.0 / z if z > 0.0 else 0.0
-        CP[j, 0] = x * iz
-        CP[j, 1] = y * iz
-        CP[j, 2] = z
-        CP[j, 3] = iz * np.sqrt(np.sqrt(x * x + y * y + z * z) * iz)
+        _to_camera_joint(P, Rs, ts, v, CP, j)
+
+
+@numba.njit(cache=True, inline="always")
+def _to_camera_joint(P, Rs, ts, v, CP, j):  # pragma: no cover - compiled
+    """Joint ``j`` of :func:`_to_camera`."""
+    x = Rs[v, 0, 0] * P[j, 0] + Rs[v, 0, 1] * P[j, 1] + Rs[v, 0, 2] * P[j, 2] + ts[v, 0]
+    y = Rs[v, 1, 0] * P[j, 0] + Rs[v, 1, 1] * P[j, 1] + Rs[v, 1, 2] * P[j, 2] + ts[v, 1]
+    z = Rs[v, 2, 0] * P[j, 0] + Rs[v, 2, 1] * P[j, 1] + Rs[v, 2, 2] * P[j, 2] + ts[v, 2]
+    iz = 1.0 / z if z > 0.0 else 0.0
+    CP[j, 0] = x * iz
+    CP[j, 1] = y * iz
+    CP[j, 2] = z
+    CP[j, 3] = iz * np.sqrt(np.sqrt(x * x + y * y + z * z) * iz)
 
 
 @numba.njit(cache=True, inline="always")
@@ -111,46 +124,51 @@ def _project_caps(CP, caps, radii, G):  # pragma: no cover - compiled
     ``G[c]``: ax, ay, ux, uy, L, ra, rb, sb, ca, ylo, yhi, xmax, valid, cone
     and the bounding box is derived from it by the caller.
     """
-    C = caps.shape[0]
-    for c in range(C):
-        ja = caps[c, 0]
-        jb = caps[c, 1]
-        za = CP[ja, 2]
-        zb = CP[jb, 2]
-        r0 = radii[c, 0]
-        r1 = radii[c, 1]
-        if za <= 1.001 * r0 or zb <= 1.001 * r1:
-            G[c, 12] = 0.0  # a ball reaching the camera plane: no bounded projection; skipped
-            continue
-        ax = CP[ja, 0]
-        ay = CP[ja, 1]
-        bx = CP[jb, 0]
-        by = CP[jb, 1]
-        ra = r0 * CP[ja, 3]
-        rb = r1 * CP[jb, 3]
-        dx = bx - ax
-        dy = by - ay
-        L = np.sqrt(dx * dx + dy * dy)
-        if L > 1e-12:
-            ux = dx / L
-            uy = dy / L
-        else:
-            ux = 1.0
-            uy = 0.0
-        G[c, 0], G[c, 1], G[c, 2], G[c, 3], G[c, 4], G[c, 5], G[c, 6] = ax, ay, ux, uy, L, ra, rb
-        if L > abs(ra - rb) * (1.0 + 1e-9) + 1e-15:
-            sb = (ra - rb) / L
-            G[c, 7] = sb
-            G[c, 8] = np.sqrt(1.0 - sb * sb)
-            G[c, 13] = 1.0
-        else:
-            G[c, 7] = 0.0
-            G[c, 8] = 1.0
-            G[c, 13] = 0.0
-        G[c, 9] = min(-ra, L - rb)
-        G[c, 10] = max(ra, L + rb)
-        G[c, 11] = max(ra, rb)
-        G[c, 12] = 1.0
+    for c in range(caps.shape[0]):
+        _project_cap(CP, caps, radii, G, c)
+
+
+@numba.njit(cache=True, inline="always")
+def _project_cap(CP, caps, radii, G, c):  # pragma: no cover - compiled
+    """Capsule ``c`` of :func:`_project_caps`."""
+    ja = caps[c, 0]
+    jb = caps[c, 1]
+    za = CP[ja, 2]
+    zb = CP[jb, 2]
+    r0 = radii[c, 0]
+    r1 = radii[c, 1]
+    if za <= 1.001 * r0 or zb <= 1.001 * r1:
+        G[c, 12] = 0.0  # a ball reaching the camera plane: no bounded projection; skipped
+        return
+    ax = CP[ja, 0]
+    ay = CP[ja, 1]
+    bx = CP[jb, 0]
+    by = CP[jb, 1]
+    ra = r0 * CP[ja, 3]
+    rb = r1 * CP[jb, 3]
+    dx = bx - ax
+    dy = by - ay
+    L = np.sqrt(dx * dx + dy * dy)
+    if L > 1e-12:
+        ux = dx / L
+        uy = dy / L
+    else:
+        ux = 1.0
+        uy = 0.0
+    G[c, 0], G[c, 1], G[c, 2], G[c, 3], G[c, 4], G[c, 5], G[c, 6] = ax, ay, ux, uy, L, ra, rb
+    if L > abs(ra - rb) * (1.0 + 1e-9) + 1e-15:
+        sb = (ra - rb) / L
+        G[c, 7] = sb
+        G[c, 8] = np.sqrt(1.0 - sb * sb)
+        G[c, 13] = 1.0
+    else:
+        G[c, 7] = 0.0
+        G[c, 8] = 1.0
+        G[c, 13] = 0.0
+    G[c, 9] = min(-ra, L - rb)
+    G[c, 10] = max(ra, L + rb)
+    G[c, 11] = max(ra, rb)
+    G[c, 12] = 1.0
 
 
 @numba.njit(cache=True, inline="always")
@@ -278,6 +296,202 @@ def _bin(y, y0, inv_dy, nb):  # pragma: no cover - compiled
     return int(b)
 
 
+@numba.njit(cache=True, inline="always")
+def _cap_box(G, G32, box, c):  # pragma: no cover - compiled
+    """Single-precision hull of capsule ``c`` (:func:`_hull32`) and its bounding box ``box[c]``: x0, x1,
+    y0, y1 (an empty box, x0 > x1, for a capsule left out of the view)."""
+    if G[c, 12] == 0.0:
+        box[c, 0] = 1.0
+        box[c, 1] = -1.0
+        box[c, 2] = 1.0
+        box[c, 3] = -1.0
+        return
+    _hull32(G, G32, c)
+    ax, ay, L = G[c, 0], G[c, 1], G[c, 4]
+    bx = ax + L * G[c, 2]
+    by = ay + L * G[c, 3]
+    ra, rb = G[c, 5], G[c, 6]
+    box[c, 0] = min(ax - ra, bx - rb)
+    box[c, 1] = max(ax + ra, bx + rb)
+    box[c, 2] = min(ay - ra, by - rb)
+    box[c, 3] = max(ay + ra, by + rb)
+
+
+@numba.njit(cache=True, inline="always")
+def _earlier_run(G, c, e, ylo, xm, na, na_ly):  # pragma: no cover - compiled
+    """Earlier capsule ``e`` seen from capsule ``c``'s frame: ``(reaches, i0, i1, sa, ta)``, the run of
+    strata ``i0..i1`` of ``c`` that ``e``'s extent along ``c``'s axis reaches (``reaches`` False when
+    its extent across misses ``c``'s rectangle, or along it every stratum) and ``e``'s first centre in
+    ``c``'s frame (along, across)."""
+    dax, day, dux, duy = G[c, 0], G[c, 1], G[c, 2], G[c, 3]
+    dxa = G[e, 0] - dax
+    dya = G[e, 1] - day
+    dxb = dxa + G[e, 4] * G[e, 2]
+    dyb = dya + G[e, 4] * G[e, 3]
+    rea = G[e, 5]
+    reb = G[e, 6]
+    ta = dya * dux - dxa * duy
+    tb = dyb * dux - dxb * duy
+    if min(ta - rea, tb - reb) > xm or max(ta + rea, tb + reb) < -xm:
+        return False, 0, 0, 0.0, 0.0
+    sa = dxa * dux + dya * duy
+    sb2 = dxb * dux + dyb * duy
+    s0 = (min(sa - rea, sb2 - reb) - ylo) * na_ly - 1e-4
+    s1 = (max(sa + rea, sb2 + reb) - ylo) * na_ly + 1e-4
+    if s1 < 0.0 or s0 >= na:
+        return False, 0, 0, 0.0, 0.0
+    i0 = int(s0) if s0 > 0.0 else 0
+    i1 = min(int(s1), na - 1)
+    return True, i0, i1, sa, ta
+
+
+@numba.njit(cache=True, inline="always")
+def _mark_earlier(X, Y, Fl, k0, k1, G, G32, c, e, sa, ta):  # pragma: no cover - compiled
+    """``Fl[k] = 0`` for the points ``k0:k1`` (frame coordinates of capsule ``c``: ``X`` along, ``Y``
+    across) inside the hull of capsule ``e`` (a rotation into ``c``'s frame: the rest of its
+    parameters stays; ``sa, ta`` from :func:`_earlier_run`)."""
+    dux, duy = G[c, 2], G[c, 3]
+    _mark_hull(X, Y, Fl, k0, k1, np.float32(sa), np.float32(ta), np.float32(G[e, 2] * dux + G[e, 3] * duy),
+               np.float32(G[e, 3] * dux - G[e, 2] * duy), G32[e, 4], G32[e, 5], G32[e, 7],
+               G32[e, 8], G32[e, 9], G32[e, 10], G32[e, 11], np.float32(0.0))
+
+
+@numba.njit(cache=True, inline="always")
+def _t1_points(ci, c, v, G, G32, BX0, BX1, BY0, BY1, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, cam_K, cov_wh,
+               PX, PY, OWN, IDX, NEAR):  # pragma: no cover - compiled
+    """Term 1, capsule ``c`` at position ``ci`` of ``order`` in view ``v``: its template points in its
+    bounding rectangle, ``PX`` along and ``PY`` across its axis, ``OWN`` 1 where inside its hull and in
+    the hull of no earlier capsule whose box (``BX0 .. BY1``, in processing order) meets its own, ``IDX``
+    the pixel (pinhole; -1 outside the image). ``NEAR`` is scratch."""
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    Wf = np.float32(cov_wh[v, 0])
+    Hf = np.float32(cov_wh[v, 1])
+    Wst = np.int32(cov_wh[v, 2])
+    ylo = G[c, 9]
+    ly = G[c, 10] - ylo
+    xm = G[c, 11]
+    k0 = tmpl_ptr[c]
+    nk = tmpl_ptr[c + 1] - k0
+    na = tmpl_na[c]
+    ns = nk // na
+    nkp = (nk + 7) & ~7     # padded: points nk.. are dropped (OWN = 0)
+    L, ra, sb, ca = G32[c, 4], G32[c, 5], G32[c, 7], G32[c, 8]
+    caL, ra2, rb2 = G32[c, 9], G32[c, 10], G32[c, 11]
+    # the pixel as an affine map of the point's frame coordinates (pinhole)
+    u0 = np.float32(cam_K[v, 0] * G[c, 0] + cam_K[v, 2] + 0.5)
+    uya = np.float32(cam_K[v, 0] * G[c, 2])
+    uxs = np.float32(-cam_K[v, 0] * G[c, 3])
+    w0 = np.float32(cam_K[v, 1] * G[c, 1] + cam_K[v, 3] + 0.5)
+    wya = np.float32(cam_K[v, 1] * G[c, 3])
+    wxs = np.float32(cam_K[v, 1] * G[c, 2])
+    ylo32 = np.float32(ylo)
+    ly32 = np.float32(ly)
+    xm32 = np.float32(xm)
+    for k in range(nkp):    # own hull test in the capsule's frame (PX along, PY across)
+        kk = numba.uint64(k0 + k)   # unsigned: no wraparound test, the loop vectorizes
+        yl = ylo32 + tmpl_a[kk] * ly32
+        xs = tmpl_s[kk] * xm32
+        xl = abs(xs)
+        x2 = xs * xs
+        q = yl * ca - xl * sb
+        yb = yl - L
+        inside = ((x2 + yl * yl <= ra2) | (x2 + yb * yb <= rb2)
+                  | ((q >= zero) & (q <= caL) & (xl * ca + yl * sb <= ra)))
+        OWN[k] = one if inside else zero
+        PX[k] = yl
+        PY[k] = xs
+        u = u0 + yl * uya + xs * uxs    # pixel of the point (pinhole; -1: outside the image)
+        w = w0 + yl * wya + xs * wxs
+        ok = (u >= zero) & (w >= zero) & (u < Wf) & (w < Hf)
+        IDX[k] = np.int32(w) * Wst + np.int32(u) if ok else np.int32(-1)
+    for k in range(nk, nkp):
+        OWN[k] = zero
+    na_ly = na / ly     # strata per unit length along the axis
+    nn = 0      # earlier capsules whose boxes meet c's (branch-free compaction)
+    bx0, bx1, by0, by1 = BX0[ci], BX1[ci], BY0[ci], BY1[ci]
+    for ei in range(ci):
+        NEAR[nn] = ei
+        nn += (BX0[ei] <= bx1) & (bx0 <= BX1[ei]) & (BY0[ei] <= by1) & (by0 <= BY1[ei])
+    for q in range(nn):
+        e = order[NEAR[q]]
+        # capsule e in c's frame: its extent along c's axis selects a run of strata,
+        # its extent across it may miss c's rectangle altogether
+        reach, i0, i1, sa, ta = _earlier_run(G, c, e, ylo, xm, na, na_ly)
+        if not reach:
+            continue
+        ka = i0 * ns            # whole vectors from the first stratum on (scratch has slack)
+        _mark_earlier(PX, PY, OWN, ka, ka + (((i1 + 1) * ns - ka + 7) & ~7), G, G32, c, e, sa, ta)
+
+
+@numba.njit(cache=True, inline="always")
+def _t1_lookup(G, c, px, py, v, cam_K, cam_D, cam_hasd, cov, cov_wh):  # pragma: no cover - compiled
+    """Foreground coverage at the point of capsule ``c``'s frame ``px`` along, ``py`` across (float32);
+    -1 outside the image (the lens-distortion path of term 1)."""
+    yl = np.float64(px)
+    xs = np.float64(py)
+    return _lookup(G[c, 0] + yl * G[c, 2] - xs * G[c, 3], G[c, 1] + yl * G[c, 3] + xs * G[c, 2],
+                   v, cam_K, cam_D, cam_hasd, cov, cov_wh[v, 0], cov_wh[v, 1], cov_wh[v, 2])
+
+
+@numba.njit(cache=True, inline="always")
+def _t1_count(c, v, nk, G, PX, PY, OWN, IDX, cam_K, cam_D, cam_hasd, cov, cov_wh):  # pragma: no cover - compiled
+    """Term 1 of capsule ``c`` from :func:`_t1_points`: ``(count, sum of F)`` over its kept points
+    inside the image (in template order)."""
+    zero = np.float32(0.0)
+    cnt = 0.0
+    fsum = 0.0
+    if cam_hasd[v]:
+        for k in range(nk):
+            if OWN[k] != zero:
+                f = _t1_lookup(G, c, PX[k], PY[k], v, cam_K, cam_D, cam_hasd, cov, cov_wh)
+                if f >= 0.0:
+                    cnt += 1.0
+                    fsum += f
+    else:
+        icnt = 0
+        isum = cov[v, 0] - cov[v, 0]    # an integer for the uint8 mask: 1-cycle additions
+        for k in range(nk):     # nearly all points are kept: the branch predicts well
+            if OWN[k] != zero and IDX[k] >= 0:
+                icnt += 1
+                isum += cov[v, IDX[k]]
+        cnt = float(icnt)
+        fsum = float(isum) * cam_K[v, 4]
+    return cnt, fsum
+
+
+@numba.njit(cache=True, inline="always")
+def _t1_weight(G, c, nk):  # pragma: no cover - compiled
+    """Weight of one template point of capsule ``c``: its rectangle's area over ``nk`` points."""
+    ly = G[c, 10] - G[c, 9]
+    return ly * 2.0 * G[c, 11] / nk
+
+
+@numba.njit(cache=True, inline="always")
+def _scratch_len(tmpl_ptr):  # pragma: no cover - compiled
+    """Length of the per-capsule point scratch: the biggest capsule's points in whole 8-lane vectors."""
+    kmax = 1
+    for c in range(tmpl_ptr.shape[0] - 1):
+        kmax = max(kmax, tmpl_ptr[c + 1] - tmpl_ptr[c])
+    return (kmax + 7) & ~7      # runs of whole 8-lane vectors: no scalar remainder loops
+
+
+@numba.njit(cache=True, inline="always")
+def _t2_runs(c, box, v, n_strips, fg_x, fg_y, fg_tab, fg_bins, fg_xr, fg_ms, flag, G32):  # pragma: no cover - compiled
+    """Term 2, capsule ``c`` in view ``v``: ``flag`` 1 for the foreground points inside its hull, tested
+    in each strip its box meets in x, on the run of points in its box's y range (whole vectors)."""
+    nb = fg_tab.shape[1] - 1
+    r0 = v * n_strips
+    for r in range(r0, r0 + n_strips):
+        if box[c, 0] > fg_xr[r, 1] or box[c, 1] < fg_xr[r, 0]:
+            continue
+        k0 = fg_tab[r, _bin(box[c, 2], fg_bins[r, 0], fg_bins[r, 1], nb)]
+        k1 = fg_tab[r, min(nb, _bin(box[c, 3], fg_bins[r, 0], fg_bins[r, 1], nb) + 1)]
+        if k1 > k0:
+            _mark_run(fg_x, fg_y, flag, r * fg_ms + (k0 & ~7), r * fg_ms + min(fg_ms, (k1 + 7) & ~7),
+                      G32, c, np.float32(1.0))
+
+
 # fastmath without "reassoc": with reassociation the freshly compiled kernel and the one loaded from
 # numba's cache gave energies differing in the last bit (measured), so a process that compiled it
 # and one that loaded it (estimator node vs `isa-mocap track`, bench workers) disagreed; ~5 % slower.
@@ -321,7 +535,6 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
     J = parents.shape[0]
     C = caps.shape[0]
     V = cam_R.shape[0]
-    one = np.float32(1.0)
     zero = np.float32(0.0)
     n_strips = fg_tab.shape[0] // V
     fg_ms = fg_x.shape[0] // fg_tab.shape[0]
@@ -340,10 +553,7 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
         BY1 = np.empty(C)
         NEAR = np.empty(C, np.int64)
         flag = np.empty(max(1, fg_x.shape[0]), np.float32)
-        kmax = 1
-        for c in range(C):
-            kmax = max(kmax, tmpl_ptr[c + 1] - tmpl_ptr[c])
-        kmax = (kmax + 7) & ~7      # runs of whole 8-lane vectors: no scalar remainder loops
+        kmax = _scratch_len(tmpl_ptr)
         PX = np.zeros(kmax + 8, np.float32)     # a point's frame coordinates: along, across
         PY = np.zeros(kmax + 8, np.float32)
         OWN = np.zeros(kmax + 8, np.float32)
@@ -355,134 +565,23 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                 _to_camera(P, cam_R, cam_t, v, CP)
                 _project_caps(CP, caps, radii, G)
                 for c in range(C):
-                    if G[c, 12] == 0.0:
-                        box[c, 0] = 1.0
-                        box[c, 1] = -1.0
-                        box[c, 2] = 1.0
-                        box[c, 3] = -1.0
-                        continue
-                    _hull32(G, G32, c)
-                    ax, ay, L = G[c, 0], G[c, 1], G[c, 4]
-                    bx = ax + L * G[c, 2]
-                    by = ay + L * G[c, 3]
-                    ra, rb = G[c, 5], G[c, 6]
-                    box[c, 0] = min(ax - ra, bx - rb)
-                    box[c, 1] = max(ax + ra, bx + rb)
-                    box[c, 2] = min(ay - ra, by - rb)
-                    box[c, 3] = max(ay + ra, by + rb)
+                    _cap_box(G, G32, box, c)
                 for ci in range(C):     # the boxes in processing order, for the overlap candidates
                     c = order[ci]
                     BX0[ci], BX1[ci], BY0[ci], BY1[ci] = box[c, 0], box[c, 1], box[c, 2], box[c, 3]
                 # term 1: model silhouette points not on foreground. Points of capsule c in its
                 # bounding rectangle; kept if inside c's hull and in no earlier capsule's hull
-                W = cov_wh[v, 0]
-                H = cov_wh[v, 1]
-                Wf = np.float32(W)
-                Hf = np.float32(H)
-                Wst = np.int32(cov_wh[v, 2])
                 num = 0.0
                 den = 0.0
                 for ci in range(C):
                     c = order[ci]
                     if G[c, 12] == 0.0:
                         continue
-                    ylo = G[c, 9]
-                    ly = G[c, 10] - ylo
-                    xm = G[c, 11]
-                    k0 = tmpl_ptr[c]
-                    nk = tmpl_ptr[c + 1] - k0
-                    na = tmpl_na[c]
-                    ns = nk // na
-                    nkp = (nk + 7) & ~7     # padded: points nk.. are dropped (OWN = 0)
-                    ax, ay = G32[c, 0], G32[c, 1]
-                    L, ra, sb, ca = G32[c, 4], G32[c, 5], G32[c, 7], G32[c, 8]
-                    caL, ra2, rb2 = G32[c, 9], G32[c, 10], G32[c, 11]
-                    # the pixel as an affine map of the point's frame coordinates (pinhole)
-                    u0 = np.float32(cam_K[v, 0] * G[c, 0] + cam_K[v, 2] + 0.5)
-                    uya = np.float32(cam_K[v, 0] * G[c, 2])
-                    uxs = np.float32(-cam_K[v, 0] * G[c, 3])
-                    w0 = np.float32(cam_K[v, 1] * G[c, 1] + cam_K[v, 3] + 0.5)
-                    wya = np.float32(cam_K[v, 1] * G[c, 3])
-                    wxs = np.float32(cam_K[v, 1] * G[c, 2])
-                    ylo32 = np.float32(ylo)
-                    ly32 = np.float32(ly)
-                    xm32 = np.float32(xm)
-                    for k in range(nkp):    # own hull test in the capsule's frame (PX along, PY across)
-                        kk = numba.uint64(k0 + k)   # unsigned: no wraparound test, the loop vectorizes
-                        yl = ylo32 + tmpl_a[kk] * ly32
-                        xs = tmpl_s[kk] * xm32
-                        xl = abs(xs)
-                        x2 = xs * xs
-                        q = yl * ca - xl * sb
-                        yb = yl - L
-                        inside = ((x2 + yl * yl <= ra2) | (x2 + yb * yb <= rb2)
-                                  | ((q >= zero) & (q <= caL) & (xl * ca + yl * sb <= ra)))
-                        OWN[k] = one if inside else zero
-                        PX[k] = yl
-                        PY[k] = xs
-                        u = u0 + yl * uya + xs * uxs    # pixel of the point (pinhole; -1: outside the image)
-                        w = w0 + yl * wya + xs * wxs
-                        ok = (u >= zero) & (w >= zero) & (u < Wf) & (w < Hf)
-                        IDX[k] = np.int32(w) * Wst + np.int32(u) if ok else np.int32(-1)
-                    for k in range(nk, nkp):
-                        OWN[k] = zero
-                    dax, day, dux, duy = G[c, 0], G[c, 1], G[c, 2], G[c, 3]
-                    na_ly = na / ly     # strata per unit length along the axis
-                    nn = 0      # earlier capsules whose boxes meet c's (branch-free compaction)
-                    bx0, bx1, by0, by1 = BX0[ci], BX1[ci], BY0[ci], BY1[ci]
-                    for ei in range(ci):
-                        NEAR[nn] = ei
-                        nn += (BX0[ei] <= bx1) & (bx0 <= BX1[ei]) & (BY0[ei] <= by1) & (by0 <= BY1[ei])
-                    for q in range(nn):
-                        e = order[NEAR[q]]
-                        # capsule e in c's frame: its extent along c's axis selects a run of strata,
-                        # its extent across it may miss c's rectangle altogether
-                        dxa = G[e, 0] - dax
-                        dya = G[e, 1] - day
-                        dxb = dxa + G[e, 4] * G[e, 2]
-                        dyb = dya + G[e, 4] * G[e, 3]
-                        rea = G[e, 5]
-                        reb = G[e, 6]
-                        ta = dya * dux - dxa * duy
-                        tb = dyb * dux - dxb * duy
-                        if min(ta - rea, tb - reb) > xm or max(ta + rea, tb + reb) < -xm:
-                            continue
-                        sa = dxa * dux + dya * duy
-                        sb2 = dxb * dux + dyb * duy
-                        s0 = (min(sa - rea, sb2 - reb) - ylo) * na_ly - 1e-4
-                        s1 = (max(sa + rea, sb2 + reb) - ylo) * na_ly + 1e-4
-                        if s1 < 0.0 or s0 >= na:
-                            continue
-                        i0 = int(s0) if s0 > 0.0 else 0
-                        i1 = min(int(s1), na - 1)
-                        # the hull of e in c's frame (a rotation: the rest of its parameters stays)
-                        ka = i0 * ns            # whole vectors from the first stratum on (scratch has slack)
-                        _mark_hull(PX, PY, OWN, ka, ka + (((i1 + 1) * ns - ka + 7) & ~7), np.float32(sa),
-                                   np.float32(ta), np.float32(G[e, 2] * dux + G[e, 3] * duy),
-                                   np.float32(G[e, 3] * dux - G[e, 2] * duy), G32[e, 4], G32[e, 5], G32[e, 7],
-                                   G32[e, 8], G32[e, 9], G32[e, 10], G32[e, 11], zero)
-                    cnt = 0.0
-                    fsum = 0.0
-                    if cam_hasd[v]:
-                        for k in range(nk):
-                            if OWN[k] != zero:
-                                yl = np.float64(PX[k])
-                                xs = np.float64(PY[k])
-                                f = _lookup(G[c, 0] + yl * G[c, 2] - xs * G[c, 3], G[c, 1] + yl * G[c, 3] + xs * G[c, 2],
-                                            v, cam_K, cam_D, cam_hasd, cov, W, H, cov_wh[v, 2])
-                                if f >= 0.0:
-                                    cnt += 1.0
-                                    fsum += f
-                    else:
-                        icnt = 0
-                        isum = cov[v, 0] - cov[v, 0]    # an integer for the uint8 mask: 1-cycle additions
-                        for k in range(nk):     # nearly all points are kept: the branch predicts well
-                            if OWN[k] != zero and IDX[k] >= 0:
-                                icnt += 1
-                                isum += cov[v, IDX[k]]
-                        cnt = float(icnt)
-                        fsum = float(isum) * cam_K[v, 4]
-                    w = ly * 2.0 * xm / nk
+                    _t1_points(ci, c, v, G, G32, BX0, BX1, BY0, BY1, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na,
+                               cam_K, cov_wh, PX, PY, OWN, IDX, NEAR)
+                    nk = tmpl_ptr[c + 1] - tmpl_ptr[c]
+                    cnt, fsum = _t1_count(c, v, nk, G, PX, PY, OWN, IDX, cam_K, cam_D, cam_hasd, cov, cov_wh)
+                    w = _t1_weight(G, c, nk)
                     den += w * cnt
                     num += w * (cnt - fsum)
                 t1 = num / den if den > 0.0 else 1.0
@@ -492,11 +591,7 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     t2 = min(1.0, max(0.0, t2))
                 else:
                     # term 2: foreground points not covered by the model; the points are sorted by y,
-                    # so a capsule's box meets a contiguous run of them (binary search)
-                    # the strips of view v; a capsule visits those its box meets in x, and in each the
-                    # run of points in its box's y range (whole vectors)
-                    m = fg_n[v]
-                    nb = fg_tab.shape[1] - 1
+                    # so a capsule's box meets a contiguous run of them in each strip
                     r0 = v * n_strips
                     for k in range(n_strips * fg_ms):
                         flag[numba.uint64(r0 * fg_ms + k)] = zero
@@ -504,17 +599,319 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                         c = order[ci]
                         if G[c, 12] == 0.0:
                             continue
-                        for r in range(r0, r0 + n_strips):
-                            if box[c, 0] > fg_xr[r, 1] or box[c, 1] < fg_xr[r, 0]:
-                                continue
-                            k0 = fg_tab[r, _bin(box[c, 2], fg_bins[r, 0], fg_bins[r, 1], nb)]
-                            k1 = fg_tab[r, min(nb, _bin(box[c, 3], fg_bins[r, 0], fg_bins[r, 1], nb) + 1)]
-                            if k1 > k0:
-                                _mark_run(fg_x, fg_y, flag, r * fg_ms + (k0 & ~7), r * fg_ms + min(fg_ms, (k1 + 7) & ~7),
-                                          G32, c, one)
+                        _t2_runs(c, box, v, n_strips, fg_x, fg_y, fg_tab, fg_bins, fg_xr, fg_ms, flag, G32)
                     hit = 0.0     # the padding is never inside a hull: sum whole strips
                     for k in range(n_strips * fg_ms):
                         hit += flag[numba.uint64(r0 * fg_ms + k)]
-                    t2 = 1.0 - hit / m
+                    t2 = 1.0 - hit / fg_n[v]
                 total += 0.5 * t1 + 0.5 * t2
+            out[i] = total / V
+
+
+# ---------------------------------------------------------------------- restricted evaluation
+# Poses that equal a base pose outside some coordinates (a stage of the hierarchical optimizer):
+# :func:`restrict_prepare` computes once what depends only on the fixed capsules, and
+# :func:`silhouette_restricted` per pose only what the moving capsules change. The same helpers and
+# the same summation order as :func:`silhouette_batch`, so the values are the same bits.
+
+@numba.njit(cache=True, inline="always")
+def _t1_recount(v, s0, s1, ALIVE, s_idx, s_f, cam_K, cam_hasd, cov):  # pragma: no cover - compiled
+    """:func:`_t1_count` over the stored points ``s0:s1`` of a fixed capsule that are still ``ALIVE``
+    (in template order, as there: the same additions in the same order)."""
+    zero = np.float32(0.0)
+    cnt = 0.0
+    fsum = 0.0
+    if cam_hasd[v]:
+        for s in range(s0, s1):
+            if ALIVE[s] != zero:
+                cnt += 1.0
+                fsum += s_f[s]
+    else:
+        icnt = 0
+        isum = cov[v, 0] - cov[v, 0]
+        for s in range(s0, s1):
+            if ALIVE[s] != zero:
+                icnt += 1
+                isum += cov[v, s_idx[s]]
+        cnt = float(icnt)
+        fsum = float(isum) * cam_K[v, 4]
+    return cnt, fsum
+
+
+@numba.njit(cache=True, fastmath=DETERMINISTIC_FASTMATH)
+def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, cam_t, cam_K, cam_D, cam_hasd,
+                     cov, cov_wh, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_xr,
+                     moving):  # pragma: no cover - compiled
+    """What the poses of a stage share, from the base pose ``x`` and ``moving (C,)`` (bool: capsules
+    whose end joints move); arguments as :func:`silhouette_batch`. Returns a tuple:
+
+    ``R (J, 3, 3), P (J, 3)`` forward kinematics of ``x``; per view ``CP (V, J, 4)``, ``G (V, C, 14)``,
+    ``G32 (V, C, 12)``, ``box (V, C, 4)``, ``BX (V, 4, C)`` (the boxes in processing order);
+    ``t1 (V, C, 3)``: weight, count and foreground sum of each fixed capsule's term-1 points that lie
+    in its hull, in no earlier *fixed* capsule's hull and inside the image; those points themselves,
+    view ``v`` at ``v T``: ``s_px, s_py`` (frame coordinates), ``s_idx`` (pixel), ``s_f`` (coverage,
+    lens-distortion path), with ``s_pre (V, T + C)``: capsule ``c``'s entry ``tmpl_ptr[c] + c + k`` is the
+    number of them before its template point ``k`` (``k = 0 .. nk``); the foreground sample points no
+    fixed capsule covers, ``u_x, u_y`` (strip ``r`` at ``r Ms``, in sample order) with
+    ``u_pre (V S, Ms + 1)`` (those before sample point ``k`` of the strip) and ``base_hit (V,)``, the
+    sample points the fixed capsules cover."""
+    J = parents.shape[0]
+    C = caps.shape[0]
+    V = cam_R.shape[0]
+    T = tmpl_ptr[C]
+    n_strips = fg_tab.shape[0] // V
+    fg_ms = fg_x.shape[0] // fg_tab.shape[0]
+    nb = fg_tab.shape[1] - 1
+    zero = np.float32(0.0)
+    R = np.empty((J, 3, 3))
+    P = np.empty((J, 3))
+    _fk_one(x, parents, offsets, ptr, dofs, axes, R, P)
+    CP = np.zeros((V, J, 4))
+    G = np.zeros((V, C, 14))
+    G32 = np.zeros((V, C, 12), np.float32)
+    box = np.zeros((V, C, 4))
+    BX = np.zeros((V, 4, C))
+    BXf = np.zeros((4, C))
+    t1 = np.zeros((V, C, 3))
+    s_px = np.zeros(V * T + 8, np.float32)
+    s_py = np.zeros(V * T + 8, np.float32)
+    s_idx = np.zeros(V * T + 8, np.int32)
+    s_f = np.zeros(V * T + 8)
+    s_pre = np.zeros((V, T + C), np.int64)
+    u_x = np.full(fg_x.shape[0], np.float32(1e6))
+    u_y = np.full(fg_x.shape[0], np.float32(1e6))
+    u_pre = np.zeros((fg_tab.shape[0], fg_ms + 1), np.int64)
+    base_hit = np.zeros(V)
+    NEAR = np.empty(C, np.int64)
+    flag = np.zeros(max(1, fg_x.shape[0]), np.float32)
+    kmax = _scratch_len(tmpl_ptr)
+    PX = np.zeros(kmax + 8, np.float32)
+    PY = np.zeros(kmax + 8, np.float32)
+    OWN = np.zeros(kmax + 8, np.float32)
+    IDX = np.zeros(kmax, np.int32)
+    for v in range(V):
+        _to_camera(P, cam_R, cam_t, v, CP[v])
+        _project_caps(CP[v], caps, radii, G[v])
+        for c in range(C):
+            _cap_box(G[v], G32[v], box[v], c)
+        for ci in range(C):
+            c = order[ci]
+            for a in range(4):
+                BX[v, a, ci] = box[v, c, a]
+                BXf[a, ci] = box[v, c, a]
+            if moving[c]:       # only the fixed capsules are earlier capsules here
+                BXf[0, ci], BXf[1, ci], BXf[2, ci], BXf[3, ci] = 1.0, -1.0, 1.0, -1.0
+        pos = 0
+        off = v * T
+        for ci in range(C):
+            c = order[ci]
+            k0 = tmpl_ptr[c]
+            nk = tmpl_ptr[c + 1] - k0
+            q0 = k0 + c
+            if moving[c] or G[v, c, 12] == 0.0:
+                for k in range(nk + 1):
+                    s_pre[v, q0 + k] = pos
+                continue
+            _t1_points(ci, c, v, G[v], G32[v], BXf[0], BXf[1], BXf[2], BXf[3], order, tmpl_a, tmpl_s, tmpl_ptr,
+                       tmpl_na, cam_K, cov_wh, PX, PY, OWN, IDX, NEAR)
+            cnt, fsum = _t1_count(c, v, nk, G[v], PX, PY, OWN, IDX, cam_K, cam_D, cam_hasd, cov, cov_wh)
+            t1[v, c, 0] = _t1_weight(G[v], c, nk)
+            t1[v, c, 1] = cnt
+            t1[v, c, 2] = fsum
+            for k in range(nk):
+                s_pre[v, q0 + k] = pos
+                if OWN[k] == zero:
+                    continue
+                f = 0.0
+                if cam_hasd[v]:
+                    f = _t1_lookup(G[v], c, PX[k], PY[k], v, cam_K, cam_D, cam_hasd, cov, cov_wh)
+                    keep = f >= 0.0
+                else:
+                    keep = IDX[k] >= 0
+                if keep:
+                    s_px[off + pos] = PX[k]
+                    s_py[off + pos] = PY[k]
+                    s_idx[off + pos] = IDX[k]
+                    s_f[off + pos] = f
+                    pos += 1
+            s_pre[v, q0 + nk] = pos
+        if fg_n[v] == 0:
+            continue
+        r0 = v * n_strips
+        for k in range(n_strips * fg_ms):
+            flag[r0 * fg_ms + k] = zero
+        for ci in range(C):
+            c = order[ci]
+            if moving[c] or G[v, c, 12] == 0.0:
+                continue
+            _t2_runs(c, box[v], v, n_strips, fg_x, fg_y, fg_tab, fg_bins, fg_xr, fg_ms, flag, G32[v])
+        hit = 0.0
+        for k in range(n_strips * fg_ms):
+            hit += flag[r0 * fg_ms + k]
+        base_hit[v] = hit
+        for r in range(r0, r0 + n_strips):
+            m = fg_tab[r, nb]       # the strip's points (the rest is padding)
+            j = 0
+            for k in range(fg_ms):
+                u_pre[r, k] = j
+                if k < m and flag[r * fg_ms + k] == zero:
+                    u_x[r * fg_ms + j] = fg_x[r * fg_ms + k]
+                    u_y[r * fg_ms + j] = fg_y[r * fg_ms + k]
+                    j += 1
+            u_pre[r, fg_ms] = j
+    return R, P, CP, G, G32, box, BX, t1, s_px, s_py, s_idx, s_f, s_pre, u_x, u_y, u_pre, base_hit
+
+
+@numba.njit(parallel=True, cache=True, fastmath=DETERMINISTIC_FASTMATH)
+def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps, mov_ci, moving_ci,
+                          parents, offsets, ptr, dofs, axes, caps, radii, cam_R, cam_t, cam_K, cam_D, cam_hasd,
+                          cov, cov_wh, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, fg_n, fg_tab, fg_bins, fg_xr, fg_area,
+                          R0, P0, CP0, G0, G320, box0, BX0_, t1, s_px, s_py, s_idx, s_f, s_pre, u_x, u_y, u_pre,
+                          base_hit, n_chunks, out):  # pragma: no cover - compiled
+    """:func:`silhouette_batch` for poses ``X (n, D)`` equal to ``x_base`` at ``fixed_dofs``, from the
+    stage data of :func:`restrict_prepare` (``R0 .. base_hit``). Per pose: forward kinematics of the
+    joints ``fk_joints`` (those that rotate or move, in tree order), projection of ``cam_joints`` (those
+    that move) and of the moving capsules ``mov_caps`` (at processing positions ``mov_ci``, ascending;
+    ``moving_ci (C,)`` flags the positions); term 1 in full for a moving capsule, for a fixed one its
+    stored points tested against the earlier moving capsules whose boxes meet its own (usually none:
+    the stored sums); term 2 from the stored count plus the uncovered points the moving capsules
+    cover. A row that differs from ``x_base`` at a fixed coordinate gets ``out = -1``."""
+    n = X.shape[0]
+    C = caps.shape[0]
+    V = cam_R.shape[0]
+    T = tmpl_ptr[C]
+    nm = mov_caps.shape[0]
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    n_strips = fg_tab.shape[0] // V
+    fg_ms = u_x.shape[0] // fg_tab.shape[0]
+    nb = fg_tab.shape[1] - 1
+    first_moving = mov_ci[0] if nm > 0 else C
+    for chunk in numba.prange(n_chunks):
+        lo = chunk * n // n_chunks
+        hi = (chunk + 1) * n // n_chunks
+        R = R0.copy()
+        P = P0.copy()
+        CP = CP0.copy()
+        G = G0.copy()
+        G32 = G320.copy()
+        box = box0.copy()
+        BX = BX0_.copy()
+        NEAR = np.empty(C, np.int64)
+        kmax = _scratch_len(tmpl_ptr)
+        PX = np.zeros(kmax + 8, np.float32)
+        PY = np.zeros(kmax + 8, np.float32)
+        OWN = np.zeros(kmax + 8, np.float32)
+        IDX = np.empty(kmax, np.int32)
+        ALIVE = np.zeros(V * T + 8, np.float32)
+        flag = np.zeros(u_x.shape[0], np.float32)
+        for i in range(lo, hi):
+            bad = False
+            for d in fixed_dofs:
+                bad |= X[i, d] != x_base[d]
+            if bad:
+                out[i] = -1.0
+                continue
+            for j in fk_joints:
+                _fk_joint(X[i], j, parents, offsets, ptr, dofs, axes, R, P)
+            total = 0.0
+            for v in range(V):
+                CPv = CP[v]
+                Gv = G[v]
+                G32v = G32[v]
+                boxv = box[v]
+                BX0 = BX[v, 0]
+                BX1 = BX[v, 1]
+                BY0 = BX[v, 2]
+                BY1 = BX[v, 3]
+                for j in cam_joints:
+                    _to_camera_joint(P, cam_R, cam_t, v, CPv, j)
+                for m in range(nm):
+                    c = mov_caps[m]
+                    _project_cap(CPv, caps, radii, Gv, c)
+                    _cap_box(Gv, G32v, boxv, c)
+                    ci = mov_ci[m]
+                    BX0[ci], BX1[ci], BY0[ci], BY1[ci] = boxv[c, 0], boxv[c, 1], boxv[c, 2], boxv[c, 3]
+                num = 0.0
+                den = 0.0
+                off = v * T
+                for ci in range(C):
+                    c = order[ci]
+                    if Gv[c, 12] == 0.0:
+                        continue
+                    nk = tmpl_ptr[c + 1] - tmpl_ptr[c]
+                    if moving_ci[ci]:
+                        _t1_points(ci, c, v, Gv, G32v, BX0, BX1, BY0, BY1, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na,
+                                   cam_K, cov_wh, PX, PY, OWN, IDX, NEAR)
+                        cnt, fsum = _t1_count(c, v, nk, Gv, PX, PY, OWN, IDX, cam_K, cam_D, cam_hasd, cov, cov_wh)
+                        w = _t1_weight(Gv, c, nk)
+                    else:
+                        w = t1[v, c, 0]
+                        cnt = t1[v, c, 1]
+                        fsum = t1[v, c, 2]
+                        q0 = tmpl_ptr[c] + c
+                        sb0 = s_pre[v, q0]
+                        sb1 = s_pre[v, q0 + nk]
+                        if first_moving < ci and sb1 > sb0:
+                            ylo = Gv[c, 9]
+                            xm = Gv[c, 11]
+                            na = tmpl_na[c]
+                            ns = nk // na
+                            na_ly = na / (Gv[c, 10] - ylo)
+                            bx0, bx1, by0, by1 = BX0[ci], BX1[ci], BY0[ci], BY1[ci]
+                            marked = False
+                            for m in range(nm):
+                                ei = mov_ci[m]
+                                if ei >= ci:
+                                    break
+                                if not ((BX0[ei] <= bx1) & (bx0 <= BX1[ei]) & (BY0[ei] <= by1) & (by0 <= BY1[ei])):
+                                    continue
+                                e = order[ei]
+                                reach, i0, i1, sa, ta = _earlier_run(Gv, c, e, ylo, xm, na, na_ly)
+                                if not reach:
+                                    continue
+                                ka = i0 * ns    # the points the full kernel tests: whole vectors from stratum i0
+                                kb = min(nk, ka + (((i1 + 1) * ns - ka + 7) & ~7))
+                                p0 = s_pre[v, q0 + ka]
+                                p1 = s_pre[v, q0 + kb]
+                                if p1 > p0:
+                                    if not marked:
+                                        for s in range(off + sb0, off + sb1):
+                                            ALIVE[s] = one
+                                        marked = True
+                                    _mark_earlier(s_px, s_py, ALIVE, off + p0, off + p1, Gv, G32v, c, e, sa, ta)
+                            if marked:
+                                cnt, fsum = _t1_recount(v, off + sb0, off + sb1, ALIVE, s_idx, s_f, cam_K, cam_hasd,
+                                                        cov)
+                    den += w * cnt
+                    num += w * (cnt - fsum)
+                t1v = num / den if den > 0.0 else 1.0
+                if fg_n[v] == 0:
+                    t2 = 1.0 - (den - num) / fg_area[v]
+                    t2 = min(1.0, max(0.0, t2))
+                else:
+                    r0 = v * n_strips
+                    for r in range(r0, r0 + n_strips):
+                        for k in range(u_pre[r, fg_ms]):
+                            flag[r * fg_ms + k] = zero
+                    for m in range(nm):
+                        c = mov_caps[m]
+                        if Gv[c, 12] == 0.0:
+                            continue
+                        for r in range(r0, r0 + n_strips):   # the runs of _t2_runs, among the uncovered points
+                            if boxv[c, 0] > fg_xr[r, 1] or boxv[c, 1] < fg_xr[r, 0]:
+                                continue
+                            k0 = fg_tab[r, _bin(boxv[c, 2], fg_bins[r, 0], fg_bins[r, 1], nb)]
+                            k1 = fg_tab[r, min(nb, _bin(boxv[c, 3], fg_bins[r, 0], fg_bins[r, 1], nb) + 1)]
+                            if k1 > k0:
+                                p0 = u_pre[r, k0 & ~7]
+                                p1 = u_pre[r, min(fg_ms, (k1 + 7) & ~7)]
+                                if p1 > p0:
+                                    _mark_run(u_x, u_y, flag, r * fg_ms + p0, r * fg_ms + p1, G32v, c, one)
+                    hit = base_hit[v]
+                    for r in range(r0, r0 + n_strips):
+                        for k in range(u_pre[r, fg_ms]):
+                            hit += flag[r * fg_ms + k]
+                    t2 = 1.0 - hit / fg_n[v]
+                total += 0.5 * t1v + 0.5 * t2
             out[i] = total / V

@@ -33,7 +33,8 @@ from ..body import BodyModel, capsule_endpoints
 from ..vision import Camera, render_mask
 from . import _silhouette_kernel as _k
 
-__all__ = ["EnergyError", "SilhouetteEnergy", "exact_view_energy", "kinematic_tables"]
+__all__ = ["EnergyError", "SilhouetteEnergy", "RestrictedSilhouetteEnergy", "exact_view_energy",
+           "kinematic_tables"]
 
 #: default size of the model-point template per view (split over the capsules by area)
 N_MODEL_POINTS = 160
@@ -43,6 +44,7 @@ _N_BINS = 32
 #: vertical strips (x quantiles) of the foreground sample: a capsule tests only the strips its box meets
 #: (1: measured fastest for one person at 384 points; 2 and 4 cost more in run overhead than they save)
 _N_STRIPS = 1
+_NO_ROWS = np.zeros(0, np.int64)
 
 
 class EnergyError(ValueError):
@@ -307,6 +309,7 @@ class SilhouetteEnergy:
         self.n_evals = 0
         self._used: list[int] = []
         self._frame: dict | None = None
+        self._restrict_cache: dict = {}     # coords -> what a restriction depends on besides pose and masks
         if masks is not None:
             self.set_masks(masks)
 
@@ -447,7 +450,190 @@ class SilhouetteEnergy:
                             fr["fg_area"], n_chunks, out)
         return out
 
+    def restrict(self, x_base: Any, coords: Any) -> "RestrictedSilhouetteEnergy":
+        """The energy of the poses that equal ``x_base`` outside the coordinates ``coords``, computed
+        faster: what depends only on the capsules those coordinates do not move is computed once here.
+
+        The values are the same bits as ``self(X)`` (same points counted, same summation order). Meant
+        for one stage of a hierarchical optimizer (every particle differs from the current estimate in
+        the stage's coordinates only): :class:`~isa_mocap_ros.optim.Hierarchical` asks for it when a
+        partition starts. Valid for the current masks only (a later :meth:`set_masks` makes calling it
+        raise). See :class:`RestrictedSilhouetteEnergy` and docs/energy.md.
+
+        Parameters
+        ----------
+        x_base : (D,) array_like
+            Finite base pose.
+        coords : sequence of int
+            The coordinates that may differ from ``x_base`` (indices in ``[0, D)``, no repeats).
+
+        Raises
+        ------
+        EnergyError
+            Bad ``x_base`` or ``coords``, or no masks set.
+        """
+        return RestrictedSilhouetteEnergy(self, x_base, coords)
+
     def __repr__(self) -> str:
         return (f"SilhouetteEnergy(model={self.model.name!r}, views={len(self.cameras)}, method={self.method!r}, "
                 f"used={self.n_views_used}, downsample={self.downsample}, n_template={self.n_template}, "
                 f"n_mask_points={self.n_mask_points})")
+
+
+class RestrictedSilhouetteEnergy:
+    """:class:`SilhouetteEnergy` restricted to poses equal to a base pose outside some coordinates
+    (:meth:`SilhouetteEnergy.restrict`); ``f(X (n, D)) -> (n,)``, the same values as the full energy.
+
+    The *moving* capsules are those with an end joint whose position depends on one of ``coords``
+    through the kinematic tree; the others are *fixed*. Computed once here, per view: the fixed
+    capsules' projections and boxes, their term-1 template points that lie in their own hull, in no
+    earlier fixed capsule's hull and in the image (count, foreground sum, the points themselves), and
+    the foreground sample points no fixed capsule covers. Per pose: forward kinematics and projection
+    of the moving joints and capsules only; term 1 in full for the moving capsules, and for a fixed one
+    only its stored points against the *earlier moving* capsules whose boxes meet its own (usually none:
+    its stored sums); term 2 from the stored count plus the uncovered points the moving capsules cover.
+
+    Falls back to the full kernel (still checking the contract) when it would not pay or is not
+    implemented: ``method="exact"``, a root coordinate (0-5) in ``coords``, or every capsule moving
+    (:attr:`full` is then True).
+
+    Contract: every finite row of ``X`` must equal ``x_base`` (exactly) outside ``coords``; a row that
+    does not raises :class:`EnergyError` (checked per row in the kernel, cheaply, never skipped). Rows
+    with NaN or inf give ``+inf``, as the full energy. Evaluations count in the parent's ``n_evals``.
+    Calling it after the parent's :meth:`~SilhouetteEnergy.set_masks` raises :class:`EnergyError`.
+
+    Attributes
+    ----------
+    energy : SilhouetteEnergy
+        The parent.
+    x_base : (D,) ndarray
+    coords : (k,) int ndarray
+        Sorted.
+    moving_capsules : (m,) int ndarray
+        Capsule indices that move (processing order).
+    full : bool
+        True when evaluating with the full kernel (see above).
+    """
+
+    def __init__(self, energy: SilhouetteEnergy, x_base: Any, coords: Any) -> None:
+        if not isinstance(energy, SilhouetteEnergy):
+            raise EnergyError(f"energy: expected a SilhouetteEnergy, received {type(energy).__name__}")
+        model = energy.model
+        D = model.dof
+        if energy._frame is None:
+            raise EnergyError("masks: expected masks to be set (constructor or set_masks) before restricting, "
+                              "received none")
+        try:
+            x = np.array(x_base, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise EnergyError(f"x_base: expected a numeric array of shape ({D},), received {x_base!r}") from exc
+        if x.shape != (D,) or not np.isfinite(x).all():
+            raise EnergyError(f"x_base: expected a finite array of shape ({D},), received shape {x.shape}"
+                              + ("" if x.shape != (D,) else " with non-finite values"))
+        try:
+            idx = np.asarray(coords)
+        except (TypeError, ValueError) as exc:
+            raise EnergyError(f"coords: expected integer indices in [0, {D}), received {coords!r}") from exc
+        if idx.ndim != 1 or (idx.size and not np.issubdtype(idx.dtype, np.integer)):
+            raise EnergyError(f"coords: expected a 1-D sequence of integer indices in [0, {D}), received {coords!r}")
+        idx = idx.astype(np.int64)
+        if idx.size and (idx.min() < 0 or idx.max() >= D):
+            raise EnergyError(f"coords: expected indices in [0, {D}), received {idx.tolist()}")
+        if np.unique(idx).size != idx.size:
+            raise EnergyError(f"coords: expected no repeated index, received {idx.tolist()}")
+        self.energy = energy
+        self.x_base = x
+        self.coords = np.sort(idx)
+        self._frame = energy._frame
+        key = tuple(self.coords.tolist())
+        st = energy._restrict_cache.get(key)
+        if st is None:
+            st = energy._restrict_cache[key] = _restriction_structure(energy, self.coords)
+        (self._fixed, self._fixed_mask, self._fk_joints, self._cam_joints, self.moving_capsules, self._mov_ci,
+         self._moving_ci, moving, structural_full) = st
+        self.full = energy.method != "fast" or structural_full
+        if self.full:
+            return
+        fr = self._frame
+        self._stage = _k.restrict_prepare(
+            x, *energy._kin, energy._caps, energy._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"], fr["cam_D"],
+            fr["cam_hasd"], fr["cov"], fr["cov_wh"], energy._order, energy._tmpl_a, energy._tmpl_s,
+            energy._tmpl_ptr, energy._tmpl_na, fr["fg_x"], fr["fg_y"], fr["fg_n"], fr["fg_tab"], fr["fg_bins"],
+            fr["fg_xr"], moving)
+
+    def _violation(self, X: np.ndarray, rows: np.ndarray) -> EnergyError:
+        i = int(rows[0])
+        d = int(np.flatnonzero((X[i] != self.x_base) & self._fixed_mask)[0])
+        return EnergyError(f"X: expected rows equal to x_base outside coords {self.coords.tolist()}, received row "
+                           f"{i} with coordinate {d} = {X[i, d]!r} (x_base: {self.x_base[d]!r}); "
+                           f"{rows.size} such row(s)")
+
+    def __call__(self, X: Any) -> np.ndarray:
+        """Energies ``(n,)`` of poses ``X (n, D)`` equal to ``x_base`` outside ``coords``."""
+        en = self.energy
+        X, ok = _check_poses(en.model, X)
+        if en._frame is not self._frame:
+            raise EnergyError("masks: expected the masks this restriction was made for, received new ones "
+                              "(set_masks was called since): restrict again")
+        if self.full:       # the full kernel is right for any pose: nothing to check
+            return en(X)
+        n = X.shape[0]
+        en.n_evals += n
+        if ok.all():
+            out = self._fast(X)
+            bad = np.flatnonzero(out < 0.0) if out.min(initial=0.0) < 0.0 else _NO_ROWS
+        else:
+            out = np.full(n, np.inf)
+            rows = np.flatnonzero(ok)
+            bad = _NO_ROWS
+            if rows.size:
+                sub = self._fast(np.ascontiguousarray(X[rows]))
+                out[rows] = sub
+                bad = rows[sub < 0.0]
+        if bad.size:
+            raise self._violation(X, bad)
+        return out
+
+    def _fast(self, X: np.ndarray) -> np.ndarray:
+        en = self.energy
+        fr = self._frame
+        out = np.empty(X.shape[0])
+        n_chunks = max(1, min(X.shape[0], 8 * en._threads))
+        _k.silhouette_restricted(
+            X, self.x_base, self._fixed, self._fk_joints, self._cam_joints, self.moving_capsules, self._mov_ci,
+            self._moving_ci, *en._kin, en._caps, en._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"], fr["cam_D"],
+            fr["cam_hasd"], fr["cov"], fr["cov_wh"], en._order, en._tmpl_a, en._tmpl_s, en._tmpl_ptr, en._tmpl_na,
+            fr["fg_n"], fr["fg_tab"], fr["fg_bins"], fr["fg_xr"], fr["fg_area"], *self._stage, n_chunks, out)
+        return out
+
+    def __repr__(self) -> str:
+        return (f"RestrictedSilhouetteEnergy(coords={self.coords.tolist()}, moving_capsules="
+                f"{self.moving_capsules.tolist()}, full={self.full})")
+
+
+
+def _restriction_structure(energy: SilhouetteEnergy, coords: np.ndarray) -> tuple:
+    """What a restriction to ``coords`` (sorted) depends on besides the base pose and the masks (cached
+    per energy): fixed coordinates (indices, mask), joints to recompute (rotating or moving), joints
+    to project (moving), moving capsules (processing order) and their processing positions, the
+    processing positions' moving flags, the capsules' moving flags, and whether only the full kernel
+    applies (a root coordinate, or every capsule moving)."""
+    D = energy.model.dof
+    fixed = np.ones(D, bool)
+    fixed[coords] = False
+    parents, _, ptr, dofs, _ = energy._kin
+    J = parents.size
+    rot = np.zeros(J, bool)         # a coordinate of the joint or of an ancestor
+    moved = np.zeros(J, bool)       # an ancestor rotates
+    for j in range(1, J):
+        rot[j] = rot[parents[j]] or not fixed[dofs[ptr[j]:ptr[j + 1]]].all()
+        moved[j] = rot[parents[j]] or moved[parents[j]]
+    caps, order = energy._caps, energy._order
+    moving = np.ascontiguousarray(moved[caps[:, 0]] | moved[caps[:, 1]])
+    pos = np.empty(len(order), np.int64)
+    pos[order] = np.arange(len(order))
+    mov_caps = np.array([c for c in order if moving[c]], dtype=np.int64)
+    full = bool(np.any(coords < 6)) or bool(moving.all())
+    return (np.flatnonzero(fixed).astype(np.int64), fixed, np.flatnonzero(rot | moved).astype(np.int64),
+            np.flatnonzero(moved).astype(np.int64), mov_caps, np.ascontiguousarray(pos[mov_caps]),
+            np.ascontiguousarray(moving[order]), moving, full)
