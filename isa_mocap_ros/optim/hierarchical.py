@@ -18,6 +18,14 @@ Rules
 * A partition ends when its share is spent or its inner optimizer stops; its estimate (the inner
   ``result().x``) is then written into the full estimate. Rotation triples must lie inside one
   partition.
+* Restricted energies: when the bound energy (``bind``/``minimize``) has a ``restrict`` method,
+  ``energy.restrict(x, coords)`` is called once when a partition starts evaluating, with ``x`` the
+  current estimate and ``coords`` the partition's indices, and that partition's generations are
+  evaluated with what it returns (a batch energy valid for poses equal to ``x`` outside ``coords``,
+  as every generation of the partition is; ``None``: the energy itself). The energy must give the
+  same values either way (e.g. :meth:`SilhouetteEnergy.restrict
+  <isa_mocap_ros.energy.silhouette.SilhouetteEnergy.restrict>`, the same bits); evaluation counts
+  and budgets do not change. Without ``restrict`` the energy is called as it is.
 """
 from __future__ import annotations
 
@@ -130,6 +138,8 @@ class Hierarchical(Optimizer):
         self._last_pop = None
         self._probes: list[Optimizer | None] | None = None   # inner optimizers built by bind()
         self.partition_log: list[tuple[int, int]] = []   # (partition, evaluations spent)
+        self._full_energy: Callable | None = None
+        self._stage_energy: tuple[int, Callable] | None = None   # (partition, its restricted energy)
 
     def _check_shares(self, eps):
         if np.ndim(eps) == 0:
@@ -178,6 +188,24 @@ class Hierarchical(Optimizer):
                 self._probes[1:] = [None] * (len(self.partitions) - 1)
             self._inner = self._probes[0]
             self._inner_used = 0
+
+    def bind(self, energy: Callable, *, max_evals: int | None = None) -> "Hierarchical":
+        """:meth:`Optimizer.bind`; an energy with a ``restrict`` method is restricted to each partition
+        when it starts (see the module rules)."""
+        super().bind(energy, max_evals=max_evals)
+        self._full_energy = energy
+        self._stage_energy = None
+        if callable(getattr(energy, "restrict", None)):
+            self._energy = self._partition_energy
+        return self
+
+    def _partition_energy(self, X):
+        """The bound energy, restricted to the current partition (built when it first evaluates: the
+        estimate outside the partition does not change while it runs)."""
+        if self._stage_energy is None or self._stage_energy[0] != self.k:
+            fn = self._full_energy.restrict(self._x.copy(), self.partitions[self.k].copy())
+            self._stage_energy = (self.k, self._full_energy if fn is None else fn)
+        return self._stage_energy[1](X)
 
     @property
     def generation_size(self):
