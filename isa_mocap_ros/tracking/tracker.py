@@ -409,6 +409,23 @@ class Tracker:
             E = E + self.prior.energy(X, eta=self.config.prior_eta)
         return E
 
+    def restricted_energy(self, x_base, coords):
+        """:meth:`total_energy` for poses equal to ``x_base`` outside ``coords``, the same values: the
+        data term's ``restrict`` (``SilhouetteEnergy.restrict``) plus the prior on the full poses; None
+        when the data term has no ``restrict``. ``Hierarchical`` asks for it per partition."""
+        restrict = getattr(self.energy, "restrict", None)
+        data = restrict(x_base, coords) if callable(restrict) else None
+        if data is None:
+            return None
+
+        def total(X):
+            X = np.atleast_2d(np.asarray(X, dtype=float))
+            E = np.asarray(data(X), dtype=float)
+            if self.prior is not None and self.config.prior_eta > 0:
+                E = E + self.prior.energy(X, eta=self.config.prior_eta)
+            return E
+        return total
+
     # ------------------------------------------------------------------ masks
     def _check_masks(self, masks) -> tuple[list, list[str]]:
         """Per view a usable mask or None, and notes on what was skipped."""
@@ -630,7 +647,7 @@ class Tracker:
         share = self._pelvis_share(notes) if stages else None
         limbs = self._limb_stage(notes) if stages else []
         limb_share = self._limb_share(len(limbs))
-        res = minimize(opt, self.total_energy, max_evals=cfg.evals_per_frame - (share or 0) - limb_share)
+        res = minimize(opt, _TotalEnergy(self), max_evals=cfg.evals_per_frame - (share or 0) - limb_share)
         if share is not None:
             x, e, n = self.refit_pelvis(res.x, evals=share, rng=rng, bounds=(lo, hi), spread=spread)
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
@@ -832,6 +849,20 @@ class Tracker:
         return FrameResult(x=x, energy=float(energy), n_evals=int(n_evals), spread=float(spread_out),
                            time_s=time.perf_counter() - t0, views_used=views, notes=tuple(notes), fell_back=False,
                            prediction=pred, initialized=initialized)
+
+
+class _TotalEnergy:
+    """``tracker.total_energy`` with ``restrict`` (:meth:`Tracker.restricted_energy`), which
+    ``Hierarchical`` asks for when a partition starts."""
+
+    def __init__(self, tracker: Tracker) -> None:
+        self.tracker = tracker
+
+    def __call__(self, X) -> np.ndarray:
+        return self.tracker.total_energy(X)
+
+    def restrict(self, x_base, coords):
+        return self.tracker.restricted_energy(x_base, coords)
 
 
 def make_tracker(model, cameras: Sequence, *, optimizer: str = "h-isa", evals: int = 1500,
