@@ -555,11 +555,17 @@ class RestrictedSilhouetteEnergy:
         if self.full:
             return
         fr = self._frame
-        self._stage = _k.restrict_prepare(
+        stage = _k.restrict_prepare(
             x, *energy._kin, energy._caps, energy._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"], fr["cam_D"],
             fr["cam_hasd"], fr["cov"], fr["cov_wh"], energy._order, energy._tmpl_a, energy._tmpl_s,
             energy._tmpl_ptr, energy._tmpl_na, fr["fg_x"], fr["fg_y"], fr["fg_n"], fr["fg_tab"], fr["fg_bins"],
             fr["fg_xr"], moving)
+        # the kernel's arguments between X and (n_chunks, out)
+        self._args = (x, self._fixed, self._fk_joints, self._cam_joints, self.moving_capsules, self._mov_ci,
+                      self._moving_ci, *energy._kin, energy._caps, energy._radii, fr["cam_R"], fr["cam_t"],
+                      fr["cam_K"], fr["cam_D"], fr["cam_hasd"], fr["cov"], fr["cov_wh"], energy._order,
+                      energy._tmpl_a, energy._tmpl_s, energy._tmpl_ptr, energy._tmpl_na, fr["fg_n"], fr["fg_tab"],
+                      fr["fg_bins"], fr["fg_xr"], fr["fg_area"], *stage)
 
     def _violation(self, X: np.ndarray, rows: np.ndarray) -> EnergyError:
         i = int(rows[0])
@@ -595,15 +601,8 @@ class RestrictedSilhouetteEnergy:
         return out
 
     def _fast(self, X: np.ndarray) -> np.ndarray:
-        en = self.energy
-        fr = self._frame
         out = np.empty(X.shape[0])
-        n_chunks = max(1, min(X.shape[0], 8 * en._threads))
-        _k.silhouette_restricted(
-            X, self.x_base, self._fixed, self._fk_joints, self._cam_joints, self.moving_capsules, self._mov_ci,
-            self._moving_ci, *en._kin, en._caps, en._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"], fr["cam_D"],
-            fr["cam_hasd"], fr["cov"], fr["cov_wh"], en._order, en._tmpl_a, en._tmpl_s, en._tmpl_ptr, en._tmpl_na,
-            fr["fg_n"], fr["fg_tab"], fr["fg_bins"], fr["fg_xr"], fr["fg_area"], *self._stage, n_chunks, out)
+        _k.silhouette_restricted(X, *self._args, max(1, min(X.shape[0], 8 * self.energy._threads)), out)
         return out
 
     def __repr__(self) -> str:
