@@ -115,7 +115,7 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
     summary = {
         "bag": str(bag), "out": str(out), "mode": "lockstep" if args.lockstep else f"real time x{args.rate}",
         "optimizer": diag.get("optimizer", args.optimizer), "evals_per_frame": int(diag.get("evals_per_frame", 0) or 0),
-        "model_dof": model.dof, "seed": args.seed if args.seed is not None else 0,
+        "model_dof": model.dof, "tracker_threads": int(diag.get("tracker_threads", 0) or 0), "seed": args.seed if args.seed is not None else 0,
         "frame_sets_played": play_summary.get("frames"), "frames_processed": len(rec["done"]),
         "frames_estimated": len(poses),
         # frame sets per second while the bag was being replayed (the player's own clock, without the

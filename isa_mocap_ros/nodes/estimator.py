@@ -85,6 +85,9 @@ class EstimatorNode(Node):
         sync = declare(self, "sync", "exact", "frame-set matching: exact or approximate")
         queue = declare(self, "queue_size", 10, "stamps kept per view while synchronizing", lo=1, hi=1000)
         slop_s = declare(self, "slop_s", 0.01, "approximate sync window, seconds", lo=0.0, hi=10.0)
+        self.tracker_threads = declare(self, "tracker_threads", 1,
+                                       "numba threads of the tracker's energy kernels (0 = numba's default, "
+                                       "all cores); results do not depend on it", lo=0, hi=256)
         self.view_timeout_s = declare(self, "view_timeout_s", 1.0,
                                       "emit a partial frame set after this wait (0 = never)", lo=0.0, hi=60.0)
         min_views = declare(self, "min_views", 2, "views a partial frame set needs", lo=1, hi=64)
@@ -122,6 +125,7 @@ class EstimatorNode(Node):
                                       slop_ns=0 if sync == "exact" else int(slop_s * 1e9),
                                       max_wait_s=self.view_timeout_s, min_views=min(min_views, self.n_views))
         self.slot = LatestSlot(keep_all=self.lockstep)
+        self.threads_in_use = 0          # numba threads of the tracker's worker (set when it starts)
         self._cv = threading.Condition()
         self._intrinsics: list = [None] * self.n_views
         self._extrinsics: list = [None] * self.n_views
@@ -296,6 +300,14 @@ class EstimatorNode(Node):
             time.sleep(0.5)  # let the matched endpoints finish their handshake
 
     def _work(self) -> None:
+        import numba
+
+        if self.tracker_threads > 0:
+            # numba's thread count is per calling thread: this worker is the only one that steps the
+            # tracker. One thread leaves the other core to the segmentation, player and recorder; the
+            # tracker's batches (30 particles) gain nothing from a second thread (docs/nodes.md).
+            numba.set_num_threads(min(self.tracker_threads, numba.config.NUMBA_NUM_THREADS))
+        self.threads_in_use = numba.get_num_threads()
         self._warm_up()
         while not self._stop.is_set():
             with self._cv:
@@ -410,7 +422,7 @@ class EstimatorNode(Node):
         values = {
             "frames": self.frames_done, "dropped_frame_sets": self.slot.dropped,
             "sync_dropped_messages": self.sync.dropped, "bad_inputs": self.problems.total,
-            "optimizer": self.optimizer, "evals_per_frame": self.evals,
+            "optimizer": self.optimizer, "evals_per_frame": self.evals, "tracker_threads": self.threads_in_use,
             "energy": getattr(r, "energy", float("nan")), "evaluations": getattr(r, "n_evals", 0),
             "views_used": getattr(r, "views_used", 0),
             "latency_ms_p50": p50, "latency_ms_p95": p95,
