@@ -142,6 +142,7 @@ def test_search_box_respects_radius_and_limits(scene):
     ({"seed": -1}, "seed: expected an integer >= 0"),
     ({"n_model_points": 0}, "n_model_points: expected an integer >= 1"),
     ({"n_mask_points": -1}, "n_mask_points: expected an integer >= 0"),
+    ({"spread_velocity_gain": -0.5}, "spread_velocity_gain: expected a finite number >= 0"),
 ])
 def test_config_errors(kw, match):
     with pytest.raises(TrackerError, match=match):
@@ -222,3 +223,33 @@ def test_tracks_through_a_half_turn():
     assert np.all(np.linalg.norm(est[:, 3:6], axis=1) <= np.pi + 1e-12)       # published canonical
     # the truth does cross |r| = pi (else this test would not test the crossing)
     assert np.linalg.norm(truth[3, 3:6]) > 3.0 and np.sign(truth[3, 5]) != np.sign(truth[-1, 5])
+
+
+@pytest.mark.parametrize("gain", [0.0, 1.5])
+def test_spreads_grow_with_the_predicted_motion(scene, monkeypatch, gain):
+    """Joints the (damped) prediction moves start with sqrt(s0^2 + (k |p - x|)^2); the others, the
+    root, and every joint with gain 0 keep joint_spread_rad."""
+    import isa_mocap_ros.optim as optim
+
+    model, cams, walk, masks = scene
+    seen = []
+    real = optim.make_optimizer
+
+    def spy(name, x0, spread, **kw):
+        seen.append(np.array(spread, dtype=float))
+        return real(name, x0, spread, **kw)
+
+    monkeypatch.setattr(optim, "make_optimizer", spy)
+    cfg = TrackerConfig(evals_per_frame=300, seed=1, spread_velocity_gain=gain, pelvis_fraction=0.0,
+                        limb_proposals=0, joint_velocity_gain=0.5)
+    tr = Tracker(model, cams, cfg)
+    tr.initialize(pose=walk[0])
+    k = model.knee_dofs[0]
+    p = walk[0].copy()
+    p[k] += 0.4                                       # the external prediction bends one knee
+    tr.step(masks[1], 1, prediction=p)
+    spread = seen[0]
+    want = np.full(model.dof, cfg.joint_spread_rad)
+    want[k] = np.hypot(cfg.joint_spread_rad, gain * 0.5 * 0.4)   # damped: half of the predicted motion
+    np.testing.assert_allclose(spread[6:], want[6:], rtol=1e-12)
+    np.testing.assert_allclose(spread[:3], cfg.root_translation_spread_m)

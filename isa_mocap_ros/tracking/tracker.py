@@ -114,6 +114,13 @@ class TrackerConfig:
         Half-width of the search box of every joint angle around the prediction (EA-vs-PF: 0.5).
     joint_spread_rad : float
         Initial standard deviation of the joint angles around the prediction.
+    spread_velocity_gain : float
+        Joint angles that the prediction moves get wider initial spreads: joint ``j`` starts with
+        ``sqrt(joint_spread_rad² + (k |p_j − x_j|)²)``, ``p`` the (damped) prediction and ``x`` the
+        last estimate, ``k`` this gain; 0 keeps ``joint_spread_rad`` for every joint. The damped
+        prediction covers only part of a fast swing, and a fixed small spread left the estimate
+        trailing it (CMU walk, 8 seeds: mean joint error 31.7 → 25.7 mm, ``docs/tracking.md``).
+        Not on the automatically initialized frame.
     root_translation_radius_m, root_translation_spread_m : float
         Search half-width and initial standard deviation of the root position, metres.
     root_rotation_radius_rad, root_rotation_spread_rad : float
@@ -178,6 +185,7 @@ class TrackerConfig:
     optimizer_params: Mapping[str, Any] = field(default_factory=dict)
     search_radius_rad: float = 0.5
     joint_spread_rad: float = 0.05
+    spread_velocity_gain: float = 1.5
     root_translation_radius_m: float = 0.25
     root_translation_spread_m: float = 0.015
     root_rotation_radius_rad: float = 0.5
@@ -219,6 +227,7 @@ class TrackerConfig:
         for name in ("search_radius_rad", "joint_spread_rad", "root_translation_radius_m", "root_translation_spread_m",
                      "root_rotation_radius_rad", "root_rotation_spread_rad"):
             _check_number(name, getattr(self, name), lo=0.0, strict=True)
+        _check_number("spread_velocity_gain", self.spread_velocity_gain, lo=0.0)
         if self.predictor not in PREDICTORS:
             raise TrackerError(f"predictor: expected one of {', '.join(PREDICTORS)}, received {self.predictor!r}")
         _check_number("predictor_order", self.predictor_order, lo=1, integer=True)
@@ -630,6 +639,9 @@ class Tracker:
         cfg = self.config
         lo, hi, spread = self.search_box(pred)
         spread = spread * spread_scale
+        if stages and cfg.spread_velocity_gain > 0 and self._last is not None:
+            moved = cfg.spread_velocity_gain * np.abs(pred[6:] - self._last[6:])
+            spread[6:] = np.sqrt(spread[6:] ** 2 + moved ** 2)
         x0 = np.clip(pred, lo, hi)
         params = cfg.params()
         if inner_optimizer(cfg.optimizer) is not None:
