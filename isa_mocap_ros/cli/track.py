@@ -60,6 +60,9 @@ def register(sub) -> None:
     p.add_argument("--prior", default=None, metavar="NPZ", help="Parzen prior file (with --prior-eta)")
     p.add_argument("--prior-eta", type=float, default=0.0, help="prior weight (0 = off)")
     p.add_argument("--energy", choices=("fast", "exact"), default="fast", help="silhouette energy method")
+    p.add_argument("--gate-margin-px", type=int, default=None, metavar="PX",
+                   help="mask gate: keep only foreground components within PX pixels of the predicted silhouette "
+                        "(0 = off; default: the tracker's default)")
     p.add_argument("--overwrite", action="store_true", help="replace DIR/estimates if it exists")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -204,6 +207,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                   energy_method=args.energy, prior_eta=args.prior_eta)
     if args.predictor:
         cfg_kw["predictor"] = args.predictor
+    if getattr(args, "gate_margin_px", None) is not None:
+        cfg_kw["gate_margin_px"] = args.gate_margin_px
     cfg = TrackerConfig(**cfg_kw)
     tracker = Tracker(model, seq.cameras, cfg, prior=prior)
     # as the node network: the prediction travels as JointState (roll/pitch/yaw root) and the
@@ -272,6 +277,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                        init_frame=init_frame, stamps=stamp_of, step_seconds=dict(step_seconds))
     summary: dict = {"bag": str(bag_path), "out": str(out), "optimizer": args.optimizer, "evals_per_frame": args.evals,
                      "optimizer_params": cfg.params(), "model_dof": model.dof, "seed": args.seed,
+                     "gate_margin_px": cfg.gate_margin_px,
                      "masks": "recorded" if use_masks else f"segmented (learned from {learn} frames)",
                      "frames_tracked": n_tracked, "frames_estimated": len(estimates), "frames_fell_back": n_fell_back,
                      "fps": n_tracked / t_track if t_track > 0 else float("nan"),

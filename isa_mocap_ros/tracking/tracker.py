@@ -9,7 +9,9 @@ One call of :meth:`Tracker.step` per frame set:
 1. **Masks.** Views whose mask is missing (None), of the wrong size for its camera, or empty are
    skipped (a note says which and why). No usable view: the frame *falls back* to the last
    estimate (``fell_back=True``, no evaluation, the predictor is not updated, so a gap does not
-   teach it a zero velocity).
+   teach it a zero velocity). With ``gate_margin_px`` > 0 and an estimate, the prediction (step 2)
+   comes first and each usable mask keeps only the foreground components touching the predicted
+   silhouette grown by that margin (:mod:`.gate`; a view left empty is skipped).
 2. **Prediction.** An external prediction (``prediction=``, e.g. from the prediction node) if it is
    finite and of length D, else the tracker's own predictor (``"ar"``: 13.28 of order
    ``predictor_order``; ``"constant_pose"``; ``"constant_velocity"``). A non-finite prediction is
@@ -55,6 +57,7 @@ import numpy as np
 
 from isa_mocap_ros.geometry import nearest_rotvec
 
+from .gate import gate_masks
 from .init import InitError, initial_pose
 from .limbs import LIMBS, LimbMove
 from .pelvis import PelvisMove
@@ -66,6 +69,8 @@ __all__ = ["TrackerError", "TrackerConfig", "FrameResult", "Tracker", "make_trac
 PREDICTORS = ("ar", "constant_pose", "constant_velocity")
 #: Factor on the root's search spreads in the pelvis stage (:meth:`Tracker.refit_pelvis`).
 PELVIS_SPREAD_SCALE = 2.0
+#: Share of a view's foreground the mask gate may remove before ``FrameResult.notes`` says so.
+GATE_NOTE_SHARE = 0.25
 ESTIMATES = ("optimizer", "best")
 
 #: Optimizer parameters used unless ``optimizer_params`` sets them (tuned on the silhouette energy,
@@ -178,6 +183,16 @@ class TrackerConfig:
     limb_proposal_limbs : tuple of str
         Limbs of the limb stage, among ``left_arm``, ``right_arm``, ``left_leg``, ``right_leg``
         (limbs the model does not have are ignored).
+    gate_margin_px : int
+        **Mask gate** (:mod:`.gate`): once the tracker has an estimate, each usable mask keeps only
+        the foreground components touching the predicted pose's silhouette grown by this many
+        pixels (whole components: a limb beyond the margin but connected to the body stays); far
+        blobs (occluders segmented as foreground) no longer pull the model towards them. 0 = off;
+        not on the automatically initialized frame. A view that lost more than
+        :data:`GATE_NOTE_SHARE` of its foreground gets a note; a view left empty is skipped as an
+        empty view. Default 10 (at 320×240; robustness bench, 3 seeds, 35 occluders: CMU walk
+        121 → 48 mm and knee RMSE 64 → 10°, generated walk 74 → 38 mm; clean walks unchanged bit
+        for bit; ``docs/tracking.md``, "Occluders and the gate").
     """
 
     optimizer: str = "h-isa"
@@ -209,6 +224,7 @@ class TrackerConfig:
     pelvis_fraction: float = 0.15
     limb_proposals: int = 16
     limb_proposal_limbs: tuple = ("left_arm", "right_arm")
+    gate_margin_px: int = 10
 
     def __post_init__(self) -> None:
         from isa_mocap_ros.optim import OPTIMIZERS
@@ -259,6 +275,7 @@ class TrackerConfig:
             raise TrackerError(f"limb_proposal_limbs: expected distinct names among {', '.join(LIMBS)}, "
                                f"received {limbs!r}")
         object.__setattr__(self, "limb_proposal_limbs", tuple(limbs))
+        _check_number("gate_margin_px", self.gate_margin_px, lo=0, integer=True)
 
     def params(self) -> dict:
         """Optimizer keyword arguments: :data:`DEFAULT_PARAMS` of the optimizer, then ``optimizer_params``."""
@@ -286,7 +303,9 @@ class FrameResult:
     views_used : int
         Views whose mask entered the energy.
     notes : tuple of str
-        Everything skipped or replaced, and why (``"view 2: empty mask; skipped"``, ...).
+        Everything skipped or replaced, and why (``"view 2: empty mask; skipped"``, ...); with the
+        mask gate (``gate_margin_px``) also each view that lost more than :data:`GATE_NOTE_SHARE`
+        of its foreground (``"view 1: the gate removed 812 of 2440 foreground pixels (33 %)"``).
     fell_back : bool
         True when no optimization ran and ``x`` is the last estimate.
     prediction : (D,) ndarray or None
@@ -777,6 +796,21 @@ class Tracker:
                 changed.append(limb.name)
         return out, float(self.total_energy(out[None, :])[0]), n * len(chosen) + 2, changed
 
+    def _gate(self, usable: list, pred: np.ndarray, notes: list[str]) -> list:
+        """The usable masks gated around ``pred`` (:func:`.gate.gate_masks`); views left empty become None."""
+        g = gate_masks(usable, self.cameras, self.model, pred, self.config.gate_margin_px)
+        out = []
+        for v, (m, lost, total) in enumerate(zip(g.masks, g.lost_px, g.total_px)):
+            if m is not None and lost >= total:
+                notes.append(f"view {v}: empty mask after the gate (all {total} foreground pixels farther than "
+                             f"{self.config.gate_margin_px} px from the predicted silhouette); skipped")
+                m = None
+            elif m is not None and lost > GATE_NOTE_SHARE * total:
+                notes.append(f"view {v}: the gate removed {lost} of {total} foreground pixels "
+                             f"({100 * lost / total:.0f} %)")
+            out.append(m)
+        return out
+
     def step(self, masks: Sequence, frame_index: int, *, prediction=None) -> FrameResult:
         """Track one frame (see the module docstring). Never raises on bad masks or predictions.
 
@@ -798,6 +832,11 @@ class Tracker:
             raise TrackerError(f"frame_index: expected an integer >= 0, received {frame_index!r}")
         cfg = self.config
         usable, notes = self._check_masks(masks)
+        gated_pred = None
+        if cfg.gate_margin_px > 0 and self._last is not None and any(m is not None for m in usable):
+            # the mask gate (config.gate_margin_px): foreground far from the predicted silhouette is dropped
+            gated_pred = self._prediction(prediction, notes)
+            usable = self._gate(usable, gated_pred, notes)
         views = self._set_masks(usable, notes, frame_index)
         if views == 0:
             notes.append("no usable view: falling back to the last estimate" if self._last is not None
@@ -820,7 +859,7 @@ class Tracker:
             initialized = True
             starts = [c[0] for c in res0.candidates] or [res0.x]
         else:
-            starts = [self._prediction(prediction, notes)]
+            starts = [gated_pred if gated_pred is not None else self._prediction(prediction, notes)]
         # the first frame optimizes from every initialization candidate and keeps the lowest energy
         best = None
         for j, pred in enumerate(starts):
