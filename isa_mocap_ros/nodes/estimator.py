@@ -78,6 +78,9 @@ class EstimatorNode(Node):
                          "(limb stage: re-opens a folded arm; 0 = off)", lo=0, hi=10_000)
         limbs = declare(self, "limb_proposal_limbs", list(tc.limb_proposal_limbs),
                         "limbs of the limb stage: left_arm, right_arm, left_leg, right_leg")
+        gate = declare(self, "gate_margin_px", tc.gate_margin_px, "mask gate: keep only foreground components "
+                       "touching the predicted silhouette grown by this many pixels (drops far occluders; 0 = off)",
+                       lo=0, hi=10_000)
         predictor = declare(self, "predictor", tc.predictor, "ar, constant_pose or constant_velocity")
         order = declare(self, "predictor_order", tc.predictor_order, "AR order (past motions used; keep equal to the prediction node's order)", lo=1, hi=20)
         self.prior_eta = declare(self, "prior_eta", 0.0, "weight of the pose prior (0 = off)", lo=0.0, hi=1e6)
@@ -120,7 +123,7 @@ class EstimatorNode(Node):
                                      seed=self.seed, energy=energy, downsample=downsample,
                                      search_radius_rad=radius, predictor=predictor, predictor_order=order,
                                      prior_eta=self.prior_eta, prior_file=prior_file, pelvis_fraction=pelvis,
-                                     limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs))
+                                     limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs), gate_margin_px=gate)
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
                                       slop_ns=0 if sync == "exact" else int(slop_s * 1e9),
                                       max_wait_s=self.view_timeout_s, min_views=min(min_views, self.n_views))
