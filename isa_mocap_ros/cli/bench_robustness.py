@@ -1,6 +1,7 @@
 """Robustness (ISA §13.4.2): clean, 50 % / 70 % pixel noise, 35 occluders; knee RMSE beside the paper.
 
-``isa-mocap bench robustness [--quick] [--json] [--cache DIR] [--out DIR] [--init truth|auto]``.
+``isa-mocap bench robustness [--quick] [--json] [--cache DIR] [--out DIR] [--init truth|auto] [--seeds 0,1,2]
+[--gate-margin-px PX] [--jobs N]``.
 
 Protocol (ISA §13.4.2, Figs. 13.15-13.17, with our tracker's best settings):
 
@@ -13,23 +14,30 @@ Protocol (ISA §13.4.2, Figs. 13.15-13.17, with our tracker's best settings):
 * each bag is tracked offline by ``isa-mocap track``'s code (:func:`isa_mocap_ros.cli.track.track_bag`):
   the images are segmented by the segmentation node's background model (learned from the 10
   distorted background frames), default tracker settings (h-isa, 1500 evaluations per frame, 39
-  DOF, the subject's body shape, fast energy, no prior), seed 0;
+  DOF, the subject's body shape, fast energy, no prior; ``--gate-margin-px`` sets the mask gate,
+  default the tracker's), once per tracker seed (default 0, 1, 2: one run is chaotic, see
+  ``docs/tracking.md``); the bags do not depend on the seed (rendered with seed 0);
 * initialization: ``--init truth`` (default) starts from the ground truth of the first frame, as a
   manually initialized system (the papers'); that frame is not scored. ``--init auto`` uses the
   automatic initialization (every frame scored);
 * scored per condition: knee-angle RMSE (the paper's measure; 2.74° clean, 2.97° / 4.51° at 50 % /
   70 % noise, 5.21° with 35 occluders, on its 200-frame walk with a level-set segmentation and a
-  learned prior) and the mean joint error (EA-vs-PF Eq. 20).
+  learned prior) and the mean joint error (EA-vs-PF Eq. 20), per run; per sequence and condition
+  the mean over the seeds with its min-max and standard error, per condition the mean over the
+  sequences of those means (targets: on the per-sequence means).
 
 Designs: default — the CMU walk from 1 s (skipped with a message when
 ``/work/shared/data/mocap/cmu_131_01_walk.bvh`` is absent) and the generated walk and jog, 4 s each
-at 30 fps (120 scored frames), 4 views 320×240, one seed; ``--quick`` — the generated walk, 6
-frames in 4 views of 160×120 at 300 evaluations per frame (a smoke test, < 1 min).
+at 30 fps (120 scored frames), 4 views 320×240, seeds 0, 1, 2 (36 runs, tracked by ``--jobs`` 2
+worker processes: ≈ 3 min on this 2-core machine); ``--quick`` — the generated walk, 6 frames in
+4 views of 160×120 at 300 evaluations per frame, seed 0 (a smoke test, < 1 min).
+The runs' ``frames/s`` are measured with the workers side by side.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import sys
 import tempfile
@@ -79,6 +87,10 @@ class RobustDesign:
     seed: int = 0
     init: str = "truth"
     notes: tuple = ()
+    #: tracker seeds, one run each per sequence and condition (``seed`` is the first, for older readers)
+    seeds: tuple = (0,)
+    #: the tracker's mask gate (``TrackerConfig.gate_margin_px``); None = the tracker's default
+    gate_margin_px: int | None = None
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -86,12 +98,25 @@ class RobustDesign:
         return d
 
 
+DEFAULT_SEEDS = (0, 1, 2)
+
+
 def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK, init: str = "truth",
-                optimizer: str = "h-isa", evals: int | None = None) -> RobustDesign:
-    """``"quick"`` or ``"default"`` (see the module docstring)."""
+                optimizer: str = "h-isa", evals: int | None = None, seeds: tuple | None = None,
+                gate_margin_px: int | None = None) -> RobustDesign:
+    """``"quick"`` or ``"default"`` (see the module docstring); ``seeds`` default (0,) quick, (0, 1, 2) default."""
+    if seeds is not None:
+        seeds = tuple(int(x) for x in seeds)
+        if not seeds or any(x < 0 for x in seeds) or len(set(seeds)) != len(seeds):
+            raise ValueError(f"seeds: expected distinct integers >= 0, received {seeds!r}")
+    if gate_margin_px is not None and (isinstance(gate_margin_px, bool) or int(gate_margin_px) != gate_margin_px
+                                       or gate_margin_px < 0):
+        raise ValueError(f"gate_margin_px: expected an integer >= 0 or None, received {gate_margin_px!r}")
     if kind == "quick":
         seqs = (RobustSequence("walk", "walk", duration_s=6 / 30, views=4, width=160, height=120),)
-        return RobustDesign("quick", seqs, tuple(c[0] for c in CONDITIONS), optimizer, evals or 300, 0, init)
+        seeds = seeds or (0,)
+        return RobustDesign("quick", seqs, tuple(c[0] for c in CONDITIONS), optimizer, evals or 300, seeds[0], init,
+                            seeds=seeds, gate_margin_px=gate_margin_px)
     if kind != "default":
         raise ValueError(f"kind: expected 'quick' or 'default', received {kind!r}")
     seqs, notes = [], []
@@ -100,8 +125,9 @@ def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK
     else:
         notes.append(f"CMU walk skipped: {cmu_path} not found")
     seqs += [RobustSequence("walk", "walk"), RobustSequence("jog", "jog")]
-    return RobustDesign("default", tuple(seqs), tuple(c[0] for c in CONDITIONS), optimizer, evals or 1500, 0, init,
-                        tuple(notes))
+    seeds = seeds or DEFAULT_SEEDS
+    return RobustDesign("default", tuple(seqs), tuple(c[0] for c in CONDITIONS), optimizer, evals or 1500, seeds[0],
+                        init, tuple(notes), seeds=seeds, gate_margin_px=gate_margin_px)
 
 
 def _cond(key: str):
@@ -129,16 +155,18 @@ def prepare_bag(seq: RobustSequence, cond: str, cache: Path) -> Path:
     return path
 
 
-def track_condition(bag: Path, out: Path, design: RobustDesign) -> dict:
-    """Track one bag with ``isa-mocap track``'s code; score the frames (not the truth-initialized one)."""
+def track_condition(bag: Path, out: Path, design: RobustDesign, seed: int | None = None) -> dict:
+    """Track one bag with ``isa-mocap track``'s code (tracker seed ``seed``, default ``design.seed``);
+    score the frames (not the truth-initialized one)."""
     from isa_mocap_ros.cli.track import track_bag
     from isa_mocap_ros.eval import knee_errors_deg
     from isa_mocap_ros.eval.report import accuracy
 
     ns = argparse.Namespace(
         bag=str(bag), out=str(out), optimizer=design.optimizer, evals=design.evals, params=None, model=None,
-        seed=design.seed, frames=None, start=0, use_masks=False, learn_frames=None, shape="truth", init=design.init,
-        predictor=None, prior=None, prior_eta=0.0, energy="fast", overwrite=True, no_progress=True)
+        seed=design.seed if seed is None else int(seed), frames=None, start=0, use_masks=False, learn_frames=None,
+        shape="truth", init=design.init, predictor=None, prior=None, prior_eta=0.0, energy="fast", overwrite=True,
+        no_progress=True, gate_margin_px=design.gate_margin_px)
     got: dict = {}
     t0 = time.perf_counter()
     s = track_bag(ns, collect=got)
@@ -154,7 +182,8 @@ def track_condition(bag: Path, out: Path, design: RobustDesign) -> dict:
     knees_e = np.degrees(P[:, model.knee_dofs])
     knees_t = np.degrees(T[:, tm.knee_dofs])
     ke = knee_errors_deg(P, T, model, true_model=tm)
-    return {"frames": acc["frames"], "mpjpe_mm": acc["mpjpe_mm"], "max_frame_error_mm": acc["max_frame_error_mm"],
+    return {"seed": int(s["seed"]), "gate_margin_px": s.get("gate_margin_px"),
+            "frames": acc["frames"], "mpjpe_mm": acc["mpjpe_mm"], "max_frame_error_mm": acc["max_frame_error_mm"],
             "knee_rmse_deg": acc["knee_rmse_deg"], "fps": s["fps"], "frames_fell_back": s["frames_fell_back"],
             "seconds": round(seconds, 2), "init": s.get("init", "ground truth" if design.init == "truth" else ""),
             "t_s": [round(x, 4) for x in t], "frame_errors_mm": acc["frame_errors_mm"],
@@ -162,47 +191,121 @@ def track_condition(bag: Path, out: Path, design: RobustDesign) -> dict:
             "knee_abs_err_deg": np.round(np.abs(ke), 2).tolist()}
 
 
-def collect(design: RobustDesign, *, cache: Path, out: Path, progress: bool = True) -> dict:
-    """Run the design; return the JSON-able results (runs, per-condition means, target checks)."""
-    runs = []
+def _track_job(job: tuple) -> dict:
+    """One run (a worker process's job): ``(bag, out, design, seed, sequence, condition, synth_seconds)``."""
+    bag, out, design, seed, seq, cond, t_synth = job
+    r = track_condition(bag, out, design, seed)
+    r.update(sequence=seq, condition=cond, synth_seconds=t_synth)
+    return r
+
+
+def _worker_init() -> None:
+    # one numba thread per worker: the workers already fill the cores (results do not depend on it)
+    try:
+        import numba
+        numba.set_num_threads(1)
+    except Exception:  # noqa: BLE001 - no numba: nothing to set
+        pass
+
+
+def collect(design: RobustDesign, *, cache: Path, out: Path, progress: bool = True, jobs: int = 2) -> dict:
+    """Run the design; return the JSON-able results (runs, per-condition means, target checks).
+
+    The bags are rendered (or found in ``cache``) first, one after the other; the runs (sequence ×
+    condition × seed) are then tracked by ``jobs`` worker processes (1: in this process).
+    """
     t0 = time.perf_counter()
+    seeds = tuple(design.seeds) or (design.seed,)
+    todo = []
     for seq in design.sequences:
         for cond in design.conditions:
             ts = time.perf_counter()
             bag = prepare_bag(seq, cond, cache)
-            t_synth = time.perf_counter() - ts
-            r = track_condition(bag, out / seq.bag_name(cond), design)
-            r.update(sequence=seq.name, condition=cond, synth_seconds=round(t_synth, 2))
-            runs.append(r)
-            if progress:
-                print(f"bench robustness: {seq.name:9s} {cond:12s} knee RMSE {r['knee_rmse_deg']:6.2f} deg, "
-                      f"{r['mpjpe_mm']:6.1f} mm over {r['frames']} frames ({r['fps']:.1f} frames/s)",
-                      file=sys.stderr, flush=True)
+            t_synth = round(time.perf_counter() - ts, 2)
+            for i, seed in enumerate(seeds):
+                run_out = out / (seq.bag_name(cond) + (f"_t{seed}" if len(seeds) > 1 else ""))
+                todo.append((bag, run_out, design, seed, seq.name, cond, t_synth if i == 0 else 0.0))
+
+    def report(r: dict) -> None:
+        if progress:
+            print(f"bench robustness: {r['sequence']:9s} {r['condition']:12s} seed {r['seed']:2d} knee RMSE "
+                  f"{r['knee_rmse_deg']:6.2f} deg, {r['mpjpe_mm']:6.1f} mm over {r['frames']} frames "
+                  f"({r['fps']:.1f} frames/s)", file=sys.stderr, flush=True)
+
+    jobs = max(1, min(int(jobs), len(todo)))
+    if jobs == 1:
+        runs = []
+        for job in todo:
+            runs.append(_track_job(job))
+            report(runs[-1])
+    else:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+        # spawn: numba's threading layer is not fork-safe once initialized
+        with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn"), initializer=_worker_init) as ex:
+            futs = {ex.submit(_track_job, job): k for k, job in enumerate(todo)}
+            done: dict = {}
+            for f in as_completed(futs):
+                done[futs[f]] = f.result()
+                report(done[futs[f]])
+        runs = [done[k] for k in range(len(todo))]
     return {"design": design.to_dict(), "runs": runs, "conditions": summarize_conditions(runs),
-            "targets": check_targets(runs), "seconds": round(time.perf_counter() - t0, 1)}
+            "targets": check_targets(runs), "seconds": round(time.perf_counter() - t0, 1), "jobs": jobs}
+
+
+def _spread(vals: list) -> dict:
+    """Mean, min, max and standard error (0 for one value) of a list of numbers."""
+    a = np.asarray(vals, dtype=float)
+    se = float(a.std(ddof=1) / np.sqrt(a.size)) if a.size > 1 else 0.0
+    return {"mean": float(a.mean()), "min": float(a.min()), "max": float(a.max()), "se": se, "n": int(a.size)}
+
+
+def per_sequence_means(runs: list[dict]) -> dict:
+    """``{(sequence, condition): {"knee_rmse_deg": spread, "mpjpe_mm": spread, "seeds": [...]}}`` over the seeds."""
+    groups: dict = {}
+    for r in runs:
+        groups.setdefault((r["sequence"], r["condition"]), []).append(r)
+    return {k: {"knee_rmse_deg": _spread([r["knee_rmse_deg"] for r in rs]),
+                "mpjpe_mm": _spread([r["mpjpe_mm"] for r in rs]),
+                "seeds": [r.get("seed", 0) for r in rs]} for k, rs in groups.items()}
 
 
 def summarize_conditions(runs: list[dict]) -> list[dict]:
-    """Per condition: mean over sequences of knee RMSE and mean joint error, with the paper's value."""
+    """Per condition: mean over sequences of the per-sequence means over the seeds (knee RMSE, mean
+    joint error), with the paper's value; ``per_sequence`` keeps the means (``knee_rmse_deg``,
+    ``mpjpe_mm``, as with one seed) and adds their min, max and standard error over the seeds."""
     out = []
+    means = per_sequence_means(runs)
     for key, lab, noise, occl, paper in CONDITIONS:
-        rs = [r for r in runs if r["condition"] == key]
-        if not rs:
+        cells = {seq: m for (seq, cond), m in means.items() if cond == key}
+        if not cells:
             continue
+        per = {}
+        for seq, m in cells.items():
+            k, e = m["knee_rmse_deg"], m["mpjpe_mm"]
+            per[seq] = {"knee_rmse_deg": k["mean"], "mpjpe_mm": e["mean"], "seeds": m["seeds"],
+                        "knee_rmse_deg_min": k["min"], "knee_rmse_deg_max": k["max"], "knee_rmse_deg_se": k["se"],
+                        "mpjpe_mm_min": e["min"], "mpjpe_mm_max": e["max"], "mpjpe_mm_se": e["se"]}
         out.append({"condition": key, "label": lab, "noise": noise, "occluders": occl, "paper_knee_rmse_deg": paper,
-                    "knee_rmse_deg": float(np.mean([r["knee_rmse_deg"] for r in rs])),
-                    "mpjpe_mm": float(np.mean([r["mpjpe_mm"] for r in rs])),
-                    "per_sequence": {r["sequence"]: {"knee_rmse_deg": r["knee_rmse_deg"], "mpjpe_mm": r["mpjpe_mm"]}
-                                     for r in rs}})
+                    "knee_rmse_deg": float(np.mean([v["knee_rmse_deg"] for v in per.values()])),
+                    "mpjpe_mm": float(np.mean([v["mpjpe_mm"] for v in per.values()])),
+                    "per_sequence": per})
     return out
 
 
 def check_targets(runs: list[dict]) -> list[dict]:
-    """Issue #7's targets on every walk sequence (``cmu_walk``, ``walk``), met only if met on each."""
+    """Issue #7's targets on every walk sequence (``cmu_walk``, ``walk``), met only if met on each
+    (on the mean over the seeds)."""
     out = []
     walks = sorted({r["sequence"] for r in runs if "walk" in r["sequence"]})
     for cond, what, limit in TARGETS:
-        vals = {r["sequence"]: float(r[what]) for r in runs if r["condition"] == cond and r["sequence"] in walks}
+        vals: dict = {}
+        for r in runs:
+            if r["condition"] == cond and r["sequence"] in walks:
+                vals.setdefault(r["sequence"], []).append(float(r[what]))
+        vals = {k: float(np.mean(v)) for k, v in vals.items()}
         if not vals:
             continue
         unit = "mm" if what.endswith("_mm") else "deg"
@@ -214,8 +317,12 @@ def check_targets(runs: list[dict]) -> list[dict]:
 def render_markdown(res: dict) -> str:
     """Tables of :func:`collect`'s output."""
     d = res["design"]
-    L = [f"Design `{d['name']}`: {d['optimizer']}, {d['evals']} evaluations per frame, init {d['init']}, seed "
-         f"{d['seed']}; sequences "
+    seeds = d.get("seeds") or [d["seed"]]
+    gate = d.get("gate_margin_px")
+    gate_s = "" if gate is None else ("; mask gate off" if gate == 0 else f"; mask gate {gate} px")
+    L = [f"Design `{d['name']}`: {d['optimizer']}, {d['evals']} evaluations per frame, init {d['init']}, "
+         + (f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {', '.join(map(str, seeds))} (mean, min-max)")
+         + f"{gate_s}; sequences "
          + ", ".join(f"{s['name']} ({round(s['duration_s'] * s['fps'])} frames, {s['views']} views "
                      f"{s['width']}×{s['height']})" for s in d["sequences"]) + f"; wall time {res['seconds']:.0f} s.", ""]
     for n in d.get("notes", []):
@@ -227,14 +334,21 @@ def render_markdown(res: dict) -> str:
         cells = []
         for s in seqs:
             v = c["per_sequence"].get(s)
-            cells.append("" if v is None else f"{v['knee_rmse_deg']:.2f}° / {v['mpjpe_mm']:.1f}")
+            if v is None:
+                cells.append("")
+            elif len(v.get("seeds", [0])) > 1:
+                cells.append(f"{v['knee_rmse_deg']:.2f}° ({v['knee_rmse_deg_min']:.1f}-{v['knee_rmse_deg_max']:.1f})"
+                             f" / {v['mpjpe_mm']:.1f} ({v['mpjpe_mm_min']:.0f}-{v['mpjpe_mm_max']:.0f})")
+            else:
+                cells.append(f"{v['knee_rmse_deg']:.2f}° / {v['mpjpe_mm']:.1f}")
         L.append(f"| {c['label']} | {c['paper_knee_rmse_deg']:.2f}° | {c['knee_rmse_deg']:.2f}° | " + " | ".join(cells)
                  + f" | {c['mpjpe_mm']:.1f} mm |")
-    L += ["", "| sequence | condition | frames | max frame error | frames fell back | frames/s |",
-          "|---|---|---|---|---|---|"]
+    L += ["", "| sequence | condition | seed | frames | knee RMSE | mean joint error | max frame error | "
+          "frames fell back | frames/s |", "|---|---|---|---|---|---|---|---|---|"]
     for r in res["runs"]:
         fps = "-" if r["frames_fell_back"] >= r["frames"] or not np.isfinite(r["fps"]) else f"{r['fps']:.2f}"
-        L.append(f"| {r['sequence']} | {r['condition']} | {r['frames']} | {r['max_frame_error_mm']:.1f} mm | "
+        L.append(f"| {r['sequence']} | {r['condition']} | {r.get('seed', d['seed'])} | {r['frames']} | "
+                 f"{r['knee_rmse_deg']:.2f}° | {r['mpjpe_mm']:.1f} mm | {r['max_frame_error_mm']:.1f} mm | "
                  f"{r['frames_fell_back']} | {fps} |")
     L += ["", "A frame *falls back* when no view gave a usable silhouette (the tracker keeps its last estimate)."]
     return "\n".join(L) + "\n"
@@ -253,13 +367,14 @@ def render_targets(res: dict) -> list[tuple[str, str, bool]]:
 
 
 def plot(res: dict, path: Path) -> Path:
-    """Knee angles against the ground truth per condition (as ISA Fig. 13.15), first sequence."""
+    """Knee angles against the ground truth per condition (as ISA Fig. 13.15), first sequence, first seed."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     seq = res["design"]["sequences"][0]["name"]
-    runs = [r for r in res["runs"] if r["sequence"] == seq]
+    seed0 = (res["design"].get("seeds") or [res["design"]["seed"]])[0]
+    runs = [r for r in res["runs"] if r["sequence"] == seq and r.get("seed", seed0) == seed0]
     fig, ax = plt.subplots(len(runs), 2, figsize=(10, 2.1 * len(runs) + 0.6), sharex=True, squeeze=False)
     for i, r in enumerate(runs):
         ke, kt = np.array(r["knee_est_deg"]), np.array(r["knee_truth_deg"])
@@ -273,7 +388,7 @@ def plot(res: dict, path: Path) -> Path:
                 a.legend(fontsize=7, loc="upper right")
     for a in ax[-1]:
         a.set_xlabel("time (s)")
-    fig.suptitle(f"robustness: {seq}, {res['design']['optimizer']} {res['design']['evals']} evals/frame")
+    fig.suptitle(f"robustness: {seq}, {res['design']['optimizer']} {res['design']['evals']} evals/frame, seed {seed0}")
     fig.tight_layout()
     fig.savefig(path, dpi=80)
     plt.close(fig)
@@ -293,11 +408,14 @@ def plot_bars(res: dict, path: Path) -> Path:
     fig, ax = plt.subplots(figsize=(7, 3.6))
     ax.bar(x - 0.4 + w / 2, [c["paper_knee_rmse_deg"] for c in conds], w, color="0.6", label="ISA paper")
     for i, sname in enumerate(seqs):
-        ax.bar(x - 0.4 + w * (i + 1.5), [c["per_sequence"].get(sname, {}).get("knee_rmse_deg", np.nan) for c in conds],
-               w, label=sname)
+        cells = [c["per_sequence"].get(sname, {}) for c in conds]
+        mean = np.array([v.get("knee_rmse_deg", np.nan) for v in cells])
+        lo = np.array([v.get("knee_rmse_deg_min", m) for v, m in zip(cells, mean)])
+        hi = np.array([v.get("knee_rmse_deg_max", m) for v, m in zip(cells, mean)])
+        ax.bar(x - 0.4 + w * (i + 1.5), mean, w, yerr=np.vstack([mean - lo, hi - mean]), capsize=2, label=sname)
     ax.set_xticks(x, [c["label"] for c in conds], fontsize=8)
     ax.set_ylabel("knee-angle RMSE (deg)")
-    ax.set_title("robustness (ISA §13.4.2): knee RMSE per condition", fontsize=9)
+    ax.set_title("robustness (ISA §13.4.2): knee RMSE per condition (mean, min-max over seeds)", fontsize=9)
     ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=80)
@@ -315,11 +433,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="first pose: the ground truth (default; not scored) or the automatic initialization")
     p.add_argument("--optimizer", default="h-isa", help="optimizer (default h-isa, the tracker's default)")
     p.add_argument("--evals", type=int, default=None, help="evaluations per frame (default 1500; --quick 300)")
+    p.add_argument("--seeds", default=None, metavar="A,B",
+                   help="tracker seeds, one run each (default 0,1,2; --quick 0)")
+    p.add_argument("--gate-margin-px", type=int, default=None, metavar="PX",
+                   help="the tracker's mask gate (0 = off; default: the tracker's default)")
+    p.add_argument("--jobs", type=int, default=2, metavar="N", help="worker processes tracking the runs (default 2)")
 
 
 def collect_from_args(args: argparse.Namespace) -> dict:
+    seeds = None if args.seeds is None else tuple(int(x) for x in str(args.seeds).split(",") if x.strip())
     design = make_design("quick" if args.quick else "default", init=args.init, optimizer=args.optimizer,
-                         evals=args.evals)
+                         evals=args.evals, seeds=seeds, gate_margin_px=args.gate_margin_px)
     for n in design.notes:
         print(f"bench robustness: {n}", file=sys.stderr)
     tmp = None
@@ -328,7 +452,7 @@ def collect_from_args(args: argparse.Namespace) -> dict:
     else:
         tmp = out = Path(tempfile.mkdtemp(prefix="isa_mocap_robust_"))
     try:
-        return collect(design, cache=Path(args.cache), out=out)
+        return collect(design, cache=Path(args.cache), out=out, jobs=args.jobs)
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -339,7 +463,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"isa-mocap bench robustness: error: --evals: expected an integer >= 1, received {args.evals}",
               file=sys.stderr)
         return 2
-    res = collect_from_args(args)
+    if args.jobs < 1:
+        print(f"isa-mocap bench robustness: error: --jobs: expected an integer >= 1, received {args.jobs}",
+              file=sys.stderr)
+        return 2
+    try:
+        res = collect_from_args(args)
+    except ValueError as exc:
+        print(f"isa-mocap bench robustness: error: {exc}", file=sys.stderr)
+        return 2
     if args.json:
         print(json.dumps(res))
         return 0
