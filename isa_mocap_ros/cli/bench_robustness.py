@@ -29,9 +29,9 @@ Protocol (ISA §13.4.2, Figs. 13.15-13.17, with our tracker's best settings):
 Designs: default — the CMU walk from 1 s (skipped with a message when
 ``/work/shared/data/mocap/cmu_131_01_walk.bvh`` is absent) and the generated walk and jog, 4 s each
 at 30 fps (120 scored frames), 4 views 320×240, seeds 0, 1, 2 (36 runs, tracked by ``--jobs`` 2
-worker processes: ≈ 3 min on this 2-core machine); ``--quick`` — the generated walk, 6 frames in
-4 views of 160×120 at 300 evaluations per frame, seed 0 (a smoke test, < 1 min).
-The runs' ``frames/s`` are measured with the workers side by side.
+worker processes: 2-5 min on this 2-core machine, depending on its other load); ``--quick`` — the
+generated walk, 6 frames in 4 views of 160×120 at 300 evaluations per frame, seed 0 (a smoke test,
+< 1 min). The runs' ``frames/s`` are measured with the workers side by side.
 """
 from __future__ import annotations
 
