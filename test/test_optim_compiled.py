@@ -55,10 +55,10 @@ def test_generation_stats_are_numpys_mean_and_std_bit_for_bit():
     assert np.isnan(_fast.generation_stats(np.ones(0), np.zeros((0, 3)))[1])
 
 
-def _run(kernel, fused, *, rotations, seed, d=7, evals=900, energies=None):
+def _run(kernel, fused, *, rotations, seed, d=7, evals=900, energies=None, variance="population"):
     d = 1 if seed == 2 and not rotations else d
     opt = Isa(np.full(d, 0.2), 0.4, n_particles=30, kernel=kernel, schedule="adaptive", target_ess=0.3,
-              c=0.5, rng=np.random.default_rng(seed), bounds=(np.full(d, -1.0), np.full(d, 1.5)),
+              c=0.5, variance=variance, rng=np.random.default_rng(seed), bounds=(np.full(d, -1.0), np.full(d, 1.5)),
               rotation_blocks=((1, 2, 3),) if rotations else ())
     opt._fused = fused
 
@@ -74,22 +74,25 @@ def _run(kernel, fused, *, rotations, seed, d=7, evals=900, energies=None):
 @pytest.mark.parametrize("kernel", ["s1", "s2", "s3"])
 @pytest.mark.parametrize("rotations", [False, True])
 @pytest.mark.parametrize("energies", ["finite", "some-nonfinite"])
-def test_fused_selection_and_mutation_give_the_numpy_run_bit_for_bit(kernel, rotations, energies):
+@pytest.mark.parametrize("variance", ["population", "selected"])
+def test_fused_selection_and_mutation_give_the_numpy_run_bit_for_bit(kernel, rotations, energies, variance):
     for seed in range(3):
-        a = _run(kernel, True, rotations=rotations, seed=seed, energies=energies)
-        b = _run(kernel, False, rotations=rotations, seed=seed, energies=energies)
+        a = _run(kernel, True, rotations=rotations, seed=seed, energies=energies, variance=variance)
+        b = _run(kernel, False, rotations=rotations, seed=seed, energies=energies, variance=variance)
         np.testing.assert_array_equal(a.x, b.x)
         np.testing.assert_array_equal(a.population, b.population)
         np.testing.assert_array_equal(a.weights, b.weights)
         assert repr(a.history) == repr(b.history)        # repr: nan fields compare unequal
 
 
-def test_fused_h_isa_gives_the_numpy_run_bit_for_bit():
+@pytest.mark.parametrize("variance", ["population", "selected"])
+def test_fused_h_isa_gives_the_numpy_run_bit_for_bit(variance):
     """Hierarchical hands its inner ISA F-ordered columns (as X[:, index_array] gave)."""
     res = {}
     for fused in (True, False):
         def factory(x, s, **kw):
-            opt = Isa(x, s, n_particles=30, kernel="s2", schedule="adaptive", target_ess=0.3, **kw)
+            opt = Isa(x, s, n_particles=30, kernel="s2", schedule="adaptive", target_ess=0.3,
+                      variance=variance, **kw)
             opt._fused = fused
             inner.append(opt)
             return opt

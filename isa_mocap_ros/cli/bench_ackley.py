@@ -8,6 +8,9 @@ Step convention: ``steps`` is the time index ``t`` of Algorithm 6 (``t = 0`` for
 particles) of the first generation whose estimate is within delta, i.e. the number of
 selection+mutation transitions performed; evaluations = ``n (t + 1)``. Success = reached within
 999 steps; ``mean_steps``/``mean_evals`` average the successful runs.
+ISA rows run once per reading of the dynamic variance scheme (13.16) (``Isa(variance=...)``):
+``population`` -- the equation as printed, the default -- and ``selected`` -- the text's "after
+resampling" reading (the ``variance`` field of a row; docs/optimizers.md compares them).
 CMA-ES rows (ours and pycma, the reference) start at a uniform point of E with sigma0 = 2 and
 bounds E; their estimate is the distribution mean; steps = generations (``t`` as above).
 """
@@ -20,6 +23,7 @@ import warnings
 import numpy as np
 
 from isa_mocap_ros.optim import CmaEs, Isa
+from isa_mocap_ros.optim.isa import VARIANCE_READINGS
 
 MAX_STEPS = 999
 LO, HI = -4.0, 4.0
@@ -47,7 +51,7 @@ def _energy(noise: bool, rng: np.random.Generator):
 
 
 def run_isa(kernel: str, n: int, b: float, c: float, noise: bool, runs: int, seed: int = 0,
-            rho: float = 1e-4) -> dict:
+            rho: float = 1e-4, variance: str = VARIANCE_READINGS[0]) -> dict:
     """Mean steps, success rate and mean evaluations of ISA on the protocol."""
     delta = 1e-2 if noise else 1e-3
     steps, evals = [], []
@@ -55,7 +59,7 @@ def run_isa(kernel: str, n: int, b: float, c: float, noise: bool, runs: int, see
         rng = np.random.default_rng([seed, r])
         P0 = rng.uniform(LO, HI, size=(n, 2))
         opt = Isa(np.zeros(2), 4.0, n_particles=n, kernel=kernel, schedule="polynomial", b=b,
-                  c=c, rho=rho, bounds=(np.full(2, LO), np.full(2, HI)), rng=rng,
+                  c=c, rho=rho, variance=variance, bounds=(np.full(2, LO), np.full(2, HI)), rng=rng,
                   initial_population=P0)
         opt.bind(_energy(noise, rng))
         for t in range(MAX_STEPS + 1):
@@ -119,20 +123,21 @@ def _summary(steps, evals, runs):
             "mean_evals": float(np.mean(evals)) if evals else None}
 
 
-def collect(runs: int, seed: int = 0) -> list[dict]:
-    """All rows of the benchmark (the JSON ``rows``)."""
+def collect(runs: int, seed: int = 0, readings=VARIANCE_READINGS) -> list[dict]:
+    """All rows of the benchmark (the JSON ``rows``): the ISA rows once per reading of (13.16)."""
     rows = []
-    for table, spec in (("13.1", TABLE_13_1), ("13.2", TABLE_13_2)):
-        for kernel, noise, n, b, c, paper in spec:
-            s = run_isa(kernel, n, b, c, noise, runs, seed)
-            rows.append({"method": f"ISA_{kernel.upper()} (Table {table})", "kernel": kernel,
-                         "n": n, "b": b, "c": c, "noise": 0.5 if noise else 0.0, **s,
-                         "paper_mean_steps": paper})
+    for variance in readings:
+        for table, spec in (("13.1", TABLE_13_1), ("13.2", TABLE_13_2)):
+            for kernel, noise, n, b, c, paper in spec:
+                s = run_isa(kernel, n, b, c, noise, runs, seed, variance=variance)
+                rows.append({"method": f"ISA_{kernel.upper()} (Table {table})", "kernel": kernel,
+                             "variance": variance, "n": n, "b": b, "c": c, "noise": 0.5 if noise else 0.0,
+                             **s, "paper_mean_steps": paper})
     for ref in (False, True):
         for noise in (False, True):
             s = run_cmaes(noise, runs, seed, reference=ref)
             n = s.pop("n")
-            rows.append({"method": "pycma" if ref else "CmaEs (ours)", "kernel": None, "n": n,
+            rows.append({"method": "pycma" if ref else "CmaEs (ours)", "kernel": None, "variance": None, "n": n,
                          "b": None, "c": None, "noise": 0.5 if noise else 0.0, **s,
                          "paper_mean_steps": None})
     return rows
@@ -143,6 +148,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--runs", type=int, default=50, help="repetitions per row (paper: 50)")
     parser.add_argument("--quick", action="store_true", help="5 runs per row (smoke test)")
     parser.add_argument("--seed", type=int, default=0, help="base seed")
+    parser.add_argument("--variance", choices=(*VARIANCE_READINGS, "both"), default="both",
+                        help="reading of the dynamic variance scheme (13.16) for the ISA rows (default both)")
 
 
 def _fmt(v, f="{:.2f}"):
@@ -154,20 +161,21 @@ def run(args: argparse.Namespace) -> int:
     if runs < 1:
         print("bench ackley: --runs must be >= 1")
         return 2
-    rows = collect(runs, args.seed)
+    readings = VARIANCE_READINGS if args.variance == "both" else (args.variance,)
+    rows = collect(runs, args.seed, readings)
     if args.json:
         print(json.dumps({"rows": rows}))
         return 0
     print(f"Ackley 2-D, E=[-4,4]^2, {runs} runs per row, <= {MAX_STEPS} steps "
           f"(delta 1e-3; noisy: sigma 0.5, delta 1e-2)")
-    hdr = f"{'method':28s} {'noise':>5s} {'n':>4s} {'b':>6s} {'c':>4s} {'steps':>7s} " \
+    hdr = f"{'method':28s} {'(13.16)':10s} {'noise':>5s} {'n':>4s} {'b':>6s} {'c':>4s} {'steps':>7s} " \
           f"{'paper':>6s} {'diff':>7s} {'success':>8s} {'evals':>8s}"
     print(hdr)
     print("-" * len(hdr))
     for r in rows:
         p, m = r["paper_mean_steps"], r["mean_steps"]
         diff = _fmt(None if (p is None or m is None) else 100 * (m - p) / p, "{:+.0f}%")
-        print(f"{r['method']:28s} {r['noise']:5.1f} {r['n']:4d} {_fmt(r['b'], '{:.3f}'):>6s} "
+        print(f"{r['method']:28s} {r['variance'] or '-':10s} {r['noise']:5.1f} {r['n']:4d} {_fmt(r['b'], '{:.3f}'):>6s} "
               f"{_fmt(r['c'], '{:.1f}'):>4s} {_fmt(m):>7s} {_fmt(p):>6s} {diff:>7s} "
               f"{100 * r['success_rate']:7.0f}% {_fmt(r['mean_evals'], '{:.0f}'):>8s}")
     return 0

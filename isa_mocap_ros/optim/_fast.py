@@ -274,14 +274,15 @@ def keep_mask(W, u, relative, keep):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def select_mutate(X, W, keep, v, Z, c, rho, lo, hi):  # pragma: no cover - compiled
+def select_mutate(X, W, keep, v, Z, c, rho, lo, hi, population):  # pragma: no cover - compiled
     """Selection, dynamic variance (13.16) and mutation of one ISA generation; returns the next
     particles ``(n, d)``.
 
     Particle ``i`` with ``keep[i]`` stays, the others in order take the multinomial draws of the
-    sorted uniforms ``v`` from the renormalised ``W`` (:func:`.resampling.multinomial`). On the
-    selected ``Xs``: ``Sigma_jj = c / (n - 1) * sum_i max(|Xs_ij - mean_j|, rho)^2`` and the next
-    particles are ``clip(Xs + Z * sqrt(Sigma_jj), lo, hi)``.
+    sorted uniforms ``v`` from the renormalised ``W`` (:func:`.resampling.multinomial`).
+    ``population=True`` (13.16 as printed): ``Sigma_jj = c / (n - 1) * sum_i max(X_ij - mean_j, rho)^2``
+    over the generation's particles ``X``; ``False``: ``... max(|Xs_ij - mean_j|, rho)^2`` over the
+    selected ``Xs``. The next particles are ``clip(Xs + Z * sqrt(Sigma_jj), lo, hi)``.
     """
     n, d = X.shape
     W3 = _renormalised(_renormalised(W))          # select_s*'s _check_W, then multinomial's
@@ -306,15 +307,18 @@ def select_mutate(X, W, keep, v, Z, c, rho, lo, hi):  # pragma: no cover - compi
     for i in range(n):
         for q in range(d):
             Xs[i, q] = X[A[i], q]
-    mean = column_sums(Xs, d == 1)                 # Xs = X[A] is C-ordered
+    S = X if population else Xs
+    # numpy reduces along the contiguous axis: Xs = X[A] is C-ordered, X may come F-ordered
+    by_column = d == 1 or (population and X.strides[0] == X.itemsize and n > 1)
+    mean = column_sums(S, by_column)
     for q in range(d):
         mean[q] = mean[q] / n
     sq = np.empty((n, d))
     for i in range(n):
         for q in range(d):
-            dev = max(abs(Xs[i, q] - mean[q]), rho)
+            dev = max(S[i, q] - mean[q], rho) if population else max(abs(S[i, q] - mean[q]), rho)
             sq[i, q] = dev * dev
-    ssq = column_sums(sq, d == 1)
+    ssq = column_sums(sq, by_column)
     scale = c / max(n - 1, 1)
     sd = np.empty(d)
     for q in range(d):

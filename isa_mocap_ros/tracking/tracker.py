@@ -77,9 +77,9 @@ ESTIMATES = ("optimizer", "best")
 #: see ``docs/tracking.md``); the library defaults apply to anything not listed.
 DEFAULT_PARAMS: Mapping[str, Mapping[str, Any]] = MappingProxyType({
     "isa": MappingProxyType({"n_particles": 100, "kernel": "s2", "schedule": "adaptive", "target_ess": 0.3,
-                             "c": 0.5}),
+                             "c": 0.5, "variance": "selected"}),
     "h-isa": MappingProxyType({"n_particles": 30, "kernel": "s2", "schedule": "adaptive", "target_ess": 0.3,
-                               "c": 0.5}),
+                               "c": 0.5, "variance": "selected"}),
 })
 
 
