@@ -16,7 +16,7 @@ import threading
 import time
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
@@ -25,7 +25,7 @@ from isa_mocap_ros.bag import BagError, BagMessage, BagReader
 from isa_mocap_ros.bag.playback import (PlaybackOptions, first_field_is_header, frames,
                                         parse_remaps, select_topics)
 from isa_mocap_ros.nodes import qos
-from isa_mocap_ros.nodes.common import declare
+from isa_mocap_ros.nodes.common import declare, declare_executor, make_executor
 
 
 class BagPlayer(Node):
@@ -239,9 +239,10 @@ def play(args: list[str] | None = None, *, parameter_overrides=None) -> dict | N
     """Init rclpy, spin the player until the bag is played, shut down; returns the summary."""
     rclpy.init(args=args)
     node = None
-    executor = SingleThreadedExecutor()
+    executor = None
     try:
         node = BagPlayer(parameter_overrides=parameter_overrides or [])
+        executor = make_executor(declare_executor(node))
         executor.add_node(node)
         while not node.done.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=0.05)
@@ -255,7 +256,8 @@ def play(args: list[str] | None = None, *, parameter_overrides=None) -> dict | N
         if node is not None:
             node.close()
             node.destroy_node()
-        executor.shutdown(timeout_sec=1.0)
+        if executor is not None:
+            executor.shutdown(timeout_sec=1.0)
         rclpy.try_shutdown()
 
 

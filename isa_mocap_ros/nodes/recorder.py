@@ -24,7 +24,7 @@ from rclpy.node import Node
 import msg_adapters as ma
 from isa_mocap_ros.bag import BagError, BagWriter
 from isa_mocap_ros.nodes import qos
-from isa_mocap_ros.nodes.common import declare
+from isa_mocap_ros.nodes.common import declare, declare_executor, make_executor, spin_until_shutdown
 
 # Topics every ROS graph has; recording them with --all only adds noise (ros2 bag skips them too).
 _ALWAYS_EXCLUDED = ("/rosout", "/parameter_events")
@@ -147,7 +147,9 @@ def main(args: list[str] | None = None, *, parameter_overrides=None) -> None:
     node = None
     try:
         node = BagRecorder(parameter_overrides=parameter_overrides or [])
-        rclpy.spin(node)
+        executor = make_executor(declare_executor(node))
+        executor.add_node(node)
+        spin_until_shutdown(executor, node.context)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except BagError as exc:
