@@ -123,7 +123,13 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
         "fps": len(rec["done"]) / play_summary["seconds"] if play_summary.get("seconds") else float("nan"),
         "latency_ms_p50": float(np.percentile(lat, 50)) if lat.size else float("nan"),
         "latency_ms_p95": float(np.percentile(lat, 95)) if lat.size else float("nan"),
-        "dropped_frames": int(diag.get("dropped_frame_sets", 0) or 0),
+        # every frame set the player sent that the estimator did not process: replaced while the tracker
+        # was busy (the estimator's own count, "dropped_by_estimator"), or lost before it (best-effort image
+        # and mask subscriptions drop what a busy segmentation/estimator cannot take; the estimator's last
+        # 1 Hz diagnostics also miss its last second)
+        "dropped_frames": max(int(play_summary.get("frames") or 0) - len(rec["done"]),
+                              int(diag.get("dropped_frame_sets", 0) or 0)),
+        "dropped_by_estimator": int(diag.get("dropped_frame_sets", 0) or 0),
         "bad_inputs": int(diag.get("bad_inputs", 0) or 0), "wall_seconds": round(wall_seconds, 1),
     }
     seq = read_sequence(bag, want_images=True, want_masks=False)
