@@ -59,6 +59,7 @@ class NodeSpec:
     respawn: bool = False
     respawn_delay_s: float = 1.0
     extra_args: tuple[str, ...] = ()
+    nice: int = 0            # added to the process's niceness (0 = unchanged; > 0 = lower CPU priority)
 
     @property
     def module(self) -> str:
@@ -80,6 +81,13 @@ class NodeSpec:
 
     def command(self, python: str = sys.executable) -> list[str]:
         return [python, "-m", self.module, *self.extra_args, *self.ros_args()]
+
+
+def niceness(increment: int) -> Callable[[], None] | None:
+    """A ``preexec_fn`` that lowers the child's CPU priority by ``increment`` (None for 0)."""
+    if increment <= 0:
+        return None
+    return lambda: os.nice(increment)
 
 
 def _substitute(value, variables: Mapping[str, str]):
@@ -201,7 +209,8 @@ class Supervisor:
 
     def _start(self, child: _Child) -> None:
         child.popen = subprocess.Popen(child.spec.command(self.python), env=self.env, stdout=subprocess.PIPE,
-                                       stderr=subprocess.STDOUT, start_new_session=True)
+                                       stderr=subprocess.STDOUT, start_new_session=True,
+                                       preexec_fn=niceness(child.spec.nice))
         tag = f"[{child.spec.name}-{child.popen.pid}]"
         self.out(f"[launch] started {child.spec.name} (pid {child.popen.pid}): {' '.join(child.spec.command(self.python)[1:])}")
 

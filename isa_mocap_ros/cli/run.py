@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from isa_mocap_ros.bag import BagReader
-from isa_mocap_ros.launcher import NodeSpec, Supervisor
+from isa_mocap_ros.launcher import NodeSpec, Supervisor, niceness
 from isa_mocap_ros.resources import default_bag, resource_dir
 from isa_mocap_ros.rosenv import ros_env
 
@@ -50,6 +50,10 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
                         "its first ground truth, else the parameter file's learn_frames)")
     p.add_argument("--overlay-frames", type=int, default=4,
                    help="overlay frames to save as PNG (drawn after the run from the recording)")
+    p.add_argument("--helper-nice", type=int, default=5, choices=range(0, 20), metavar="0..19",
+                   help="niceness added to every process but the estimator's (player, segmentation, prediction, "
+                        "recorder; default 5, 0 = off): on a small machine the tracker's threads then lose "
+                        "less time to the helpers (docs/nodes.md)")
     p.add_argument("--quiet", action="store_true", help="do not echo node output")
 
 
@@ -71,11 +75,12 @@ def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
         seg += [(f"qos_overrides.{NS}/cam{v}/image_raw.subscription.reliability", "reliable") for v in range(n_views)]
         est += [(f"qos_overrides.{NS}/cam{v}/mask.subscription.reliability", "reliable") for v in range(n_views)]
     common = dict(namespace=NS, params_files=(params,))
+    nice = getattr(args, "helper_nice", 0)
     return [
-        NodeSpec(exec="segmentation_node", name="segmentation", params=tuple(seg), **common),
-        NodeSpec(exec="prediction_node", name="prediction", **common),
+        NodeSpec(exec="segmentation_node", name="segmentation", params=tuple(seg), nice=nice, **common),
+        NodeSpec(exec="prediction_node", name="prediction", nice=nice, **common),
         NodeSpec(exec="estimator_node", name="estimator", params=tuple(est), **common),
-        NodeSpec(exec="recorder_node", name="recorder", namespace=NS,
+        NodeSpec(exec="recorder_node", name="recorder", namespace=NS, nice=nice,
                  params=(("output", str(out / "estimates")), ("overwrite", "true"),
                          ("topics", "[" + ",".join(f"'{t}'" for t in RECORDED) + "]"))),
     ]
@@ -146,7 +151,8 @@ def run(args: argparse.Namespace) -> int:
         else:
             play += ["--rate", str(args.rate)]
         import subprocess
-        res = subprocess.run(play, env=env, capture_output=True, text=True)
+        res = subprocess.run(play, env=env, capture_output=True, text=True,
+                             preexec_fn=niceness(getattr(args, "helper_nice", 0)))
         on_line(f"[player] {res.stdout.strip()} {res.stderr.strip()}")
         if res.returncode != 0:
             print(f"run: replay failed:\n{res.stderr}", file=sys.stderr)
