@@ -318,6 +318,53 @@ def _cap_box(G, G32, box, c):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always")
+def _eb_set(EB, ci, G, box, c):  # pragma: no cover - compiled
+    """Column ``ci`` (processing position) of ``EB (11, C + 8)``: capsule ``c``'s box (rows 0-3: x0, x1,
+    y0, y1) and hull ``G[c, 0:7]`` (rows 4-10: ax, ay, ux, uy, L, ra, rb; zeros when it is left out of
+    the view, so that no stale value is computed on), the earlier capsules of :func:`_earlier_runs`."""
+    for a in range(4):
+        EB[a, ci] = box[c, a]
+    if G[c, 12] == 0.0:
+        for a in range(7):
+            EB[4 + a, ci] = 0.0
+    else:
+        for a in range(7):
+            EB[4 + a, ci] = G[c, a]
+
+
+@numba.njit(cache=True, inline="always")
+def _earlier_runs(ci, G, c, EB, ylo, xm, na, na_ly, S, OK):  # pragma: no cover - compiled
+    """:func:`_earlier_run` of capsule ``c`` (position ``ci``) against every earlier position at once,
+    branch-free over whole 8-lane vectors (``EB`` from :func:`_eb_set`): ``OK[ei]`` 1 where ``ei < ci``,
+    the boxes meet and the capsule reaches ``c``'s rectangle, with ``S[0, ei], S[1, ei]`` its ``sa, ta``
+    and ``S[2, ei], S[3, ei]`` the strata bounds ``s0, s1`` (the same operations as there, so the same
+    values)."""
+    dax, day, dux, duy = G[c, 0], G[c, 1], G[c, 2], G[c, 3]
+    bx0, bx1, by0, by1 = EB[0, ci], EB[1, ci], EB[2, ci], EB[3, ci]
+    for j in range((ci + 7) & ~7):
+        k = numba.uint64(j)
+        dxa = EB[4, k] - dax
+        dya = EB[5, k] - day
+        dxb = dxa + EB[8, k] * EB[6, k]
+        dyb = dya + EB[8, k] * EB[7, k]
+        rea = EB[9, k]
+        reb = EB[10, k]
+        ta = dya * dux - dxa * duy
+        tb = dyb * dux - dxb * duy
+        sa = dxa * dux + dya * duy
+        sb2 = dxb * dux + dyb * duy
+        s0 = (min(sa - rea, sb2 - reb) - ylo) * na_ly - 1e-4
+        s1 = (max(sa + rea, sb2 + reb) - ylo) * na_ly + 1e-4
+        ok = ((j < ci) & (EB[0, k] <= bx1) & (bx0 <= EB[1, k]) & (EB[2, k] <= by1) & (by0 <= EB[3, k])
+              & (min(ta - rea, tb - reb) <= xm) & (max(ta + rea, tb + reb) >= -xm) & (s1 >= 0.0) & (s0 < na))
+        S[0, k] = sa
+        S[1, k] = ta
+        S[2, k] = s0
+        S[3, k] = s1
+        OK[k] = 1 if ok else 0
+
+
+@numba.njit(cache=True, inline="always")
 def _earlier_run(G, c, e, ylo, xm, na, na_ly):  # pragma: no cover - compiled
     """Earlier capsule ``e`` seen from capsule ``c``'s frame: ``(reaches, i0, i1, sa, ta)``, the run of
     strata ``i0..i1`` of ``c`` that ``e``'s extent along ``c``'s axis reaches (``reaches`` False when
@@ -357,12 +404,12 @@ def _mark_earlier(X, Y, Fl, k0, k1, G, G32, c, e, sa, ta):  # pragma: no cover -
 
 
 @numba.njit(cache=True, inline="always")
-def _t1_points(ci, c, v, G, G32, BX0, BX1, BY0, BY1, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, cam_K, cov_wh,
-               PX, PY, OWN, IDX, NEAR):  # pragma: no cover - compiled
+def _t1_points(ci, c, v, G, G32, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, cam_K, cov_wh,
+               PX, PY, OWN, IDX, NEAR, S, OK):  # pragma: no cover - compiled
     """Term 1, capsule ``c`` at position ``ci`` of ``order`` in view ``v``: its template points in its
     bounding rectangle, ``PX`` along and ``PY`` across its axis, ``OWN`` 1 where inside its hull and in
-    the hull of no earlier capsule whose box (``BX0 .. BY1``, in processing order) meets its own, ``IDX``
-    the pixel (pinhole; -1 outside the image). ``NEAR`` is scratch."""
+    the hull of no earlier capsule whose box (``EB``, :func:`_eb_set`) meets its own, ``IDX``
+    the pixel (pinhole; -1 outside the image). ``NEAR``, ``S``, ``OK`` are scratch."""
     one = np.float32(1.0)
     zero = np.float32(0.0)
     Wf = np.float32(cov_wh[v, 0])
@@ -408,20 +455,21 @@ def _t1_points(ci, c, v, G, G32, BX0, BX1, BY0, BY1, order, tmpl_a, tmpl_s, tmpl
     for k in range(nk, nkp):
         OWN[k] = zero
     na_ly = na / ly     # strata per unit length along the axis
-    nn = 0      # earlier capsules whose boxes meet c's (branch-free compaction)
-    bx0, bx1, by0, by1 = BX0[ci], BX1[ci], BY0[ci], BY1[ci]
+    # earlier capsules whose boxes meet c's and that reach its rectangle: capsule e in c's frame, its
+    # extent along c's axis selects a run of strata (all pairs at once, then a branch-free compaction)
+    _earlier_runs(ci, G, c, EB, ylo, xm, na, na_ly, S, OK)
+    nn = 0
     for ei in range(ci):
         NEAR[nn] = ei
-        nn += (BX0[ei] <= bx1) & (bx0 <= BX1[ei]) & (BY0[ei] <= by1) & (by0 <= BY1[ei])
+        nn += OK[ei]
     for q in range(nn):
-        e = order[NEAR[q]]
-        # capsule e in c's frame: its extent along c's axis selects a run of strata,
-        # its extent across it may miss c's rectangle altogether
-        reach, i0, i1, sa, ta = _earlier_run(G, c, e, ylo, xm, na, na_ly)
-        if not reach:
-            continue
+        ei = NEAR[q]
+        s0 = S[2, ei]
+        i0 = int(s0) if s0 > 0.0 else 0
+        i1 = min(int(S[3, ei]), na - 1)
         ka = i0 * ns            # whole vectors from the first stratum on (scratch has slack)
-        _mark_earlier(PX, PY, OWN, ka, ka + (((i1 + 1) * ns - ka + 7) & ~7), G, G32, c, e, sa, ta)
+        _mark_earlier(PX, PY, OWN, ka, ka + (((i1 + 1) * ns - ka + 7) & ~7), G, G32, c, order[ei], S[0, ei],
+                      S[1, ei])
 
 
 @numba.njit(cache=True, inline="always")
@@ -435,7 +483,7 @@ def _t1_lookup(G, c, px, py, v, cam_K, cam_D, cam_hasd, cov, cov_wh):  # pragma:
 
 
 @numba.njit(cache=True, inline="always")
-def _t1_count(c, v, nk, G, PX, PY, OWN, IDX, cam_K, cam_D, cam_hasd, cov, cov_wh):  # pragma: no cover - compiled
+def _t1_count(c, v, nk, G, PX, PY, OWN, IDX, JDX, cam_K, cam_D, cam_hasd, cov, cov_wh):  # pragma: no cover - compiled
     """Term 1 of capsule ``c`` from :func:`_t1_points`: ``(count, sum of F)`` over its kept points
     inside the image (in template order)."""
     zero = np.float32(0.0)
@@ -449,12 +497,18 @@ def _t1_count(c, v, nk, G, PX, PY, OWN, IDX, cam_K, cam_D, cam_hasd, cov, cov_wh
                     cnt += 1.0
                     fsum += f
     else:
+        # the kept points' pixels, the others sent to the zero pixel after the mask (whole vectors),
+        # then one branch-free read per point: the sum is that of the kept points, in the same order
+        zpix = np.int32(cov.shape[1] - 1)
         icnt = 0
+        for k in range((nk + 7) & ~7):
+            kk = numba.uint64(k)
+            ok = (OWN[kk] != zero) & (IDX[kk] >= 0)
+            JDX[kk] = IDX[kk] if ok else zpix
+            icnt += ok
         isum = cov[v, 0] - cov[v, 0]    # an integer for the uint8 mask: 1-cycle additions
-        for k in range(nk):     # nearly all points are kept: the branch predicts well
-            if OWN[k] != zero and IDX[k] >= 0:
-                icnt += 1
-                isum += cov[v, IDX[k]]
+        for k in range(nk):
+            isum += cov[v, numba.uint32(JDX[numba.uint64(k)])]
         cnt = float(icnt)
         fsum = float(isum) * cam_K[v, 4]
     return cnt, fsum
@@ -513,8 +567,9 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
     cam_R, cam_t : (V, 3, 3), (V, 3) world -> camera
     cam_K : (V, 5) fx, fy, cx, cy of the downsampled camera and the scale of ``cov``;
     cam_D : (V, 8);  cam_hasd : (V,) bool
-    cov : (V, Hmax * Wmax) foreground coverage of the downsampled mask, rows of ``Wmax``, times
-        ``1 / cam_K[v, 4]`` (uint8 0/1 at full resolution, float32 fractions when downsampled)
+    cov : (V, Hmax * Wmax + 8) foreground coverage of the downsampled mask, rows of ``Wmax``, times
+        ``1 / cam_K[v, 4]`` (uint8 0/1 at full resolution, float32 fractions when downsampled), then
+        8 zeros (the last one is the pixel that points not counted read)
     cov_wh : (V, 3) int64 width, height of the downsampled image and ``Wmax``
     order : (C,) int64 processing order of the capsules (a point counts for the first one containing it)
     tmpl_a, tmpl_s : (T + 8,) float32 template points (8 padding points at the end), along the capsule axis in [0, 1] and across it in [-1, 1];
@@ -547,10 +602,9 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
         G = np.empty((C, 14))
         G32 = np.empty((C, 12), np.float32)
         box = np.empty((C, 4))
-        BX0 = np.empty(C)
-        BX1 = np.empty(C)
-        BY0 = np.empty(C)
-        BY1 = np.empty(C)
+        EB = np.zeros((11, C + 8))     # the capsules in processing order (whole vectors)
+        S = np.zeros((4, C + 8))
+        OK = np.zeros(C + 8, np.int64)
         NEAR = np.empty(C, np.int64)
         flag = np.empty(max(1, fg_x.shape[0]), np.float32)
         kmax = _scratch_len(tmpl_ptr)
@@ -558,6 +612,7 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
         PY = np.zeros(kmax + 8, np.float32)
         OWN = np.zeros(kmax + 8, np.float32)
         IDX = np.empty(kmax, np.int32)
+        JDX = np.empty(kmax, np.int32)
         for i in range(lo, hi):
             _fk_one(X[i], parents, offsets, ptr, dofs, axes, R, P)
             total = 0.0
@@ -566,9 +621,8 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                 _project_caps(CP, caps, radii, G)
                 for c in range(C):
                     _cap_box(G, G32, box, c)
-                for ci in range(C):     # the boxes in processing order, for the overlap candidates
-                    c = order[ci]
-                    BX0[ci], BX1[ci], BY0[ci], BY1[ci] = box[c, 0], box[c, 1], box[c, 2], box[c, 3]
+                for ci in range(C):     # boxes and hulls in processing order, for the overlap candidates
+                    _eb_set(EB, ci, G, box, order[ci])
                 # term 1: model silhouette points not on foreground. Points of capsule c in its
                 # bounding rectangle; kept if inside c's hull and in no earlier capsule's hull
                 num = 0.0
@@ -577,10 +631,10 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     c = order[ci]
                     if G[c, 12] == 0.0:
                         continue
-                    _t1_points(ci, c, v, G, G32, BX0, BX1, BY0, BY1, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na,
-                               cam_K, cov_wh, PX, PY, OWN, IDX, NEAR)
+                    _t1_points(ci, c, v, G, G32, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na,
+                               cam_K, cov_wh, PX, PY, OWN, IDX, NEAR, S, OK)
                     nk = tmpl_ptr[c + 1] - tmpl_ptr[c]
-                    cnt, fsum = _t1_count(c, v, nk, G, PX, PY, OWN, IDX, cam_K, cam_D, cam_hasd, cov, cov_wh)
+                    cnt, fsum = _t1_count(c, v, nk, G, PX, PY, OWN, IDX, JDX, cam_K, cam_D, cam_hasd, cov, cov_wh)
                     w = _t1_weight(G, c, nk)
                     den += w * cnt
                     num += w * (cnt - fsum)
@@ -600,10 +654,12 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                         if G[c, 12] == 0.0:
                             continue
                         _t2_runs(c, box, v, n_strips, fg_x, fg_y, fg_tab, fg_bins, fg_xr, fg_ms, flag, G32)
-                    hit = 0.0     # the padding is never inside a hull: sum whole strips
+                    # the padding is never inside a hull: count whole strips (an integer count of the
+                    # 0/1 flags, vectorized: the same value as their sum in order)
+                    hit = 0
                     for k in range(n_strips * fg_ms):
-                        hit += flag[numba.uint64(r0 * fg_ms + k)]
-                    t2 = 1.0 - hit / fg_n[v]
+                        hit += flag[numba.uint64(r0 * fg_ms + k)] != zero
+                    t2 = 1.0 - float(hit) / fg_n[v]
                 total += 0.5 * t1 + 0.5 * t2
             out[i] = total / V
 
@@ -646,7 +702,7 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
     whose end joints move); arguments as :func:`silhouette_batch`. Returns a tuple:
 
     ``R (J, 3, 3), P (J, 3)`` forward kinematics of ``x``; per view ``CP (V, J, 4)``, ``G (V, C, 14)``,
-    ``G32 (V, C, 12)``, ``box (V, C, 4)``, ``BX (V, 4, C)`` (the boxes in processing order);
+    ``G32 (V, C, 12)``, ``box (V, C, 4)``, ``BX (V, 11, C + 8)`` (boxes and hulls in processing order, :func:`_eb_set`);
     ``t1 (V, C, 3)``: weight, count and foreground sum of each fixed capsule's term-1 points that lie
     in its hull, in no earlier *fixed* capsule's hull and inside the image; those points themselves,
     view ``v`` at ``v T``: ``s_px, s_py`` (frame coordinates), ``s_idx`` (pixel), ``s_f`` (coverage,
@@ -670,8 +726,10 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
     G = np.zeros((V, C, 14))
     G32 = np.zeros((V, C, 12), np.float32)
     box = np.zeros((V, C, 4))
-    BX = np.zeros((V, 4, C))
-    BXf = np.zeros((4, C))
+    BX = np.zeros((V, 11, C + 8))
+    BXf = np.zeros((11, C + 8))
+    S = np.zeros((4, C + 8))
+    OK = np.zeros(C + 8, np.int64)
     t1 = np.zeros((V, C, 3))
     s_px = np.zeros(V * T + 8, np.float32)
     s_py = np.zeros(V * T + 8, np.float32)
@@ -689,6 +747,7 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
     PY = np.zeros(kmax + 8, np.float32)
     OWN = np.zeros(kmax + 8, np.float32)
     IDX = np.zeros(kmax, np.int32)
+    JDX = np.zeros(kmax, np.int32)
     for v in range(V):
         _to_camera(P, cam_R, cam_t, v, CP[v])
         _project_caps(CP[v], caps, radii, G[v])
@@ -696,9 +755,8 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
             _cap_box(G[v], G32[v], box[v], c)
         for ci in range(C):
             c = order[ci]
-            for a in range(4):
-                BX[v, a, ci] = box[v, c, a]
-                BXf[a, ci] = box[v, c, a]
+            _eb_set(BX[v], ci, G[v], box[v], c)
+            _eb_set(BXf, ci, G[v], box[v], c)
             if moving[c]:       # only the fixed capsules are earlier capsules here
                 BXf[0, ci], BXf[1, ci], BXf[2, ci], BXf[3, ci] = 1.0, -1.0, 1.0, -1.0
         pos = 0
@@ -712,9 +770,9 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
                 for k in range(nk + 1):
                     s_pre[v, q0 + k] = pos
                 continue
-            _t1_points(ci, c, v, G[v], G32[v], BXf[0], BXf[1], BXf[2], BXf[3], order, tmpl_a, tmpl_s, tmpl_ptr,
-                       tmpl_na, cam_K, cov_wh, PX, PY, OWN, IDX, NEAR)
-            cnt, fsum = _t1_count(c, v, nk, G[v], PX, PY, OWN, IDX, cam_K, cam_D, cam_hasd, cov, cov_wh)
+            _t1_points(ci, c, v, G[v], G32[v], BXf, order, tmpl_a, tmpl_s, tmpl_ptr,
+                       tmpl_na, cam_K, cov_wh, PX, PY, OWN, IDX, NEAR, S, OK)
+            cnt, fsum = _t1_count(c, v, nk, G[v], PX, PY, OWN, IDX, JDX, cam_K, cam_D, cam_hasd, cov, cov_wh)
             t1[v, c, 0] = _t1_weight(G[v], c, nk)
             t1[v, c, 1] = cnt
             t1[v, c, 2] = fsum
@@ -797,12 +855,15 @@ def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps
         G32 = G320.copy()
         box = box0.copy()
         BX = BX0_.copy()
+        S = np.zeros((4, C + 8))
+        OK = np.zeros(C + 8, np.int64)
         NEAR = np.empty(C, np.int64)
         kmax = _scratch_len(tmpl_ptr)
         PX = np.zeros(kmax + 8, np.float32)
         PY = np.zeros(kmax + 8, np.float32)
         OWN = np.zeros(kmax + 8, np.float32)
         IDX = np.empty(kmax, np.int32)
+        JDX = np.empty(kmax, np.int32)
         ALIVE = np.zeros(V * T + 8, np.float32)
         flag = np.zeros(u_x.shape[0], np.float32)
         for i in range(lo, hi):
@@ -820,18 +881,18 @@ def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps
                 Gv = G[v]
                 G32v = G32[v]
                 boxv = box[v]
-                BX0 = BX[v, 0]
-                BX1 = BX[v, 1]
-                BY0 = BX[v, 2]
-                BY1 = BX[v, 3]
+                EB = BX[v]
+                BX0 = EB[0]
+                BX1 = EB[1]
+                BY0 = EB[2]
+                BY1 = EB[3]
                 for j in cam_joints:
                     _to_camera_joint(P, cam_R, cam_t, v, CPv, j)
                 for m in range(nm):
                     c = mov_caps[m]
                     _project_cap(CPv, caps, radii, Gv, c)
                     _cap_box(Gv, G32v, boxv, c)
-                    ci = mov_ci[m]
-                    BX0[ci], BX1[ci], BY0[ci], BY1[ci] = boxv[c, 0], boxv[c, 1], boxv[c, 2], boxv[c, 3]
+                    _eb_set(EB, mov_ci[m], Gv, boxv, c)
                 num = 0.0
                 den = 0.0
                 off = v * T
@@ -841,9 +902,9 @@ def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps
                         continue
                     nk = tmpl_ptr[c + 1] - tmpl_ptr[c]
                     if moving_ci[ci]:
-                        _t1_points(ci, c, v, Gv, G32v, BX0, BX1, BY0, BY1, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na,
-                                   cam_K, cov_wh, PX, PY, OWN, IDX, NEAR)
-                        cnt, fsum = _t1_count(c, v, nk, Gv, PX, PY, OWN, IDX, cam_K, cam_D, cam_hasd, cov, cov_wh)
+                        _t1_points(ci, c, v, Gv, G32v, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na,
+                                   cam_K, cov_wh, PX, PY, OWN, IDX, NEAR, S, OK)
+                        cnt, fsum = _t1_count(c, v, nk, Gv, PX, PY, OWN, IDX, JDX, cam_K, cam_D, cam_hasd, cov, cov_wh)
                         w = _t1_weight(Gv, c, nk)
                     else:
                         w = t1[v, c, 0]
@@ -908,10 +969,10 @@ def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps
                                 p1 = u_pre[r, min(fg_ms, (k1 + 7) & ~7)]
                                 if p1 > p0:
                                     _mark_run(u_x, u_y, flag, r * fg_ms + p0, r * fg_ms + p1, G32v, c, one)
-                    hit = base_hit[v]
+                    ihit = 0
                     for r in range(r0, r0 + n_strips):
                         for k in range(u_pre[r, fg_ms]):
-                            hit += flag[r * fg_ms + k]
-                    t2 = 1.0 - hit / fg_n[v]
+                            ihit += flag[r * fg_ms + k] != zero
+                    t2 = 1.0 - (base_hit[v] + float(ihit)) / fg_n[v]
                 total += 0.5 * t1v + 0.5 * t2
             out[i] = total / V

@@ -410,7 +410,8 @@ class SilhouetteEnergy:
                 "cam_K": np.ascontiguousarray([[c.fx, c.fy, c.cx, c.cy, 1.0] for c in small]),
                 "cam_D": np.ascontiguousarray([np.pad(c.dist, (0, 8 - c.dist.size)) for c in small]),
                 "cam_hasd": np.array([c.has_distortion for c in small]),
-                "cov": cov.reshape(V, Hmax * Wmax),
+                # 8 zeros after the pixels: the kernel reads the last one for the points it does not count
+                "cov": np.concatenate([cov.reshape(V, Hmax * Wmax), np.zeros((V, 8), cov.dtype)], axis=1),
                 "cov_wh": np.array([[c.width, c.height, Wmax] for c in small], np.int64),
                 "fg_x": fg_x.ravel(), "fg_y": fg_y.ravel(), "fg_n": fg_n, "fg_tab": fg_tab, "fg_bins": fg_bins,
                 "fg_xr": fg_xr, "fg_area": fg_area}
