@@ -92,6 +92,22 @@ def test_constant_twist_sequence_is_extrapolated_exactly_for_the_next_stamp(spaw
     assert "8 predictions published, 0 estimates dropped" in proc.output()
 
 
+def test_estimates_with_dropped_frames_still_give_the_exact_next_frame(spawn, rosenv, tmp_path):
+    """The estimator dropped frame sets (real time): estimates of frames 0, 1, 3, 4, 7, 9. The node
+    learns the motion per period from the stamps, so the prediction for the next frame stays exact."""
+    proc = _start(spawn, tmp_path)
+    model, Q = constant_twist_estimates(11, np.random.default_rng(8))
+    names = list(model.dof_names)
+    with ros_node(rosenv, "pred_gap_test") as (node, ex):
+        h = Harness(node, ex)
+        assert spin_until(ex, h.connected, 20)
+        for i, k in enumerate([0, 1, 3, 4, 7, 9]):
+            pred = h.send(ma.arrays_to_joint_state(names, Q[k], stamp_ns=T0 + k * PERIOD_NS, frame_id="world"))
+            if i:
+                np.testing.assert_allclose(np.array(pred.position), Q[k + 1], rtol=0, atol=1e-9)
+    assert proc.stop() == 0
+
+
 def test_nan_out_of_order_and_wrong_names_are_dropped_and_good_estimates_still_predicted(spawn, rosenv, tmp_path):
     proc = _start(spawn, tmp_path, restart_after_s=1.0)
     model, Q = constant_twist_estimates(6, np.random.default_rng(6))

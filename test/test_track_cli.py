@@ -43,6 +43,19 @@ def test_track_fixture_writes_estimates_and_summary(tmp_path, capsys, masks):
         from_cdr(msgs[0].data, msgs[0].type).header.stamp.nanosec
 
 
+@pytest.mark.skipif(not FIXTURE.is_dir(), reason="bags/fixture not present")
+def test_track_stride_tracks_every_kth_frame(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["track", str(FIXTURE), "--out", str(out), "--evals", "300", "--frames", "7", "--stride", "3",
+                 "--no-progress", "--init", "truth", "--use-masks"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["stride"] == 3 and s["frames_tracked"] == 3 and s["frames"] == 3       # frames k, k + 3, k + 6
+    d = np.diff(s["frame_stamps_ns"])
+    assert len(d) == 2 and d[0] == d[1] and d[0] > 0
+    assert main(["track", str(FIXTURE), "--out", str(tmp_path / "o2"), "--stride", "0"]) == 2
+    assert "--stride: expected an integer >= 1" in capsys.readouterr().err
+
+
 def test_track_bad_input(tmp_path, capsys):
     assert main(["track", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]) == 2
     assert "no such path" in capsys.readouterr().err

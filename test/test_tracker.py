@@ -253,3 +253,55 @@ def test_spreads_grow_with_the_predicted_motion(scene, monkeypatch, gain):
     want[k] = np.hypot(cfg.joint_spread_rad, gain * 0.5 * 0.4)   # damped: half of the predicted motion
     np.testing.assert_allclose(spread[6:], want[6:], rtol=1e-12)
     np.testing.assert_allclose(spread[:3], cfg.root_translation_spread_m)
+
+
+class _SpyPredictor:
+    """An ArPredictor that records the frame counts the tracker passes (None = the default 1)."""
+
+    def __init__(self):
+        from isa_mocap_ros.tracking.predict import ArPredictor
+        self.inner, self.updates, self.predicts = ArPredictor(order=1), [], []
+
+    def update(self, x, **kw):
+        self.updates.append(kw.get("frames"))
+        self.inner.update(x, **kw)
+
+    def predict(self, **kw):
+        self.predicts.append(kw.get("frames"))
+        return self.inner.predict(**kw)
+
+    def reset(self):
+        self.inner.reset()
+
+
+def test_own_prediction_looks_as_many_frames_ahead_as_have_passed(scene):
+    """Frames the tracker did not see (frames_elapsed, or a frame that fell back) make its own
+    prediction look further ahead (at most max_frames_ahead); the predictor learns per period."""
+    model, cams, walk, masks = scene
+    spy = _SpyPredictor()
+    tr = Tracker(model, cams, TrackerConfig(evals_per_frame=300, seed=1, max_frames_ahead=4), predictor=spy)
+    tr.initialize(pose=walk[0])
+    assert tr.step(masks[1], 1).fell_back is False                   # consecutive: the plain calls
+    assert tr.step([None] * len(cams), 2).fell_back is True          # nothing seen: no update
+    tr.step(masks[3], 3)                                             # 2 periods since the last estimate
+    tr.step(masks[4], 4, frames_elapsed=3)
+    tr.step(masks[4], 5, frames_elapsed=7)                           # capped at 4 ahead, learnt as 7
+    assert spy.updates == [None, None, 2.0, 3.0, 7.0]
+    assert spy.predicts == [None, 2.0, 3.0, 4.0]                      # one prediction per tracked frame
+    with pytest.raises(TrackerError, match="frames_elapsed: expected a number of frame periods > 0"):
+        tr.step(masks[4], 6, frames_elapsed=0)
+    with pytest.raises(TrackerError, match="frames_elapsed"):
+        tr.step(masks[4], 6, frames_elapsed="2")
+    with pytest.raises(TrackerError, match="max_frames_ahead"):
+        TrackerConfig(max_frames_ahead=0.5)
+
+
+def test_consecutive_frames_give_the_same_estimates_with_frames_elapsed_one(scene):
+    cfg = TrackerConfig(evals_per_frame=300, seed=4)
+    _, a = _track(scene, cfg)
+    model, cams, walk, masks = scene
+    tr = Tracker(model, cams, cfg)
+    tr.initialize(pose=walk[0])
+    b = [tr.step(masks[k], k, frames_elapsed=1.0) for k in range(1, N_FRAMES)]
+    for ra, rb in zip(a, b):
+        np.testing.assert_array_equal(ra.x, rb.x)

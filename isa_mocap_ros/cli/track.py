@@ -44,6 +44,9 @@ def register(sub) -> None:
                    help="tracking model DOF (default: the bag's ground-truth model's, else 39)")
     p.add_argument("--seed", type=int, default=0, help="seed of the per-frame random streams (default 0)")
     p.add_argument("--frames", type=int, default=None, metavar="N", help="track at most N frames")
+    p.add_argument("--stride", type=int, default=1, metavar="K",
+                   help="track every K-th frame only, as a network that keeps up with 1/K of the frame rate "
+                        "(the prediction looks K periods ahead; every frame is still segmented; default 1)")
     p.add_argument("--start", type=int, default=0, metavar="K",
                    help="first frame to track (frame index in the bag, empty frames included; default: the "
                         "first frame after the background learning)")
@@ -151,6 +154,9 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         raise ValueError(f"--frames: expected an integer >= 1, received {args.frames}")
     if args.start < 0:
         raise ValueError(f"--start: expected an integer >= 0, received {args.start}")
+    stride = getattr(args, "stride", 1)
+    if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1:
+        raise ValueError(f"--stride: expected an integer >= 1, received {stride}")
     params = {}
     if args.params:
         try:
@@ -238,6 +244,9 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                 masks = [None if img is None else seg.apply(img) for seg, img in zip(segmenters, fr.images)]
             if fr.index < first:
                 continue
+            if (fr.index - first) % stride:
+                bar.update(1)
+                continue
             t0 = time.perf_counter()
             if args.init == "truth" and not tracker.initialized:
                 if fr.truth is None or seq.truth_model is None or seq.truth_model.dof != model.dof:
@@ -248,7 +257,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                 r = None
                 x = tracker.last_estimate
             else:
-                r = tracker.step(masks, int(fr.stamp_ns))
+                r = tracker.step(masks, int(fr.stamp_ns), frames_elapsed=stride)
                 x = r.x
             dt = time.perf_counter() - t0
             t_track += dt
@@ -269,13 +278,14 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
             bar.update(1)
         bar.close()
 
-    n_tracked = stop - first
-    stamp_of = {f.index: int(f.stamp_ns) for f in seq.frames[first:stop]}
+    n_tracked = len(range(first, stop, stride))
+    stamp_of = {f.index: int(f.stamp_ns) for f in seq.frames[first:stop:stride]}
     if collect is not None:
         collect.update(model=model, truth_model=seq.truth_model, estimates=dict(estimates), energies=dict(energies),
-                       truth={f.index: f.truth for f in seq.frames[first:stop] if f.truth is not None},
+                       truth={f.index: f.truth for f in seq.frames[first:stop:stride] if f.truth is not None},
                        init_frame=init_frame, stamps=stamp_of, step_seconds=dict(step_seconds))
     summary: dict = {"bag": str(bag_path), "out": str(out), "optimizer": args.optimizer, "evals_per_frame": args.evals,
+                     "stride": stride,
                      "optimizer_params": cfg.params(), "model_dof": model.dof, "seed": args.seed,
                      "gate_margin_px": cfg.gate_margin_px,
                      "masks": "recorded" if use_masks else f"segmented (learned from {learn} frames)",
@@ -293,7 +303,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     inits = [n for r in results for n in r.notes if n.startswith("initialized")]
     if inits:
         summary["init"] = inits[0]
-    idx = [f.index for f in seq.frames[first:stop] if f.truth is not None and f.index in estimates]
+    idx = [f.index for f in seq.frames[first:stop:stride] if f.truth is not None and f.index in estimates]
     if seq.has_truth and idx:
         tm = seq.truth_model
         truth = np.array([seq.frames[k].truth for k in idx])

@@ -81,6 +81,8 @@ class EstimatorNode(Node):
         gate = declare(self, "gate_margin_px", tc.gate_margin_px, "mask gate: keep only foreground components "
                        "touching the predicted silhouette grown by this many pixels (drops far occluders; 0 = off)",
                        lo=0, hi=10_000)
+        ahead = declare(self, "max_frames_ahead", tc.max_frames_ahead, "after frame sets this node could not keep up "
+                        "with, its own prediction looks as many periods ahead, at most this many", lo=1.0, hi=1000.0)
         predictor = declare(self, "predictor", tc.predictor, "ar, constant_pose or constant_velocity")
         order = declare(self, "predictor_order", tc.predictor_order, "AR order (past motions used; keep equal to the prediction node's order)", lo=1, hi=20)
         self.prior_eta = declare(self, "prior_eta", 0.0, "weight of the pose prior (0 = off)", lo=0.0, hi=1e6)
@@ -123,7 +125,8 @@ class EstimatorNode(Node):
                                      seed=self.seed, energy=energy, downsample=downsample,
                                      search_radius_rad=radius, predictor=predictor, predictor_order=order,
                                      prior_eta=self.prior_eta, prior_file=prior_file, pelvis_fraction=pelvis,
-                                     limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs), gate_margin_px=gate)
+                                     limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs), gate_margin_px=gate,
+                                     max_frames_ahead=ahead)
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
                                       slop_ns=0 if sync == "exact" else int(slop_s * 1e9),
                                       max_wait_s=self.view_timeout_s, min_views=min(min_views, self.n_views))
@@ -134,6 +137,7 @@ class EstimatorNode(Node):
         self._extrinsics: list = [None] * self.n_views
         self._images: list[dict[int, np.ndarray]] = [{} for _ in range(self.n_views)]
         self._predictions: dict[int, np.ndarray] = {}
+        self._prev_stamp_ns: int | None = None   # stamp of the last frame set given to the tracker
         self.tracker = None
         self.frames_done = 0
         self.last_result = None
@@ -361,7 +365,13 @@ class EstimatorNode(Node):
             from isa_mocap_ros.body import joint_state_to_pose
             prediction = joint_state_to_pose(self.model, prediction_msg)
         masks = list(frame_set.items)
-        result = self.tracker.step(masks, frame_set.stamp_ns, prediction=prediction)
+        # frame periods since the last set given to the tracker: more than 1 after sets dropped for
+        # lack of time (or missing views), so the tracker's own prediction looks as far ahead
+        gap = 1
+        if self._prev_stamp_ns is not None and frame_set.stamp_ns > self._prev_stamp_ns:
+            gap = max(1, round((frame_set.stamp_ns - self._prev_stamp_ns) / (self.frame_period_s * 1e9)))
+        self._prev_stamp_ns = frame_set.stamp_ns
+        result = self.tracker.step(masks, frame_set.stamp_ns, prediction=prediction, frames_elapsed=gap)
         self.frames_done += 1
         self.last_result = result
         if result.x is not None:

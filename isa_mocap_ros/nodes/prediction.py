@@ -10,7 +10,9 @@ Subscribes ``joint_states`` (the estimator's estimates, reliable depth 10) and p
 
 Stamp convention: the prediction made from the estimate of frame ``k`` (stamp ``t_k``) is the
 prediction FOR frame ``k + 1`` and carries the stamp ``t_k + frame_period_s``; the estimator looks
-the prediction of a frame up by that stamp (within half a period). Joint names are published as
+the prediction of a frame up by that stamp (within half a period). Estimates more than one period
+apart (frame sets the estimator dropped) teach the predictor the motion per period
+(:mod:`isa_mocap_ros.tracking.predict`, "Gaps"). Joint names are published as
 received (the order of the first estimate); ``header.frame_id`` is copied.
 
 The estimates carry the root rotation as roll/pitch/yaw (``isa_mocap_ros.body.pose_to_joint_state``);
@@ -140,8 +142,13 @@ class PredictionNode(Node):
                                               f"(out of order by {back_s * 1e3:.1f} ms)")
                 return
         x_model = q[self._perm]
+        # frame periods since the last estimate: more than 1 when the estimator dropped frame sets,
+        # so the motion is learnt per period (the prediction is still for the next frame)
+        gap = 1
+        if self.last_stamp_ns is not None and stamp > self.last_stamp_ns:
+            gap = max(1, round((stamp - self.last_stamp_ns) / (self.frame_period_s * 1e9)))
         try:
-            self.predictor.update_from_message(x_model)
+            self.predictor.update_from_message(x_model, gap)
             pred = self.predictor.message()
         except (PredictionError, ValueError) as exc:
             self.problems.report("predict", f"joint_states dropped: {exc}")

@@ -29,6 +29,14 @@ velocities is extrapolated exactly. The predicted rotation vector is chosen amon
 equivalents ``(θ + 2πm) ω`` as the one nearest the last estimate's, so a root turning through
 ``θ = π`` does not jump.
 
+**Gaps.** Estimates need not come from consecutive frames: a real-time network drops frame sets it
+cannot keep up with. ``update(x, frames=g)`` says ``g`` frame periods passed since the previous
+estimate, ``predict(frames=h)`` asks for the pose ``h`` periods after the last one. Each motion is
+then taken per period and re-applied for ``h`` periods: ``λ_i`` becomes ``λ_i h / g_i`` in both
+formulas (root: ``exp(λ_i (h / g_i) ζ_i)``; joints: ``Σ_i λ_i (h / g_i) (q_i - q_{i-1})``), so a
+constant-twist motion sampled at any gaps is still extrapolated exactly. With every gap 1 (the
+default) the arithmetic is the plain formula's, bit for bit (the factors are exactly 1.0).
+
 Baselines: :class:`ConstantPosePredictor` (the last estimate) and
 :class:`ConstantVelocityPredictor` (``2 x_k - x_{k-1}`` in pose-vector space; ``ArPredictor``
 with ``order=1`` is the constant velocity on SE(3)).
@@ -42,11 +50,26 @@ import numpy as np
 
 from isa_mocap_ros.geometry import adjoint, exp_se3, log_se3, matrix_to_pose, nearest_rotvec, pose_to_matrix
 
-__all__ = ["PredictionError", "ArPredictor", "ConstantPosePredictor", "ConstantVelocityPredictor"]
+__all__ = ["PredictionError", "ArPredictor", "ConstantPosePredictor", "ConstantVelocityPredictor", "frames_kwargs"]
 
 
 class PredictionError(ValueError):
     """Bad estimate given to a predictor, bad settings, or a prediction asked of an empty history."""
+
+
+def _frames(name: str, value) -> float:
+    """A number of frame periods: a real number, finite and > 0."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not (0 < float(value) < np.inf):
+        raise PredictionError(f"{name}: expected a number of frame periods > 0, got {value!r}")
+    return float(value)
+
+
+def frames_kwargs(frames) -> dict:
+    """``frames`` as the keyword of ``update`` / ``predict``, only when it is not the default 1: a
+    predictor of one's own written without gaps (``update(x)``, ``predict()``) keeps working
+    wherever the frames are consecutive."""
+    return {} if (not isinstance(frames, bool) and frames == 1) else {"frames": frames}
 
 
 def _se3_inverse(T: np.ndarray) -> np.ndarray:
@@ -62,6 +85,7 @@ class _HistoryPredictor:
 
     def __init__(self, history: int) -> None:
         self._hist: deque[np.ndarray] = deque(maxlen=history)
+        self._gaps: deque[float] = deque(maxlen=history)    # periods between an estimate and the one before
         self._n_dof: int | None = None
 
     @property
@@ -96,24 +120,28 @@ class _HistoryPredictor:
             raise PredictionError(f"x: expected finite values, got {x[bad]} at index {bad}")
         return x
 
-    def update(self, x) -> None:
+    def update(self, x, frames: float = 1) -> None:
         """Append the estimate of the frame just finished.
 
         Parameters
         ----------
         x : (D,) array_like
             Pose vector; ``D`` must match the earlier estimates.
+        frames : float
+            Frame periods since the previous estimate (> 0; default 1, consecutive frames).
 
         Raises
         ------
         PredictionError
-            Non-finite values or a wrong shape; the history is left untouched.
+            Non-finite values, a wrong shape or a bad ``frames``; the history is left untouched.
         """
         x = self._check(x)
+        g = _frames("frames", frames)
         if self._n_dof is None:
             self._validate_dof(x.size)
         self._n_dof = x.size
         self._hist.append(x)
+        self._gaps.append(g)
 
     def _validate_dof(self, n_dof: int) -> None:
         pass
@@ -121,6 +149,7 @@ class _HistoryPredictor:
     def reset(self) -> None:
         """Forget every estimate (the pose length may change afterwards)."""
         self._hist.clear()
+        self._gaps.clear()
         self._n_dof = None
 
     def _last(self) -> np.ndarray:
@@ -128,7 +157,7 @@ class _HistoryPredictor:
             raise PredictionError("predict: no estimate yet; call update(x) first")
         return self._hist[-1]
 
-    def predict(self) -> np.ndarray:  # pragma: no cover - abstract
+    def predict(self, frames: float = 1) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
 
 
@@ -138,8 +167,9 @@ class ConstantPosePredictor(_HistoryPredictor):
     def __init__(self) -> None:
         super().__init__(1)
 
-    def predict(self) -> np.ndarray:
-        """Return ``x_k`` as a (D,) ndarray (a copy)."""
+    def predict(self, frames: float = 1) -> np.ndarray:
+        """Return ``x_k`` as a (D,) ndarray (a copy), however many ``frames`` ahead."""
+        _frames("frames", frames)
         return self._last().copy()
 
 
@@ -153,12 +183,15 @@ class ConstantVelocityPredictor(_HistoryPredictor):
     def __init__(self) -> None:
         super().__init__(2)
 
-    def predict(self) -> np.ndarray:
-        """Return the (D,) prediction ``2 x_k - x_{k-1}`` (``x_k`` with a single estimate)."""
+    def predict(self, frames: float = 1) -> np.ndarray:
+        """Return the (D,) prediction ``x_k + (h / g) (x_k - x_{k-1})`` for ``h = frames`` periods
+        ahead, ``g`` the periods between the two estimates (``2 x_k - x_{k-1}`` for consecutive
+        frames; ``x_k`` with a single estimate)."""
+        h = _frames("frames", frames)
         last = self._last()
         if len(self._hist) < 2:
             return last.copy()
-        return last + (last - self._hist[-2])
+        return last + (h / self._gaps[-1]) * (last - self._hist[-2])
 
 
 class ArPredictor(_HistoryPredictor):
@@ -218,8 +251,8 @@ class ArPredictor(_HistoryPredictor):
                 raise PredictionError(f"root_slice: expected 6 coordinates of a pose of length "
                                       f"{n_dof}, got {len(idx)} ({self.root_slice})")
 
-    def predict(self) -> np.ndarray:
-        """Prediction for the next frame.
+    def predict(self, frames: float = 1) -> np.ndarray:
+        """Prediction for the frame ``frames`` periods after the last estimate (default the next).
 
         Returns
         -------
@@ -231,12 +264,14 @@ class ArPredictor(_HistoryPredictor):
         PredictionError
             No estimate yet.
         """
+        h = _frames("frames", frames)
         last = self._last()
         K = min(self.order, len(self._hist) - 1)
         if K == 0:
             return last.copy()
         X = np.array(self._hist)[-(K + 1):]                 # x_{k-K} ... x_k, oldest first
         lam = self.damping[-K:] / self.damping[-K:].sum()    # λ of the newest K motions
+        lam = lam * (h / np.array(self._gaps)[-K:])          # per period, h periods ahead (1.0 each: unchanged)
         out = np.empty_like(last)
         joint = np.ones(last.size, bool)
         if self.root_slice is not None:

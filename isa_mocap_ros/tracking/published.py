@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from isa_mocap_ros.body import BodyModel, joint_state_to_pose, pose_to_joint_state
+from isa_mocap_ros.tracking.predict import frames_kwargs
 
 
 def through_message(model: BodyModel, x: np.ndarray) -> np.ndarray:
@@ -25,19 +26,21 @@ class PublishedPredictor:
         self.model = model
         self.predictor = predictor
 
-    def update_from_message(self, positions: np.ndarray) -> None:
-        """What the prediction node does with a received estimate (JointState positions)."""
-        self.predictor.update(joint_state_to_pose(self.model, positions))
+    def update_from_message(self, positions: np.ndarray, frames: float = 1) -> None:
+        """What the prediction node does with a received estimate (JointState positions);
+        ``frames``: periods since the previous estimate."""
+        self.predictor.update(joint_state_to_pose(self.model, positions), **frames_kwargs(frames))
 
-    def message(self) -> np.ndarray:
-        """JointState positions of the prediction, as the prediction node publishes them."""
-        return pose_to_joint_state(self.model, self.predictor.predict())
+    def message(self, frames: float = 1) -> np.ndarray:
+        """JointState positions of the prediction ``frames`` periods ahead, as the prediction node publishes them."""
+        return pose_to_joint_state(self.model, self.predictor.predict(**frames_kwargs(frames)))
 
-    def update(self, x: np.ndarray) -> None:
-        self.update_from_message(pose_to_joint_state(self.model, x))
+    def update(self, x: np.ndarray, frames: float = 1) -> None:
+        self.update_from_message(pose_to_joint_state(self.model, x), frames)
 
-    def predict(self) -> np.ndarray:
-        return joint_state_to_pose(self.model, self.message())
+    def predict(self, frames: float = 1) -> np.ndarray:
+        return joint_state_to_pose(self.model, self.message(frames))
 
     def reset(self) -> None:
         self.predictor.reset()
+

@@ -32,6 +32,13 @@ One call of :meth:`Tracker.step` per frame set:
 5. **Estimate.** ``estimate="optimizer"``: the algorithm's own estimate (ISA/APF weighted mean,
    CMA-ES mean, DE/PSO best); ``"best"``: the best evaluated particle. Then the predictor is updated.
 
+**Gaps.** ``step(..., frames_elapsed=g)`` says ``g`` frame periods passed since the previous call's
+frame (default 1; the estimator node counts them from the stamps when it could not keep up, and
+``isa-mocap track --stride`` tracks every g-th frame). The tracker's own prediction then looks
+``g`` periods ahead (summed over frames that fell back), and the predictor learns the motion per
+period (:mod:`.predict`, "Gaps"); an external prediction is taken as made for this frame. With
+consecutive frames nothing changes, bit for bit.
+
 **Random streams.** Frame ``k`` (``frame_index``; the estimator node passes the stamp in ns, any
 non-negative integer works) draws everything from ``numpy.random.default_rng([seed, k])``
 (a ``SeedSequence`` of the pair), so a frame's result depends only on the seed, the frame key,
@@ -61,7 +68,7 @@ from .gate import gate_masks
 from .init import InitError, initial_pose
 from .limbs import LIMBS, LimbMove
 from .pelvis import PelvisMove
-from .predict import ArPredictor, ConstantPosePredictor, ConstantVelocityPredictor
+from .predict import ArPredictor, ConstantPosePredictor, ConstantVelocityPredictor, frames_kwargs
 
 __all__ = ["TrackerError", "TrackerConfig", "FrameResult", "Tracker", "make_tracker", "DEFAULT_PARAMS",
            "PREDICTORS", "frame_rng"]
@@ -193,6 +200,11 @@ class TrackerConfig:
         empty view. Default 10 (at 320×240; robustness bench, 3 seeds, 35 occluders: CMU walk
         121 → 48 mm and knee RMSE 64 → 10°, generated walk 74 → 38 mm; clean walks unchanged bit
         for bit; ``docs/tracking.md``, "Occluders and the gate").
+    max_frames_ahead : float
+        After frames the tracker did not see (``step``'s ``frames_elapsed`` > 1, or frames that
+        fell back), its own prediction looks that many periods ahead, but at most this many
+        (>= 1; default 5, 1/6 s at 30 fps): past that, extrapolating the last motion says little.
+        The predictor still learns the motion per period from the true gap.
     """
 
     optimizer: str = "h-isa"
@@ -225,6 +237,7 @@ class TrackerConfig:
     limb_proposals: int = 16
     limb_proposal_limbs: tuple = ("left_arm", "right_arm")
     gate_margin_px: int = 10
+    max_frames_ahead: float = 5.0
 
     def __post_init__(self) -> None:
         from isa_mocap_ros.optim import OPTIMIZERS
@@ -247,6 +260,7 @@ class TrackerConfig:
         if self.predictor not in PREDICTORS:
             raise TrackerError(f"predictor: expected one of {', '.join(PREDICTORS)}, received {self.predictor!r}")
         _check_number("predictor_order", self.predictor_order, lo=1, integer=True)
+        _check_number("max_frames_ahead", self.max_frames_ahead, lo=1.0)
         for name in ("root_velocity_gain", "joint_velocity_gain"):
             _check_number(name, getattr(self, name), lo=0.0)
         _check_number("prior_eta", self.prior_eta, lo=0.0)
@@ -406,6 +420,7 @@ class Tracker:
                                                  rng=np.random.default_rng([config.seed, 2**32 - 2]))
         self.predictor = _make_predictor(config) if predictor is None else predictor
         self._last: np.ndarray | None = None
+        self._elapsed = 0.0        # frame periods since the last estimate (step's frames_elapsed, summed)
         self._pelvis = PelvisMove(model) if "root" in model.partitions else None
         self._pelvis_generation: int | None = None
         self._limbs = LimbMove(model)
@@ -427,6 +442,7 @@ class Tracker:
     def reset(self) -> None:
         """Forget the estimates (the next step initializes again)."""
         self._last = None
+        self._elapsed = 0.0
         self.predictor.reset()
 
     def total_energy(self, X) -> np.ndarray:
@@ -583,7 +599,8 @@ class Tracker:
 
     def _accept(self, x: np.ndarray) -> None:
         self._last = np.array(x, dtype=float)
-        self.predictor.update(self._last)
+        self.predictor.update(self._last, **frames_kwargs(self._elapsed or 1))
+        self._elapsed = 0.0
 
     # ------------------------------------------------------------------ one frame
     def _prediction(self, external, notes: list[str]) -> np.ndarray:
@@ -609,7 +626,8 @@ class Tracker:
                 p = None
         if p is None:
             try:
-                p = np.asarray(self.predictor.predict(), dtype=float)
+                ahead = min(self._elapsed or 1, self.config.max_frames_ahead)
+                p = np.asarray(self.predictor.predict(**frames_kwargs(ahead)), dtype=float)
             except ValueError as exc:      # PredictionError: empty history (cannot happen once initialized)
                 notes.append(f"prediction: {exc}; using the last estimate")
                 return self._last.copy()
@@ -811,7 +829,7 @@ class Tracker:
             out.append(m)
         return out
 
-    def step(self, masks: Sequence, frame_index: int, *, prediction=None) -> FrameResult:
+    def step(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1) -> FrameResult:
         """Track one frame (see the module docstring). Never raises on bad masks or predictions.
 
         Parameters
@@ -822,6 +840,8 @@ class Tracker:
             Non-negative frame key (index or stamp) of the per-frame random stream.
         prediction : (D,) array_like, optional
             External prediction; default the tracker's predictor.
+        frames_elapsed : float
+            Frame periods since the previous call's frame (> 0; default 1). See "Gaps" above.
 
         Returns
         -------
@@ -830,6 +850,10 @@ class Tracker:
         t0 = time.perf_counter()
         if isinstance(frame_index, bool) or not isinstance(frame_index, (int, np.integer)) or frame_index < 0:
             raise TrackerError(f"frame_index: expected an integer >= 0, received {frame_index!r}")
+        gap = float(frames_elapsed) if isinstance(frames_elapsed, (int, float, np.integer, np.floating)) else math.nan
+        if isinstance(frames_elapsed, bool) or not (0 < gap < math.inf):
+            raise TrackerError(f"frames_elapsed: expected a number of frame periods > 0, received {frames_elapsed!r}")
+        self._elapsed += gap
         cfg = self.config
         usable, notes = self._check_masks(masks)
         gated_pred = None
@@ -895,7 +919,8 @@ class Tracker:
             notes.append(f"energy: {res.n_nonfinite} non-finite evaluations")
         spread_out = res.history[-1].spread if res.history else float("nan")
         self._last = x.copy()
-        self.predictor.update(x)
+        self.predictor.update(x, **frames_kwargs(self._elapsed or 1))
+        self._elapsed = 0.0
         self.frames += 1
         return FrameResult(x=x, energy=float(energy), n_evals=int(n_evals), spread=float(spread_out),
                            time_s=time.perf_counter() - t0, views_used=views, notes=tuple(notes), fell_back=False,
