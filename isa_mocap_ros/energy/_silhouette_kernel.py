@@ -393,25 +393,26 @@ def _earlier_run(G, c, e, ylo, xm, na, na_ly):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always")
-def _mark_earlier(X, Y, Fl, k0, k1, G, G32, c, e, sa, ta):  # pragma: no cover - compiled
-    """``Fl[k] = 0`` for the points ``k0:k1`` (frame coordinates of capsule ``c``: ``X`` along, ``Y``
+def _mark_earlier(X, Y, Fl, k0, k1, G, G32, c, e, sa, ta, val):  # pragma: no cover - compiled
+    """``Fl[k] = val`` for the points ``k0:k1`` (frame coordinates of capsule ``c``: ``X`` along, ``Y``
     across) inside the hull of capsule ``e`` (a rotation into ``c``'s frame: the rest of its
     parameters stays; ``sa, ta`` from :func:`_earlier_run`)."""
     dux, duy = G[c, 2], G[c, 3]
     _mark_hull(X, Y, Fl, k0, k1, np.float32(sa), np.float32(ta), np.float32(G[e, 2] * dux + G[e, 3] * duy),
                np.float32(G[e, 3] * dux - G[e, 2] * duy), G32[e, 4], G32[e, 5], G32[e, 7],
-               G32[e, 8], G32[e, 9], G32[e, 10], G32[e, 11], np.float32(0.0))
+               G32[e, 8], G32[e, 9], G32[e, 10], G32[e, 11], val)
 
 
 @numba.njit(cache=True, inline="always")
 def _t1_points(ci, c, v, G, G32, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, cam_K, cov_wh,
-               PX, PY, OWN, IDX, NEAR, S, OK):  # pragma: no cover - compiled
+               cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK):  # pragma: no cover - compiled
     """Term 1, capsule ``c`` at position ``ci`` of ``order`` in view ``v``: its template points in its
-    bounding rectangle, ``PX`` along and ``PY`` across its axis, ``OWN`` 1 where inside its hull and in
-    the hull of no earlier capsule whose box (``EB``, :func:`_eb_set`) meets its own, ``IDX``
-    the pixel (pinhole; -1 outside the image). ``NEAR``, ``S``, ``OK`` are scratch."""
-    one = np.float32(1.0)
+    bounding rectangle, ``PX`` along and ``PY`` across its axis, and ``IDX``: for a point inside its
+    hull and in the hull of no earlier capsule whose box (``EB``, :func:`_eb_set`) meets its own, its
+    pixel (pinhole; ``zpix`` outside the image) or 0 (lens distortion: looked up later), for the
+    others ``zpix`` (the zero pixel after the mask). ``NEAR``, ``S``, ``OK`` are scratch."""
     zero = np.float32(0.0)
+    hasd = cam_hasd[v]
     Wf = np.float32(cov_wh[v, 0])
     Hf = np.float32(cov_wh[v, 1])
     Wst = np.int32(cov_wh[v, 2])
@@ -422,7 +423,7 @@ def _t1_points(ci, c, v, G, G32, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, c
     nk = tmpl_ptr[c + 1] - k0
     na = tmpl_na[c]
     ns = nk // na
-    nkp = (nk + 7) & ~7     # padded: points nk.. are dropped (OWN = 0)
+    nkp = (nk + 7) & ~7     # padded: points nk.. are dropped (IDX = zpix)
     L, ra, sb, ca = G32[c, 4], G32[c, 5], G32[c, 7], G32[c, 8]
     caL, ra2, rb2 = G32[c, 9], G32[c, 10], G32[c, 11]
     # the pixel as an affine map of the point's frame coordinates (pinhole)
@@ -445,31 +446,31 @@ def _t1_points(ci, c, v, G, G32, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, c
         yb = yl - L
         inside = ((x2 + yl * yl <= ra2) | (x2 + yb * yb <= rb2)
                   | ((q >= zero) & (q <= caL) & (xl * ca + yl * sb <= ra)))
-        OWN[k] = one if inside else zero
         PX[k] = yl
         PY[k] = xs
-        u = u0 + yl * uya + xs * uxs    # pixel of the point (pinhole; -1: outside the image)
+        u = u0 + yl * uya + xs * uxs    # pixel of the point (pinhole)
         w = w0 + yl * wya + xs * wxs
         ok = (u >= zero) & (w >= zero) & (u < Wf) & (w < Hf)
-        IDX[k] = np.int32(w) * Wst + np.int32(u) if ok else np.int32(-1)
+        pix = np.int32(0) if hasd else np.int32(w) * Wst + np.int32(u)
+        IDX[k] = pix if inside & (ok | hasd) else zpix
     for k in range(nk, nkp):
-        OWN[k] = zero
+        IDX[numba.uint64(k)] = zpix
     na_ly = na / ly     # strata per unit length along the axis
     # earlier capsules whose boxes meet c's and that reach its rectangle: capsule e in c's frame, its
     # extent along c's axis selects a run of strata (all pairs at once, then a branch-free compaction)
     _earlier_runs(ci, G, c, EB, ylo, xm, na, na_ly, S, OK)
     nn = 0
     for ei in range(ci):
-        NEAR[nn] = ei
+        NEAR[numba.uint64(nn)] = ei
         nn += OK[ei]
     for q in range(nn):
-        ei = NEAR[q]
+        ei = numba.uint64(NEAR[q])
         s0 = S[2, ei]
         i0 = int(s0) if s0 > 0.0 else 0
         i1 = min(int(S[3, ei]), na - 1)
         ka = i0 * ns            # whole vectors from the first stratum on (scratch has slack)
-        _mark_earlier(PX, PY, OWN, ka, ka + (((i1 + 1) * ns - ka + 7) & ~7), G, G32, c, order[ei], S[0, ei],
-                      S[1, ei])
+        _mark_earlier(PX, PY, IDX, ka, ka + (((i1 + 1) * ns - ka + 7) & ~7), G, G32, c, order[ei], S[0, ei],
+                      S[1, ei], zpix)
 
 
 @numba.njit(cache=True, inline="always")
@@ -483,32 +484,27 @@ def _t1_lookup(G, c, px, py, v, cam_K, cam_D, cam_hasd, cov, cov_wh):  # pragma:
 
 
 @numba.njit(cache=True, inline="always")
-def _t1_count(c, v, nk, G, PX, PY, OWN, IDX, JDX, cam_K, cam_D, cam_hasd, cov, cov_wh):  # pragma: no cover - compiled
+def _t1_count(c, v, nk, G, PX, PY, IDX, zpix, cam_K, cam_D, cam_hasd, cov, cov_wh):  # pragma: no cover - compiled
     """Term 1 of capsule ``c`` from :func:`_t1_points`: ``(count, sum of F)`` over its kept points
     inside the image (in template order)."""
-    zero = np.float32(0.0)
     cnt = 0.0
     fsum = 0.0
     if cam_hasd[v]:
         for k in range(nk):
-            if OWN[k] != zero:
+            if IDX[k] != zpix:
                 f = _t1_lookup(G, c, PX[k], PY[k], v, cam_K, cam_D, cam_hasd, cov, cov_wh)
                 if f >= 0.0:
                     cnt += 1.0
                     fsum += f
     else:
-        # the kept points' pixels, the others sent to the zero pixel after the mask (whole vectors),
-        # then one branch-free read per point: the sum is that of the kept points, in the same order
-        zpix = np.int32(cov.shape[1] - 1)
+        # one branch-free read per point: the points not counted read the zero pixel after the mask,
+        # so the sum is that of the kept points, in the same order
         icnt = 0
-        for k in range((nk + 7) & ~7):
-            kk = numba.uint64(k)
-            ok = (OWN[kk] != zero) & (IDX[kk] >= 0)
-            JDX[kk] = IDX[kk] if ok else zpix
-            icnt += ok
         isum = cov[v, 0] - cov[v, 0]    # an integer for the uint8 mask: 1-cycle additions
         for k in range(nk):
-            isum += cov[v, numba.uint32(JDX[numba.uint64(k)])]
+            j = IDX[numba.uint64(k)]
+            icnt += j != zpix
+            isum += cov[v, numba.uint32(j)]
         cnt = float(icnt)
         fsum = float(isum) * cam_K[v, 4]
     return cnt, fsum
@@ -610,9 +606,8 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
         kmax = _scratch_len(tmpl_ptr)
         PX = np.zeros(kmax + 8, np.float32)     # a point's frame coordinates: along, across
         PY = np.zeros(kmax + 8, np.float32)
-        OWN = np.zeros(kmax + 8, np.float32)
-        IDX = np.empty(kmax, np.int32)
-        JDX = np.empty(kmax, np.int32)
+        IDX = np.empty(kmax, np.int32)     # a point's pixel, zpix when not counted
+        zpix = np.int32(cov.shape[1] - 1)
         for i in range(lo, hi):
             _fk_one(X[i], parents, offsets, ptr, dofs, axes, R, P)
             total = 0.0
@@ -632,9 +627,9 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     if G[c, 12] == 0.0:
                         continue
                     _t1_points(ci, c, v, G, G32, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na,
-                               cam_K, cov_wh, PX, PY, OWN, IDX, NEAR, S, OK)
+                               cam_K, cov_wh, cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK)
                     nk = tmpl_ptr[c + 1] - tmpl_ptr[c]
-                    cnt, fsum = _t1_count(c, v, nk, G, PX, PY, OWN, IDX, JDX, cam_K, cam_D, cam_hasd, cov, cov_wh)
+                    cnt, fsum = _t1_count(c, v, nk, G, PX, PY, IDX, zpix, cam_K, cam_D, cam_hasd, cov, cov_wh)
                     w = _t1_weight(G, c, nk)
                     den += w * cnt
                     num += w * (cnt - fsum)
@@ -745,9 +740,8 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
     kmax = _scratch_len(tmpl_ptr)
     PX = np.zeros(kmax + 8, np.float32)
     PY = np.zeros(kmax + 8, np.float32)
-    OWN = np.zeros(kmax + 8, np.float32)
     IDX = np.zeros(kmax, np.int32)
-    JDX = np.zeros(kmax, np.int32)
+    zpix = np.int32(cov.shape[1] - 1)
     for v in range(V):
         _to_camera(P, cam_R, cam_t, v, CP[v])
         _project_caps(CP[v], caps, radii, G[v])
@@ -771,21 +765,20 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
                     s_pre[v, q0 + k] = pos
                 continue
             _t1_points(ci, c, v, G[v], G32[v], BXf, order, tmpl_a, tmpl_s, tmpl_ptr,
-                       tmpl_na, cam_K, cov_wh, PX, PY, OWN, IDX, NEAR, S, OK)
-            cnt, fsum = _t1_count(c, v, nk, G[v], PX, PY, OWN, IDX, JDX, cam_K, cam_D, cam_hasd, cov, cov_wh)
+                       tmpl_na, cam_K, cov_wh, cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK)
+            cnt, fsum = _t1_count(c, v, nk, G[v], PX, PY, IDX, zpix, cam_K, cam_D, cam_hasd, cov, cov_wh)
             t1[v, c, 0] = _t1_weight(G[v], c, nk)
             t1[v, c, 1] = cnt
             t1[v, c, 2] = fsum
             for k in range(nk):
                 s_pre[v, q0 + k] = pos
-                if OWN[k] == zero:
+                if IDX[k] == zpix:
                     continue
                 f = 0.0
+                keep = True
                 if cam_hasd[v]:
                     f = _t1_lookup(G[v], c, PX[k], PY[k], v, cam_K, cam_D, cam_hasd, cov, cov_wh)
                     keep = f >= 0.0
-                else:
-                    keep = IDX[k] >= 0
                 if keep:
                     s_px[off + pos] = PX[k]
                     s_py[off + pos] = PY[k]
@@ -861,9 +854,8 @@ def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps
         kmax = _scratch_len(tmpl_ptr)
         PX = np.zeros(kmax + 8, np.float32)
         PY = np.zeros(kmax + 8, np.float32)
-        OWN = np.zeros(kmax + 8, np.float32)
         IDX = np.empty(kmax, np.int32)
-        JDX = np.empty(kmax, np.int32)
+        zpix = np.int32(cov.shape[1] - 1)
         ALIVE = np.zeros(V * T + 8, np.float32)
         flag = np.zeros(u_x.shape[0], np.float32)
         for i in range(lo, hi):
@@ -903,8 +895,8 @@ def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps
                     nk = tmpl_ptr[c + 1] - tmpl_ptr[c]
                     if moving_ci[ci]:
                         _t1_points(ci, c, v, Gv, G32v, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na,
-                                   cam_K, cov_wh, PX, PY, OWN, IDX, NEAR, S, OK)
-                        cnt, fsum = _t1_count(c, v, nk, Gv, PX, PY, OWN, IDX, JDX, cam_K, cam_D, cam_hasd, cov, cov_wh)
+                                   cam_K, cov_wh, cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK)
+                        cnt, fsum = _t1_count(c, v, nk, Gv, PX, PY, IDX, zpix, cam_K, cam_D, cam_hasd, cov, cov_wh)
                         w = _t1_weight(Gv, c, nk)
                     else:
                         w = t1[v, c, 0]
@@ -940,7 +932,7 @@ def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps
                                         for s in range(off + sb0, off + sb1):
                                             ALIVE[s] = one
                                         marked = True
-                                    _mark_earlier(s_px, s_py, ALIVE, off + p0, off + p1, Gv, G32v, c, e, sa, ta)
+                                    _mark_earlier(s_px, s_py, ALIVE, off + p0, off + p1, Gv, G32v, c, e, sa, ta, zero)
                             if marked:
                                 cnt, fsum = _t1_recount(v, off + sb0, off + sb1, ALIVE, s_idx, s_f, cam_K, cam_hasd,
                                                         cov)
