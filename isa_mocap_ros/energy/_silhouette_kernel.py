@@ -405,12 +405,16 @@ def _mark_earlier(X, Y, Fl, k0, k1, G, G32, c, e, sa, ta, val):  # pragma: no co
 
 @numba.njit(cache=True, inline="always")
 def _t1_points(ci, c, v, G, G32, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, cam_K, cov_wh,
-               cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK):  # pragma: no cover - compiled
+               cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK, all_pairs):  # pragma: no cover - compiled
     """Term 1, capsule ``c`` at position ``ci`` of ``order`` in view ``v``: its template points in its
     bounding rectangle, ``PX`` along and ``PY`` across its axis, and ``IDX``: for a point inside its
     hull and in the hull of no earlier capsule whose box (``EB``, :func:`_eb_set`) meets its own, its
     pixel (pinhole; ``zpix`` outside the image) or 0 (lens distortion: looked up later), for the
-    others ``zpix`` (the zero pixel after the mask). ``NEAR``, ``S``, ``OK`` are scratch."""
+    others ``zpix`` (the zero pixel after the mask). ``NEAR``, ``S``, ``OK`` are scratch.
+
+    ``all_pairs`` (a constant): the earlier capsules in one vector pass (:func:`_earlier_runs`; the full
+    kernel), else box tests first and :func:`_earlier_run` on the few that meet (the restricted kernel,
+    where it is measured faster); the same strata either way."""
     zero = np.float32(0.0)
     hasd = cam_hasd[v]
     Wf = np.float32(cov_wh[v, 0])
@@ -457,20 +461,32 @@ def _t1_points(ci, c, v, G, G32, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, c
         IDX[numba.uint64(k)] = zpix
     na_ly = na / ly     # strata per unit length along the axis
     # earlier capsules whose boxes meet c's and that reach its rectangle: capsule e in c's frame, its
-    # extent along c's axis selects a run of strata (all pairs at once, then a branch-free compaction)
-    _earlier_runs(ci, G, c, EB, ylo, xm, na, na_ly, S, OK)
+    # extent along c's axis selects a run of strata
     nn = 0
-    for ei in range(ci):
-        NEAR[numba.uint64(nn)] = ei
-        nn += OK[ei]
-    for q in range(nn):
-        ei = numba.uint64(NEAR[q])
-        s0 = S[2, ei]
-        i0 = int(s0) if s0 > 0.0 else 0
-        i1 = min(int(S[3, ei]), na - 1)
-        ka = i0 * ns            # whole vectors from the first stratum on (scratch has slack)
-        _mark_earlier(PX, PY, IDX, ka, ka + (((i1 + 1) * ns - ka + 7) & ~7), G, G32, c, order[ei], S[0, ei],
-                      S[1, ei], zpix)
+    if all_pairs:   # all pairs at once, then a branch-free compaction
+        _earlier_runs(ci, G, c, EB, ylo, xm, na, na_ly, S, OK)
+        for ei in range(ci):
+            NEAR[numba.uint64(nn)] = ei
+            nn += OK[ei]
+        for q in range(nn):
+            ei = numba.uint64(NEAR[q])
+            s0 = S[2, ei]
+            i0 = int(s0) if s0 > 0.0 else 0
+            i1 = min(int(S[3, ei]), na - 1)
+            ka = i0 * ns            # whole vectors from the first stratum on (scratch has slack)
+            _mark_earlier(PX, PY, IDX, ka, ka + (((i1 + 1) * ns - ka + 7) & ~7), G, G32, c, order[ei], S[0, ei],
+                          S[1, ei], zpix)
+    else:
+        bx0, bx1, by0, by1 = EB[0, ci], EB[1, ci], EB[2, ci], EB[3, ci]
+        for ei in range(ci):
+            NEAR[nn] = ei
+            nn += (EB[0, ei] <= bx1) & (bx0 <= EB[1, ei]) & (EB[2, ei] <= by1) & (by0 <= EB[3, ei])
+        for q in range(nn):
+            e = order[NEAR[q]]
+            reach, i0, i1, sa, ta = _earlier_run(G, c, e, ylo, xm, na, na_ly)
+            if reach:
+                ka = i0 * ns
+                _mark_earlier(PX, PY, IDX, ka, ka + (((i1 + 1) * ns - ka + 7) & ~7), G, G32, c, e, sa, ta, zpix)
 
 
 @numba.njit(cache=True, inline="always")
@@ -627,7 +643,7 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     if G[c, 12] == 0.0:
                         continue
                     _t1_points(ci, c, v, G, G32, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na,
-                               cam_K, cov_wh, cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK)
+                               cam_K, cov_wh, cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK, True)
                     nk = tmpl_ptr[c + 1] - tmpl_ptr[c]
                     cnt, fsum = _t1_count(c, v, nk, G, PX, PY, IDX, zpix, cam_K, cam_D, cam_hasd, cov, cov_wh)
                     w = _t1_weight(G, c, nk)
@@ -697,7 +713,7 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
     whose end joints move); arguments as :func:`silhouette_batch`. Returns a tuple:
 
     ``R (J, 3, 3), P (J, 3)`` forward kinematics of ``x``; per view ``CP (V, J, 4)``, ``G (V, C, 14)``,
-    ``G32 (V, C, 12)``, ``box (V, C, 4)``, ``BX (V, 11, C + 8)`` (boxes and hulls in processing order, :func:`_eb_set`);
+    ``G32 (V, C, 12)``, ``box (V, C, 4)``, ``BX (V, 4, C)`` (the boxes in processing order);
     ``t1 (V, C, 3)``: weight, count and foreground sum of each fixed capsule's term-1 points that lie
     in its hull, in no earlier *fixed* capsule's hull and inside the image; those points themselves,
     view ``v`` at ``v T``: ``s_px, s_py`` (frame coordinates), ``s_idx`` (pixel), ``s_f`` (coverage,
@@ -721,7 +737,7 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
     G = np.zeros((V, C, 14))
     G32 = np.zeros((V, C, 12), np.float32)
     box = np.zeros((V, C, 4))
-    BX = np.zeros((V, 11, C + 8))
+    BX = np.zeros((V, 4, C))
     BXf = np.zeros((11, C + 8))
     S = np.zeros((4, C + 8))
     OK = np.zeros(C + 8, np.int64)
@@ -749,7 +765,8 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
             _cap_box(G[v], G32[v], box[v], c)
         for ci in range(C):
             c = order[ci]
-            _eb_set(BX[v], ci, G[v], box[v], c)
+            for a in range(4):
+                BX[v, a, ci] = box[v, c, a]
             _eb_set(BXf, ci, G[v], box[v], c)
             if moving[c]:       # only the fixed capsules are earlier capsules here
                 BXf[0, ci], BXf[1, ci], BXf[2, ci], BXf[3, ci] = 1.0, -1.0, 1.0, -1.0
@@ -765,7 +782,7 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
                     s_pre[v, q0 + k] = pos
                 continue
             _t1_points(ci, c, v, G[v], G32[v], BXf, order, tmpl_a, tmpl_s, tmpl_ptr,
-                       tmpl_na, cam_K, cov_wh, cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK)
+                       tmpl_na, cam_K, cov_wh, cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK, True)
             cnt, fsum = _t1_count(c, v, nk, G[v], PX, PY, IDX, zpix, cam_K, cam_D, cam_hasd, cov, cov_wh)
             t1[v, c, 0] = _t1_weight(G[v], c, nk)
             t1[v, c, 1] = cnt
@@ -838,6 +855,8 @@ def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps
     fg_ms = u_x.shape[0] // fg_tab.shape[0]
     nb = fg_tab.shape[1] - 1
     first_moving = mov_ci[0] if nm > 0 else C
+    S = np.zeros((4, 1))    # not used (the moving capsules' earlier ones: box tests first)
+    OK = np.zeros(1, np.int64)
     for chunk in numba.prange(n_chunks):
         lo = chunk * n // n_chunks
         hi = (chunk + 1) * n // n_chunks
@@ -848,8 +867,6 @@ def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps
         G32 = G320.copy()
         box = box0.copy()
         BX = BX0_.copy()
-        S = np.zeros((4, C + 8))
-        OK = np.zeros(C + 8, np.int64)
         NEAR = np.empty(C, np.int64)
         kmax = _scratch_len(tmpl_ptr)
         PX = np.zeros(kmax + 8, np.float32)
@@ -884,7 +901,8 @@ def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps
                     c = mov_caps[m]
                     _project_cap(CPv, caps, radii, Gv, c)
                     _cap_box(Gv, G32v, boxv, c)
-                    _eb_set(EB, mov_ci[m], Gv, boxv, c)
+                    ci = mov_ci[m]
+                    BX0[ci], BX1[ci], BY0[ci], BY1[ci] = boxv[c, 0], boxv[c, 1], boxv[c, 2], boxv[c, 3]
                 num = 0.0
                 den = 0.0
                 off = v * T
@@ -895,7 +913,7 @@ def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps
                     nk = tmpl_ptr[c + 1] - tmpl_ptr[c]
                     if moving_ci[ci]:
                         _t1_points(ci, c, v, Gv, G32v, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na,
-                                   cam_K, cov_wh, cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK)
+                                   cam_K, cov_wh, cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK, False)
                         cnt, fsum = _t1_count(c, v, nk, Gv, PX, PY, IDX, zpix, cam_K, cam_D, cam_hasd, cov, cov_wh)
                         w = _t1_weight(Gv, c, nk)
                     else:
