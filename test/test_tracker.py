@@ -305,3 +305,23 @@ def test_consecutive_frames_give_the_same_estimates_with_frames_elapsed_one(scen
     b = [tr.step(masks[k], k, frames_elapsed=1.0) for k in range(1, N_FRAMES)]
     for ra, rb in zip(a, b):
         np.testing.assert_array_equal(ra.x, rb.x)
+
+
+def test_after_a_long_gap_the_root_follows_the_foreground(scene):
+    """More than max_frames_ahead periods unseen (e.g. the automatic initialization in real time):
+    the predicted root position moves with the triangulated foreground centroid, not the motion."""
+    model, cams, walk, masks = scene
+    tr = Tracker(model, cams, TrackerConfig(evals_per_frame=300, seed=2))
+    tr.initialize(pose=walk[0])
+    tr.step(masks[1], 1)
+    far = walk[2].copy()
+    far[0] += 0.6                                                    # the person walked on 60 cm
+    far_masks = [render_mask(c, capsule_endpoints(model, far)[0], model.capsule_radii) for c in cams]
+    r = tr.step(far_masks, 30, frames_elapsed=28)
+    moved = [n for n in r.notes if "root moved with the foreground" in n]
+    assert len(moved) == 1 and "28 frame periods" in moved[0]
+    assert abs(r.prediction[0] - walk[1][0] - 0.6) < 0.1, r.prediction[0]
+    assert abs(r.x[0] - far[0]) < 0.05                               # tracked there, not lost
+    # a short gap extrapolates the motion instead
+    r = tr.step(masks[4], 31, frames_elapsed=2)
+    assert not any("root moved" in n for n in r.notes)

@@ -65,7 +65,7 @@ import numpy as np
 from isa_mocap_ros.geometry import nearest_rotvec
 
 from .gate import gate_masks
-from .init import InitError, initial_pose
+from .init import InitError, initial_pose, root_from_masks
 from .limbs import LIMBS, LimbMove
 from .pelvis import PelvisMove
 from .predict import ArPredictor, ConstantPosePredictor, ConstantVelocityPredictor, frames_kwargs
@@ -203,8 +203,10 @@ class TrackerConfig:
     max_frames_ahead : float
         After frames the tracker did not see (``step``'s ``frames_elapsed`` > 1, or frames that
         fell back), its own prediction looks that many periods ahead, but at most this many
-        (>= 1; default 5, 1/6 s at 30 fps): past that, extrapolating the last motion says little.
-        The predictor still learns the motion per period from the true gap.
+        (>= 1; default 5, 1/6 s at 30 fps): past that, extrapolating the last motion says little,
+        so the predicted root position is moved instead by how far the foreground's triangulated
+        centroid moved since the last estimate's frame (:meth:`Tracker._recentre`). The predictor
+        still learns the motion per period from the true gap.
     """
 
     optimizer: str = "h-isa"
@@ -421,6 +423,8 @@ class Tracker:
         self.predictor = _make_predictor(config) if predictor is None else predictor
         self._last: np.ndarray | None = None
         self._elapsed = 0.0        # frame periods since the last estimate (step's frames_elapsed, summed)
+        self._masks_last: list | None = None   # usable masks of the last estimate's frame (re-centring)
+        self._masks_now: list | None = None    # usable masks of the frame being tracked
         self._pelvis = PelvisMove(model) if "root" in model.partitions else None
         self._pelvis_generation: int | None = None
         self._limbs = LimbMove(model)
@@ -443,6 +447,7 @@ class Tracker:
         """Forget the estimates (the next step initializes again)."""
         self._last = None
         self._elapsed = 0.0
+        self._masks_last = None
         self.predictor.reset()
 
     def total_energy(self, X) -> np.ndarray:
@@ -562,11 +567,13 @@ class Tracker:
             if x.ndim != 1:
                 raise TrackerError(f"pose: expected shape ({self.model.dof},), received {x.shape}")
             x = np.clip(x, self.model.lower, self.model.upper)
+            self._masks_now = None          # no frame: nothing to re-centre from later
             self._accept(x)
             return None
         if masks is None:
             raise TrackerError("initialize: expected masks= or pose=, received neither")
         usable, notes = self._check_masks(masks)
+        self._masks_now = usable
         if self._set_masks(usable, notes, frame_index) == 0:
             raise TrackerError(f"masks: expected foreground in at least one view, received none ({'; '.join(notes)})")
         cfg = self.config
@@ -601,6 +608,8 @@ class Tracker:
         self._last = np.array(x, dtype=float)
         self.predictor.update(self._last, **frames_kwargs(self._elapsed or 1))
         self._elapsed = 0.0
+        self._masks_last = self._masks_now
+        self._masks_now = None
 
     # ------------------------------------------------------------------ one frame
     def _prediction(self, external, notes: list[str]) -> np.ndarray:
@@ -644,7 +653,27 @@ class Tracker:
             p[idx] = nearest_rotvec(p[idx], self._last[idx])
         gain = np.full(D, cfg.joint_velocity_gain)
         gain[:6] = cfg.root_velocity_gain
-        return self._last + gain * (p - self._last)       # damped extrapolation
+        out = self._last + gain * (p - self._last)        # damped extrapolation
+        if self._elapsed > cfg.max_frames_ahead:
+            self._recentre(out, notes)
+        return out
+
+    def _recentre(self, pred: np.ndarray, notes: list[str]) -> None:
+        """After more frames than ``max_frames_ahead`` unseen, move the predicted root position (x, y)
+        by how far the foreground moved: the triangulated mask centroid (:func:`.init.root_from_masks`)
+        of this frame minus that of the last estimate's frame. Extrapolating the last motion over
+        such a gap says little (in real time the automatic initialization alone takes ~24 frame
+        periods, and a person walking moves ~1 m meanwhile), the foreground says where the body is."""
+        if self._masks_last is None or self._masks_now is None:
+            return
+        try:
+            c_last = root_from_masks(self.model, self.cameras, self._masks_last)[0]
+            c_now = root_from_masks(self.model, self.cameras, self._masks_now)[0]
+        except InitError:
+            return
+        pred[:2] = self._last[:2] + (c_now[:2] - c_last[:2])
+        notes.append(f"prediction: {self._elapsed:g} frame periods since the last estimate; root moved with the "
+                     f"foreground by {1e3 * float(np.hypot(*(c_now[:2] - c_last[:2]))):.0f} mm")
 
     def search_box(self, center) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Bounds ``(lo, hi)`` and initial spreads ``(D,)`` around a (clipped) prediction."""
@@ -856,6 +885,7 @@ class Tracker:
         self._elapsed += gap
         cfg = self.config
         usable, notes = self._check_masks(masks)
+        self._masks_now = usable
         gated_pred = None
         if cfg.gate_margin_px > 0 and self._last is not None and any(m is not None for m in usable):
             # the mask gate (config.gate_margin_px): foreground far from the predicted silhouette is dropped
@@ -921,6 +951,8 @@ class Tracker:
         self._last = x.copy()
         self.predictor.update(x, **frames_kwargs(self._elapsed or 1))
         self._elapsed = 0.0
+        self._masks_last = usable        # after the gate: the person's foreground
+        self._masks_now = None
         self.frames += 1
         return FrameResult(x=x, energy=float(energy), n_evals=int(n_evals), spread=float(spread_out),
                            time_s=time.perf_counter() - t0, views_used=views, notes=tuple(notes), fell_back=False,
