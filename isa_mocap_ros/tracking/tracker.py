@@ -662,8 +662,8 @@ class Tracker:
         """After more frames than ``max_frames_ahead`` unseen, move the predicted root position (x, y)
         by how far the foreground moved: the triangulated mask centroid (:func:`.init.root_from_masks`)
         of this frame minus that of the last estimate's frame. Extrapolating the last motion over
-        such a gap says little (in real time the automatic initialization alone takes ~24 frame
-        periods, and a person walking moves ~1 m meanwhile), the foreground says where the body is."""
+        such a gap says little (in real time the automatic initialization alone takes 7-10 frame
+        periods, and a person walking moves 0.3-0.5 m meanwhile), the foreground says where the body is."""
         if self._masks_last is None or self._masks_now is None:
             return
         try:
