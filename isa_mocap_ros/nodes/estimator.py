@@ -284,11 +284,6 @@ class EstimatorNode(Node):
             tracker = make_tracker(self.model, rig.cameras, **settings)
             tracker.initialize(pose=x)
             tracker.step(masks, 0)
-            # the automatic initialization's own path (grid, root refinement, every candidate), which the
-            # first real frame set takes: uncompiled, it kept the tracker from the next sets for longer
-            tracker = make_tracker(self.model, rig.cameras, **dict(settings, init_refine_evals=40))
-            tracker.step(masks, 0)
-            tracker.step(masks, 1)
         except Exception as exc:  # noqa: BLE001 - warm-up is an optimisation, never fatal
             self.get_logger().warn(f"warm-up failed ({type(exc).__name__}: {exc}); the first frame will be slow")
         self._wait_for_inputs()
