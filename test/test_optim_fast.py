@@ -6,6 +6,7 @@ from isa_mocap_ros.optim import OPTIMIZERS, make_optimizer, minimize
 from isa_mocap_ros.optim._fast import pairwise_sum
 from isa_mocap_ros.optim.resampling import ess, normalise_log
 from isa_mocap_ros.optim.schedules import beta_for_ess
+from libm_probe import NUMPY_IS_LIBM
 
 
 def numpy_beta_for_ess(energies, target, beta_max=1e12, tol=1e-6):
@@ -57,7 +58,11 @@ def test_beta_for_ess_is_bit_identical_to_the_numpy_formulation():
         if trial % 5 == 0:
             E = np.round(E, 2)
         target = float(rng.uniform(0.05, 0.95))
-        assert beta_for_ess(E, target) == numpy_beta_for_ess(E, target)
+        if NUMPY_IS_LIBM:       # numpy's exp / power are libm's (AVX2 machines): the same bits
+            assert beta_for_ess(E, target) == numpy_beta_for_ess(E, target)
+        else:                   # numpy's AVX-512 ufuncs: a last-bit difference may move one bisection
+            # step (tol 1e-6 in log10 beta), so the two agree to 10 ** 1e-6 - 1 = 2.3e-6
+            assert beta_for_ess(E, target) == pytest.approx(numpy_beta_for_ess(E, target), rel=3e-6, abs=0)
 
 
 def sphere(X):
