@@ -64,6 +64,7 @@ def test_run_processes_every_frame_set_and_writes_the_summary(runs):
         n_truth = r.topics["/mocap/ground_truth/joint_states"].message_count
     assert s0["frames_processed"] == n_sets          # lockstep: every frame set, none dropped
     assert s0["dropped_frames"] == 0
+    assert s0["dropped_while_initializing"] == 0      # lockstep: the next set waits for the first estimate
     assert s0["frames"] == n_truth                     # an estimate for every frame with a person
     assert s0["optimizer"] == "isa" and s0["evals_per_frame"] == 300 and s0["model_dof"] == 39
     assert s0["tracker_threads"] >= 1          # reported by the estimator (default: numba's thread count)

@@ -133,6 +133,11 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
         "bad_inputs": int(diag.get("bad_inputs", 0) or 0), "wall_seconds": round(wall_seconds, 1),
     }
     seq = read_sequence(bag, want_images=True, want_masks=False)
+    # of those, the sets the bag played while the first estimate (the automatic initialization) was
+    # being computed: between the first two estimates' stamps
+    est = sorted(poses)
+    summary["dropped_while_initializing"] = (sum(1 for f in seq.frames if est[0] < f.stamp_ns < est[1])
+                                             if len(est) >= 2 else None)
     stamps = [f.stamp_ns for f in seq.frames if f.truth is not None and f.stamp_ns in poses]
     if seq.has_truth and stamps:
         truth = {f.stamp_ns: f.truth for f in seq.frames if f.truth is not None}
