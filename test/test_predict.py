@@ -233,3 +233,13 @@ def test_bad_frame_counts_are_rejected_and_history_untouched(bad):
         assert p.n_estimates == 1
         with pytest.raises(PredictionError, match="frames"):
             p.predict(frames=bad)
+
+
+def test_periods_between_stamps():
+    from isa_mocap_ros.tracking.predict import periods_between
+    p = 1 / 30
+    assert periods_between(None, 5, p) == 1
+    assert periods_between(0, 33_333_333, p) == 1
+    assert periods_between(0, 3 * 33_333_333 + 1, p) == 3
+    assert periods_between(0, 20_000_000, p) == 1          # closer than a period: still 1
+    assert periods_between(10**9, 10**9, p) == 1 and periods_between(10**9, 5, p) == 1   # not newer

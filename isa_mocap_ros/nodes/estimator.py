@@ -38,6 +38,7 @@ from isa_mocap_ros.body.hri import hri_joint_names, hri_urdf
 from isa_mocap_ros.geometry import exp_so3
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, one_numba_thread, run_node
+from isa_mocap_ros.tracking.predict import periods_between
 from isa_mocap_ros.tracking.sync import FrameSynchronizer, LatestSlot, SyncError
 from isa_mocap_ros.tracking.tracker import TrackerConfig
 from isa_mocap_ros.vision import Camera
@@ -367,9 +368,7 @@ class EstimatorNode(Node):
         masks = list(frame_set.items)
         # frame periods since the last set given to the tracker: more than 1 after sets dropped for
         # lack of time (or missing views), so the tracker's own prediction looks as far ahead
-        gap = 1
-        if self._prev_stamp_ns is not None and frame_set.stamp_ns > self._prev_stamp_ns:
-            gap = max(1, round((frame_set.stamp_ns - self._prev_stamp_ns) / (self.frame_period_s * 1e9)))
+        gap = periods_between(self._prev_stamp_ns, frame_set.stamp_ns, self.frame_period_s)
         self._prev_stamp_ns = frame_set.stamp_ns
         result = self.tracker.step(masks, frame_set.stamp_ns, prediction=prediction, frames_elapsed=gap)
         self.frames_done += 1

@@ -42,7 +42,7 @@ from isa_mocap_ros.body import make_model
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, run_node
 from isa_mocap_ros.tracking.predict import (ArPredictor, ConstantPosePredictor, ConstantVelocityPredictor,
-                                            PredictionError)
+                                            PredictionError, periods_between)
 from isa_mocap_ros.tracking.published import PublishedPredictor
 
 __all__ = ["PredictionNode", "PREDICTORS", "make_predictor", "main"]
@@ -144,11 +144,8 @@ class PredictionNode(Node):
         x_model = q[self._perm]
         # frame periods since the last estimate: more than 1 when the estimator dropped frame sets,
         # so the motion is learnt per period (the prediction is still for the next frame)
-        gap = 1
-        if self.last_stamp_ns is not None and stamp > self.last_stamp_ns:
-            gap = max(1, round((stamp - self.last_stamp_ns) / (self.frame_period_s * 1e9)))
         try:
-            self.predictor.update_from_message(x_model, gap)
+            self.predictor.update_from_message(x_model, periods_between(self.last_stamp_ns, stamp, self.frame_period_s))
             pred = self.predictor.message()
         except (PredictionError, ValueError) as exc:
             self.problems.report("predict", f"joint_states dropped: {exc}")

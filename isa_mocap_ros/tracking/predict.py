@@ -50,19 +50,28 @@ import numpy as np
 
 from isa_mocap_ros.geometry import adjoint, exp_se3, log_se3, matrix_to_pose, nearest_rotvec, pose_to_matrix
 
-__all__ = ["PredictionError", "ArPredictor", "ConstantPosePredictor", "ConstantVelocityPredictor", "frames_kwargs"]
+__all__ = ["PredictionError", "ArPredictor", "ConstantPosePredictor", "ConstantVelocityPredictor", "frames_kwargs",
+           "frame_periods", "periods_between"]
 
 
 class PredictionError(ValueError):
     """Bad estimate given to a predictor, bad settings, or a prediction asked of an empty history."""
 
 
-def _frames(name: str, value) -> float:
-    """A number of frame periods: a real number, finite and > 0."""
+def frame_periods(name: str, value) -> float:
+    """``value`` as a number of frame periods (a real number, finite and > 0), else PredictionError."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
             or not (0 < float(value) < np.inf):
         raise PredictionError(f"{name}: expected a number of frame periods > 0, got {value!r}")
     return float(value)
+
+
+def periods_between(prev_ns: int | None, ns: int, period_s: float) -> int:
+    """Whole frame periods from stamp ``prev_ns`` to ``ns`` (at least 1; 1 without a previous stamp or
+    when ``ns`` is not newer): what a node that dropped frame sets tells the tracker or predictor."""
+    if prev_ns is None or ns <= prev_ns:
+        return 1
+    return max(1, round((ns - prev_ns) / (period_s * 1e9)))
 
 
 def frames_kwargs(frames) -> dict:
@@ -136,7 +145,7 @@ class _HistoryPredictor:
             Non-finite values, a wrong shape or a bad ``frames``; the history is left untouched.
         """
         x = self._check(x)
-        g = _frames("frames", frames)
+        g = frame_periods("frames", frames)
         if self._n_dof is None:
             self._validate_dof(x.size)
         self._n_dof = x.size
@@ -169,7 +178,7 @@ class ConstantPosePredictor(_HistoryPredictor):
 
     def predict(self, frames: float = 1) -> np.ndarray:
         """Return ``x_k`` as a (D,) ndarray (a copy), however many ``frames`` ahead."""
-        _frames("frames", frames)
+        frame_periods("frames", frames)
         return self._last().copy()
 
 
@@ -187,7 +196,7 @@ class ConstantVelocityPredictor(_HistoryPredictor):
         """Return the (D,) prediction ``x_k + (h / g) (x_k - x_{k-1})`` for ``h = frames`` periods
         ahead, ``g`` the periods between the two estimates (``2 x_k - x_{k-1}`` for consecutive
         frames; ``x_k`` with a single estimate)."""
-        h = _frames("frames", frames)
+        h = frame_periods("frames", frames)
         last = self._last()
         if len(self._hist) < 2:
             return last.copy()
@@ -264,7 +273,7 @@ class ArPredictor(_HistoryPredictor):
         PredictionError
             No estimate yet.
         """
-        h = _frames("frames", frames)
+        h = frame_periods("frames", frames)
         last = self._last()
         K = min(self.order, len(self._hist) - 1)
         if K == 0:

@@ -43,4 +43,3 @@ class PublishedPredictor:
 
     def reset(self) -> None:
         self.predictor.reset()
-

@@ -68,7 +68,8 @@ from .gate import gate_masks
 from .init import InitError, initial_pose, root_from_masks
 from .limbs import LIMBS, LimbMove
 from .pelvis import PelvisMove
-from .predict import ArPredictor, ConstantPosePredictor, ConstantVelocityPredictor, frames_kwargs
+from .predict import (ArPredictor, ConstantPosePredictor, ConstantVelocityPredictor, PredictionError, frame_periods,
+                      frames_kwargs)
 
 __all__ = ["TrackerError", "TrackerConfig", "FrameResult", "Tracker", "make_tracker", "DEFAULT_PARAMS",
            "PREDICTORS", "frame_rng"]
@@ -879,10 +880,10 @@ class Tracker:
         t0 = time.perf_counter()
         if isinstance(frame_index, bool) or not isinstance(frame_index, (int, np.integer)) or frame_index < 0:
             raise TrackerError(f"frame_index: expected an integer >= 0, received {frame_index!r}")
-        gap = float(frames_elapsed) if isinstance(frames_elapsed, (int, float, np.integer, np.floating)) else math.nan
-        if isinstance(frames_elapsed, bool) or not (0 < gap < math.inf):
-            raise TrackerError(f"frames_elapsed: expected a number of frame periods > 0, received {frames_elapsed!r}")
-        self._elapsed += gap
+        try:
+            self._elapsed += frame_periods("frames_elapsed", frames_elapsed)
+        except PredictionError as exc:
+            raise TrackerError(str(exc)) from None
         cfg = self.config
         usable, notes = self._check_masks(masks)
         self._masks_now = usable
@@ -948,11 +949,8 @@ class Tracker:
         if res.n_nonfinite:
             notes.append(f"energy: {res.n_nonfinite} non-finite evaluations")
         spread_out = res.history[-1].spread if res.history else float("nan")
-        self._last = x.copy()
-        self.predictor.update(x, **frames_kwargs(self._elapsed or 1))
-        self._elapsed = 0.0
-        self._masks_last = usable        # after the gate: the person's foreground
-        self._masks_now = None
+        self._masks_now = usable         # after the gate: the person's foreground, for a later re-centring
+        self._accept(x)
         self.frames += 1
         return FrameResult(x=x, energy=float(energy), n_evals=int(n_evals), spread=float(spread_out),
                            time_s=time.perf_counter() - t0, views_used=views, notes=tuple(notes), fell_back=False,
