@@ -116,6 +116,20 @@ def _streams(runs: int, seeds) -> list[tuple[int, int]]:
     return [(s, r) for s in seeds for r in range(runs)]
 
 
+def _best_cell(cells, settings, weight, kernel, noise, streams, variance):
+    """Branch and bound over ``cells`` (duplicates tried once, in order): the first with the lowest
+    ``weight(cell) * sum t`` among those where every run reaches delta; ``settings(cell)`` gives its
+    ``(n, b, c)``. Returns ``(cell, total steps)`` or ``(None, None)``, and the cells tried."""
+    best, best_total, best_cost, tried = None, None, math.inf, 0
+    for cell in dict.fromkeys(cells):
+        tried += 1
+        n, b, c = settings(cell)
+        total = _cell_cost(kernel, n, b, c, noise, streams, variance, weight(cell), best_cost)
+        if total is not None:
+            best, best_total, best_cost = cell, total, weight(cell) * total
+    return best, best_total, tried
+
+
 def search_bc(kernel: str, noise: bool, n: int, runs: int, seeds=(0,), *, grid_b=GRID_B, grid_c=GRID_C,
               first=None, variance: str = VARIANCE_READINGS[0]) -> dict:
     """Table 13.1's search: the (b, c) of the polynomial schedule (13.19) and the dynamic variance
@@ -124,15 +138,10 @@ def search_bc(kernel: str, noise: bool, n: int, runs: int, seeds=(0,), *, grid_b
     candidate too)."""
     cells = ([tuple(first)] if first is not None else []) + [(b, c) for b in grid_b for c in grid_c]
     streams = _streams(runs, seeds)
-    best, best_cost, tried = None, math.inf, 0
-    for b, c in dict.fromkeys(cells):
-        tried += 1
-        cost = _cell_cost(kernel, n, b, c, noise, streams, variance, 1, best_cost)
-        if cost is not None:
-            best, best_cost = (b, c), cost
+    best, total, tried = _best_cell(cells, lambda bc: (n, *bc), lambda bc: 1, kernel, noise, streams, variance)
     if best is None:
         return {"b": None, "c": None, "selection_mean_steps": None, "cells": tried}
-    return {"b": best[0], "c": best[1], "selection_mean_steps": best_cost / len(streams), "cells": tried}
+    return {"b": best[0], "c": best[1], "selection_mean_steps": total / len(streams), "cells": tried}
 
 
 def scan_n(kernel: str, noise: bool, b: float, c: float, runs: int, seeds=(0,), *, grid_n=GRID_N,
@@ -142,14 +151,10 @@ def scan_n(kernel: str, noise: bool, b: float, c: float, runs: int, seeds=(0,), 
     run reaches delta."""
     ns = ([int(first)] if first is not None else []) + [int(n) for n in grid_n]
     streams = _streams(runs, seeds)
-    best, best_cost = None, math.inf
-    for n in dict.fromkeys(ns):
-        cost = _cell_cost(kernel, n, b, c, noise, streams, variance, n, best_cost)
-        if cost is not None:
-            best, best_cost = n, n * cost
+    best, total, _ = _best_cell(ns, lambda n: (n, b, c), lambda n: n, kernel, noise, streams, variance)
     if best is None:
         return {"n": None, "selection_mean_steps": None}
-    return {"n": best, "selection_mean_steps": best_cost / best / len(streams)}
+    return {"n": best, "selection_mean_steps": total / len(streams)}
 
 
 def run_cmaes(noise: bool, runs: int, seed: int = 0, *, reference: bool = False) -> dict:
