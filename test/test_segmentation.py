@@ -362,6 +362,31 @@ def test_robust_mode_forced_on_with_a_clean_plate(scene):
     assert iou(out, truth) >= 0.85
 
 
+@pytest.mark.parametrize("kernel", ["numpy", "numba"])
+def test_robust_pairs_added_one_sample_at_a_time_give_the_one_shot_estimate(kernel):
+    # the segmenter adds each learning image's agreements as it arrives (the pair work is spread
+    # over the learning frames); the finished estimate is the one-shot reference's
+    from isa_mocap_ros.vision.segmentation import _KERNELS, _robust_background_numpy
+
+    rng = np.random.default_rng(25)
+    stack = rng.integers(0, 256, (1, 20, 30, 3)) + rng.normal(0, 6, (9, 20, 30, 3))
+    hit = rng.random((9, 20, 30)) < 0.4
+    stack[hit] = rng.integers(0, 256, (int(hit.sum()), 3))
+    stack = np.clip(stack, 0, 255).astype(np.uint8)
+    _, _, pairs, finish = _KERNELS[kernel]
+    buf = np.zeros((12,) + stack.shape[1:], np.uint8)        # room for more samples than arrive
+    n, spread = np.ones(buf.shape[:3], np.int32), np.zeros(buf.shape[:3], np.int32)
+    for k, img in enumerate(stack):
+        buf[k] = img
+        pairs(buf, k, n, spread, 20.0)
+    got = finish(buf[:9], n[:9], spread[:9], 20.0)
+    want = _robust_background_numpy(stack, 20.0)
+    np.testing.assert_array_equal(got[2], want[2])
+    np.testing.assert_allclose(got[0], want[0], atol=1e-3)
+    np.testing.assert_allclose(got[1], want[1], rtol=1e-4, atol=1e-3)
+    assert not np.array_equal(n[:9], np.ones_like(n[:9]))    # samples did agree somewhere
+
+
 @pytest.mark.parametrize("channels", [3, 1])
 def test_robust_background_numba_agrees_with_numpy(channels):
     from isa_mocap_ros.vision.segmentation import _robust_background_numba, _robust_background_numpy

@@ -358,67 +358,110 @@ def _robust_background_numpy(stack, radius):
     return mu.astype(np.float32), var.astype(np.float32), count.astype(np.int32)
 
 
+def _robust_pairs_numpy(stack, k, n, spread, radius):
+    """Add the agreements of sample ``k`` with samples ``0..k-1`` to ``n`` and ``spread`` (K, H, W).
+
+    ``n`` starts at 1 (a sample agrees with itself), ``spread`` at 0: after every sample is added
+    they are the counts and distance sums of :func:`_robust_background_numpy`. Adding each sample
+    as it arrives spreads the K² / 2 pair work over the learning frames.
+    """
+    x = stack.astype(np.int16)
+    for j in range(k):
+        dist = np.abs(x[k] - x[j]).max(axis=-1)
+        a = dist <= radius
+        n[k] += a
+        n[j] += a
+        d = np.where(a, dist, 0).astype(n.dtype)
+        spread[k] += d
+        spread[j] += d
+
+
+def _robust_finish_numpy(stack, n, spread, radius):
+    """``(mu, var, count)`` of :func:`_robust_background_numpy` from the accumulated pairs."""
+    x = stack.astype(np.int16)
+    K = x.shape[0]
+    key = n.astype(np.int64) * (256 * K + 1) - spread          # count first, then spread
+    best = key.argmax(axis=0)                                    # (H, W), first on ties
+    xb = np.take_along_axis(x, best[None, ..., None], axis=0)    # (1, H, W, C)
+    inl = np.abs(x - xb).max(axis=-1) <= radius                  # (K, H, W)
+    count = inl.sum(axis=0)
+    w = inl[..., None].astype(np.float64)
+    mu = (w * x).sum(axis=0) / count[..., None]
+    var = (w * (x - mu) ** 2).sum(axis=0) / np.maximum(count - 1, 1)[..., None]
+    return mu.astype(np.float32), var.astype(np.float32), count.astype(np.int32)
+
+
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _robust_background_numba(stack, radius):  # pragma: no cover
-    # Same result as _robust_background_numpy. Each pair's distance is computed once (the
-    # relation is symmetric), branch-free along a row of one channel plane (vectorizable), rows in
-    # parallel: the estimate is on the real-time path (the segmentation node computes it for every
-    # view at the last learning frame).
+def _robust_pairs_numba(stack, k, n, spread, radius):  # pragma: no cover
+    # _robust_pairs_numpy, branch-free along a row of one channel plane, rows in parallel
+    K, H, W, C = stack.shape
+    for y in numba.prange(H):
+        pk = np.empty((C, W), np.int32)
+        for x in range(W):
+            for c in range(C):
+                pk[c, x] = stack[k, y, x, c]
+        d = np.empty(W, np.int32)
+        for j in range(k):
+            for x in range(W):
+                d[x] = abs(pk[0, x] - np.int32(stack[j, y, x, 0]))
+            for c in range(1, C):
+                for x in range(W):
+                    d[x] = max(d[x], abs(pk[c, x] - np.int32(stack[j, y, x, c])))
+            for x in range(W):
+                ok = np.int32(d[x] <= radius)
+                n[k, y, x] += ok
+                n[j, y, x] += ok
+                spread[k, y, x] += ok * d[x]
+                spread[j, y, x] += ok * d[x]
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _robust_finish_numba(stack, n, spread, radius):  # pragma: no cover
+    # _robust_finish_numpy, rows in parallel
     K, H, W, C = stack.shape
     mu = np.zeros((H, W, C), np.float32)
     var = np.zeros((H, W, C), np.float32)
     count = np.zeros((H, W), np.int32)
     for y in numba.prange(H):
-        planes = np.empty((K, C, W), np.int32)
-        for k in range(K):
-            for x in range(W):
-                for c in range(C):
-                    planes[k, c, x] = stack[k, y, x, c]
-        n = np.ones((K, W), np.int32)               # a sample agrees with itself at distance 0
-        spread = np.zeros((K, W), np.int32)
-        d = np.empty(W, np.int32)
-        for i in range(K):
-            for j in range(i + 1, K):
-                for x in range(W):
-                    d[x] = abs(planes[i, 0, x] - planes[j, 0, x])
-                for c in range(1, C):
-                    for x in range(W):
-                        d[x] = max(d[x], abs(planes[i, c, x] - planes[j, c, x]))
-                for x in range(W):
-                    ok = np.int32(d[x] <= radius)
-                    n[i, x] += ok
-                    n[j, x] += ok
-                    spread[i, x] += ok * d[x]
-                    spread[j, x] += ok * d[x]
         inl = np.empty(K, np.bool_)
         for x in range(W):
             best, best_spread, bi = -1, 0, 0
             for i in range(K):
-                if n[i, x] > best or (n[i, x] == best and spread[i, x] < best_spread):
-                    best, best_spread, bi = n[i, x], spread[i, x], i
+                if n[i, y, x] > best or (n[i, y, x] == best and spread[i, y, x] < best_spread):
+                    best, best_spread, bi = n[i, y, x], spread[i, y, x], i
             count[y, x] = best
             for j in range(K):
                 dj = 0
                 for c in range(C):
-                    dj = max(dj, abs(planes[bi, c, x] - planes[j, c, x]))
+                    dj = max(dj, abs(np.int32(stack[bi, y, x, c]) - np.int32(stack[j, y, x, c])))
                 inl[j] = dj <= radius
             for c in range(C):
                 m = 0.0
                 for j in range(K):
                     if inl[j]:
-                        m += planes[j, c, x]
+                        m += stack[j, y, x, c]
                 m /= best
                 v = 0.0
                 for j in range(K):
                     if inl[j]:
-                        v += (planes[j, c, x] - m) ** 2
+                        v += (stack[j, y, x, c] - m) ** 2
                 mu[y, x, c] = m
                 var[y, x, c] = v / max(best - 1, 1)
     return mu, var, count
 
 
-_KERNELS = {"numpy": (_foreground_numpy, _update_numpy, _robust_background_numpy),
-            "numba": (_foreground_numba, _update_numba, _robust_background_numba)}
+def _robust_background_numba(stack, radius):
+    """:func:`_robust_background_numpy` with the compiled pair and finish kernels."""
+    n = np.ones(stack.shape[:3], np.int32)
+    spread = np.zeros(stack.shape[:3], np.int32)
+    for k in range(1, stack.shape[0]):
+        _robust_pairs_numba(stack, k, n, spread, float(radius))
+    return _robust_finish_numba(stack, n, spread, float(radius))
+
+
+#: per kernel: foreground, model update, robust pairs (one new sample), robust finish
+_KERNELS = {"numpy": (_foreground_numpy, _update_numpy, _robust_pairs_numpy, _robust_finish_numpy),
+            "numba": (_foreground_numba, _update_numba, _robust_pairs_numba, _robust_finish_numba)}
 
 
 class BackgroundSegmenter:
@@ -460,7 +503,9 @@ class BackgroundSegmenter:
         self._mu = self._var = None
         self._cv = None
         self._n_learnt = 0  # images the model has learnt from before segmenting
-        self._samples: list[np.ndarray] = []   # learning images kept for the robust estimate
+        self._samples = None       # (S, H, W, C) uint8: learning images kept for the robust estimate
+        self._n_samples = 0        # of them filled
+        self._pairs = None         # (n, spread) (S, H, W) int32: their agreements so far
         self._reliable = None      # robust mode: (H, W) uint8 1 where the background is known
         self._vote_sigma = 0.0     # robust mode: sigma of the vote window (0: not chosen yet)
         self._vote_norm = None     # robust mode: reliable pixels per vote window
@@ -598,7 +643,7 @@ class BackgroundSegmenter:
                 self._sum = np.zeros(img.shape, np.float64)
                 self._sumsq = np.zeros(img.shape, np.float64)
             if c.robust != "off" and self._n_learnt in _sample_indices(c.learn_frames):
-                self._samples.append(img.copy())
+                self._add_sample(img)
             imgf = img.astype(np.float32)
             self._sum += imgf
             self._sumsq += np.square(imgf, dtype=np.float64)
@@ -635,6 +680,20 @@ class BackgroundSegmenter:
             bool(c.shadow_suppression), np.float32(c.shadow_min_brightness),
             np.float32(c.shadow_max_brightness), np.float32(c.shadow_chroma_threshold) ** 2)
 
+    def _add_sample(self, img: np.ndarray) -> None:
+        """Keep a learning image for the robust estimate and add its agreements with the earlier
+        ones (the pair work is done as the images arrive, not all at the last learning frame)."""
+        if self._samples is None:
+            S = len(_sample_indices(self.config.learn_frames))
+            self._samples = np.empty((S,) + img.shape, np.uint8)
+            self._pairs = (np.ones((S,) + img.shape[:2], np.int32), np.zeros((S,) + img.shape[:2], np.int32))
+            self._n_samples = 0
+        k = self._n_samples
+        self._samples[k] = img
+        self._n_samples += 1
+        if k:
+            _KERNELS[self.config.kernel][2](self._samples, k, *self._pairs, float(self.config.robust_radius))
+
     def _finish_learning(self) -> None:
         """Mean / variance of the learning images; the robust estimate and the mode decision."""
         c = self.config
@@ -647,10 +706,13 @@ class BackgroundSegmenter:
         self._mu = mu.astype(np.float32)
         self._var = var.astype(np.float32)
         self._sum = self._sumsq = None
-        if not self._samples:
+        if not self._n_samples:
             return
-        samples, self._samples = np.stack(self._samples), []
-        rmu, rvar, count = _KERNELS[c.kernel][2](samples, float(c.robust_radius))
+        samples, (n, spread) = self._samples[:self._n_samples], self._pairs
+        self._samples = self._pairs = None
+        self._n_samples = 0
+        rmu, rvar, count = _KERNELS[c.kernel][3](samples, n[:len(samples)], spread[:len(samples)],
+                                                 float(c.robust_radius))
         reliable = (count >= min(2, len(samples))).astype(np.uint8)
         if not reliable.any():
             reliable[:] = 1
