@@ -7,6 +7,7 @@ from isa_mocap_ros.body import capsule_endpoints, joint_positions, make_model
 from isa_mocap_ros.body.motion import generate_motion
 from isa_mocap_ros.geometry import exp_so3, log_so3
 from isa_mocap_ros.tracking import Tracker, TrackerConfig, TrackerError
+from isa_mocap_ros.tracking import pelvis as pelvis_mod
 from isa_mocap_ros.tracking.pelvis import PelvisMove
 from isa_mocap_ros.vision import default_rig, render_mask
 
@@ -43,6 +44,49 @@ def test_children_keep_their_world_pose(dof):
     np.testing.assert_allclose(hips, expect, atol=1e-9)
     # the unchanged root gives the pose back
     np.testing.assert_allclose(pm(x, x[None, :6])[0], x, atol=1e-9)
+
+
+@pytest.mark.skipif(pelvis_mod._quat_kernels is None, reason="scipy without _rotation_cy")
+@pytest.mark.parametrize("dof", [18, 28, 39])
+def test_compiled_path_is_rotation_bit_for_bit(dof):
+    """``around`` on scipy's compiled kernels and the written-out Hamilton product gives the doubles
+    of the ``Rotation`` formulation (large and small turns, the identity root, one row)."""
+    model = make_model(dof)
+    pm = PelvisMove(model)
+    rng = np.random.default_rng(100 + dof)
+    for t in range(60):
+        x = _random_pose(model, rng)
+        x[3:6] = rng.normal(0.0, 1.5, 3)
+        n = int(rng.integers(1, 60))
+        roots = np.repeat(x[None, :6], n, axis=0)
+        roots[:, 3:6] += rng.normal(0.0, [0.01, 0.3, 2.0][t % 3], (n, 3))
+        roots[0, 3:6] = 0.0 if t % 5 == 0 else roots[0, 3:6]
+        a = pm.around(x, compiled=False)(roots)
+        b = pm.around(x, compiled=True)(roots)
+        assert a.tobytes() == b.tobytes()
+    assert pm.around(x, compiled=True)(x[:6]).tobytes() == pm.around(x, compiled=False)(x[:6]).tobytes()
+
+
+def test_compose_quat_is_scipys():
+    """``Rotation.__mul__`` is the product of the held quaternions, normalised."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(5)
+    A, B = Rotation.from_quat(rng.normal(size=(500, 4))), Rotation.from_quat(rng.normal(size=(500, 4)))
+    p, q = A.as_quat(canonical=False), B.as_quat(canonical=False)
+    for b, qb in ((B, q), (B[:1], q[:1])):
+        want = (A * b).as_quat(canonical=False)
+        got = Rotation.from_quat(pelvis_mod._compose_quat(p, qb)).as_quat(canonical=False)
+        assert want.tobytes() == got.tobytes()
+
+
+def test_compiled_unavailable_is_named(monkeypatch):
+    monkeypatch.setattr(pelvis_mod, "_quat_kernels", None)
+    pm = PelvisMove(make_model(18))
+    x = make_model(18).rest_pose()
+    with pytest.raises(ValueError, match="compiled"):
+        pm.around(x, compiled=True)
+    np.testing.assert_allclose(pm(x, x[None, :6])[0], x, atol=1e-9)     # falls back to Rotation
 
 
 @pytest.fixture(scope="module")
