@@ -180,3 +180,39 @@ def test_view_left_empty_by_the_gate_is_skipped(scene):
     res = tr.step(only_blobs, 2)
     assert res.fell_back and res.views_used == 0 and res.n_evals == 0
     assert sum("empty mask after the gate" in n for n in res.notes) == 4
+
+
+@pytest.mark.parametrize("rule", ["components", "pixels"])
+def test_gate_is_the_reference_formulation(scene, rule):
+    """The gate's shortcuts (uint8 views of the boolean masks, the lookup table, ``f`` when every
+    component touches) give the masks of the plain formulation: components touching the grown
+    silhouette, ``touching[labels]``, bit for bit; random blobs near and far, bool and uint8 input."""
+    import cv2
+
+    model, cams, walk, masks = scene
+    rng = np.random.default_rng(3)
+    for t in range(N_FRAMES):
+        mm = []
+        for m in masks[t]:
+            m = m.copy()
+            for _ in range(5):
+                i, j = rng.integers(0, m.shape[0] - 12), rng.integers(0, m.shape[1] - 12)
+                m[i:i + rng.integers(1, 12), j:j + rng.integers(1, 12)] = 200
+            mm.append(m if t % 2 else m > 0)
+        margin = [0, 2, 6, 30][t % 4]
+        g = gate_masks(mm, cams, model, walk[t], margin, rule=rule)
+        sil = predicted_silhouettes(model, cams, walk[t], margin_px=margin)
+        for m, s, out, lost in zip(mm, sil, g.masks, g.lost_px):
+            f, near = np.asarray(m) > 0, s > 0
+            if margin == 0:
+                keep = f
+            elif rule == "pixels":
+                keep = f & near
+            else:
+                n, labels = cv2.connectedComponents(f.astype(np.uint8), connectivity=8)
+                touching = np.zeros(n, bool)
+                touching[np.unique(labels[near & f])] = True
+                touching[0] = False
+                keep = touching[labels]
+            np.testing.assert_array_equal(out, keep.astype(np.uint8) * np.uint8(255))
+            assert lost == np.count_nonzero(f) - np.count_nonzero(keep)
