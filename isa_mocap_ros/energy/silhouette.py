@@ -379,7 +379,7 @@ class SilhouetteEnergy:
             else:
                 cov[k, :sc.height, :sc.width] = cv2.resize(F[v].astype(np.float32), (sc.width, sc.height),
                                                            interpolation=cv2.INTER_AREA)
-            vv, uu = np.nonzero(F[v])                       # raster order
+            vv, uu = np.divmod(np.flatnonzero(F[v]), F[v].shape[1])   # np.nonzero(F[v]) (raster order), 10x faster
             n = vv.size
             fg_area[k] = _normalized_area(cam, uu, vv)
             if M == 0:
