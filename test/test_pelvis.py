@@ -68,16 +68,19 @@ def test_compiled_path_is_rotation_bit_for_bit(dof):
 
 
 def test_compose_quat_is_scipys():
-    """``Rotation.__mul__`` is the product of the held quaternions, normalised."""
+    """``Rotation.__mul__`` is the product of the held quaternions, normalised; the compiled product
+    (every ``p_i`` with every ``q_c``) gives its doubles."""
     from scipy.spatial.transform import Rotation
 
     rng = np.random.default_rng(5)
-    A, B = Rotation.from_quat(rng.normal(size=(500, 4))), Rotation.from_quat(rng.normal(size=(500, 4)))
+    A, B = Rotation.from_quat(rng.normal(size=(2000, 4))), Rotation.from_quat(rng.normal(size=(3, 4)))
     p, q = A.as_quat(canonical=False), B.as_quat(canonical=False)
-    for b, qb in ((B, q), (B[:1], q[:1])):
-        want = (A * b).as_quat(canonical=False)
-        got = Rotation.from_quat(pelvis_mod._compose_quat(p, qb)).as_quat(canonical=False)
-        assert want.tobytes() == got.tobytes()
+    got = pelvis_mod._compose_quat(p, q)
+    assert got.shape == (3 * 2000, 4)
+    for c in range(3):
+        want = (A * B[c:c + 1]).as_quat(canonical=False)
+        assert Rotation.from_quat(got[c * 2000:(c + 1) * 2000]).as_quat(canonical=False).tobytes() \
+            == want.tobytes()
 
 
 def test_compiled_unavailable_is_named(monkeypatch):
