@@ -192,3 +192,15 @@ def test_pixel_noise_switches_the_node_to_the_robust_mode(spawn, rosenv, tmp_pat
     assert seg.stop() == 0
     out = seg.output()
     assert out.count("-> robust mode on") == 2, out
+
+
+def test_unquoted_yaml_off_for_a_string_parameter_is_one_clear_line(spawn, tmp_path):
+    # YAML reads `robust: off` as the boolean false; the node says so in one line and exits 2
+    params = tmp_path / "p.yaml"
+    params.write_text("/mocap/segmentation:\n  ros__parameters:\n    robust: off\n")
+    seg = spawn("segmentation", *NODE, "--params-file", str(params))
+    assert seg.popen.wait(60) == 2
+    out = seg.output()
+    assert 'parameter robust: expected a str, received bool False' in out, out
+    assert 'quote the value, e.g. robust: "off"' in out, out
+    assert "Traceback" not in out, out

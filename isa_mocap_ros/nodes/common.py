@@ -21,6 +21,7 @@ from typing import Any, Callable, Iterator
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos_overriding_options import QoSOverridingOptions
@@ -58,7 +59,16 @@ def declare(node: Node, name: str, default: Any, description: str, *, lo: float 
         d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
     elif lo is not None:
         d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
-    return node.declare_parameter(name, default, d).value
+    try:
+        return node.declare_parameter(name, default, d).value
+    except InvalidParameterTypeException:
+        # one line (run_node prints ValueErrors) instead of rclpy's traceback; YAML reads unquoted
+        # on/off/yes/no/true/false as booleans, the usual way a string parameter receives a bool
+        given = getattr(getattr(node, "_parameter_overrides", {}).get(name), "value", None)
+        hint = (f' (YAML reads unquoted on/off/yes/no as booleans: quote the value, e.g. {name}: "off")'
+                if isinstance(default, str) and isinstance(given, bool) else "")
+        raise ValueError(f"parameter {name}: expected a {type(default).__name__}, received "
+                         f"{type(given).__name__} {given!r}{hint}") from None
 
 
 class ProblemLog:
