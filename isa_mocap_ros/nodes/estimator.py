@@ -91,9 +91,10 @@ class EstimatorNode(Node):
         sync = declare(self, "sync", "exact", "frame-set matching: exact or approximate")
         queue = declare(self, "queue_size", 10, "stamps kept per view while synchronizing", lo=1, hi=1000)
         slop_s = declare(self, "slop_s", 0.01, "approximate sync window, seconds", lo=0.0, hi=10.0)
-        self.tracker_threads = declare(self, "tracker_threads", 0,
+        self.tracker_threads = declare(self, "tracker_threads", 1,
                                        "numba threads of the tracker's energy kernels (0 = numba's default, "
-                                       "all cores); results do not depend on it", lo=0, hi=256)
+                                       "all cores; 1 leaves the other cores to the rest of the network); "
+                                       "results do not depend on it", lo=0, hi=256)
         self.view_timeout_s = declare(self, "view_timeout_s", 1.0,
                                       "emit a partial frame set after this wait (0 = never)", lo=0.0, hi=60.0)
         min_views = declare(self, "min_views", 2, "views a partial frame set needs", lo=1, hi=64)
