@@ -85,3 +85,13 @@ def test_latest_slot_keeps_newest_and_counts_drops():
     for k in range(4):
         lock.put(k)
     assert [lock.take() for _ in range(4)] == [0, 1, 2, 3] and lock.dropped == 0
+
+
+def test_latest_slot_with_depth_keeps_the_newest_sets_in_order():
+    slot = LatestSlot(depth=2)
+    for k in range(5):
+        slot.put(k)
+    assert slot.dropped == 3 and [slot.take(), slot.take(), slot.take()] == [3, 4, None]
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(SyncError, match="depth: expected an integer >= 1"):
+            LatestSlot(depth=bad)

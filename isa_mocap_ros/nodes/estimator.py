@@ -100,6 +100,8 @@ class EstimatorNode(Node):
         min_views = declare(self, "min_views", 2, "views a partial frame set needs", lo=1, hi=64)
         self.lockstep = declare(self, "lockstep", False, "process every frame set (no dropping) and wait "
                                 "for the prediction of each frame")
+        self.backlog = declare(self, "backlog", 1, "real time: frame sets kept waiting while the tracker is busy "
+                               "(the newest; older ones are dropped)", lo=1, hi=100)
         self.use_prediction = declare(self, "use_prediction", True, "use prediction/joint_states when it arrives")
         self.prediction_wait_s = declare(self, "prediction_wait_s", 1.0,
                                          "lockstep: longest wait for a frame's prediction", lo=0.0, hi=60.0)
@@ -132,7 +134,7 @@ class EstimatorNode(Node):
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
                                       slop_ns=0 if sync == "exact" else int(slop_s * 1e9),
                                       max_wait_s=self.view_timeout_s, min_views=min(min_views, self.n_views))
-        self.slot = LatestSlot(keep_all=self.lockstep)
+        self.slot = LatestSlot(keep_all=self.lockstep, depth=self.backlog)
         self.threads_in_use = 0          # numba threads of the tracker's worker (set when it starts)
         self._cv = threading.Condition()
         self._intrinsics: list = [None] * self.n_views

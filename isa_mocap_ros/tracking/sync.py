@@ -157,22 +157,27 @@ class FrameSynchronizer:
 
 
 class LatestSlot:
-    """Real-time hand-over between the synchronizer and a slower worker: keeps only the newest set.
+    """Real-time hand-over between the synchronizer and a slower worker: keeps the newest sets.
 
-    ``put`` replaces an unprocessed set (counted in ``dropped``); ``take`` empties the slot. In
+    ``put`` appends a set; beyond ``depth`` sets waiting, the oldest are dropped (counted in
+    ``dropped``); ``take`` gives the oldest waiting set. ``depth=1`` keeps only the newest. In
     lockstep mode use ``keep_all=True``: every set is queued, none dropped.
     """
 
-    def __init__(self, *, keep_all: bool = False) -> None:
+    def __init__(self, *, keep_all: bool = False, depth: int = 1) -> None:
+        if isinstance(depth, bool) or not isinstance(depth, int) or depth < 1:
+            raise SyncError(f"depth: expected an integer >= 1, received {depth!r}")
         self.keep_all = keep_all
+        self.depth = depth
         self._items: list = []
         self.dropped = 0
 
     def put(self, item) -> None:
-        if not self.keep_all and self._items:
-            self.dropped += len(self._items)
-            self._items.clear()
         self._items.append(item)
+        if not self.keep_all and len(self._items) > self.depth:
+            n = len(self._items) - self.depth
+            self.dropped += n
+            del self._items[:n]
 
     def take(self):
         return self._items.pop(0) if self._items else None
