@@ -18,7 +18,7 @@ def register(sub) -> None:
     bsub.required = True
     for name in BENCHES:
         mod = importlib.import_module(f"isa_mocap_ros.cli.bench_{name}")
-        bp = bsub.add_parser(name, help=(mod.__doc__ or "").strip().splitlines()[0])
+        bp = bsub.add_parser(name, help=(mod.__doc__ or "").strip().splitlines()[0].replace("%", "%%"))
         mod.add_arguments(bp)
         bp.set_defaults(func=mod.run)
     from isa_mocap_ros.cli import bench_results
