@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import threading
 import time
+from collections import deque
 
 import numpy as np
 import yaml
@@ -145,8 +146,9 @@ class EstimatorNode(Node):
         self.tracker = None
         self.frames_done = 0
         self.last_result = None
-        self.latencies_ms: list[float] = []
-        self.step_ms: list[float] = []   # Tracker.step wall time per tracked set (diagnostics)
+        # the last 300 of each, for the 1 Hz diagnostics' percentiles
+        self.latencies_ms: deque[float] = deque(maxlen=300)
+        self.step_ms: deque[float] = deque(maxlen=300)   # Tracker.step wall time per tracked set
         self._published_any = False
         self._stop = threading.Event()
 
@@ -434,10 +436,10 @@ class EstimatorNode(Node):
     def _publish_diagnostics(self) -> None:
         st = DiagnosticStatus(name="isa_mocap_ros: estimator", hardware_id=self.body_id)
         r = self.last_result
-        lat = np.array(self.latencies_ms[-300:])
+        lat = np.array(self.latencies_ms)
         p50, p95 = (float(np.percentile(lat, 50)), float(np.percentile(lat, 95))) if lat.size else (0.0, 0.0)
         # the tracker's own time per tracked set: above the frame period, the tracker alone drops sets
-        steps = np.array(self.step_ms[-300:])
+        steps = np.array(self.step_ms)
         t50, t95 = (float(np.percentile(steps, 50)), float(np.percentile(steps, 95))) if steps.size else (0.0, 0.0)
         values = {
             "frames": self.frames_done, "dropped_frame_sets": self.slot.dropped,

@@ -365,7 +365,7 @@ def _robust_pairs_numpy(stack, k, n, spread, radius):
     they are the counts and distance sums of :func:`_robust_background_numpy`. Adding each sample
     as it arrives spreads the K² / 2 pair work over the learning frames.
     """
-    x = stack.astype(np.int16)
+    x = stack[:k + 1].astype(np.int16)       # the samples so far (the buffer may hold more)
     for j in range(k):
         dist = np.abs(x[k] - x[j]).max(axis=-1)
         a = dist <= radius
@@ -687,7 +687,6 @@ class BackgroundSegmenter:
             S = len(_sample_indices(self.config.learn_frames))
             self._samples = np.empty((S,) + img.shape, np.uint8)
             self._pairs = (np.ones((S,) + img.shape[:2], np.int32), np.zeros((S,) + img.shape[:2], np.int32))
-            self._n_samples = 0
         k = self._n_samples
         self._samples[k] = img
         self._n_samples += 1
