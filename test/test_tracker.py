@@ -68,6 +68,34 @@ def test_automatic_initialization_on_first_step(scene):
     assert np.linalg.norm(r.x[:2] - walk[0][:2]) < 0.15
 
 
+def test_initialization_prunes_candidate_runs_part_way(scene):
+    # init_keep: every heading candidate's search runs to the first partition's end, then only the
+    # init_keep lowest go on. The runs kept end as unpruned runs (own streams): the frame's energy is
+    # never below the unpruned frame's, equal only with the same estimate; fewer evaluations.
+    model, cams, walk, masks = scene
+
+    def first(keep):
+        tr = Tracker(model, cams, TrackerConfig(evals_per_frame=300, init_refine_evals=100, seed=2, init_keep=keep))
+        r = tr.step(masks[0], 0)
+        assert r.initialized
+        return r
+
+    full = first(0)
+    assert any("4 heading candidates, 4 searched to the end" in n for n in full.notes)
+    same = first(4)
+    np.testing.assert_array_equal(same.x, full.x)
+    assert same.n_evals == full.n_evals
+    evals = []
+    for keep in (1, 2, 3):
+        r = first(keep)
+        assert any(f"4 heading candidates, {keep} searched to the end" in n for n in r.notes)
+        assert r.energy >= full.energy
+        if r.energy == full.energy:
+            np.testing.assert_array_equal(r.x, full.x)
+        evals.append(r.n_evals)
+    assert evals[0] < evals[1] < evals[2] < full.n_evals
+
+
 def test_fallbacks_never_raise_and_say_why(scene):
     model, cams, walk, masks = scene
     tr = Tracker(model, cams, TrackerConfig(evals_per_frame=200, seed=0))
@@ -143,6 +171,7 @@ def test_search_box_respects_radius_and_limits(scene):
     ({"n_model_points": 0}, "n_model_points: expected an integer >= 1"),
     ({"n_mask_points": -1}, "n_mask_points: expected an integer >= 0"),
     ({"spread_velocity_gain": -0.5}, "spread_velocity_gain: expected a finite number >= 0"),
+    ({"init_keep": 1.5}, "init_keep: expected an integer >= 0"),
 ])
 def test_config_errors(kw, match):
     with pytest.raises(TrackerError, match=match):

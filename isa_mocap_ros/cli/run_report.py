@@ -133,6 +133,8 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
         # Tracker.step per tracked set, the estimator's 1 Hz figure over its last 300 of them
         "tracker_ms_p50": float(diag.get("tracker_ms_p50", "nan")),
         "tracker_ms_p95": float(diag.get("tracker_ms_p95", "nan")),
+        # Tracker.step of the set the automatic initialization ran on (nan: initialized otherwise)
+        "init_ms": float(diag.get("init_ms", "nan")),
         "bad_inputs": int(diag.get("bad_inputs", 0) or 0), "wall_seconds": round(wall_seconds, 1),
     }
     seq = read_sequence(bag, want_images=True, want_masks=False)

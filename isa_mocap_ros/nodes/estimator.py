@@ -149,6 +149,7 @@ class EstimatorNode(Node):
         # the last 300 of each, for the 1 Hz diagnostics' percentiles
         self.latencies_ms: deque[float] = deque(maxlen=300)
         self.step_ms: deque[float] = deque(maxlen=300)   # Tracker.step wall time per tracked set
+        self.init_ms = float("nan")     # Tracker.step wall time of the automatic initialization's set
         self._published_any = False
         self._stop = threading.Event()
 
@@ -381,6 +382,8 @@ class EstimatorNode(Node):
         self.last_result = result
         if result.x is not None and not result.fell_back and not result.initialized:
             self.step_ms.append(result.time_s * 1e3)   # tracked sets (not the initialization)
+        if result.initialized:
+            self.init_ms = result.time_s * 1e3
         if result.x is not None:
             with one_numba_thread():
                 self._publish(frame_set.stamp_ns, result)
@@ -448,7 +451,7 @@ class EstimatorNode(Node):
             "energy": getattr(r, "energy", float("nan")), "evaluations": getattr(r, "n_evals", 0),
             "views_used": getattr(r, "views_used", 0),
             "latency_ms_p50": p50, "latency_ms_p95": p95,
-            "tracker_ms_p50": t50, "tracker_ms_p95": t95,
+            "tracker_ms_p50": t50, "tracker_ms_p95": t95, "init_ms": self.init_ms,
             "problems": json.dumps(self.problems.counts),
         }
         st.level = DiagnosticStatus.OK if self.problems.total == 0 else DiagnosticStatus.WARN
