@@ -69,6 +69,7 @@ def test_run_processes_every_frame_set_and_writes_the_summary(runs):
     assert s0["optimizer"] == "isa" and s0["evals_per_frame"] == 300 and s0["model_dof"] == 39
     assert s0["tracker_threads"] == 1          # reported by the estimator (pipeline.yaml: 1)
     assert 0 < s0["tracker_ms_p50"] <= s0["tracker_ms_p95"]   # Tracker.step per tracked set, from /diagnostics
+    assert s0["init_ms"] > 0                   # the automatic initialization's set, from /diagnostics
     assert np.isfinite(s0["mpjpe_mm"]) and (base / "run0" / "knees_and_error.png").stat().st_size > 1000
     assert list((base / "run0" / "overlays").glob("*.png"))
 
