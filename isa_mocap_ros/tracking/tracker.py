@@ -769,23 +769,22 @@ class Tracker:
             rng = frame_rng(cfg.seed, frame_index) if j == 0 else frame_rng(cfg.seed, frame_index, 3, j)
             opt, budget, _, _, _ = self._search(pred, rng, cfg.init_spread_scale, notes if j == 0 else None,
                                                 stages=False)
-            # bind + iterate + result() is minimize(), split at the checkpoint
-            runs.append((j, opt.bind(_TotalEnergy(self), max_evals=budget), pred))
+            # bind + iterate + result() is minimize(), split at the checkpoint: the end of the first
+            # partition (hierarchical optimizers, whose shares bind() sets) or a sixth of the budget
+            opt.bind(_TotalEnergy(self), max_evals=budget)
+            shares = getattr(opt, "shares", None)
+            runs.append((j, opt, pred, shares[0] if shares else budget // 6))
+        n_pruned = 0
         if 0 < cfg.init_keep < len(runs):
-            for _, opt, _ in runs:
-                shares = getattr(opt, "shares", None)
-                checkpoint = shares[0] if shares else budget // 6
+            for _, opt, _, checkpoint in runs:
                 for _ in opt:
                     if opt.n_evals >= checkpoint:
                         break
             ranked = sorted(runs, key=lambda r: r[1].best_energy)      # stable: ties keep the start order
-            pruned = ranked[cfg.init_keep:]
+            n_pruned = sum(r[1].n_evals for r in ranked[cfg.init_keep:])
             runs = sorted(ranked[:cfg.init_keep], key=lambda r: r[0])
-            n_pruned = sum(r[1].n_evals for r in pruned)
-        else:
-            n_pruned = 0
         out = []
-        for j, opt, pred in runs:
+        for j, opt, pred, _ in runs:
             for _ in opt:
                 pass
             out.append((j, opt.result(), pred))
