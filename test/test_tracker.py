@@ -96,6 +96,95 @@ def test_initialization_prunes_candidate_runs_part_way(scene):
     assert evals[0] < evals[1] < evals[2] < full.n_evals
 
 
+@pytest.fixture(scope="module")
+def scene320():
+    """Six frames of a generated walk at 320x240 (the heading check needs the default resolution: at
+    160x120 and 300 evaluations both headings fit alike)."""
+    model = make_model(39)
+    rig = default_rig(width=320, height=240)
+    walk = generate_motion("walk", model, duration_s=0.5, fps=30, rng=np.random.default_rng(0))[:6]
+    masks = [[render_mask(c, capsule_endpoints(model, x)[0], model.capsule_radii) for c in rig.cameras]
+             for x in walk]
+    return model, rig.cameras, walk, masks
+
+
+def _heading_runs(scene, monkeypatch, *, wrong_first: bool, external=None, **cfg):
+    """Track scene320 from an automatic initialization; with ``wrong_first`` the initialized frame's
+    runs heading like the truth get 1.4x their energy, so a run facing the other way wins."""
+    import dataclasses
+
+    from isa_mocap_ros.tracking import tracker as T
+    from isa_mocap_ros.tracking.init import _wrap, _yaw_of
+
+    model, cams, walk, masks = scene
+    if wrong_first:
+        orig = T.Tracker._initial_runs
+        yaw = _yaw_of(walk[0][3:6])
+
+        def runs(self, starts, frame_index, notes):
+            out, n = orig(self, starts, frame_index, notes)
+            return [(j, dataclasses.replace(r, energy=1.4 * r.energy, best_energy=1.4 * r.best_energy)
+                     if abs(_wrap(_yaw_of(r.x[3:6]) - yaw)) < np.pi / 2 else r, p) for j, r, p in out], n
+        monkeypatch.setattr(T.Tracker, "_initial_runs", runs)
+    # init_confirm_ratio 1.5: here the right and the wrong heading end 29 % apart on the first frame
+    tr = Tracker(model, cams, TrackerConfig(seed=0, init_confirm_ratio=1.5, **cfg))
+    out = [tr.step(masks[0], 0)]
+    out += [tr.step(masks[k], k, prediction=(external or {}).get(k)) for k in range(1, len(masks))]
+    monkeypatch.undo()
+    err = frame_errors_mm(marker_positions(model, np.array([r.x for r in out])), marker_positions(model, walk))
+    return tr, out, err
+
+
+def _heading_notes(out):
+    return [n for r in out for n in r.notes if n.startswith("heading check")]
+
+
+def test_heading_check_keeps_a_right_first_heading_bit_for_bit(scene320, monkeypatch):
+    # the rival (the best run facing the other way, within init_confirm_ratio) is tracked beside the
+    # winner on the next frames: the winner's estimates do not change, the frames of the check count both
+    _, off, err_off = _heading_runs(scene320, monkeypatch, wrong_first=False, init_confirm_frames=0)
+    _, on, err_on = _heading_runs(scene320, monkeypatch, wrong_first=False)
+    assert err_off.max() < 60.0
+    for a, b in zip(off, on):
+        np.testing.assert_array_equal(a.x, b.x)
+    notes = _heading_notes(on)
+    assert notes[0].startswith("heading check: a run heading the other way ended") and \
+        notes[1].startswith("heading check: kept the initial heading")
+    checked = [k for k, r in enumerate(on) if any("kept the initial heading" in n for n in r.notes)][0]
+    assert [r.n_evals for r in on[1:checked + 1]] == [2 * 1500] * checked
+    assert all(r.n_evals == 1500 for r in on[checked + 1:])
+
+
+def test_heading_check_ends_at_a_gap(scene320):
+    # after a gap (real time: the sets that came during the initialization were dropped) both
+    # hypotheses are still catching up: the check ends there without stepping the rival
+    model, cams, walk, masks = scene320
+    tr = Tracker(model, cams, TrackerConfig(seed=0, init_confirm_ratio=1.5))
+    assert any("both tracked" in n for n in tr.step(masks[0], 0).notes)
+    r = tr.step(masks[2], 2, frames_elapsed=2)
+    assert r.n_evals == 1500 and any("ended without a decision (2 frame periods" in n for n in r.notes)
+    assert not any("heading check" in n for n in tr.step(masks[3], 3).notes)
+
+
+def test_heading_check_switches_from_a_wrong_first_heading(scene320, monkeypatch):
+    _, off, err_off = _heading_runs(scene320, monkeypatch, wrong_first=True, init_confirm_frames=0)
+    assert err_off.min() > 200.0                      # facing backwards: lost for good without the check
+    tr, on, err = _heading_runs(scene320, monkeypatch, wrong_first=True)
+    switched = [k for k, r in enumerate(on) if any("switched to the other heading" in n for n in r.notes)]
+    assert len(switched) == 1 and 1 <= switched[0] <= 3
+    k = switched[0]
+    assert err[:k].min() > 200.0 and err[k:].max() < 60.0
+    np.testing.assert_array_equal(tr.last_estimate, on[-1].x)
+    # an external prediction (made from the estimates before the switch) is ignored on the frame
+    # after it (AR order 1 looks back on two estimates), used again on the next
+    model, _, walk, _ = scene320
+    _, ext, _ = _heading_runs(scene320, monkeypatch, wrong_first=True, external={k + 1: walk[k + 1], k + 2: walk[k + 2]})
+    for j in range(k + 2):
+        np.testing.assert_array_equal(ext[j].x, on[j].x)
+    assert any("the external one follows the estimates from before" in n for n in ext[k + 1].notes)
+    assert not any("external" in n for n in ext[k + 2].notes) and not np.array_equal(ext[k + 2].x, on[k + 2].x)
+
+
 def test_fallbacks_never_raise_and_say_why(scene):
     model, cams, walk, masks = scene
     tr = Tracker(model, cams, TrackerConfig(evals_per_frame=200, seed=0))
@@ -172,6 +261,9 @@ def test_search_box_respects_radius_and_limits(scene):
     ({"n_mask_points": -1}, "n_mask_points: expected an integer >= 0"),
     ({"spread_velocity_gain": -0.5}, "spread_velocity_gain: expected a finite number >= 0"),
     ({"init_keep": 1.5}, "init_keep: expected an integer >= 0"),
+    ({"init_confirm_frames": -1}, "init_confirm_frames: expected an integer >= 0"),
+    ({"init_confirm_ratio": 0.9}, "init_confirm_ratio: expected a finite number >= 1.0"),
+    ({"init_confirm_margin": float("nan")}, "init_confirm_margin: expected a finite number >= 1.0"),
 ])
 def test_config_errors(kw, match):
     with pytest.raises(TrackerError, match=match):

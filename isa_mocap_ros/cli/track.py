@@ -66,6 +66,9 @@ def register(sub) -> None:
     p.add_argument("--gate-margin-px", type=int, default=None, metavar="PX",
                    help="mask gate: keep only foreground components within PX pixels of the predicted silhouette "
                         "(0 = off; default: the tracker's default)")
+    p.add_argument("--init-confirm-frames", type=int, default=None, metavar="N",
+                   help="heading check after the automatic initialization: frames an opposite-heading rival is "
+                        "tracked beside the winner (0 = off; default: the tracker's default)")
     p.add_argument("--overwrite", action="store_true", help="replace DIR/estimates if it exists")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -215,6 +218,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         cfg_kw["predictor"] = args.predictor
     if getattr(args, "gate_margin_px", None) is not None:
         cfg_kw["gate_margin_px"] = args.gate_margin_px
+    if getattr(args, "init_confirm_frames", None) is not None:
+        cfg_kw["init_confirm_frames"] = args.init_confirm_frames
     cfg = TrackerConfig(**cfg_kw)
     tracker = Tracker(model, seq.cameras, cfg, prior=prior)
     # as the node network: the prediction travels as JointState (roll/pitch/yaw root) and the
@@ -287,7 +292,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     summary: dict = {"bag": str(bag_path), "out": str(out), "optimizer": args.optimizer, "evals_per_frame": args.evals,
                      "stride": stride,
                      "optimizer_params": cfg.params(), "model_dof": model.dof, "seed": args.seed,
-                     "gate_margin_px": cfg.gate_margin_px,
+                     "gate_margin_px": cfg.gate_margin_px, "init_confirm_frames": cfg.init_confirm_frames,
                      "masks": "recorded" if use_masks else f"segmented (learned from {learn} frames)",
                      "frames_tracked": n_tracked, "frames_estimated": len(estimates), "frames_fell_back": n_fell_back,
                      "fps": n_tracked / t_track if t_track > 0 else float("nan"),

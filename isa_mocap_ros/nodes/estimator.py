@@ -85,6 +85,9 @@ class EstimatorNode(Node):
                        lo=0, hi=10_000)
         ahead = declare(self, "max_frames_ahead", tc.max_frames_ahead, "after frame sets this node could not keep up "
                         "with, its own prediction looks as many periods ahead, at most this many", lo=1.0, hi=1000.0)
+        confirm = declare(self, "init_confirm_frames", tc.init_confirm_frames, "heading check after the automatic "
+                          "initialization: frames an opposite-heading rival of similar energy is tracked beside the "
+                          "winner before the lower energy sum decides (0 = off)", lo=0, hi=100)
         predictor = declare(self, "predictor", tc.predictor, "ar, constant_pose or constant_velocity")
         order = declare(self, "predictor_order", tc.predictor_order, "AR order (past motions used; keep equal to the prediction node's order)", lo=1, hi=20)
         self.prior_eta = declare(self, "prior_eta", 0.0, "weight of the pose prior (0 = off)", lo=0.0, hi=1e6)
@@ -131,7 +134,7 @@ class EstimatorNode(Node):
                                      search_radius_rad=radius, predictor=predictor, predictor_order=order,
                                      prior_eta=self.prior_eta, prior_file=prior_file, pelvis_fraction=pelvis,
                                      limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs), gate_margin_px=gate,
-                                     max_frames_ahead=ahead)
+                                     max_frames_ahead=ahead, init_confirm_frames=confirm)
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
                                       slop_ns=0 if sync == "exact" else int(slop_s * 1e9),
                                       max_wait_s=self.view_timeout_s, min_views=min(min_views, self.n_views))

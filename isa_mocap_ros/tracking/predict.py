@@ -103,6 +103,11 @@ class _HistoryPredictor:
         return len(self._hist)
 
     @property
+    def capacity(self) -> int:
+        """Estimates the predictor looks back on (its history length)."""
+        return int(self._hist.maxlen)
+
+    @property
     def n_dof(self) -> int | None:
         """Length ``D`` of the pose vectors (fixed by the first estimate; None before)."""
         return self._n_dof

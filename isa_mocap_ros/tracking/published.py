@@ -43,3 +43,8 @@ class PublishedPredictor:
 
     def reset(self) -> None:
         self.predictor.reset()
+
+    @property
+    def capacity(self) -> int | None:
+        """The wrapped predictor's history length (None if it does not say)."""
+        return getattr(self.predictor, "capacity", None)

@@ -182,6 +182,33 @@ class TrackerConfig:
         frames of five motions the unpruned winner was pruned once (3 mm apart), with 2 kept 7
         times; bags/demo and the CMU walk, seeds 0-7, unchanged bit for bit
         (``docs/tracking.md``, "A cheaper initialization").
+    init_confirm_frames : int
+        **Heading check** after the automatic initialization. A standing silhouette looks nearly
+        the same from the front and from the back, so on the initialized frame the energies of
+        opposite headings can differ by less than the energy's noise (bags/demo, seed 6: the
+        winner faced backwards, 2 % below the right heading, and the whole run was lost). When the
+        best run whose final heading differs from the winner's by more than 90° has an energy
+        within ``init_confirm_ratio`` of the winner's, it is kept as a *rival* and tracked beside
+        the winner (its own predictor, the same frame streams and budget) for up to this many
+        frames: once the person moves, the wrong heading fits markedly worse (knees do not bend
+        forwards). After each frame the energy sums so far decide: a hypothesis whose sum is below
+        the other's by the factor ``init_confirm_margin`` wins; if neither does by the last frame,
+        the initial winner stays (so the check only acts on clear evidence: at low resolution and
+        budget both headings can fit alike). When the rival wins, the tracker takes over its state
+        and that frame's result is the rival's (a note says so; the frames before it stay as
+        estimated), and for as many frames as its predictor looks back it ignores external
+        predictions (made from the estimates before the switch). Frames of the check report both
+        hypotheses' evaluations and time. The check compares consecutive frames only: a frame that
+        comes after a gap (``step``'s ``frames_elapsed`` > 1, as in real time when the sets that
+        arrived during the initialization were dropped) ends it and keeps the winner, because
+        after a gap both hypotheses are still catching up and their energies decided wrongly
+        (measured). 0 turns it off (``docs/tracking.md``, "Checking the heading").
+    init_confirm_ratio : float
+        How close (>= 1, a factor on the winner's energy) the rival's energy on the initialized
+        frame must be for the heading check to run. Default 1.25.
+    init_confirm_margin : float
+        Factor (>= 1) by which a hypothesis' energy sum must be below the other's to decide the
+        heading check. Default 1.1.
     pelvis_fraction : float
         Share of the frame budget spent, after the main search, on the **pelvis stage**
         (:mod:`.pelvis`): the configured algorithm re-fits the 6 root DOF with the root's child
@@ -249,6 +276,9 @@ class TrackerConfig:
     init_refine_evals: int = 400
     init_spread_scale: float = 2.0
     init_keep: int = 3
+    init_confirm_frames: int = 3
+    init_confirm_ratio: float = 1.25
+    init_confirm_margin: float = 1.1
     pelvis_fraction: float = 0.15
     limb_proposals: int = 16
     limb_proposal_limbs: tuple = ("left_arm", "right_arm")
@@ -296,6 +326,9 @@ class TrackerConfig:
         _check_number("init_refine_evals", self.init_refine_evals, lo=0, integer=True)
         _check_number("init_spread_scale", self.init_spread_scale, lo=0.0, strict=True)
         _check_number("init_keep", self.init_keep, lo=0, integer=True)
+        _check_number("init_confirm_frames", self.init_confirm_frames, lo=0, integer=True)
+        _check_number("init_confirm_ratio", self.init_confirm_ratio, lo=1.0)
+        _check_number("init_confirm_margin", self.init_confirm_margin, lo=1.0)
         _check_number("pelvis_fraction", self.pelvis_fraction, lo=0.0)
         if self.pelvis_fraction >= 1.0:
             raise TrackerError(f"pelvis_fraction: expected a share in [0, 1), received {self.pelvis_fraction!r}")
@@ -447,6 +480,11 @@ class Tracker:
                             ("root", "torso", "left_arm", "right_arm", "left_leg", "right_leg")
                             if k in model.partitions]
         self.frames = 0
+        # the heading check after an automatic initialization (config.init_confirm_frames)
+        self._rival_start: tuple[np.ndarray, float, float] | None = None   # (pose, energy, winner's energy)
+        self._rival: Tracker | None = None
+        self._confirm = [0, 0.0, 0.0]      # frames compared, energy sums: this tracker, the rival
+        self._own_prediction_frames = 0    # frames left that ignore external predictions (after a switch)
 
     # ------------------------------------------------------------------ state
     @property
@@ -464,6 +502,8 @@ class Tracker:
         self._elapsed = 0.0
         self._masks_last = None
         self.predictor.reset()
+        self._rival_start = self._rival = None
+        self._own_prediction_frames = 0
 
     def total_energy(self, X) -> np.ndarray:
         """Data term plus the prior ``−η ln p`` (13.33) of poses ``(n, D)`` under the current masks."""
@@ -636,6 +676,10 @@ class Tracker:
         """
         D = self.model.dof
         p = None
+        if external is not None and self._own_prediction_frames > 0:
+            notes.append("prediction: the external one follows the estimates from before the heading check's "
+                         "switch; using the tracker's own")
+            external = None
         if external is not None:
             try:
                 p = np.asarray(external, dtype=float)
@@ -914,6 +958,57 @@ class Tracker:
             out.append(m)
         return out
 
+    def _final_pose(self, res) -> tuple[np.ndarray, float]:
+        """The estimate of an optimizer result (``config.estimate``) in the model's limits, rotation
+        vectors shortened (|r| <= pi), and its energy."""
+        if self.config.estimate == "best" or not np.all(np.isfinite(res.x)):
+            x, energy = res.best_x, res.best_energy
+        else:
+            x, energy = res.x, res.energy
+        x = np.clip(np.array(x, dtype=float), self.model.lower, self.model.upper)
+        for blk in self.model.rotation_blocks:      # |r| <= pi: turning on and on never meets the limits
+            idx = list(blk)
+            x[idx] = nearest_rotvec(x[idx], np.zeros(3))
+        return x, float(energy)
+
+    def _pick_rival(self, runs: list, winner, x: np.ndarray, energy: float):
+        """The heading check's rival among the initialized frame's runs (``config.init_confirm_frames``):
+        the lowest-energy run heading more than 90° away from the winner's estimate ``x``, if its
+        energy is within ``config.init_confirm_ratio`` of ``energy``; else None."""
+        from .init import _wrap, _yaw_of
+
+        if 3 not in {len(b) for b in self.model.rotation_blocks} or not np.isfinite(energy):
+            return None
+        yaw = _yaw_of(x[3:6])
+        best = None
+        for _, res, _ in runs:
+            if res is winner:
+                continue
+            xr, er = self._final_pose(res)
+            if abs(float(_wrap(_yaw_of(xr[3:6]) - yaw))) > np.pi / 2 and np.isfinite(er) \
+                    and (best is None or er < best[1]):
+                best = (xr, er)
+        if best is None or best[1] > self.config.init_confirm_ratio * max(energy, 0.0):
+            return None
+        return best[0], best[1], energy
+
+    def _start_rival(self, frame_index: int) -> None:
+        """A second tracker (same model, cameras, configuration and energy; a fresh predictor of this
+        one's kind) at the rival's pose of the initialized frame."""
+        import copy
+
+        xr, _, _ = self._rival_start
+        self._rival_start = None
+        predictor = copy.deepcopy(self.predictor, memo={id(self.model): self.model})
+        predictor.reset()
+        rival = Tracker(self.model, self.cameras, dataclasses.replace(self.config, init_confirm_frames=0),
+                        prior=self.prior, energy=self.energy, predictor=predictor)
+        rival.initialize(pose=xr, frame_index=frame_index)
+        rival._elapsed = self._elapsed
+        rival._masks_last = self._masks_last
+        self._rival = rival
+        self._confirm = [0, 0.0, 0.0]
+
     def step(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1) -> FrameResult:
         """Track one frame (see the module docstring). Never raises on bad masks or predictions.
 
@@ -932,6 +1027,71 @@ class Tracker:
         -------
         FrameResult
         """
+        t0 = time.perf_counter()
+        rival = self._rival
+        res = self._step(masks, frame_index, prediction=prediction, frames_elapsed=frames_elapsed)
+        if self._own_prediction_frames > 0:
+            self._own_prediction_frames -= 1
+        if res.initialized:
+            self._rival = None
+            if self._rival_start is not None:
+                e_rival, e_win = self._rival_start[1], self._rival_start[2]
+                self._start_rival(frame_index)
+                return dataclasses.replace(res, notes=res.notes + (
+                    f"heading check: a run heading the other way ended {e_rival:.4g} (winner {e_win:.4g}); both "
+                    f"tracked for up to {self.config.init_confirm_frames} frames",))
+            return res
+        if rival is None or rival is not self._rival:
+            return res
+        if frames_elapsed != 1:
+            # after a gap both hypotheses are still catching up and their energies say little (real
+            # time, the sets that arrived during the initialization dropped: wrong switches measured)
+            self._rival = None
+            return dataclasses.replace(res, notes=res.notes + (
+                f"heading check: ended without a decision ({frames_elapsed:g} frame periods since the last frame; "
+                "it compares consecutive frames only); kept this heading",))
+        return self._confirm_heading(res, masks, frame_index, frames_elapsed, t0)
+
+    def _confirm_heading(self, res: FrameResult, masks, frame_index: int, frames_elapsed: float,
+                         t0: float) -> FrameResult:
+        """One frame of the heading check: step the rival on the same masks, add both energies, decide
+        (see ``TrackerConfig.init_confirm_frames``); the frame's result (the rival's when it wins)."""
+        cfg = self.config
+        rival = self._rival
+        other = rival._step(masks, frame_index, prediction=None, frames_elapsed=frames_elapsed)
+        n_evals = res.n_evals + other.n_evals
+        if res.fell_back and other.fell_back:       # nothing to compare this frame
+            return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0)
+        if res.fell_back != other.fell_back or not (np.isfinite(res.energy) and np.isfinite(other.energy)):
+            self._rival = None
+            return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0, notes=res.notes + (
+                "heading check: ended without a decision (only one hypothesis could be tracked); kept this one",))
+        c = self._confirm
+        c[0] += 1
+        c[1] += res.energy
+        c[2] += other.energy
+        margin = cfg.init_confirm_margin
+        sums = f"energy sums over {c[0]} frame(s) {c[1]:.4g} vs {c[2]:.4g} for the other heading"
+        if c[2] > margin * c[1] or (c[0] >= cfg.init_confirm_frames and not c[1] > margin * c[2]):
+            self._rival = None
+            return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0,
+                                       notes=res.notes + (f"heading check: kept the initial heading ({sums})",))
+        if not c[1] > margin * c[2]:
+            return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0)
+        # the rival wins: take over its state; external predictions were made from this tracker's
+        # estimates, so they are ignored while the predictor's history still holds any of them
+        self._rival = None
+        self._last, self._elapsed = rival._last, rival._elapsed
+        self._masks_last, self._masks_now = rival._masks_last, rival._masks_now
+        self.predictor = rival.predictor
+        cap = getattr(self.predictor, "capacity", None)
+        self._own_prediction_frames = (int(cap) if cap is not None else cfg.predictor_order + 1) - 1
+        return dataclasses.replace(other, n_evals=n_evals, time_s=time.perf_counter() - t0, notes=other.notes + (
+            f"heading check: switched to the other heading ({sums}); the frames before were estimated facing "
+            "the wrong way",))
+
+    def _step(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1) -> FrameResult:
+        """:meth:`step` for one hypothesis (without the heading check's rival)."""
         t0 = time.perf_counter()
         if isinstance(frame_index, bool) or not isinstance(frame_index, (int, np.integer)) or frame_index < 0:
             raise TrackerError(f"frame_index: expected an integer >= 0, received {frame_index!r}")
@@ -995,14 +1155,9 @@ class Tracker:
         if initialized:
             notes.append(f"initialized automatically ({len(starts)} heading candidates, {len(runs)} searched to the "
                          f"end, grid best yaw {np.rad2deg(res0.yaw):.0f} deg {res0.variant}, {n_evals} evaluations)")
-        if cfg.estimate == "best" or not np.all(np.isfinite(res.x)):
-            x, energy = res.best_x, res.best_energy
-        else:
-            x, energy = res.x, res.energy
-        x = np.clip(np.array(x, dtype=float), self.model.lower, self.model.upper)
-        for blk in self.model.rotation_blocks:      # |r| <= pi: turning on and on never meets the limits
-            idx = list(blk)
-            x[idx] = nearest_rotvec(x[idx], np.zeros(3))
+        x, energy = self._final_pose(res)
+        if initialized and cfg.init_confirm_frames > 0:
+            self._rival_start = self._pick_rival(runs, res, x, energy)
         if res.n_nonfinite:
             notes.append(f"energy: {res.n_nonfinite} non-finite evaluations")
         spread_out = res.history[-1].spread if res.history else float("nan")
