@@ -446,3 +446,21 @@ def test_after_a_long_gap_the_root_follows_the_foreground(scene):
     # a short gap extrapolates the motion instead
     r = tr.step(masks[4], 31, frames_elapsed=2)
     assert not any("root moved" in n for n in r.notes)
+
+
+def test_after_a_gap_from_the_first_estimate_the_root_follows_the_foreground(scene):
+    """A single estimate holds no motion (real time: the first set tracked after the automatic
+    initialization comes a few periods later): even a short gap moves the predicted root with the
+    foreground; once the motion is known a short gap extrapolates it."""
+    model, cams, walk, masks = scene
+    tr = Tracker(model, cams, TrackerConfig(evals_per_frame=300, init_refine_evals=100, seed=2, init_confirm_frames=0))
+    assert tr.step(masks[0], 0).initialized                           # automatic: the masks say where it was
+    far = walk[2].copy()
+    far[0] += 0.15                                                   # 15 cm further than the walk's frame 2
+    far_masks = [render_mask(c, capsule_endpoints(model, far)[0], model.capsule_radii) for c in cams]
+    r = tr.step(far_masks, 2, frames_elapsed=2)
+    moved = [n for n in r.notes if "root moved with the foreground" in n]
+    assert len(moved) == 1 and "2 frame periods" in moved[0]
+    assert abs(r.prediction[0] - far[0]) < 0.05, (r.prediction[0], far[0])
+    r = tr.step(masks[4], 4, frames_elapsed=2)
+    assert not any("root moved" in n for n in r.notes)

@@ -45,6 +45,11 @@ class PublishedPredictor:
         self.predictor.reset()
 
     @property
+    def n_estimates(self) -> int | None:
+        """The wrapped predictor's number of estimates held (None if it does not say)."""
+        return getattr(self.predictor, "n_estimates", None)
+
+    @property
     def capacity(self) -> int | None:
         """The wrapped predictor's history length (None if it does not say)."""
         return getattr(self.predictor, "capacity", None)

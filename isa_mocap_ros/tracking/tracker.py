@@ -245,7 +245,9 @@ class TrackerConfig:
         fell back), its own prediction looks that many periods ahead, but at most this many
         (>= 1; default 5, 1/6 s at 30 fps): past that, extrapolating the last motion says little,
         so the predicted root position is moved instead by how far the foreground's triangulated
-        centroid moved since the last estimate's frame (:meth:`Tracker._recentre`). The predictor
+        centroid moved since the last estimate's frame (:meth:`Tracker._recentre`). The same
+        happens after any gap while the predictor holds a single estimate (no motion known yet:
+        real time after the automatic initialization; ``docs/tracking.md``). The predictor
         still learns the motion per period from the true gap.
     """
 
@@ -713,16 +715,24 @@ class Tracker:
         gain = np.full(D, cfg.joint_velocity_gain)
         gain[:6] = cfg.root_velocity_gain
         out = self._last + gain * (p - self._last)        # damped extrapolation
-        if self._elapsed > cfg.max_frames_ahead:
+        if self._elapsed > cfg.max_frames_ahead or (self._elapsed > 1 and self._motion_unknown()):
             self._recentre(out, notes)
         return out
 
+    def _motion_unknown(self) -> bool:
+        """True when the predictor holds a single estimate (no motion to extrapolate: the frame after
+        the first, e.g. in real time after the sets that came during the initialization were dropped)."""
+        n = getattr(self.predictor, "n_estimates", None)
+        return n is not None and int(n) < 2
+
     def _recentre(self, pred: np.ndarray, notes: list[str]) -> None:
-        """After more frames than ``max_frames_ahead`` unseen, move the predicted root position (x, y)
-        by how far the foreground moved: the triangulated mask centroid (:func:`.init.root_from_masks`)
-        of this frame minus that of the last estimate's frame. Extrapolating the last motion over
-        such a gap says little (in real time the automatic initialization alone takes 7-10 frame
-        periods, and a person walking moves 0.3-0.5 m meanwhile), the foreground says where the body is."""
+        """After more frames than ``max_frames_ahead`` unseen — or after any gap when the predictor holds
+        a single estimate (the first estimate's frame: no motion to extrapolate) — move the predicted
+        root position (x, y) by how far the foreground moved: the triangulated mask centroid
+        (:func:`.init.root_from_masks`) of this frame minus that of the last estimate's frame.
+        Extrapolating the last motion over such a gap says little (in real time the automatic
+        initialization alone takes 4-10 frame periods, and a person walking moves 0.2-0.5 m
+        meanwhile), the foreground says where the body is."""
         if self._masks_last is None or self._masks_now is None:
             return
         try:
