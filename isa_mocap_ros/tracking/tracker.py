@@ -64,6 +64,7 @@ import numpy as np
 
 from isa_mocap_ros.geometry import nearest_rotvec
 
+from . import _fast_search
 from .gate import gate_masks
 from .init import InitError, initial_pose, root_from_masks
 from .limbs import LIMBS, LimbMove
@@ -487,6 +488,9 @@ class Tracker:
         self._rival: Tracker | None = None
         self._confirm = [0, 0.0, 0.0]      # frames compared, energy sums: this tracker, the rival
         self._own_prediction_frames = 0    # frames left that ignore external predictions (after a switch)
+        # h-isa on the fast energy runs compiled per partition (tracking/_fast_search.py, the same
+        # numbers as the optimizer protocol); False: always through the protocol (tests compare both)
+        self._compiled_search = True
 
     # ------------------------------------------------------------------ state
     @property
@@ -506,6 +510,9 @@ class Tracker:
         self.predictor.reset()
         self._rival_start = self._rival = None
         self._own_prediction_frames = 0
+
+    def _prior_active(self) -> bool:
+        return self.prior is not None and self.config.prior_eta > 0
 
     def total_energy(self, X) -> np.ndarray:
         """Data term plus the prior ``−η ln p`` (13.33) of poses ``(n, D)`` under the current masks."""
@@ -803,7 +810,10 @@ class Tracker:
         from isa_mocap_ros.optim import minimize
 
         opt, budget, share, limbs, (lo, hi, spread) = self._search(pred, rng, spread_scale, notes, stages)
-        res = minimize(opt, _TotalEnergy(self), max_evals=budget)
+        if self._compiled_search and _fast_search.supported(opt, self.energy, self._prior_active()):
+            res = _fast_search.run_hisa(opt, self.energy, budget)      # the same numbers, compiled per partition
+        else:
+            res = minimize(opt, _TotalEnergy(self), max_evals=budget)
         if share is not None:
             x, e, n = self.refit_pelvis(res.x, evals=share, rng=rng, bounds=(lo, hi), spread=spread)
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
@@ -823,6 +833,10 @@ class Tracker:
             rng = frame_rng(cfg.seed, frame_index) if j == 0 else frame_rng(cfg.seed, frame_index, 3, j)
             opt, budget, _, _, _ = self._search(pred, rng, cfg.init_spread_scale, notes if j == 0 else None,
                                                 stages=False)
+            if self._compiled_search and _fast_search.supported(opt, self.energy, self._prior_active()):
+                # compiled h-isa, paused after its first partition (the same numbers as below)
+                runs.append((j, _fast_search.HisaRun(opt, self.energy, budget), pred, None))
+                continue
             # bind + iterate + result() is minimize(), split at the checkpoint: the end of the first
             # partition (hierarchical optimizers, whose shares bind() sets) or a sixth of the budget
             opt.bind(_TotalEnergy(self), max_evals=budget)
@@ -831,6 +845,9 @@ class Tracker:
         n_pruned = 0
         if 0 < cfg.init_keep < len(runs):
             for _, opt, _, checkpoint in runs:
+                if checkpoint is None:
+                    opt.advance(1)
+                    continue
                 for _ in opt:
                     if opt.n_evals >= checkpoint:
                         break
@@ -838,7 +855,10 @@ class Tracker:
             n_pruned = sum(r[1].n_evals for r in ranked[cfg.init_keep:])
             runs = sorted(ranked[:cfg.init_keep], key=lambda r: r[0])
         out = []
-        for j, opt, pred, _ in runs:
+        for j, opt, pred, checkpoint in runs:
+            if checkpoint is None:
+                out.append((j, opt.advance().result(), pred))
+                continue
             for _ in opt:
                 pass
             out.append((j, opt.result(), pred))

@@ -1,0 +1,295 @@
+"""H-ISA on the fast silhouette energy with every generation compiled: the tracker's default search.
+
+The tracker's frame search is :class:`~isa_mocap_ros.optim.Hierarchical` over :class:`~isa_mocap_ros.optim.Isa`
+(``h-isa``, ~45 generations of 30 particles per frame) on the restricted silhouette energy of each
+partition. Through the optimizer protocol each generation is a dozen Python calls around the compiled
+pieces (ask, embed, check, kernel, record, weights, estimate, selection, mutation, diagnostics): about
+a fifth of a tracked frame's time went there. :func:`run_hisa` runs the same algorithm with one compiled
+call per partition: the same compiled helpers (:mod:`isa_mocap_ros.optim._fast`,
+:mod:`~isa_mocap_ros.optim._fast_so3`), the same energy kernels, the same random draws from the same
+``numpy.random.Generator`` (numba draws from its state exactly as numpy does), in the same order — so
+the result is the protocol's, bit for bit (``test/test_fast_search.py`` checks estimates, best
+particles, energies, diagnostics and the generator's state afterwards). What it covers, and the
+tracker checks before using it (:func:`supported`): inner ISA with multinomial replacement (kernels
+S1/S2/S3, either variance reading) and the adaptive schedule, the fast energy, no prior, no initial
+population; anything else runs through the protocol.
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from isa_mocap_ros.energy import _silhouette_kernel as _k
+from isa_mocap_ros.optim import _fast, _fast_so3
+from isa_mocap_ros.optim._base import GenerationInfo, Result
+
+__all__ = ["supported", "run_hisa", "HisaRun", "rotation_mean"]
+
+#: Inner ISA parameters this path implements (others: the protocol).
+_PARAMS = {"n_particles", "kernel", "schedule", "target_ess", "c", "rho", "variance", "resampling"}
+_KERNELS = {"s1": 1, "s2": 2, "s3": 3}
+
+
+def supported(opt, energy, prior_active: bool) -> bool:
+    """True when ``opt`` (an unbound :class:`~isa_mocap_ros.optim.Hierarchical`) and ``energy`` are what
+    :func:`run_hisa` implements."""
+    from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
+    from isa_mocap_ros.optim import Hierarchical
+
+    if prior_active or type(energy) is not SilhouetteEnergy or energy.method != "fast" or energy._frame is None:
+        return False
+    if type(opt) is not Hierarchical or getattr(opt, "inner_name", None) != "isa" or opt.n_iter != 0:
+        return False
+    p = opt.params
+    return (set(p) <= _PARAMS and p.get("kernel", "s1") in _KERNELS and p.get("schedule") == "adaptive"
+            and p.get("resampling", "multinomial") == "multinomial" and opt._initial_population is None
+            and opt.init == "normal" and opt.max_iter is None
+            and p.get("variance", "population") in ("population", "selected"))
+
+
+@numba.njit(cache=True)
+def rotation_mean(r, weights, n_iter, tol):  # pragma: no cover - compiled
+    """:func:`isa_mocap_ros.optim._rotations.rotation_mean` (13.24, then the representative nearest to
+    the start, ``geometry.nearest_rotvec``) of rotation vectors ``r (n, 3)``, compiled."""
+    w = weights / _fast.pairwise_sum(weights)
+    Ri = _fast_so3.exp_many(r)
+    start = r[np.argmax(w)].copy()
+    mean = start.copy()
+    for _ in range(n_iter):
+        delta = _fast_so3.relative_logs(mean, Ri)
+        step = np.dot(w, delta)
+        mean = _fast_so3.compose(mean, step)
+        if np.dot(step, step) < tol:
+            break
+    theta = np.sqrt(np.dot(mean, mean))
+    if theta < 1e-12:
+        return mean
+    axis = mean / theta
+    m = np.round((np.dot(axis, start) - theta) / (2.0 * np.pi))
+    if m == 0:
+        return mean
+    return axis * (theta + 2.0 * np.pi * m)
+
+
+@numba.njit(cache=True)
+def _tell(XF, E, rng, beta_prev, target, kernel, c, rho, lo, hi, population, block):  # pragma: no cover
+    """``Isa._tell`` (weights by the adaptive schedule, never decreasing; the weighted estimate with the
+    rotation mean of the local triple at ``block`` (< 0: none); fused selection and mutation) for
+    particles ``XF (n, d)`` (F order, as the hierarchy hands them over) with energies ``E``. Returns
+    (next particles, estimate, beta)."""
+    beta = _fast.adaptive_beta(E, target, 1e12, 1e-6)
+    if np.isfinite(beta_prev):
+        beta = max(beta, beta_prev)
+    n = E.size
+    W = np.empty(n)
+    _fast.annealed_weights(E, beta, W)
+    x = np.dot(W, XF)
+    if block >= 0:
+        x[block:block + 3] = rotation_mean(np.ascontiguousarray(XF[:, block:block + 3]), W, 20, 1e-12)
+    keep = np.zeros(n, np.bool_)
+    k = n
+    if kernel != 1:
+        k = _fast.keep_mask(W, rng.random(n), kernel == 3, keep)
+    v = rng.random(k)
+    v.sort()
+    Z = rng.standard_normal((n, XF.shape[1]))
+    return _fast.select_mutate(XF, W, keep, v, Z, c, rho, lo, hi, population), x, beta
+
+
+@numba.njit(cache=True)
+def _start(x0, spread, lo, hi, n, rng):  # pragma: no cover - compiled
+    """``Optimizer._draw_initial``: ``clip(x0 + Z * spread)``, ``Z`` standard normal ``(n, d)``."""
+    Z = rng.standard_normal((n, x0.size))
+    X = np.empty((n, x0.size))
+    for i in range(n):
+        for q in range(x0.size):
+            X[i, q] = min(max(x0[q] + Z[i, q] * spread[q], lo[q]), hi[q])
+    return X
+
+
+@numba.njit(cache=True)
+def _record(X, E, kk, xfull, best, best_x, stats, g, n_evals):  # pragma: no cover - compiled
+    """After a generation's kernel call: non-finite energies to +inf (counted), the truncated rows
+    +inf, the best particle, the hierarchy's diagnostics row ``stats[g]`` (n_evals, best energy, mean
+    finite energy, spread of the full particles). Returns the number of non-finite energies."""
+    bad = 0
+    for i in range(kk):
+        if not np.isfinite(E[i]):
+            E[i] = np.inf
+            bad += 1
+    for i in range(kk, E.size):
+        E[i] = np.inf
+    i = np.argmin(E)
+    if E[i] < best[0]:
+        best[0] = E[i]
+        best_x[:] = xfull[i]
+    mean_energy, spread = _fast.generation_stats(E, xfull)
+    stats[g, 0] = n_evals
+    stats[g, 1] = best[0]
+    stats[g, 2] = mean_energy
+    stats[g, 3] = spread
+    return bad
+
+
+@numba.njit(cache=True)
+def _embed(xbase, idx, Xs):  # pragma: no cover - compiled
+    """The full particles: ``xbase`` in every row, ``Xs`` in the columns ``idx``."""
+    n = Xs.shape[0]
+    X = np.empty((n, xbase.size))
+    for i in range(n):
+        X[i, :] = xbase
+        for q in range(idx.size):
+            X[i, idx[q]] = Xs[i, q]
+    return X
+
+
+@numba.njit(cache=True)
+def _partition_full(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c, rho, population, block,
+                    best, best_x, stats, g0, n_evals0, threads8, kargs):  # pragma: no cover - compiled
+    """One partition of the hierarchy, evaluated with the full kernel (``silhouette_batch``, arguments
+    ``kargs`` between the poses and ``n_chunks``). Returns (estimate, generations, evaluations,
+    non-finite, last full particles)."""
+    Xs = _start(x0, spread, lo, hi, n, rng)
+    used = 0
+    g = g0
+    bad = 0
+    beta = np.nan
+    x = x0.copy()
+    X = _embed(xbase, idx, Xs)
+    while used < share:
+        kk = min(n, share - used)
+        X = _embed(xbase, idx, Xs)
+        E = np.empty(n)
+        out = np.empty(kk)
+        _k.silhouette_batch(X if kk == n else X[:kk].copy(), *kargs, max(1, min(kk, threads8)), out)
+        E[:kk] = out
+        used += kk
+        bad += _record(X, E, kk, X, best, best_x, stats, g, n_evals0 + used)
+        Xs, x, beta = _tell(np.asfortranarray(Xs), E, rng, beta, target, kernel, c, rho, lo, hi, population, block)
+        g += 1
+    return x, g - g0, used, bad, X
+
+
+@numba.njit(cache=True)
+def _partition_restricted(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c, rho, population, block,
+                          best, best_x, stats, g0, n_evals0, threads8, kargs):  # pragma: no cover - compiled
+    """:func:`_partition_full` with the restricted kernel (``silhouette_restricted``, arguments
+    ``kargs``); returns -1 generations if the kernel flagged a row (never, by construction)."""
+    Xs = _start(x0, spread, lo, hi, n, rng)
+    used = 0
+    g = g0
+    bad = 0
+    beta = np.nan
+    x = x0.copy()
+    X = _embed(xbase, idx, Xs)
+    while used < share:
+        kk = min(n, share - used)
+        X = _embed(xbase, idx, Xs)
+        E = np.empty(n)
+        out = np.empty(kk)
+        _k.silhouette_restricted(X if kk == n else X[:kk].copy(), *kargs, max(1, min(kk, threads8)), out)
+        for i in range(kk):
+            if out[i] < 0.0:
+                return x, -1, used, bad, X
+        E[:kk] = out
+        used += kk
+        bad += _record(X, E, kk, X, best, best_x, stats, g, n_evals0 + used)
+        Xs, x, beta = _tell(np.asfortranarray(Xs), E, rng, beta, target, kernel, c, rho, lo, hi, population, block)
+        g += 1
+    return x, g - g0, used, bad, X
+
+
+class HisaRun:
+    """``opt.bind(energy, max_evals=...)`` then generations, compiled per partition: :meth:`advance` runs
+    partitions up to an index (the tracker's first frame pauses its candidate runs after the first
+    partition), :meth:`result` is ``opt.result()`` once every partition ran. The same draws from
+    ``opt.rng`` as the protocol. Counts the evaluations in ``energy.n_evals`` as the protocol does."""
+
+    def __init__(self, opt, energy, max_evals: int) -> None:
+        from isa_mocap_ros.optim import split_budget
+        from isa_mocap_ros.optim._base import OptimError
+
+        p = opt.params
+        self.n = n = int(p.get("n_particles", 50))
+        self.kernel = _KERNELS[p.get("kernel", "s1")]
+        self.target = float(p.get("target_ess", 0.5))
+        self.c = float(p.get("c", 0.8))
+        self.rho = float(p.get("rho", 1e-4))
+        self.population = p.get("variance", "population") == "population"
+        if n < 2 or not (0.0 < self.target <= 1.0) or not self.c > 0 or not self.rho >= 0:
+            raise OptimError(f"h-isa parameters out of range: n_particles={n}, target_ess={self.target}, "
+                             f"c={self.c}, rho={self.rho}")
+        self.opt, self.energy, self.max_evals = opt, energy, int(max_evals)
+        self.parts = opt.partitions
+        self.shares = split_budget(self.max_evals, [len(q) for q in self.parts])
+        if min(self.shares) < n:
+            k = int(np.argmin(self.shares))
+            raise OptimError(f"max_evals: partition {k} ({len(self.parts[k])} coordinates) gets {self.shares[k]} "
+                             f"evaluations, fewer than one generation of isa ({n})")
+        self.blocks = []
+        for q in self.parts:
+            local = {int(i): j for j, i in enumerate(q.tolist())}
+            own = [blk for blk in opt.rotation_blocks if set(blk) <= set(local)]
+            if len(own) > 1 or (own and [local[i] for i in own[0]] != list(range(local[own[0][0]],
+                                                                                 local[own[0][0]] + 3))):
+                raise OptimError("rotation_blocks: the compiled h-isa takes at most one consecutive triple per "
+                                 "partition")
+            self.blocks.append(local[own[0][0]] if own else -1)
+        self.xbase = opt.x0.copy()
+        self.best = np.array([np.inf])
+        self.best_x = opt.x0.copy()
+        self.stats = np.empty((sum(-(-s // n) for s in self.shares), 4))
+        self.k = self.g = self.n_evals = self.bad = 0
+        self.X = None
+
+    @property
+    def best_energy(self) -> float:
+        return float(self.best[0])
+
+    def advance(self, to: int | None = None) -> "HisaRun":
+        """Run the partitions up to (not including) ``to`` (default: all)."""
+        energy, opt = self.energy, self.opt
+        threads8 = 8 * energy._threads
+        stop = len(self.parts) if to is None else min(int(to), len(self.parts))
+        while self.k < stop:
+            k = self.k
+            idx = np.ascontiguousarray(self.parts[k], dtype=np.int64)
+            lo, hi = np.ascontiguousarray(opt.lo[idx]), np.ascontiguousarray(opt.hi[idx])
+            x0 = np.clip(self.xbase[idx], lo, hi)
+            rest = energy.restrict(self.xbase.copy(), idx.copy())
+            args = (self.xbase, idx, x0, np.ascontiguousarray(opt.spread[idx]), lo, hi, self.shares[k], self.n,
+                    opt.rng, self.target, self.kernel, self.c, self.rho, self.population, self.blocks[k], self.best,
+                    self.best_x, self.stats, self.g, self.n_evals, threads8)
+            if rest.full:
+                fr = energy._frame
+                kargs = (*energy._kin, energy._caps, energy._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"],
+                         fr["cam_D"], fr["cam_hasd"], fr["cov"], fr["cov_wh"], energy._order, energy._tmpl_a,
+                         energy._tmpl_s, energy._tmpl_ptr, energy._tmpl_na, fr["fg_x"], fr["fg_y"], fr["fg_n"],
+                         fr["fg_tab"], fr["fg_bins"], fr["fg_xr"], fr["fg_area"])
+                x, gens, used, nb, self.X = _partition_full(*args, kargs)
+            else:
+                x, gens, used, nb, self.X = _partition_restricted(*args, rest._args)
+                if gens < 0:
+                    raise rest._violation(self.X, np.flatnonzero(np.any(self.X != rest.x_base, axis=1)))
+            energy.n_evals += used
+            self.xbase[idx] = x
+            self.g += gens
+            self.n_evals += used
+            self.bad += nb
+            self.k += 1
+        return self
+
+    def result(self) -> Result:
+        s = self.stats
+        history = tuple(GenerationInfo(n_iter=i + 1, n_evals=int(s[i, 0]), best_energy=float(s[i, 1]),
+                                       mean_energy=float(s[i, 2]), spread=float(s[i, 3])) for i in range(self.g))
+        e = float(self.best[0])
+        return Result(x=self.xbase.copy(), best_x=self.best_x.copy(), energy=e, best_energy=e, n_evals=self.n_evals,
+                      n_iter=self.g, reason=f"max_evals={self.max_evals}, partitions={len(self.parts)}",
+                      population=np.array(self.X, dtype=float), weights=None, history=history,
+                      n_nonfinite=self.bad)
+
+
+def run_hisa(opt, energy, max_evals: int) -> Result:
+    """``minimize(opt, energy, max_evals=max_evals)`` for what :func:`supported` accepts (:class:`HisaRun`)."""
+    return HisaRun(opt, energy, max_evals).advance().result()

@@ -1,0 +1,123 @@
+"""The compiled h-isa search (tracking/_fast_search.py) gives the optimizer protocol's numbers, bit for bit."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from isa_mocap_ros.body import capsule_endpoints, make_model
+from isa_mocap_ros.body.motion import generate_motion
+from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
+from isa_mocap_ros.optim import make_optimizer, minimize
+from isa_mocap_ros.optim._rotations import rotation_mean as rotation_mean_py
+from isa_mocap_ros.tracking import Tracker, TrackerConfig
+from isa_mocap_ros.tracking import _fast_search
+from isa_mocap_ros.vision import default_rig, render_mask
+
+
+@pytest.fixture(scope="module")
+def scene():
+    model = make_model(39)
+    rig = default_rig(width=320, height=240)
+    walk = generate_motion("walk", model, duration_s=0.5, fps=30, rng=np.random.default_rng(1))[:6]
+    masks = [[render_mask(c, capsule_endpoints(model, x)[0], model.capsule_radii) for c in rig.cameras]
+             for x in walk]
+    return model, rig.cameras, walk, masks
+
+
+def _hier(model, x, seed, **params):
+    parts = [np.asarray(model.partitions[k]) for k in ("root", "torso", "left_arm", "right_arm", "left_leg",
+                                                        "right_leg")]
+    spread = np.full(model.dof, 0.05)
+    spread[:3] = 0.015
+    lo, hi = np.maximum(x - 0.5, model.lower), np.minimum(x + 0.5, model.upper)
+    base = {"n_particles": 30, "kernel": "s2", "schedule": "adaptive", "target_ess": 0.3, "c": 0.5,
+            "variance": "selected"}
+    base.update(params)
+    return make_optimizer("h-isa", np.clip(x, lo, hi), spread, rng=np.random.default_rng([seed, 9]),
+                          bounds=(lo, hi), rotation_blocks=model.rotation_blocks, partitions=parts, **base)
+
+
+class _Restrictable:
+    """The tracker's `_TotalEnergy` without the prior: the energy and its restriction per partition."""
+
+    def __init__(self, energy):
+        self.energy = energy
+
+    def __call__(self, X):
+        return self.energy(X)
+
+    def restrict(self, x, coords):
+        return self.energy.restrict(x, coords)
+
+
+@pytest.mark.parametrize("params, budget", [
+    ({}, 1241),                                                   # the tracker's: truncated last generations
+    ({"kernel": "s1", "variance": "population"}, 900),
+    ({"kernel": "s3", "n_particles": 20, "target_ess": 0.5, "c": 0.8, "rho": 1e-3}, 1000),
+])
+def test_compiled_hisa_equals_the_protocol(scene, params, budget):
+    model, cams, walk, masks = scene
+    energy = SilhouetteEnergy(model, cams, masks[2], n_model_points=640, n_mask_points=384,
+                              rng=np.random.default_rng(3))
+    x = walk[1] + 0.02
+    ref_opt = _hier(model, x, 5, **params)
+    ref = minimize(ref_opt, _Restrictable(energy), max_evals=budget)
+    n_ref = energy.n_evals
+    opt = _hier(model, x, 5, **params)
+    assert _fast_search.supported(opt, energy, False)
+    got = _fast_search.run_hisa(opt, energy, budget)
+    assert energy.n_evals == 2 * n_ref
+    for name in ("x", "best_x", "population"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
+    for name in ("energy", "best_energy", "n_evals", "n_iter", "reason", "n_nonfinite"):
+        assert getattr(got, name) == getattr(ref, name), name
+    np.testing.assert_array_equal([dataclasses.astuple(h) for h in got.history],      # nan == nan here
+                                  [dataclasses.astuple(h) for h in ref.history])
+    assert got.weights is None and ref.weights is None
+    assert opt.rng.bit_generator.state == ref_opt.rng.bit_generator.state     # the same draws, in order
+
+
+@pytest.mark.parametrize("init", ["given", "automatic"])
+def test_tracker_with_and_without_the_compiled_search(scene, init):
+    # automatic: the first frame's candidate runs pause after their first partition (init_keep)
+    model, cams, walk, masks = scene
+    out = []
+    for compiled in (True, False):
+        tr = Tracker(model, cams, TrackerConfig(seed=4))
+        tr._compiled_search = compiled
+        first = []
+        if init == "given":
+            tr.initialize(pose=walk[0])
+        else:
+            first = [tr.step(masks[0], 0)]
+            assert first[0].initialized and any("3 searched to the end" in n for n in first[0].notes)
+        out.append(first + [tr.step(masks[k], k) for k in range(1, len(masks))])
+    for a, b in zip(*out):
+        np.testing.assert_array_equal(a.x, b.x)
+        assert (a.energy, a.spread, a.n_evals, a.notes) == (b.energy, b.spread, b.n_evals, b.notes)
+
+
+def test_compiled_rotation_mean_equals_numpy():
+    rng = np.random.default_rng(0)
+    for k in range(300):
+        n = int(rng.integers(2, 40))
+        centre = rng.standard_normal(3)
+        centre *= (np.pi - 0.05 * rng.random()) / np.linalg.norm(centre) if k % 3 == 0 else 1.0  # near a half turn
+        r = np.ascontiguousarray(centre + 0.1 * rng.standard_normal((n, 3)))
+        w = rng.random(n)
+        w /= w.sum()
+        np.testing.assert_array_equal(_fast_search.rotation_mean(r, w, 20, 1e-12), rotation_mean_py(r, w))
+
+
+def test_what_the_compiled_search_does_not_cover_runs_through_the_protocol(scene):
+    model, cams, walk, masks = scene
+    energy = SilhouetteEnergy(model, cams, masks[2], rng=np.random.default_rng(3))
+    x = walk[1]
+    assert _fast_search.supported(_hier(model, x, 0), energy, False)
+    assert not _fast_search.supported(_hier(model, x, 0), energy, True)                     # prior on
+    assert not _fast_search.supported(_hier(model, x, 0, schedule="polynomial"), energy, False)
+    assert not _fast_search.supported(_hier(model, x, 0, resampling="systematic"), energy, False)
+    exact = SilhouetteEnergy(model, cams, masks[2], method="exact")
+    assert not _fast_search.supported(_hier(model, x, 0), exact, False)
+    flat = make_optimizer("isa", x, 0.05, rng=np.random.default_rng(0))
+    assert not _fast_search.supported(flat, energy, False)
