@@ -121,3 +121,21 @@ def test_what_the_compiled_search_does_not_cover_runs_through_the_protocol(scene
     assert not _fast_search.supported(_hier(model, x, 0), exact, False)
     flat = make_optimizer("isa", x, 0.05, rng=np.random.default_rng(0))
     assert not _fast_search.supported(flat, energy, False)
+
+
+def test_cached_code_depends_on_the_kernels_it_calls():
+    # numba keys a cached function on its own file; the compiled search calls the energy kernels and the
+    # optimizer helpers of other files, so its cache stamp carries their hashes too (a git pull that
+    # changes a kernel recompiles it instead of loading old machine code)
+    import hashlib
+
+    from isa_mocap_ros.energy import _silhouette_kernel
+    from isa_mocap_ros.optim import _fast, _fast_so3
+
+    for fn in (_fast_search._partition_full, _fast_search._partition_restricted, _fast_search.rotation_mean):
+        locator = fn._cache._impl.locator
+        assert type(locator).__name__ == "_DependentLocator"
+        h = hashlib.sha256()
+        for m in (_silhouette_kernel, _fast, _fast_so3):
+            h.update(open(m.__file__, "rb").read())
+        assert locator.get_source_stamp()[1] == h.hexdigest()

@@ -16,6 +16,9 @@ population; anything else runs through the protocol.
 """
 from __future__ import annotations
 
+import hashlib
+import os
+
 import numba
 import numpy as np
 
@@ -24,6 +27,63 @@ from isa_mocap_ros.optim import _fast, _fast_so3
 from isa_mocap_ros.optim._base import GenerationInfo, Result
 
 __all__ = ["supported", "run_hisa", "HisaRun", "rotation_mean"]
+
+
+def _register_dependent_cache() -> None:
+    """Make numba's on-disk cache of this module's functions depend on the files whose compiled
+    functions they call as well. numba keys a cached function on its own source file only, so after an
+    edit (or a ``git pull``) of the energy kernels or the optimizer helpers the functions here would
+    load their old machine code, kernels included. A locator placed first among numba's asks the
+    locator numba would have chosen for everything but the stamp, which it extends with the
+    dependencies' hashes. Best effort: if numba's (internal) caching API differs, nothing changes."""
+    try:
+        from numba.core import caching
+        from isa_mocap_ros.energy import _silhouette_kernel
+        from isa_mocap_ros.optim import _fast as fast_mod, _fast_so3 as so3_mod
+    except ImportError:                                                    # pragma: no cover
+        return
+    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
+    if impl is None or not hasattr(caching, "_CacheLocator"):                # pragma: no cover
+        return
+    deps = tuple(m.__file__ for m in (_silhouette_kernel, fast_mod, so3_mod))
+    here = os.path.abspath(__file__)
+
+    class _DependentLocator(caching._CacheLocator):
+        def __init__(self, inner):
+            self._inner = inner
+
+        def ensure_cache_path(self):
+            self._inner.ensure_cache_path()
+
+        def get_cache_path(self):
+            return self._inner.get_cache_path()
+
+        def get_disambiguator(self):
+            return self._inner.get_disambiguator()
+
+        def get_source_stamp(self):
+            h = hashlib.sha256()
+            for path in deps:
+                with open(path, "rb") as f:
+                    h.update(f.read())
+            return self._inner.get_source_stamp(), h.hexdigest()
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            if os.path.abspath(py_file) != here:
+                return None
+            for other in impl._locator_classes:
+                if other is not cls:
+                    inner = other.from_function(py_func, py_file)
+                    if inner is not None:
+                        return cls(inner)
+            return None
+
+    if not any(getattr(c, "__name__", "") == "_DependentLocator" for c in impl._locator_classes):
+        impl._locator_classes.insert(0, _DependentLocator)
+
+
+_register_dependent_cache()
 
 #: Inner ISA parameters this path implements (others: the protocol).
 _PARAMS = {"n_particles", "kernel", "schedule", "target_ess", "c", "rho", "variance", "resampling"}
