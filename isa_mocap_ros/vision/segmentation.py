@@ -417,36 +417,55 @@ def _robust_pairs_numba(stack, k, n, spread, radius):  # pragma: no cover
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _robust_finish_numba(stack, n, spread, radius):  # pragma: no cover
-    # _robust_finish_numpy, rows in parallel
+    # _robust_finish_numpy, rows in parallel. A row's samples are first copied into channel planes,
+    # and an outlier adds 0.0 (the same sums, in the same order per pixel, as skipping it), so the
+    # inner loops run along x without branches (SIMD)
     K, H, W, C = stack.shape
     mu = np.zeros((H, W, C), np.float32)
     var = np.zeros((H, W, C), np.float32)
     count = np.zeros((H, W), np.int32)
     for y in numba.prange(H):
-        inl = np.empty(K, np.bool_)
+        P = np.empty((K, C, W), np.int32)
+        for j in range(K):
+            for x in range(W):
+                for c in range(C):
+                    P[j, c, x] = stack[j, y, x, c]
+        ref = np.empty((C, W), np.int32)
         for x in range(W):
-            best, best_spread, bi = -1, 0, 0
+            best, best_spread, b = -1, 0, 0
             for i in range(K):
                 if n[i, y, x] > best or (n[i, y, x] == best and spread[i, y, x] < best_spread):
-                    best, best_spread, bi = n[i, y, x], spread[i, y, x], i
+                    best, best_spread, b = n[i, y, x], spread[i, y, x], i
             count[y, x] = best
-            for j in range(K):
-                dj = 0
-                for c in range(C):
-                    dj = max(dj, abs(np.int32(stack[bi, y, x, c]) - np.int32(stack[j, y, x, c])))
-                inl[j] = dj <= radius
             for c in range(C):
-                m = 0.0
-                for j in range(K):
-                    if inl[j]:
-                        m += stack[j, y, x, c]
-                m /= best
-                v = 0.0
-                for j in range(K):
-                    if inl[j]:
-                        v += (stack[j, y, x, c] - m) ** 2
-                mu[y, x, c] = m
-                var[y, x, c] = v / max(best - 1, 1)
+                ref[c, x] = P[b, c, x]
+        inl = np.empty((K, W), np.float64)
+        d = np.empty(W, np.int32)
+        for j in range(K):
+            for x in range(W):
+                d[x] = abs(ref[0, x] - P[j, 0, x])
+            for c in range(1, C):
+                for x in range(W):
+                    d[x] = max(d[x], abs(ref[c, x] - P[j, c, x]))
+            for x in range(W):
+                inl[j, x] = 1.0 if d[x] <= radius else 0.0
+        m = np.empty(W, np.float64)
+        v = np.empty(W, np.float64)
+        for c in range(C):
+            m[:] = 0.0
+            for j in range(K):
+                for x in range(W):
+                    m[x] += inl[j, x] * np.float64(P[j, c, x])
+            for x in range(W):
+                m[x] /= count[y, x]
+            v[:] = 0.0
+            for j in range(K):
+                for x in range(W):
+                    e = np.float64(P[j, c, x]) - m[x]
+                    v[x] += inl[j, x] * (e * e)
+            for x in range(W):
+                mu[y, x, c] = m[x]
+                var[y, x, c] = v[x] / max(count[y, x] - 1, 1)
     return mu, var, count
 
 
@@ -777,12 +796,51 @@ def _auto_sigma(f: float, z: float | None = None) -> float:
 
 
 def _fill_from_reliable(arr: np.ndarray, reliable: np.ndarray, side: int, *, smooth: bool = False) -> np.ndarray:
-    """Box mean of ``arr`` over reliable pixels; used at unreliable pixels (everywhere if ``smooth``)."""
+    """Box mean of ``arr`` over reliable pixels; used at unreliable pixels (everywhere if ``smooth``).
+
+    The box sums are OpenCV's; the rest is :func:`_fill_numpy`'s arithmetic, compiled
+    (:func:`_fill_numba`, the same float32 operations: the same bits; ~4x less time)."""
     shape = arr.shape
-    a = arr.reshape(shape[0], shape[1], -1).astype(np.float32)
+    a = np.ascontiguousarray(arr.reshape(shape[0], shape[1], -1), dtype=np.float32)
     r = reliable.astype(np.float32)
-    num = cv2.boxFilter(a * r[:, :, None], -1, (side, side), normalize=False).reshape(a.shape)
-    den = cv2.boxFilter(r, -1, (side, side), normalize=False)[:, :, None]
+    num = cv2.boxFilter(_masked(a, r), -1, (side, side), normalize=False).reshape(a.shape)
+    den = cv2.boxFilter(r, -1, (side, side), normalize=False)
+    return _fill_numba(a, r, np.ascontiguousarray(num), den, smooth).reshape(shape)
+
+
+def _fill_numpy(a, r, num, den, smooth):
+    """The reference of :func:`_fill_numba` (what :func:`_fill_from_reliable` computed in numpy)."""
+    den = den[:, :, None]
     mean = np.where(den > 0, num / np.maximum(den, 1e-6), a)
     out = mean if smooth else np.where(r[:, :, None] > 0, a, mean)
-    return out.reshape(shape).astype(np.float32)
+    return out.astype(np.float32)
+
+
+@numba.njit(cache=True, nogil=True)
+def _masked(a, r):  # pragma: no cover - compiled
+    """``a * r[:, :, None]`` (float32)."""
+    H, W, C = a.shape
+    out = np.empty_like(a)
+    for y in range(H):
+        for x in range(W):
+            for c in range(C):
+                out[y, x, c] = a[y, x, c] * r[y, x]
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _fill_numba(a, r, num, den, smooth):  # pragma: no cover - compiled
+    H, W, C = a.shape
+    out = np.empty_like(a)
+    tiny = np.float32(1e-6)
+    for y in range(H):
+        for x in range(W):
+            dn = den[y, x]
+            for c in range(C):
+                if not smooth and r[y, x] > 0:
+                    out[y, x, c] = a[y, x, c]
+                elif dn > 0:
+                    out[y, x, c] = num[y, x, c] / max(dn, tiny)
+                else:
+                    out[y, x, c] = a[y, x, c]
+    return out
