@@ -433,3 +433,23 @@ def test_pipeline_yaml_segmentation_section_matches_the_config_defaults():
     defaults = {f.name: f.default for f in dataclasses.fields(SegmentationConfig)}
     assert set(section) - {"views"} == set(defaults)
     assert {k: section[k] for k in defaults} == defaults
+
+
+@pytest.mark.parametrize("smooth", [False, True])
+def test_fill_from_reliable_compiled_equals_numpy(smooth):
+    # the compiled arithmetic of _fill_from_reliable gives the numpy reference's bits
+    import cv2
+
+    from isa_mocap_ros.vision.segmentation import _fill_from_reliable, _fill_numpy
+
+    rng = np.random.default_rng(5)
+    for channels, share in ((3, 0.8), (1, 0.05), (3, 0.0)):
+        arr = (rng.random((48, 64, channels)) * 255).astype(np.float32)
+        rel = (rng.random((48, 64)) < share).astype(np.uint8)
+        a, r = arr.astype(np.float32), rel.astype(np.float32)
+        num = cv2.boxFilter(a * r[:, :, None], -1, (5, 5), normalize=False).reshape(a.shape)
+        den = cv2.boxFilter(r, -1, (5, 5), normalize=False)
+        want = _fill_numpy(a, r, num, den, smooth)
+        got = _fill_from_reliable(arr, rel, 5, smooth=smooth)
+        assert got.dtype == np.float32
+        np.testing.assert_array_equal(got, want)
