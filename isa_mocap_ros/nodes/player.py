@@ -197,20 +197,24 @@ class BagPlayer(Node):
             # topic costs the publisher tens of ms (DDS writer set-up): timed from before it, the
             # next frame sets fell due meanwhile and went out in a burst (sets 0-2 within 7 ms,
             # and the estimator dropped one or two of them)
-            wall0 = None
+            wall0 = time.monotonic()
+            shifted = False
             for frame in frames(self.reader.messages(list(self.publishers_by_topic), start_ns=start_ns),
                                 stamped_topics=self.stamped, latched_topics=self.latched,
                                 stamp_of=self._stamp_of):
                 if not self._running():
                     break
                 for msg in frame.messages:
-                    if not self.lockstep_topic and wall0 is not None:
+                    if not self.lockstep_topic:
                         due = wall0 + (msg.log_time_ns - start_ns) / 1e9 / self.options.rate
                         if not self._sleep_until(due):
                             break
                     self._publish(msg)
-                if wall0 is None and frame.stamp_ns is not None and frame.messages:
-                    wall0 = time.monotonic() - (frame.messages[-1].log_time_ns - start_ns) / 1e9 / self.options.rate
+                if not shifted and frame.stamp_ns is not None and frame.messages:
+                    # the time the first frame set took to go out moves the whole timeline
+                    shifted = True
+                    due = wall0 + (frame.messages[-1].log_time_ns - start_ns) / 1e9 / self.options.rate
+                    wall0 += max(0.0, time.monotonic() - due)
                 if frame.stamp_ns is not None:
                     n_frames += 1
                     if self.lockstep_topic:
