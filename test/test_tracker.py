@@ -148,8 +148,8 @@ def test_heading_check_keeps_a_right_first_heading_bit_for_bit(scene320, monkeyp
     for a, b in zip(off, on):
         np.testing.assert_array_equal(a.x, b.x)
     notes = _heading_notes(on)
-    assert notes[0].startswith("heading check: a run heading the other way ended") and \
-        notes[1].startswith("heading check: kept the initial heading")
+    assert notes[0].startswith("heading check started: a run heading the other way ended") and \
+        notes[1].startswith("heading check decided: kept the initial heading")
     checked = [k for k, r in enumerate(on) if any("kept the initial heading" in n for n in r.notes)][0]
     assert [r.n_evals for r in on[1:checked + 1]] == [2 * 1500] * checked
     assert all(r.n_evals == 1500 for r in on[checked + 1:])
@@ -162,7 +162,7 @@ def test_heading_check_ends_at_a_gap(scene320):
     tr = Tracker(model, cams, TrackerConfig(seed=0, init_confirm_ratio=1.5))
     assert any("both tracked" in n for n in tr.step(masks[0], 0).notes)
     r = tr.step(masks[2], 2, frames_elapsed=2)
-    assert r.n_evals == 1500 and any("ended without a decision (2 frame periods" in n for n in r.notes)
+    assert r.n_evals == 1500 and any("heading check ended: no decision (2 frame periods" in n for n in r.notes)
     assert not any("heading check" in n for n in tr.step(masks[3], 3).notes)
 
 

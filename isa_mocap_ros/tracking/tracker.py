@@ -1068,7 +1068,7 @@ class Tracker:
                 e_rival, e_win = self._rival_start[1], self._rival_start[2]
                 self._start_rival(frame_index)
                 return dataclasses.replace(res, notes=res.notes + (
-                    f"heading check: a run heading the other way ended {e_rival:.4g} (winner {e_win:.4g}); both "
+                    f"heading check started: a run heading the other way ended {e_rival:.4g} (winner {e_win:.4g}); both "
                     f"tracked for up to {self.config.init_confirm_frames} frames",))
             return res
         if rival is None or rival is not self._rival:
@@ -1078,7 +1078,7 @@ class Tracker:
             # time, the sets that arrived during the initialization dropped: wrong switches measured)
             self._rival = None
             return dataclasses.replace(res, notes=res.notes + (
-                f"heading check: ended without a decision ({frames_elapsed:g} frame periods since the last frame; "
+                f"heading check ended: no decision ({frames_elapsed:g} frame periods since the last frame; "
                 "it compares consecutive frames only); kept this heading",))
         return self._confirm_heading(res, masks, frame_index, frames_elapsed, t0)
 
@@ -1095,7 +1095,7 @@ class Tracker:
         if res.fell_back != other.fell_back or not (np.isfinite(res.energy) and np.isfinite(other.energy)):
             self._rival = None
             return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0, notes=res.notes + (
-                "heading check: ended without a decision (only one hypothesis could be tracked); kept this one",))
+                "heading check ended: no decision (only one hypothesis could be tracked); kept this one",))
         c = self._confirm
         c[0] += 1
         c[1] += res.energy
@@ -1105,7 +1105,7 @@ class Tracker:
         if c[2] > margin * c[1] or (c[0] >= cfg.init_confirm_frames and not c[1] > margin * c[2]):
             self._rival = None
             return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0,
-                                       notes=res.notes + (f"heading check: kept the initial heading ({sums})",))
+                                       notes=res.notes + (f"heading check decided: kept the initial heading ({sums})",))
         if not c[1] > margin * c[2]:
             return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0)
         # the rival wins: take over its state; external predictions were made from this tracker's
@@ -1117,7 +1117,7 @@ class Tracker:
         cap = getattr(self.predictor, "capacity", None)
         self._own_prediction_frames = (int(cap) if cap is not None else cfg.predictor_order + 1) - 1
         return dataclasses.replace(other, n_evals=n_evals, time_s=time.perf_counter() - t0, notes=other.notes + (
-            f"heading check: switched to the other heading ({sums}); the frames before were estimated facing "
+            f"heading check decided: switched to the other heading ({sums}); the frames before were estimated facing "
             "the wrong way",))
 
     def _step(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1) -> FrameResult:
