@@ -139,3 +139,36 @@ def test_cached_code_depends_on_the_kernels_it_calls():
         for m in (_silhouette_kernel, _fast, _fast_so3):
             h.update(open(m.__file__, "rb").read())
         assert locator.get_source_stamp()[1] == h.hexdigest()
+
+
+@pytest.mark.parametrize("params, budget", [
+    ({"n_particles": 30, "kernel": "s2", "schedule": "adaptive", "target_ess": 0.3, "c": 0.5, "variance": "selected"},
+     224),                                                        # the pelvis stage's (truncated last generation)
+    ({"n_particles": 17, "kernel": "s1", "schedule": "adaptive", "target_ess": 0.5}, 170),
+    ({"n_particles": 20, "kernel": "s3", "schedule": "adaptive", "variance": "population", "rho": 1e-3}, 333),
+])
+def test_compiled_flat_isa_equals_the_protocol(params, budget):
+    from isa_mocap_ros.optim import Isa
+
+    def energy(X):                      # a rugged energy with a rotation block, NaN rows counted as +inf
+        E = np.sum((X - 0.3) ** 2, axis=1) + 0.1 * np.sin(7 * X).sum(axis=1)
+        E[X[:, 1] > 0.1] = np.nan
+        return E
+
+    def make(seed):
+        return Isa(np.array([0.1, -0.2, 0.05, 0.4, 0.3, -2.9]), np.full(6, 0.2), rng=np.random.default_rng(seed),
+                   bounds=(np.full(6, -1.0), np.array([1.0, 1.0, 1.0, 3.5, 3.5, 3.5])),
+                   rotation_blocks=((3, 4, 5),), **params)
+    ref_opt, opt = make(11), make(11)
+    ref = minimize(ref_opt, energy, max_evals=budget)
+    assert _fast_search.supported_flat(opt)
+    got = _fast_search.run_isa(opt, energy, budget)
+    for name in ("x", "best_x", "population", "weights"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
+    for name in ("energy", "best_energy", "n_evals", "n_iter", "reason", "n_nonfinite"):
+        assert getattr(got, name) == getattr(ref, name), name
+    assert ref.n_nonfinite > 0
+    np.testing.assert_array_equal([dataclasses.astuple(h) for h in got.history],
+                                  [dataclasses.astuple(h) for h in ref.history])
+    assert opt.rng.bit_generator.state == ref_opt.rng.bit_generator.state
+    assert not _fast_search.supported_flat(Isa(np.zeros(6), 0.1, rng=np.random.default_rng(0), schedule="polynomial"))

@@ -26,7 +26,7 @@ from isa_mocap_ros.energy import _silhouette_kernel as _k
 from isa_mocap_ros.optim import _fast, _fast_so3
 from isa_mocap_ros.optim._base import GenerationInfo, Result
 
-__all__ = ["supported", "run_hisa", "HisaRun", "rotation_mean"]
+__all__ = ["supported", "run_hisa", "HisaRun", "supported_flat", "run_isa", "rotation_mean"]
 
 
 def _register_dependent_cache() -> None:
@@ -135,14 +135,14 @@ def rotation_mean(r, weights, n_iter, tol):  # pragma: no cover - compiled
 def _tell(XF, E, rng, beta_prev, target, kernel, c, rho, lo, hi, population, block):  # pragma: no cover
     """``Isa._tell`` (weights by the adaptive schedule, never decreasing; the weighted estimate with the
     rotation mean of the local triple at ``block`` (< 0: none); fused selection and mutation) for
-    particles ``XF (n, d)`` (F order, as the hierarchy hands them over) with energies ``E``. Returns
-    (next particles, estimate, beta)."""
+    particles ``XF (n, d)`` (F order, as the hierarchy hands them over; C order for a flat run) with
+    energies ``E``. Returns (next particles, estimate, beta, weights, ESS)."""
     beta = _fast.adaptive_beta(E, target, 1e12, 1e-6)
     if np.isfinite(beta_prev):
         beta = max(beta, beta_prev)
     n = E.size
     W = np.empty(n)
-    _fast.annealed_weights(E, beta, W)
+    ess = _fast.annealed_weights(E, beta, W)
     x = np.dot(W, XF)
     if block >= 0:
         x[block:block + 3] = rotation_mean(np.ascontiguousarray(XF[:, block:block + 3]), W, 20, 1e-12)
@@ -153,7 +153,7 @@ def _tell(XF, E, rng, beta_prev, target, kernel, c, rho, lo, hi, population, blo
     v = rng.random(k)
     v.sort()
     Z = rng.standard_normal((n, XF.shape[1]))
-    return _fast.select_mutate(XF, W, keep, v, Z, c, rho, lo, hi, population), x, beta
+    return _fast.select_mutate(XF, W, keep, v, Z, c, rho, lo, hi, population), x, beta, W, ess
 
 
 @numba.njit(cache=True)
@@ -225,7 +225,8 @@ def _partition_full(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kerne
         E[:kk] = out
         used += kk
         bad += _record(X, E, kk, X, best, best_x, stats, g, n_evals0 + used)
-        Xs, x, beta = _tell(np.asfortranarray(Xs), E, rng, beta, target, kernel, c, rho, lo, hi, population, block)
+        Xs, x, beta, _, _ = _tell(np.asfortranarray(Xs), E, rng, beta, target, kernel, c, rho, lo, hi, population,
+                                  block)
         g += 1
     return x, g - g0, used, bad, X
 
@@ -254,7 +255,8 @@ def _partition_restricted(xbase, idx, x0, spread, lo, hi, share, n, rng, target,
         E[:kk] = out
         used += kk
         bad += _record(X, E, kk, X, best, best_x, stats, g, n_evals0 + used)
-        Xs, x, beta = _tell(np.asfortranarray(Xs), E, rng, beta, target, kernel, c, rho, lo, hi, population, block)
+        Xs, x, beta, _, _ = _tell(np.asfortranarray(Xs), E, rng, beta, target, kernel, c, rho, lo, hi, population,
+                                  block)
         g += 1
     return x, g - g0, used, bad, X
 
@@ -353,3 +355,59 @@ class HisaRun:
 def run_hisa(opt, energy, max_evals: int) -> Result:
     """``minimize(opt, energy, max_evals=max_evals)`` for what :func:`supported` accepts (:class:`HisaRun`)."""
     return HisaRun(opt, energy, max_evals).advance().result()
+
+
+def supported_flat(opt) -> bool:
+    """True when ``opt`` (an unbound :class:`~isa_mocap_ros.optim.Isa`) is what :func:`run_isa` implements."""
+    from isa_mocap_ros.optim import Isa
+    from isa_mocap_ros.optim.schedules import AdaptiveEss
+
+    blocks = opt.rotation_blocks if isinstance(opt, Isa) else ()
+    return (type(opt) is Isa and opt.n_iter == 0 and opt._fused and isinstance(opt.schedule, AdaptiveEss)
+            and opt.kernel in _KERNELS and opt._initial_population is None and opt.init == "normal"
+            and opt.max_iter is None and len(blocks) <= 1
+            and all(list(b) == list(range(b[0], b[0] + 3)) for b in blocks))
+
+
+def run_isa(opt, energy, max_evals: int) -> Result:
+    """``minimize(opt, energy, max_evals=max_evals)`` for a flat ISA that :func:`supported_flat` accepts:
+    ``energy`` (any batch energy) is called from Python once per generation, everything else of a
+    generation (weights, estimate, selection, mutation) in one compiled call (:func:`_tell`). The
+    same :class:`~isa_mocap_ros.optim.Result` (history included) and draws from ``opt.rng``."""
+    from isa_mocap_ros.optim._base import OptimError, check_energies
+
+    n, max_evals = opt.n, int(max_evals)
+    if max_evals < n:
+        raise OptimError(f"max_evals: budget {max_evals} (remaining {max_evals}) is smaller than one generation "
+                         f"of isa ({n} evaluations)")
+    kernel = _KERNELS[opt.kernel]
+    target = float(opt.schedule.target)
+    block = opt.rotation_blocks[0][0] if opt.rotation_blocks else -1
+    population = opt.variance == "population"
+    X = _start(opt.x0, opt.spread, opt.lo, opt.hi, n, opt.rng)
+    used = bad = 0
+    best, best_x = np.inf, opt.x0.copy()
+    beta = np.nan
+    x = W = P = None
+    history = []
+    while used < max_evals:
+        kk = min(n, max_evals - used)
+        E, nb = check_energies(energy(X[:kk]), kk)
+        if kk < n:
+            E = np.concatenate([E, np.full(n - kk, np.inf)])
+        used += kk
+        bad += nb
+        i = int(E.argmin())
+        if E[i] < best:
+            best, best_x = float(E[i]), X[i].copy()
+        Xn, x, beta, W, ess = _tell(X, E, opt.rng, beta, target, kernel, opt.c, opt.rho, opt.lo, opt.hi, population,
+                                    block)
+        mean_energy, spread = _fast.generation_stats(E, X)
+        history.append(GenerationInfo(n_iter=len(history) + 1, n_evals=used, best_energy=float(best),
+                                      mean_energy=float(mean_energy), spread=float(spread), beta=float(beta),
+                                      ess=float(ess)))
+        P, X = X, Xn
+    return Result(x=np.array(x, dtype=float), best_x=best_x.copy(), energy=float(best), best_energy=float(best),
+                  n_evals=used, n_iter=len(history), reason=f"max_evals={max_evals}",
+                  population=np.array(P, dtype=float), weights=np.array(W, dtype=float), history=tuple(history),
+                  n_nonfinite=bad)

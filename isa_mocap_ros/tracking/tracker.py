@@ -941,7 +941,10 @@ class Tracker:
 
         opt = make_optimizer(optimizer, x1[:6], spread[:6] * PELVIS_SPREAD_SCALE, rng=rng, bounds=(lo[:6], hi[:6]),
                              rotation_blocks=((3, 4, 5),), **dict(params or {}))
-        r = minimize(opt, energy, max_evals=int(evals) - 1)
+        if self._compiled_search and _fast_search.supported_flat(opt):
+            r = _fast_search.run_isa(opt, energy, int(evals) - 1)     # the same numbers, generations compiled
+        else:
+            r = minimize(opt, energy, max_evals=int(evals) - 1)
         out = np.clip(move(r.x)[0], m.lower, m.upper)
         return out, float(self.total_energy(out[None, :])[0]), r.n_evals + 1
 
