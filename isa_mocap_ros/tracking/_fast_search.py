@@ -12,7 +12,9 @@ the result is the protocol's, bit for bit (``test/test_fast_search.py`` checks e
 particles, energies, diagnostics and the generator's state afterwards). What it covers, and the
 tracker checks before using it (:func:`supported`): inner ISA with multinomial replacement (kernels
 S1/S2/S3, either variance reading) and the adaptive schedule, the fast energy, no prior, no initial
-population; anything else runs through the protocol.
+population; anything else runs through the protocol. :func:`run_isa` does the same for a flat ISA
+whose energy stays a Python callable (the tracker's pelvis stage): one compiled call per generation
+for everything but the energy.
 """
 from __future__ import annotations
 
@@ -168,10 +170,11 @@ def _start(x0, spread, lo, hi, n, rng):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _record(X, E, kk, xfull, best, best_x, stats, g, n_evals):  # pragma: no cover - compiled
-    """After a generation's kernel call: non-finite energies to +inf (counted), the truncated rows
-    +inf, the best particle, the hierarchy's diagnostics row ``stats[g]`` (n_evals, best energy, mean
-    finite energy, spread of the full particles). Returns the number of non-finite energies."""
+def _record(E, kk, X, best, best_x, stats, g, n_evals):  # pragma: no cover - compiled
+    """After a generation's kernel call on the full particles ``X``: non-finite energies to +inf
+    (counted), the truncated rows +inf, the best particle, the hierarchy's diagnostics row ``stats[g]``
+    (n_evals, best energy, mean finite energy, spread of the full particles). Returns the number of
+    non-finite energies."""
     bad = 0
     for i in range(kk):
         if not np.isfinite(E[i]):
@@ -182,8 +185,8 @@ def _record(X, E, kk, xfull, best, best_x, stats, g, n_evals):  # pragma: no cov
     i = np.argmin(E)
     if E[i] < best[0]:
         best[0] = E[i]
-        best_x[:] = xfull[i]
-    mean_energy, spread = _fast.generation_stats(E, xfull)
+        best_x[:] = X[i]
+    mean_energy, spread = _fast.generation_stats(E, X)
     stats[g, 0] = n_evals
     stats[g, 1] = best[0]
     stats[g, 2] = mean_energy
@@ -203,6 +206,8 @@ def _embed(xbase, idx, Xs):  # pragma: no cover - compiled
     return X
 
 
+# Two copies of the partition loop, one per kernel: a kernel passed as an argument would make numba
+# key the cache on the dispatcher object, i.e. compile again in every process (~14 s).
 @numba.njit(cache=True)
 def _partition_full(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c, rho, population, block,
                     best, best_x, stats, g0, n_evals0, threads8, kargs):  # pragma: no cover - compiled
@@ -224,7 +229,7 @@ def _partition_full(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kerne
         _k.silhouette_batch(X if kk == n else X[:kk].copy(), *kargs, max(1, min(kk, threads8)), out)
         E[:kk] = out
         used += kk
-        bad += _record(X, E, kk, X, best, best_x, stats, g, n_evals0 + used)
+        bad += _record(E, kk, X, best, best_x, stats, g, n_evals0 + used)
         Xs, x, beta, _, _ = _tell(np.asfortranarray(Xs), E, rng, beta, target, kernel, c, rho, lo, hi, population,
                                   block)
         g += 1
@@ -254,7 +259,7 @@ def _partition_restricted(xbase, idx, x0, spread, lo, hi, share, n, rng, target,
                 return x, -1, used, bad, X
         E[:kk] = out
         used += kk
-        bad += _record(X, E, kk, X, best, best_x, stats, g, n_evals0 + used)
+        bad += _record(E, kk, X, best, best_x, stats, g, n_evals0 + used)
         Xs, x, beta, _, _ = _tell(np.asfortranarray(Xs), E, rng, beta, target, kernel, c, rho, lo, hi, population,
                                   block)
         g += 1
