@@ -4,24 +4,18 @@ import dataclasses
 import numpy as np
 import pytest
 
-from isa_mocap_ros.body import capsule_endpoints, make_model
-from isa_mocap_ros.body.motion import generate_motion
 from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
 from isa_mocap_ros.optim import make_optimizer, minimize
 from isa_mocap_ros.optim._rotations import rotation_mean as rotation_mean_py
 from isa_mocap_ros.tracking import Tracker, TrackerConfig
 from isa_mocap_ros.tracking import _fast_search
-from isa_mocap_ros.vision import default_rig, render_mask
+
+from walk_scene import walk_scene
 
 
 @pytest.fixture(scope="module")
 def scene():
-    model = make_model(39)
-    rig = default_rig(width=320, height=240)
-    walk = generate_motion("walk", model, duration_s=0.5, fps=30, rng=np.random.default_rng(1))[:6]
-    masks = [[render_mask(c, capsule_endpoints(model, x)[0], model.capsule_radii) for c in rig.cameras]
-             for x in walk]
-    return model, rig.cameras, walk, masks
+    return walk_scene(width=320, height=240, frames=6, duration_s=0.5, seed=1)
 
 
 def _hier(model, x, seed, **params):
@@ -132,7 +126,7 @@ def test_cached_code_depends_on_the_kernels_it_calls():
     from isa_mocap_ros.energy import _silhouette_kernel
     from isa_mocap_ros.optim import _fast, _fast_so3
 
-    for fn in (_fast_search._partition_full, _fast_search._partition_restricted, _fast_search.rotation_mean):
+    for fn in (_fast_search._partition, _fast_search.rotation_mean):
         locator = fn._cache._impl.locator
         assert type(locator).__name__ == "_DependentLocator"
         h = hashlib.sha256()

@@ -441,14 +441,19 @@ class SilhouetteEnergy:
             total += _view_terms(self.cameras[v], fr["F"][v], fr["n_fg"][v], E, self._radii)
         return total / len(self._used)
 
-    def _fast(self, X: np.ndarray) -> np.ndarray:
+    def _kernel_args(self) -> tuple:
+        """The arguments of :func:`~._silhouette_kernel.silhouette_batch` between the poses and
+        ``n_chunks`` for the current masks (also what the tracker's compiled search passes it)."""
         fr = self._frame
+        return (*self._kin, self._caps, self._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"], fr["cam_D"],
+                fr["cam_hasd"], fr["cov"], fr["cov_wh"], self._order, self._tmpl_a, self._tmpl_s, self._tmpl_ptr,
+                self._tmpl_na, fr["fg_x"], fr["fg_y"], fr["fg_n"], fr["fg_tab"], fr["fg_bins"], fr["fg_xr"],
+                fr["fg_area"])
+
+    def _fast(self, X: np.ndarray) -> np.ndarray:
         out = np.empty(X.shape[0])
         n_chunks = max(1, min(X.shape[0], 8 * self._threads))
-        _k.silhouette_batch(X, *self._kin, self._caps, self._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"],
-                            fr["cam_D"], fr["cam_hasd"], fr["cov"], fr["cov_wh"], self._order, self._tmpl_a,
-                            self._tmpl_s, self._tmpl_ptr, self._tmpl_na, fr["fg_x"], fr["fg_y"], fr["fg_n"], fr["fg_tab"], fr["fg_bins"], fr["fg_xr"],
-                            fr["fg_area"], n_chunks, out)
+        _k.silhouette_batch(X, *self._kernel_args(), n_chunks, out)
         return out
 
     def restrict(self, x_base: Any, coords: Any) -> "RestrictedSilhouetteEnergy":

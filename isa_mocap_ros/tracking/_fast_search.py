@@ -23,6 +23,7 @@ import os
 
 import numba
 import numpy as np
+from numba.extending import overload
 
 from isa_mocap_ros.energy import _silhouette_kernel as _k
 from isa_mocap_ros.optim import _fast, _fast_so3
@@ -206,14 +207,40 @@ def _embed(xbase, idx, Xs):  # pragma: no cover - compiled
     return X
 
 
-# Two copies of the partition loop, one per kernel: a kernel passed as an argument would make numba
-# key the cache on the dispatcher object, i.e. compile again in every process (~14 s).
+def _kernel(X, kargs, n_chunks, out):  # pragma: no cover - compiled only (see the overload below)
+    """``silhouette_batch`` or ``silhouette_restricted`` of ``X`` with their arguments ``kargs`` (between
+    the poses and ``n_chunks``), told apart by the number of arguments when numba compiles the caller."""
+    raise NotImplementedError("_fast_search._kernel is for compiled code only")
+
+
+_N_BATCH = _k.silhouette_batch.py_func.__code__.co_argcount - 3          # without X, n_chunks, out
+_N_RESTRICTED = _k.silhouette_restricted.py_func.__code__.co_argcount - 3
+assert _N_BATCH != _N_RESTRICTED
+
+
+@overload(_kernel)
+def _kernel_overload(X, kargs, n_chunks, out):
+    # chosen from the argument tuple's type at compile time: the kernels are called by name (a kernel
+    # passed as an argument would key numba's cache on the dispatcher object, i.e. compile again in
+    # every process), and one partition loop serves both
+    if len(kargs) == _N_RESTRICTED:
+        def restricted(X, kargs, n_chunks, out):
+            _k.silhouette_restricted(X, *kargs, n_chunks, out)
+        return restricted
+    if len(kargs) == _N_BATCH:
+        def batch(X, kargs, n_chunks, out):
+            _k.silhouette_batch(X, *kargs, n_chunks, out)
+        return batch
+    return None
+
+
 @numba.njit(cache=True)
-def _partition_full(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c, rho, population, block,
-                    best, best_x, stats, g0, n_evals0, threads8, kargs):  # pragma: no cover - compiled
-    """One partition of the hierarchy, evaluated with the full kernel (``silhouette_batch``, arguments
-    ``kargs`` between the poses and ``n_chunks``). Returns (estimate, generations, evaluations,
-    non-finite, last full particles)."""
+def _partition(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c, rho, population, block,
+               best, best_x, stats, g0, n_evals0, threads8, kargs):  # pragma: no cover - compiled
+    """One partition of the hierarchy, evaluated with the full kernel or the restricted one (``kargs``:
+    its arguments between the poses and ``n_chunks``, :func:`_kernel`). Returns (estimate, generations,
+    evaluations, non-finite, last full particles); -1 generations if the kernel flagged a row with a
+    negative energy (the restricted kernel's mark of a row off its base pose: never, by construction)."""
     Xs = _start(x0, spread, lo, hi, n, rng)
     used = 0
     g = g0
@@ -226,34 +253,7 @@ def _partition_full(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kerne
         X = _embed(xbase, idx, Xs)
         E = np.empty(n)
         out = np.empty(kk)
-        _k.silhouette_batch(X if kk == n else X[:kk].copy(), *kargs, max(1, min(kk, threads8)), out)
-        E[:kk] = out
-        used += kk
-        bad += _record(E, kk, X, best, best_x, stats, g, n_evals0 + used)
-        Xs, x, beta, _, _ = _tell(np.asfortranarray(Xs), E, rng, beta, target, kernel, c, rho, lo, hi, population,
-                                  block)
-        g += 1
-    return x, g - g0, used, bad, X
-
-
-@numba.njit(cache=True)
-def _partition_restricted(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c, rho, population, block,
-                          best, best_x, stats, g0, n_evals0, threads8, kargs):  # pragma: no cover - compiled
-    """:func:`_partition_full` with the restricted kernel (``silhouette_restricted``, arguments
-    ``kargs``); returns -1 generations if the kernel flagged a row (never, by construction)."""
-    Xs = _start(x0, spread, lo, hi, n, rng)
-    used = 0
-    g = g0
-    bad = 0
-    beta = np.nan
-    x = x0.copy()
-    X = _embed(xbase, idx, Xs)
-    while used < share:
-        kk = min(n, share - used)
-        X = _embed(xbase, idx, Xs)
-        E = np.empty(n)
-        out = np.empty(kk)
-        _k.silhouette_restricted(X if kk == n else X[:kk].copy(), *kargs, max(1, min(kk, threads8)), out)
+        _kernel(X if kk == n else X[:kk].copy(), kargs, max(1, min(kk, threads8)), out)
         for i in range(kk):
             if out[i] < 0.0:
                 return x, -1, used, bad, X
@@ -327,17 +327,9 @@ class HisaRun:
             args = (self.xbase, idx, x0, np.ascontiguousarray(opt.spread[idx]), lo, hi, self.shares[k], self.n,
                     opt.rng, self.target, self.kernel, self.c, self.rho, self.population, self.blocks[k], self.best,
                     self.best_x, self.stats, self.g, self.n_evals, threads8)
-            if rest.full:
-                fr = energy._frame
-                kargs = (*energy._kin, energy._caps, energy._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"],
-                         fr["cam_D"], fr["cam_hasd"], fr["cov"], fr["cov_wh"], energy._order, energy._tmpl_a,
-                         energy._tmpl_s, energy._tmpl_ptr, energy._tmpl_na, fr["fg_x"], fr["fg_y"], fr["fg_n"],
-                         fr["fg_tab"], fr["fg_bins"], fr["fg_xr"], fr["fg_area"])
-                x, gens, used, nb, self.X = _partition_full(*args, kargs)
-            else:
-                x, gens, used, nb, self.X = _partition_restricted(*args, rest._args)
-                if gens < 0:
-                    raise rest._violation(self.X, np.flatnonzero(np.any(self.X != rest.x_base, axis=1)))
+            x, gens, used, nb, self.X = _partition(*args, energy._kernel_args() if rest.full else rest._args)
+            if gens < 0:
+                raise rest._violation(self.X, np.flatnonzero(np.any(self.X != rest.x_base, axis=1)))
             energy.n_evals += used
             self.xbase[idx] = x
             self.g += gens
