@@ -10,17 +10,14 @@ from isa_mocap_ros.tracking import Tracker, TrackerConfig, TrackerError
 from isa_mocap_ros.tracking.gate import GateError, gate_masks, predicted_silhouettes
 from isa_mocap_ros.vision import default_rig, render_mask
 
+from walk_scene import walk_scene
+
 N_FRAMES = 6
 
 
 @pytest.fixture(scope="module")
 def scene():
-    model = make_model(39)
-    rig = default_rig(width=160, height=120)
-    walk = generate_motion("walk", model, duration_s=0.3, fps=30, rng=np.random.default_rng(0))[:N_FRAMES]
-    masks = [[render_mask(c, capsule_endpoints(model, x)[0], model.capsule_radii) for c in rig.cameras]
-             for x in walk]
-    return model, rig.cameras, walk, masks
+    return walk_scene(width=160, height=120, frames=N_FRAMES, duration_s=0.3, seed=0)
 
 
 def _far_blob(mask: np.ndarray, size: tuple[int, int], *, avoid: np.ndarray | None = None) -> tuple[slice, slice]:

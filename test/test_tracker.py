@@ -8,17 +8,14 @@ from isa_mocap_ros.eval import frame_errors_mm, marker_positions
 from isa_mocap_ros.tracking import FrameResult, Tracker, TrackerConfig, TrackerError, make_tracker
 from isa_mocap_ros.vision import default_rig, render_mask
 
+from walk_scene import walk_scene
+
 N_FRAMES = 5
 
 
 @pytest.fixture(scope="module")
 def scene():
-    model = make_model(39)
-    rig = default_rig(width=160, height=120)
-    walk = generate_motion("walk", model, duration_s=0.3, fps=30, rng=np.random.default_rng(0))[:N_FRAMES]
-    masks = [[render_mask(c, capsule_endpoints(model, x)[0], model.capsule_radii) for c in rig.cameras]
-             for x in walk]
-    return model, rig.cameras, walk, masks
+    return walk_scene(width=160, height=120, frames=N_FRAMES, duration_s=0.3, seed=0)
 
 
 def _track(scene, config, *, init="truth"):
@@ -100,12 +97,7 @@ def test_initialization_prunes_candidate_runs_part_way(scene):
 def scene320():
     """Six frames of a generated walk at 320x240 (the heading check needs the default resolution: at
     160x120 and 300 evaluations both headings fit alike)."""
-    model = make_model(39)
-    rig = default_rig(width=320, height=240)
-    walk = generate_motion("walk", model, duration_s=0.5, fps=30, rng=np.random.default_rng(0))[:6]
-    masks = [[render_mask(c, capsule_endpoints(model, x)[0], model.capsule_radii) for c in rig.cameras]
-             for x in walk]
-    return model, rig.cameras, walk, masks
+    return walk_scene(width=320, height=240, frames=6, duration_s=0.5, seed=0)
 
 
 def _heading_runs(scene, monkeypatch, *, wrong_first: bool, external=None, **cfg):
