@@ -80,6 +80,11 @@ class EstimatorNode(Node):
                          "(limb stage: re-opens a folded arm; 0 = off)", lo=0, hi=10_000)
         limbs = declare(self, "limb_proposal_limbs", list(tc.limb_proposal_limbs),
                         "limbs of the limb stage: left_arm, right_arm, left_leg, right_leg")
+        refine = declare(self, "refine_fraction", tc.refine_fraction, "share of the budget for the refinement stage "
+                         "(hierarchical optimizers: torso and arms searched again as one partition; 0 = off)",
+                         lo=0.0, hi=0.9)
+        refine_parts = declare(self, "refine_partitions", list(tc.refine_partitions),
+                               "partitions the refinement stage searches together (torso, left_arm, right_arm, ...)")
         gate = declare(self, "gate_margin_px", tc.gate_margin_px, "mask gate: keep only foreground components "
                        "touching the predicted silhouette grown by this many pixels (drops far occluders; 0 = off)",
                        lo=0, hi=10_000)
@@ -133,7 +138,8 @@ class EstimatorNode(Node):
                                      seed=self.seed, energy=energy, downsample=downsample,
                                      search_radius_rad=radius, predictor=predictor, predictor_order=order,
                                      prior_eta=self.prior_eta, prior_file=prior_file, pelvis_fraction=pelvis,
-                                     limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs), gate_margin_px=gate,
+                                     limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs), refine_fraction=refine,
+                                     refine_partitions=tuple(refine_parts), gate_margin_px=gate,
                                      max_frames_ahead=ahead, init_confirm_frames=confirm)
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
                                       slop_ns=0 if sync == "exact" else int(slop_s * 1e9),

@@ -25,10 +25,12 @@ One call of :meth:`Tracker.step` per frame set:
    (defaults per optimizer in :data:`DEFAULT_PARAMS`), hierarchical ones (``h-*``, ``psapf``) over
    ``model.partitions`` in the order root, torso, left arm, right arm, left leg, right leg (§3.3);
    exactly ``evals_per_frame`` evaluations (:func:`~isa_mocap_ros.optim.minimize`), of which
-   the two stages below take their shares: the **pelvis stage** (:meth:`Tracker.refit_pelvis`)
-   re-fits the root with its children held in the world, then the **limb stage**
+   the three stages below take their shares: the **pelvis stage** (:meth:`Tracker.refit_pelvis`)
+   re-fits the root with its children held in the world, the **limb stage**
    (:meth:`Tracker.propose_limbs`) tries twist-and-hinge proposals for the arms and keeps any that
-   lowers the energy. Neither runs on the automatically initialized frame.
+   lowers the energy, then the **refinement stage** (:meth:`Tracker.refine`, hierarchical
+   algorithms) searches the torso and both arms again together with the algorithm's flat form and
+   keeps the result if it lowers the energy. None runs on the automatically initialized frame.
 5. **Estimate.** ``estimate="optimizer"``: the algorithm's own estimate (ISA/APF weighted mean,
    CMA-ES mean, DE/PSO best); ``"best"``: the best evaluated particle. Then the predictor is updated.
 
@@ -78,6 +80,10 @@ __all__ = ["TrackerError", "TrackerConfig", "FrameResult", "Tracker", "make_trac
 PREDICTORS = ("ar", "constant_pose", "constant_velocity")
 #: Factor on the root's search spreads in the pelvis stage (:meth:`Tracker.refit_pelvis`).
 PELVIS_SPREAD_SCALE = 2.0
+#: Generations the refinement stage's share must hold (:meth:`Tracker.refine`): with fewer, its estimate is
+#: the weighted mean of a few random draws, and the budget it takes from the main search costs more than it
+#: gives (measured: 7-frame walks at 160x120, 600 evaluations, 2 generations: 19.6 -> 28.7 mm).
+REFINE_MIN_GENERATIONS = 4
 #: Share of a view's foreground the mask gate may remove before ``FrameResult.notes`` says so.
 GATE_NOTE_SHARE = 0.25
 ESTIMATES = ("optimizer", "best")
@@ -232,6 +238,24 @@ class TrackerConfig:
     limb_proposal_limbs : tuple of str
         Limbs of the limb stage, among ``left_arm``, ``right_arm``, ``left_leg``, ``right_leg``
         (limbs the model does not have are ignored).
+    refine_fraction : float
+        Share of the frame budget spent, after the limb stage, on the **refinement stage**
+        (:meth:`Tracker.refine`): for a hierarchical algorithm (``h-isa``, ``h-cmaes``, ``h-de``,
+        ``h-pso``, ``psapf``), its flat form searches the coordinates of the partitions
+        ``refine_partitions`` together, around the pose so far (the pose itself in the first
+        generation; the frame's search box and initial spreads without the motion term), everything
+        else held; its estimate replaces the pose when it lowers the energy. The §3.3 hierarchy
+        fits the torso with the arms held at their prediction, then each arm on that torso: a
+        waving arm drags the spine after it, and no partition alone can undo that shared error;
+        searched together they can (wave 46 → 29 mm, CMU walk 25.7 → 24.6 mm, ``docs/tracking.md``,
+        "The refinement stage"). 0 disables it; not for flat algorithms (their search is holistic
+        already); skipped (with a note) when its share is below :data:`REFINE_MIN_GENERATIONS` (4)
+        generations of the algorithm + 2 (h-isa: 1220 evaluations per frame at 0.1), and on the
+        automatically initialized frame. Default 0.1.
+    refine_partitions : tuple of str
+        Names of ``model.partitions`` searched together by the refinement stage (default the upper
+        body: ``torso``, ``left_arm``, ``right_arm``; partitions the model does not have are
+        ignored, none left: no stage).
     gate_margin_px : int
         **Mask gate** (:mod:`.gate`): once the tracker has an estimate, each usable mask keeps only
         the foreground components touching the predicted pose's silhouette grown by this many
@@ -286,6 +310,8 @@ class TrackerConfig:
     pelvis_fraction: float = 0.15
     limb_proposals: int = 16
     limb_proposal_limbs: tuple = ("left_arm", "right_arm")
+    refine_fraction: float = 0.1
+    refine_partitions: tuple = ("torso", "left_arm", "right_arm")
     gate_margin_px: int = 10
     max_frames_ahead: float = 5.0
 
@@ -343,6 +369,18 @@ class TrackerConfig:
             raise TrackerError(f"limb_proposal_limbs: expected distinct names among {', '.join(LIMBS)}, "
                                f"received {limbs!r}")
         object.__setattr__(self, "limb_proposal_limbs", tuple(limbs))
+        _check_number("refine_fraction", self.refine_fraction, lo=0.0)
+        if self.refine_fraction >= 1.0:
+            raise TrackerError(f"refine_fraction: expected a share in [0, 1), received {self.refine_fraction!r}")
+        parts = self.refine_partitions
+        if isinstance(parts, str) or not isinstance(parts, Sequence) or not all(isinstance(v, str) for v in parts) \
+                or len(set(parts)) != len(parts):
+            raise TrackerError(f"refine_partitions: expected distinct partition names (e.g. torso, left_arm, "
+                               f"right_arm), received {parts!r}")
+        object.__setattr__(self, "refine_partitions", tuple(parts))
+        if self.pelvis_fraction + self.refine_fraction >= 1.0:
+            raise TrackerError(f"pelvis_fraction + refine_fraction: expected below 1 (the main search needs a "
+                               f"share), received {self.pelvis_fraction!r} + {self.refine_fraction!r}")
         _check_number("gate_margin_px", self.gate_margin_px, lo=0, integer=True)
 
     def params(self) -> dict:
@@ -480,6 +518,9 @@ class Tracker:
         self._pelvis = PelvisMove(model) if "root" in model.partitions else None
         self._pelvis_generation: int | None = None
         self._limbs = LimbMove(model)
+        self._refine_coords = np.array(sorted(int(i) for k in config.refine_partitions if k in model.partitions
+                                              for i in model.partitions[k]), dtype=np.int64)
+        self._refine_generation: int | None = None
         self._partitions = [np.asarray(model.partitions[k]) for k in
                             ("root", "torso", "left_arm", "right_arm", "left_leg", "right_leg")
                             if k in model.partitions]
@@ -797,8 +838,9 @@ class Tracker:
                              rotation_blocks=self.model.rotation_blocks, **params)
         share = self._pelvis_share(notes) if stages else None
         limbs = self._limb_stage(notes) if stages else []
-        budget = cfg.evals_per_frame - (share or 0) - self._limb_share(len(limbs))
-        return opt, budget, share, limbs, (lo, hi, spread)
+        refine = self._refine_share(notes) if stages else None
+        budget = cfg.evals_per_frame - (share or 0) - self._limb_share(len(limbs)) - (refine or 0)
+        return opt, budget, (share, limbs, refine), (lo, hi, spread)
 
     def _optimize(self, pred: np.ndarray, rng: np.random.Generator, spread_scale: float = 1.0, notes=None,
                   stages: bool = True):
@@ -810,7 +852,7 @@ class Tracker:
         stage turned the pelvis against the legs (bags/demo: 270-340 mm on the first frames, measured)."""
         from isa_mocap_ros.optim import minimize
 
-        opt, budget, share, limbs, (lo, hi, spread) = self._search(pred, rng, spread_scale, notes, stages)
+        opt, budget, (share, limbs, refine), (lo, hi, spread) = self._search(pred, rng, spread_scale, notes, stages)
         if self._compiled_search and _fast_search.supported(opt, self.energy, self._prior_active()):
             res = _fast_search.run_hisa(opt, self.energy, budget)      # the same numbers, compiled per partition
         else:
@@ -820,6 +862,11 @@ class Tracker:
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         if limbs:
             x, e, n, _ = self.propose_limbs(res.x, n=self.config.limb_proposals, rng=rng, limbs=limbs)
+            res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
+        if refine is not None:
+            exact = share is not None or bool(limbs)     # else res.energy may be a particle's, not res.x's
+            x, e, n, _ = self.refine(res.x, evals=refine, rng=rng, energy=res.energy if exact else None,
+                                     bounds=(lo, hi), spread=self.search_box(pred)[2] * spread_scale)
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         return res
 
@@ -832,8 +879,8 @@ class Tracker:
         runs = []
         for j, pred in enumerate(starts):
             rng = frame_rng(cfg.seed, frame_index) if j == 0 else frame_rng(cfg.seed, frame_index, 3, j)
-            opt, budget, _, _, _ = self._search(pred, rng, cfg.init_spread_scale, notes if j == 0 else None,
-                                                stages=False)
+            opt, budget, _, _ = self._search(pred, rng, cfg.init_spread_scale, notes if j == 0 else None,
+                                             stages=False)
             if self._compiled_search and _fast_search.supported(opt, self.energy, self._prior_active()):
                 # compiled h-isa, paused after its first partition (the same numbers as below)
                 runs.append((j, _fast_search.HisaRun(opt, self.energy, budget), pred, None))
@@ -913,6 +960,83 @@ class Tracker:
                              f"of {self._flat_algorithm()[0]} ({self._pelvis_generation}) + 1")
             return None
         return share
+
+    def _refine_share(self, notes) -> int | None:
+        """Evaluations of the refinement stage, or None (off, a flat algorithm, no partition of
+        ``refine_partitions`` in the model, or below ``REFINE_MIN_GENERATIONS`` generations + 2)."""
+        from isa_mocap_ros.optim import inner_optimizer, make_optimizer
+
+        cfg = self.config
+        if cfg.refine_fraction <= 0 or inner_optimizer(cfg.optimizer) is None or not self._refine_coords.size:
+            return None
+        share = int(cfg.evals_per_frame * cfg.refine_fraction)
+        if self._refine_generation is None:      # depends on the algorithm and its parameters only
+            name, params = self._flat_algorithm()
+            m, c = self.model, self._refine_coords
+            self._refine_generation = make_optimizer(name, m.rest_pose()[c], np.ones(c.size),
+                                                     rng=np.random.default_rng(0), bounds=(m.lower[c], m.upper[c]),
+                                                     **params).generation_size
+        if share < REFINE_MIN_GENERATIONS * self._refine_generation + 2:    # + the start's and the result's energies
+            if notes is not None:
+                notes.append(f"refinement stage skipped: its share ({share} evaluations) is below "
+                             f"{REFINE_MIN_GENERATIONS} generations of {self._flat_algorithm()[0]} "
+                             f"({REFINE_MIN_GENERATIONS} x {self._refine_generation}) + 2")
+            return None
+        return share
+
+    def refine(self, x, *, evals: int, rng: np.random.Generator, energy: float | None = None, bounds=None,
+               spread=None) -> tuple[np.ndarray, float, int, bool]:
+        """The refinement stage on pose ``x`` under the current masks: the configured hierarchical
+        algorithm's flat form (``h-isa`` → ``isa`` with the same parameters, ``psapf`` → ``apf``) over
+        the coordinates of ``config.refine_partitions`` as one block, the rest of ``x`` held, its first
+        generation ``x`` and draws around it; its estimate replaces those coordinates when it lowers
+        the energy.
+
+        ``energy`` is ``x``'s energy if known (else one evaluation computes it); the search gets the
+        rest of ``evals`` but one, which gives the final pose's energy, so the stage spends exactly
+        ``evals``. ``bounds``/``spread`` default to :meth:`search_box` around ``x``. Returns
+        ``(pose, its energy, evaluations, replaced)``.
+        """
+        from isa_mocap_ros.optim import inner_optimizer, make_optimizer, minimize
+
+        cfg, m, c = self.config, self.model, self._refine_coords
+        if inner_optimizer(cfg.optimizer) is None:
+            raise TrackerError(f"refine: the optimizer {cfg.optimizer!r} is not hierarchical")
+        if not c.size:
+            raise TrackerError(f"refine: none of refine_partitions {list(cfg.refine_partitions)} is a partition of "
+                               f"model {m.name} ({', '.join(m.partitions)})")
+        x = np.clip(np.asarray(x, dtype=float), m.lower, m.upper)
+        box = self.search_box(x)
+        lo, hi = bounds if bounds is not None else box[:2]
+        spread = box[2] if spread is None else np.asarray(spread, dtype=float)
+        used = 0
+        if energy is None:
+            energy, used = float(self.total_energy(x[None, :])[0]), 1
+        lo, hi = np.minimum(lo, x), np.maximum(hi, x)     # x itself is a particle (a limb proposal may lie outside)
+        x0 = x
+        name, params = self._flat_algorithm()
+        data = self.restricted_energy(x0, c) or self.total_energy
+        blocks = tuple(tuple(int(np.searchsorted(c, i)) for i in b) for b in m.rotation_blocks if set(b) <= set(c))
+
+        def energy_of(Xc):            # poses equal to x0 outside c
+            X = np.repeat(x0[None, :], len(Xc), axis=0)
+            X[:, c] = Xc
+            return data(X)
+        # first generation: the pose so far and draws around it (as the main search of a flat algorithm)
+        n = make_optimizer(name, x0[c], spread[c], rng=np.random.default_rng(0), bounds=(lo[c], hi[c]),
+                           **params).generation_size
+        P = np.clip(x0[c] + rng.standard_normal((n, c.size)) * spread[c], lo[c], hi[c])
+        P[0] = x0[c]
+        opt = make_optimizer(name, x0[c], spread[c], rng=rng, bounds=(lo[c], hi[c]), initial_population=P,
+                             rotation_blocks=blocks, **params)
+        r = minimize(opt, energy_of, max_evals=int(evals) - used - 1)
+        y = x.copy()
+        y[c] = np.clip(r.x, m.lower[c], m.upper[c])
+        ey = float(self.total_energy(y[None, :])[0])
+        used += r.n_evals + 1
+        if ey < energy:
+            return y, ey, used, True
+        return x, float(energy), used, False
 
     def refit_pelvis(self, x, *, evals: int, rng: np.random.Generator, optimizer: str | None = None,
                      params: Mapping | None = None, bounds=None, spread=None) -> tuple[np.ndarray, float, int]:
