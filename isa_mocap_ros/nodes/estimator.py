@@ -81,7 +81,7 @@ class EstimatorNode(Node):
         limbs = declare(self, "limb_proposal_limbs", list(tc.limb_proposal_limbs),
                         "limbs of the limb stage: left_arm, right_arm, left_leg, right_leg")
         refine = declare(self, "refine_fraction", tc.refine_fraction, "share of the budget for the refinement stage "
-                         "(hierarchical optimizers: torso and arms searched again as one partition; 0 = off)",
+                         "(hierarchical optimizers: the flat form searches torso and arms together; 0 = off)",
                          lo=0.0, hi=0.9)
         refine_parts = declare(self, "refine_partitions", list(tc.refine_partitions),
                                "partitions the refinement stage searches together (torso, left_arm, right_arm, ...)")
