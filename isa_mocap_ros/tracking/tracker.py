@@ -812,8 +812,9 @@ class Tracker:
 
     def _search(self, pred: np.ndarray, rng: np.random.Generator, spread_scale: float = 1.0, notes=None,
                 stages: bool = True):
-        """The frame's optimizer around ``pred`` (not yet run) and its share of the budget, the
-        pelvis stage's share (None: no stage) and the limb stage's limbs (see :meth:`_optimize`)."""
+        """The frame's optimizer around ``pred`` (not yet run), its share of the budget, the stages
+        ``(pelvis share or None, limb stage's limbs, refinement share or None)`` and the search box
+        ``(lo, hi, spread)`` (see :meth:`_optimize`)."""
         from isa_mocap_ros.optim import inner_optimizer, make_optimizer
 
         cfg = self.config
@@ -845,11 +846,12 @@ class Tracker:
     def _optimize(self, pred: np.ndarray, rng: np.random.Generator, spread_scale: float = 1.0, notes=None,
                   stages: bool = True):
         """One optimizer run of the frame budget around ``pred`` (raises the optimizer's errors), then
-        the pelvis stage (``config.pelvis_fraction`` of the budget) and the limb stage
-        (``config.limb_proposals``); ``spread_scale`` multiplies the initial spreads (the first frame
-        starts from a rough pose); skipped stages are noted in ``notes``. The automatically
-        initialized frame has neither stage (``stages=False``): from a rough standing pose the pelvis
-        stage turned the pelvis against the legs (bags/demo: 270-340 mm on the first frames, measured)."""
+        the pelvis stage (``config.pelvis_fraction`` of the budget), the limb stage
+        (``config.limb_proposals``) and the refinement stage (``config.refine_fraction``);
+        ``spread_scale`` multiplies the initial spreads (the first frame starts from a rough pose);
+        skipped stages are noted in ``notes``. The automatically initialized frame has no stage
+        (``stages=False``): from a rough standing pose the pelvis stage turned the pelvis against the
+        legs (bags/demo: 270-340 mm on the first frames, measured)."""
         from isa_mocap_ros.optim import minimize
 
         opt, budget, (share, limbs, refine), (lo, hi, spread) = self._search(pred, rng, spread_scale, notes, stages)
