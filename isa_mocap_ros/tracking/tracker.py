@@ -516,11 +516,10 @@ class Tracker:
         self._masks_last: list | None = None   # usable masks of the last estimate's frame (re-centring)
         self._masks_now: list | None = None    # usable masks of the frame being tracked
         self._pelvis = PelvisMove(model) if "root" in model.partitions else None
-        self._pelvis_generation: int | None = None
+        self._flat_generations: dict[int, int] = {}     # _flat_generation's cache
         self._limbs = LimbMove(model)
         self._refine_coords = np.array(sorted(int(i) for k in config.refine_partitions if k in model.partitions
                                               for i in model.partitions[k]), dtype=np.int64)
-        self._refine_generation: int | None = None
         self._partitions = [np.asarray(model.partitions[k]) for k in
                             ("root", "torso", "left_arm", "right_arm", "left_leg", "right_leg")
                             if k in model.partitions]
@@ -814,12 +813,13 @@ class Tracker:
                 stages: bool = True):
         """The frame's optimizer around ``pred`` (not yet run), its share of the budget, the stages
         ``(pelvis share or None, limb stage's limbs, refinement share or None)`` and the search box
-        ``(lo, hi, spread)`` (see :meth:`_optimize`)."""
+        ``(lo, hi, spread, spread without the motion term)`` (see :meth:`_optimize`)."""
         from isa_mocap_ros.optim import inner_optimizer, make_optimizer
 
         cfg = self.config
         lo, hi, spread = self.search_box(pred)
-        spread = spread * spread_scale
+        base = spread * spread_scale
+        spread = base.copy()              # the motion term widens the main search's spreads only
         if stages and cfg.spread_velocity_gain > 0 and self._last is not None:
             moved = cfg.spread_velocity_gain * np.abs(pred[6:] - self._last[6:])
             spread[6:] = np.sqrt(spread[6:] ** 2 + moved ** 2)
@@ -841,7 +841,7 @@ class Tracker:
         limbs = self._limb_stage(notes) if stages else []
         refine = self._refine_share(notes) if stages else None
         budget = cfg.evals_per_frame - (share or 0) - self._limb_share(len(limbs)) - (refine or 0)
-        return opt, budget, (share, limbs, refine), (lo, hi, spread)
+        return opt, budget, (share, limbs, refine), (lo, hi, spread, base)
 
     def _optimize(self, pred: np.ndarray, rng: np.random.Generator, spread_scale: float = 1.0, notes=None,
                   stages: bool = True):
@@ -854,7 +854,8 @@ class Tracker:
         legs (bags/demo: 270-340 mm on the first frames, measured)."""
         from isa_mocap_ros.optim import minimize
 
-        opt, budget, (share, limbs, refine), (lo, hi, spread) = self._search(pred, rng, spread_scale, notes, stages)
+        opt, budget, (share, limbs, refine), (lo, hi, spread, base) = self._search(pred, rng, spread_scale, notes,
+                                                                                   stages)
         if self._compiled_search and _fast_search.supported(opt, self.energy, self._prior_active()):
             res = _fast_search.run_hisa(opt, self.energy, budget)      # the same numbers, compiled per partition
         else:
@@ -868,7 +869,7 @@ class Tracker:
         if refine is not None:
             exact = share is not None or bool(limbs)     # else res.energy may be a particle's, not res.x's
             x, e, n, _ = self.refine(res.x, evals=refine, rng=rng, energy=res.energy if exact else None,
-                                     bounds=(lo, hi), spread=self.search_box(pred)[2] * spread_scale)
+                                     bounds=(lo, hi), spread=base)
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         return res
 
@@ -943,46 +944,47 @@ class Tracker:
                   if k not in ("partitions", "optimizer", "initial_population", "evals_per_partition")}
         return name, params
 
-    def _pelvis_share(self, notes) -> int | None:
-        """Evaluations of the pelvis stage, or None (off, no root children, or below one generation + 1)."""
+    def _flat_generation(self, d: int) -> int:
+        """Rows of a generation of the configured algorithm's flat form on ``d`` coordinates (the
+        pelvis and refinement stages' searches; it depends on the algorithm, its parameters and ``d``
+        only, so it is computed once per ``d``)."""
         from isa_mocap_ros.optim import make_optimizer
 
+        if d not in self._flat_generations:
+            name, params = self._flat_algorithm()
+            self._flat_generations[d] = make_optimizer(name, np.zeros(d), np.ones(d), rng=np.random.default_rng(0),
+                                                       **params).generation_size
+        return self._flat_generations[d]
+
+    def _pelvis_share(self, notes) -> int | None:
+        """Evaluations of the pelvis stage, or None (off, no root children, or below one generation + 1)."""
         cfg = self.config
         if cfg.pelvis_fraction <= 0 or self._pelvis is None or not self._pelvis.children:
             return None
         share = int(cfg.evals_per_frame * cfg.pelvis_fraction)
-        if self._pelvis_generation is None:      # depends on the algorithm and its parameters only
-            name, params = self._flat_algorithm()
-            m = self.model
-            self._pelvis_generation = make_optimizer(name, m.rest_pose()[:6], np.ones(6), rng=np.random.default_rng(0),
-                                                     bounds=(m.lower[:6], m.upper[:6]), **params).generation_size
-        if share - 1 < self._pelvis_generation:       # one evaluation is kept for the final pose
+        n = self._flat_generation(6)
+        if share - 1 < n:       # one evaluation is kept for the final pose
             if notes is not None:
                 notes.append(f"pelvis stage skipped: its share ({share} evaluations) is below one generation "
-                             f"of {self._flat_algorithm()[0]} ({self._pelvis_generation}) + 1")
+                             f"of {self._flat_algorithm()[0]} ({n}) + 1")
             return None
         return share
 
     def _refine_share(self, notes) -> int | None:
         """Evaluations of the refinement stage, or None (off, a flat algorithm, no partition of
         ``refine_partitions`` in the model, or below ``REFINE_MIN_GENERATIONS`` generations + 2)."""
-        from isa_mocap_ros.optim import inner_optimizer, make_optimizer
+        from isa_mocap_ros.optim import inner_optimizer
 
         cfg = self.config
         if cfg.refine_fraction <= 0 or inner_optimizer(cfg.optimizer) is None or not self._refine_coords.size:
             return None
         share = int(cfg.evals_per_frame * cfg.refine_fraction)
-        if self._refine_generation is None:      # depends on the algorithm and its parameters only
-            name, params = self._flat_algorithm()
-            m, c = self.model, self._refine_coords
-            self._refine_generation = make_optimizer(name, m.rest_pose()[c], np.ones(c.size),
-                                                     rng=np.random.default_rng(0), bounds=(m.lower[c], m.upper[c]),
-                                                     **params).generation_size
-        if share < REFINE_MIN_GENERATIONS * self._refine_generation + 2:    # + the start's and the result's energies
+        n = self._flat_generation(self._refine_coords.size)
+        if share < REFINE_MIN_GENERATIONS * n + 2:    # + the start's and the result's energies
             if notes is not None:
                 notes.append(f"refinement stage skipped: its share ({share} evaluations) is below "
                              f"{REFINE_MIN_GENERATIONS} generations of {self._flat_algorithm()[0]} "
-                             f"({REFINE_MIN_GENERATIONS} x {self._refine_generation}) + 2")
+                             f"({REFINE_MIN_GENERATIONS} x {n}) + 2")
             return None
         return share
 
@@ -1008,28 +1010,29 @@ class Tracker:
             raise TrackerError(f"refine: none of refine_partitions {list(cfg.refine_partitions)} is a partition of "
                                f"model {m.name} ({', '.join(m.partitions)})")
         x = np.clip(np.asarray(x, dtype=float), m.lower, m.upper)
-        box = self.search_box(x)
-        lo, hi = bounds if bounds is not None else box[:2]
-        spread = box[2] if spread is None else np.asarray(spread, dtype=float)
+        if bounds is None or spread is None:
+            box = self.search_box(x)
+            bounds = box[:2] if bounds is None else bounds
+            spread = box[2] if spread is None else spread
+        spread = np.asarray(spread, dtype=float)
         used = 0
         if energy is None:
             energy, used = float(self.total_energy(x[None, :])[0]), 1
-        lo, hi = np.minimum(lo, x), np.maximum(hi, x)     # x itself is a particle (a limb proposal may lie outside)
-        x0 = x
+        # x is a particle of the first generation (a limb proposal may lie outside the frame's box)
+        lo, hi = np.minimum(bounds[0], x), np.maximum(bounds[1], x)
         name, params = self._flat_algorithm()
-        data = self.restricted_energy(x0, c) or self.total_energy
+        data = self.restricted_energy(x, c) or self.total_energy
         blocks = tuple(tuple(int(np.searchsorted(c, i)) for i in b) for b in m.rotation_blocks if set(b) <= set(c))
 
-        def energy_of(Xc):            # poses equal to x0 outside c
-            X = np.repeat(x0[None, :], len(Xc), axis=0)
+        def energy_of(Xc):            # poses equal to x outside c
+            X = np.repeat(x[None, :], len(Xc), axis=0)
             X[:, c] = Xc
             return data(X)
         # first generation: the pose so far and draws around it (as the main search of a flat algorithm)
-        n = make_optimizer(name, x0[c], spread[c], rng=np.random.default_rng(0), bounds=(lo[c], hi[c]),
-                           **params).generation_size
-        P = np.clip(x0[c] + rng.standard_normal((n, c.size)) * spread[c], lo[c], hi[c])
-        P[0] = x0[c]
-        opt = make_optimizer(name, x0[c], spread[c], rng=rng, bounds=(lo[c], hi[c]), initial_population=P,
+        n = self._flat_generation(c.size)
+        P = np.clip(x[c] + rng.standard_normal((n, c.size)) * spread[c], lo[c], hi[c])
+        P[0] = x[c]
+        opt = make_optimizer(name, x[c], spread[c], rng=rng, bounds=(lo[c], hi[c]), initial_population=P,
                              rotation_blocks=blocks, **params)
         r = minimize(opt, energy_of, max_evals=int(evals) - used - 1)
         y = x.copy()
