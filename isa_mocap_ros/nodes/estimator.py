@@ -80,6 +80,9 @@ class EstimatorNode(Node):
                          "(limb stage: re-opens a folded arm; 0 = off)", lo=0, hi=10_000)
         limbs = declare(self, "limb_proposal_limbs", list(tc.limb_proposal_limbs),
                         "limbs of the limb stage: left_arm, right_arm, left_leg, right_leg")
+        part_order = declare(self, "partition_order", list(tc.partition_order),
+                             "order in which hierarchical optimizers search the model's partitions (root, "
+                             "left_arm, right_arm, torso, left_leg, right_leg; the paper's: root, torso, arms, legs)")
         refine = declare(self, "refine_fraction", tc.refine_fraction, "share of the budget for the refinement stage "
                          "(hierarchical optimizers: the flat form searches torso and arms together; 0 = off)",
                          lo=0.0, hi=0.9)
@@ -138,7 +141,8 @@ class EstimatorNode(Node):
                                      seed=self.seed, energy=energy, downsample=downsample,
                                      search_radius_rad=radius, predictor=predictor, predictor_order=order,
                                      prior_eta=self.prior_eta, prior_file=prior_file, pelvis_fraction=pelvis,
-                                     limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs), refine_fraction=refine,
+                                     limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs),
+                                     partition_order=tuple(part_order), refine_fraction=refine,
                                      refine_partitions=tuple(refine_parts), gate_margin_px=gate,
                                      max_frames_ahead=ahead, init_confirm_frames=confirm)
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
