@@ -95,3 +95,36 @@ def test_latest_slot_with_depth_keeps_the_newest_sets_in_order():
     for bad in (0, -1, 1.5, True):
         with pytest.raises(SyncError, match="depth: expected an integer >= 1"):
             LatestSlot(depth=bad)
+
+
+def test_latest_slot_hold_keeps_the_sets_in_sequence():
+    # the worker is busy with set 0 (an initialization): the 3 sets after it are held, the rest is
+    # replaced by the newest; each held set taken shortens the hold
+    slot = LatestSlot()
+    slot.hold(3)
+    for k in range(1, 8):
+        slot.put(k)
+    assert slot.held == 3 and slot.dropped == 3 and len(slot) == 4
+    assert slot.take() == 1 and slot.held == 2
+    slot.put(8)                                       # 7 replaced by 8, 2 and 3 still held
+    assert slot.dropped == 4 and slot.take() == 2 and slot.held == 1
+    # the hold ends (the heading check decided): the held set still waiting goes, the newest stays
+    slot.hold(0)
+    assert slot.dropped == 5 and slot.take() == 8 and slot.take() is None
+    slot.put(9)
+    slot.put(10)
+    assert slot.take() == 10 and slot.dropped == 6  # back to keeping the newest only
+    slot.hold(0)                                      # no hold: nothing to drop
+    assert slot.dropped == 6
+    lock = LatestSlot(keep_all=True)
+    lock.hold(2)
+    for k in range(5):
+        lock.put(k)
+    lock.hold(0)
+    assert [lock.take() for _ in range(5)] == [0, 1, 2, 3, 4] and lock.dropped == 0
+
+
+@pytest.mark.parametrize("bad", [-1, 1.5, True, "2"])
+def test_latest_slot_bad_hold(bad):
+    with pytest.raises(SyncError, match="hold: expected an integer >= 0"):
+        LatestSlot().hold(bad)

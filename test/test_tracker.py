@@ -152,9 +152,12 @@ def test_heading_check_ends_at_a_gap(scene320):
     # hypotheses are still catching up: the check ends there without stepping the rival
     model, cams, walk, masks = scene320
     tr = Tracker(model, cams, TrackerConfig(seed=0, init_confirm_ratio=1.5))
+    assert not tr.checking_heading
     assert any("both tracked" in n for n in tr.step(masks[0], 0).notes)
+    assert tr.checking_heading          # the estimator node keeps the next sets in sequence meanwhile
     r = tr.step(masks[2], 2, frames_elapsed=2)
     assert r.n_evals == 1500 and any("heading check ended: no decision (2 frame periods" in n for n in r.notes)
+    assert not tr.checking_heading
     assert not any("heading check" in n for n in tr.step(masks[3], 3).notes)
 
 
@@ -163,7 +166,7 @@ def test_heading_check_switches_from_a_wrong_first_heading(scene320, monkeypatch
     assert err_off.min() > 200.0                      # facing backwards: lost for good without the check
     tr, on, err = _heading_runs(scene320, monkeypatch, wrong_first=True)
     switched = [k for k, r in enumerate(on) if any("switched to the other heading" in n for n in r.notes)]
-    assert len(switched) == 1 and 1 <= switched[0] <= 3
+    assert len(switched) == 1 and 1 <= switched[0] <= 3 and not tr.checking_heading
     k = switched[0]
     assert err[:k].min() > 200.0 and err[k:].max() < 60.0
     np.testing.assert_array_equal(tr.last_estimate, on[-1].x)

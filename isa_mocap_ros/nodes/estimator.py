@@ -342,6 +342,10 @@ class EstimatorNode(Node):
                 if item is None:
                     self._cv.wait(0.1)
                     continue
+                if not self.lockstep and (self.tracker is None or not self.tracker.initialized):
+                    # this set may initialize the tracker: keep the sets that follow it in sequence
+                    # for the heading check (Tracker.checking_heading), not only the newest
+                    self.slot.hold(self.tracker_settings.get("init_confirm_frames", 0))
                 frame_set, t_ready = item
                 prediction = None
                 if self.use_prediction and self._published_any:
@@ -356,6 +360,10 @@ class EstimatorNode(Node):
                                              f"within {self.prediction_wait_s:.2f} s; using the estimator's own")
             try:
                 self._process(frame_set, prediction, t_ready)
+                if self.tracker is not None and self.tracker.initialized and not self.tracker.checking_heading:
+                    with self._cv:
+                        if self.slot.held:
+                            self.slot.hold(0)   # no heading check (left): on with the newest set
             except Exception as exc:  # noqa: BLE001 - a node must survive any one bad frame set
                 if self._stop.is_set() or not self.context.ok():
                     return  # shutting down: publishers are gone with the context

@@ -162,6 +162,12 @@ class LatestSlot:
     ``put`` appends a set; beyond ``depth`` sets waiting, the oldest are dropped (counted in
     ``dropped``); ``take`` gives the oldest waiting set. ``depth=1`` keeps only the newest. In
     lockstep mode use ``keep_all=True``: every set is queued, none dropped.
+
+    ``hold(n)`` keeps, besides the ``depth`` newest, the ``n`` oldest sets waiting, so that the worker
+    gets the sets that follow the one it is busy with in sequence (the tracker's heading check after
+    its automatic initialization compares consecutive frames, and the initialization takes several
+    frame periods); the sets between are dropped. ``hold(0)`` ends it and drops the held sets that are
+    still waiting, so the worker goes on with the newest.
     """
 
     def __init__(self, *, keep_all: bool = False, depth: int = 1) -> None:
@@ -170,17 +176,37 @@ class LatestSlot:
         self.keep_all = keep_all
         self.depth = depth
         self._items: list = []
+        self._hold = 0
         self.dropped = 0
+
+    @property
+    def held(self) -> int:
+        """How many of the oldest waiting sets are kept (``hold``)."""
+        return self._hold
+
+    def hold(self, n: int) -> None:
+        """Keep the ``n`` oldest waiting sets besides the ``depth`` newest (0: stop, see the class)."""
+        if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+            raise SyncError(f"hold: expected an integer >= 0, received {n!r}")
+        if n == 0 and self._hold and not self.keep_all and len(self._items) > self.depth:
+            k = len(self._items) - self.depth
+            self.dropped += k
+            del self._items[:k]
+        self._hold = n
 
     def put(self, item) -> None:
         self._items.append(item)
-        if not self.keep_all and len(self._items) > self.depth:
-            n = len(self._items) - self.depth
+        limit = self._hold + self.depth
+        if not self.keep_all and len(self._items) > limit:
+            n = len(self._items) - limit
             self.dropped += n
-            del self._items[:n]
+            del self._items[self._hold:self._hold + n]
 
     def take(self):
-        return self._items.pop(0) if self._items else None
+        item = self._items.pop(0) if self._items else None
+        if item is not None and self._hold:
+            self._hold -= 1          # a held set was taken: the next one in sequence is the oldest now
+        return item
 
     def __len__(self) -> int:
         return len(self._items)

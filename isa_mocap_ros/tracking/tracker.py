@@ -566,6 +566,13 @@ class Tracker:
     def last_estimate(self) -> np.ndarray | None:
         return None if self._last is None else self._last.copy()
 
+    @property
+    def checking_heading(self) -> bool:
+        """True while the heading check after the automatic initialization runs (``init_confirm_frames``):
+        it decides on consecutive frames only, so a caller that drops frames (the estimator node in
+        real time) should hand it the frames that follow in sequence meanwhile."""
+        return self._rival is not None
+
     def reset(self) -> None:
         """Forget the estimates (the next step initializes again)."""
         self._last = None
