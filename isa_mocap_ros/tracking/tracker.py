@@ -245,12 +245,12 @@ class TrackerConfig:
         Default root, left arm, right arm, torso, left leg, right leg. EA-vs-PF §3.3 goes root, torso,
         then the limbs, down the kinematic tree; but the torso stage then fits the spine and neck with
         the arms held at their prediction, and an arm the prediction left behind drags them after it
-        (a generated wave: the neck bent 40-60° forward while the raised arm lagged 50-80° for 50
-        frames, every part compensating the others). The arms move more than the torso in most
+        (a generated wave: the raised arm lagged 20-70° behind for 30 frames and the neck bent 40-70°
+        forward after it, every part compensating the others). The arms move more than the torso in most
         motions, so fitting them first on the predicted torso, then the torso with the arms found,
-        measured better on every sequence (8 / 8 / 4 / 4 seeds, segmented images: CMU walk
-        24.6 → 23.2 mm, bags/demo 19.7 → 17.9, generated wave 29.2 → 21.0, box 104 → 94;
-        ``docs/tracking.md``, "Partition order"). ``("root", "torso", "left_arm", "right_arm",
+        measured better on every sequence at 1500 evaluations (8 / 8 / 4 / 4 seeds, segmented images:
+        CMU walk 24.6 → 23.2 mm, bags/demo 19.7 → 17.9, generated wave 29.2 → 21.0, box 104 → 94; not
+        on a 7-frame occluded walk at 600: 33.8 → 37.1; ``docs/tracking.md``, "The partition order"). ``("root", "torso", "left_arm", "right_arm",
         "left_leg", "right_leg")`` is the paper's.
     refine_fraction : float
         Share of the frame budget spent, after the limb stage, on the **refinement stage**
