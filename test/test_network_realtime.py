@@ -32,3 +32,5 @@ def test_real_time_run_mends_a_backwards_first_heading(tmp_path, rosenv):
     s = json.loads((out / "summary.json").read_text())
     # measured: 24.5 / 25.4 mm (4-11 sets dropped); lost for good without the hold: 310 mm
     assert s["mpjpe_mm"] < 60.0, s
+    # the start-up's drops (initialization + heading check) are counted, and within all the drops
+    assert 1 <= s["dropped_while_initializing"] <= s["dropped_frames"], s

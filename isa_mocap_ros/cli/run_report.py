@@ -99,6 +99,20 @@ def write_overlays(folder: Path, model, seq, poses: dict[int, np.ndarray], masks
     return written
 
 
+def _first_gap(estimated: list[int], played: list[int]) -> int:
+    """The length of the first gap after the first estimated stamp: the sets played without an
+    estimate before the next estimated one (0 when there is none, or when no estimate follows it)."""
+    done = set(estimated)
+    n = 0
+    for s in sorted(v for v in played if v > estimated[0]):
+        if s in done:
+            if n:
+                return n
+        else:
+            n += 1
+    return 0
+
+
 def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary: dict,
                  wall_seconds: float) -> int:
     import cv2
@@ -138,10 +152,11 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
         "bad_inputs": int(diag.get("bad_inputs", 0) or 0), "wall_seconds": round(wall_seconds, 1),
     }
     seq = read_sequence(bag, want_images=True, want_masks=False)
-    # of those, the sets the bag played while the first estimate (the automatic initialization) was
-    # being computed: between the first two estimates' stamps
+    # of those, the sets of the start-up: the first run of sets without an estimate after the first
+    # estimate (the automatic initialization, and in real time the heading check after it, whose
+    # consecutive sets the estimator holds: its drops come right after the check's frames)
     est = sorted(poses)
-    summary["dropped_while_initializing"] = (sum(1 for f in seq.frames if est[0] < f.stamp_ns < est[1])
+    summary["dropped_while_initializing"] = (_first_gap(est, [f.stamp_ns for f in seq.frames])
                                              if len(est) >= 2 else None)
     stamps = [f.stamp_ns for f in seq.frames if f.truth is not None and f.stamp_ns in poses]
     if seq.has_truth and stamps:
