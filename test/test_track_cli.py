@@ -56,6 +56,19 @@ def test_track_stride_tracks_every_kth_frame(tmp_path, capsys):
     assert "--stride: expected an integer >= 1" in capsys.readouterr().err
 
 
+@pytest.mark.skipif(not FIXTURE.is_dir(), reason="bags/fixture not present")
+def test_track_partition_order(tmp_path, capsys):
+    paper = "root,torso,left_arm,right_arm,left_leg,right_leg"
+    out = tmp_path / "out"
+    assert main(["track", str(FIXTURE), "--out", str(out), "--evals", "300", "--frames", "3", "--no-progress",
+                 "--init", "truth", "--use-masks", "--partition-order", paper]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["partition_order"] == paper.split(",") and s["frames"] == 3
+    capsys.readouterr()
+    assert main(["track", str(FIXTURE), "--out", str(tmp_path / "o2"), "--partition-order", "root,torso"]) == 2
+    assert "partition_order: expected every partition of model" in capsys.readouterr().err
+
+
 def test_track_bad_input(tmp_path, capsys):
     assert main(["track", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]) == 2
     assert "no such path" in capsys.readouterr().err

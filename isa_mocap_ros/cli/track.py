@@ -69,6 +69,10 @@ def register(sub) -> None:
     p.add_argument("--init-confirm-frames", type=int, default=None, metavar="N",
                    help="heading check after the automatic initialization: frames an opposite-heading rival is "
                         "tracked beside the winner (0 = off; default: the tracker's default)")
+    p.add_argument("--partition-order", default=None, metavar="NAMES",
+                   help="comma-separated order of the hierarchy's partitions (default: the tracker's, root,left_arm,"
+                        "right_arm,torso,left_leg,right_leg; the paper's: root,torso,left_arm,right_arm,left_leg,"
+                        "right_leg)")
     p.add_argument("--overwrite", action="store_true", help="replace DIR/estimates if it exists")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -220,6 +224,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         cfg_kw["gate_margin_px"] = args.gate_margin_px
     if getattr(args, "init_confirm_frames", None) is not None:
         cfg_kw["init_confirm_frames"] = args.init_confirm_frames
+    if getattr(args, "partition_order", None) is not None:
+        cfg_kw["partition_order"] = tuple(v.strip() for v in args.partition_order.split(",") if v.strip())
     cfg = TrackerConfig(**cfg_kw)
     tracker = Tracker(model, seq.cameras, cfg, prior=prior)
     # as the node network: the prediction travels as JointState (roll/pitch/yaw root) and the
@@ -293,6 +299,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                      "stride": stride,
                      "optimizer_params": cfg.params(), "model_dof": model.dof, "seed": args.seed,
                      "gate_margin_px": cfg.gate_margin_px, "init_confirm_frames": cfg.init_confirm_frames,
+                     "partition_order": list(cfg.partition_order),
                      "masks": "recorded" if use_masks else f"segmented (learned from {learn} frames)",
                      "frames_tracked": n_tracked, "frames_estimated": len(estimates), "frames_fell_back": n_fell_back,
                      "fps": n_tracked / t_track if t_track > 0 else float("nan"),
