@@ -345,7 +345,7 @@ class EstimatorNode(Node):
                 if not self.lockstep and (self.tracker is None or not self.tracker.initialized):
                     # this set may initialize the tracker: keep the sets that follow it in sequence
                     # for the heading check (Tracker.checking_heading), not only the newest
-                    self.slot.hold(self.tracker_settings.get("init_confirm_frames", 0))
+                    self.slot.hold(self.tracker_settings["init_confirm_frames"])
                 frame_set, t_ready = item
                 prediction = None
                 if self.use_prediction and self._published_any:

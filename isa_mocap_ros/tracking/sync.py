@@ -188,17 +188,17 @@ class LatestSlot:
         """Keep the ``n`` oldest waiting sets besides the ``depth`` newest (0: stop, see the class)."""
         if isinstance(n, bool) or not isinstance(n, int) or n < 0:
             raise SyncError(f"hold: expected an integer >= 0, received {n!r}")
-        if n == 0 and self._hold and not self.keep_all and len(self._items) > self.depth:
-            k = len(self._items) - self.depth
-            self.dropped += k
-            del self._items[:k]
         self._hold = n
+        self._trim()
 
     def put(self, item) -> None:
         self._items.append(item)
-        limit = self._hold + self.depth
-        if not self.keep_all and len(self._items) > limit:
-            n = len(self._items) - limit
+        self._trim()
+
+    def _trim(self) -> None:
+        """Drop (and count) the sets waiting beyond the ``held`` oldest and the ``depth`` newest."""
+        n = len(self._items) - self._hold - self.depth
+        if not self.keep_all and n > 0:
             self.dropped += n
             del self._items[self._hold:self._hold + n]
 

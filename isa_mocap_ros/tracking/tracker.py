@@ -117,6 +117,15 @@ def _check_number(name: str, value, *, lo: float | None = None, strict: bool = F
         raise TrackerError(f"{name}: expected {kind}{bound}, received {value!r}")
 
 
+def _partition_names(name: str, value, example: str, *, empty: bool) -> tuple:
+    """``value`` as a tuple of distinct partition names (a sequence of strings, not a string; ``empty``:
+    whether none is allowed), else :class:`TrackerError` naming the setting."""
+    if isinstance(value, str) or not isinstance(value, Sequence) or not all(isinstance(v, str) for v in value) \
+            or len(set(value)) != len(value) or not (empty or value):
+        raise TrackerError(f"{name}: expected distinct partition names (e.g. {example}), received {value!r}")
+    return tuple(value)
+
+
 @dataclass(frozen=True)
 class TrackerConfig:
     """Fixed settings of a :class:`Tracker` (see the module docstring and ``docs/tracking.md``).
@@ -250,8 +259,8 @@ class TrackerConfig:
         motions, so fitting them first on the predicted torso, then the torso with the arms found,
         measured better on every sequence at 1500 evaluations (8 / 8 / 4 / 4 seeds, segmented images:
         CMU walk 24.6 → 23.2 mm, bags/demo 19.7 → 17.9, generated wave 29.2 → 21.0, box 104 → 94; not
-        on a 7-frame occluded walk at 600: 33.8 → 37.1; ``docs/tracking.md``, "The partition order"). ``("root", "torso", "left_arm", "right_arm",
-        "left_leg", "right_leg")`` is the paper's.
+        on a 7-frame occluded walk at 600: 33.8 → 37.1; ``docs/tracking.md``, "The partition order").
+        ``("root", "torso", "left_arm", "right_arm", "left_leg", "right_leg")`` is the paper's.
     refine_fraction : float
         Share of the frame budget spent, after the limb stage, on the **refinement stage**
         (:meth:`Tracker.refine`): for a hierarchical algorithm (``h-isa``, ``h-cmaes``, ``h-de``,
@@ -384,21 +393,14 @@ class TrackerConfig:
             raise TrackerError(f"limb_proposal_limbs: expected distinct names among {', '.join(LIMBS)}, "
                                f"received {limbs!r}")
         object.__setattr__(self, "limb_proposal_limbs", tuple(limbs))
-        order = self.partition_order
-        if isinstance(order, str) or not isinstance(order, Sequence) or not all(isinstance(v, str) for v in order) \
-                or len(set(order)) != len(order) or not order:
-            raise TrackerError(f"partition_order: expected distinct partition names (e.g. root, left_arm, right_arm, "
-                               f"torso, left_leg, right_leg), received {order!r}")
-        object.__setattr__(self, "partition_order", tuple(order))
+        object.__setattr__(self, "partition_order", _partition_names(
+            "partition_order", self.partition_order, "root, left_arm, right_arm, torso, left_leg, right_leg",
+            empty=False))
         _check_number("refine_fraction", self.refine_fraction, lo=0.0)
         if self.refine_fraction >= 1.0:
             raise TrackerError(f"refine_fraction: expected a share in [0, 1), received {self.refine_fraction!r}")
-        parts = self.refine_partitions
-        if isinstance(parts, str) or not isinstance(parts, Sequence) or not all(isinstance(v, str) for v in parts) \
-                or len(set(parts)) != len(parts):
-            raise TrackerError(f"refine_partitions: expected distinct partition names (e.g. torso, left_arm, "
-                               f"right_arm), received {parts!r}")
-        object.__setattr__(self, "refine_partitions", tuple(parts))
+        object.__setattr__(self, "refine_partitions", _partition_names(
+            "refine_partitions", self.refine_partitions, "torso, left_arm, right_arm", empty=True))
         if self.pelvis_fraction + self.refine_fraction >= 1.0:
             raise TrackerError(f"pelvis_fraction + refine_fraction: expected below 1 (the main search needs a "
                                f"share), received {self.pelvis_fraction!r} + {self.refine_fraction!r}")
