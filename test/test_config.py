@@ -19,6 +19,7 @@ def test_estimator_section_matches_tracker_defaults():
              "predictor_order": tc.predictor_order, "prior_eta": tc.prior_eta, "seed": tc.seed,
              "pelvis_fraction": tc.pelvis_fraction, "limb_proposals": tc.limb_proposals,
              "limb_proposal_limbs": list(tc.limb_proposal_limbs), "init_confirm_frames": tc.init_confirm_frames,
+             "init_confirm_share": tc.init_confirm_share,
              "refine_fraction": tc.refine_fraction, "refine_partitions": list(tc.refine_partitions),
              "partition_order": list(tc.partition_order)}
     assert {k: est[k] for k in pairs} == pairs

@@ -147,6 +147,23 @@ def test_heading_check_keeps_a_right_first_heading_bit_for_bit(scene320, monkeyp
     assert all(r.n_evals == 1500 for r in on[checked + 1:])
 
 
+def test_heading_check_shares_the_frame_budget(scene320, monkeypatch):
+    # init_confirm_share 0.5: a frame of the check costs one frame's budget, 750 evaluations each
+    _, on, err = _heading_runs(scene320, monkeypatch, wrong_first=False, init_confirm_share=0.5)
+    notes = _heading_notes(on)
+    assert notes[1].startswith("heading check decided: kept the initial heading")
+    checked = [k for k, r in enumerate(on) if any("kept the initial heading" in n for n in r.notes)][0]
+    assert [r.n_evals for r in on[1:]] == [1500] * (len(on) - 1)
+    assert err.max() < 60.0
+    model, cams, _, _ = scene320
+    # never below 500 (or the frame budget when it is smaller)
+    for evals, share, each in ((1500, 0.5, 750), (3000, 0.5, 1500), (800, 0.5, 500), (400, 0.5, 400),
+                               (1500, 0.1, 500), (1500, 1.0, 1500)):
+        tr = Tracker(model, cams, TrackerConfig(evals_per_frame=evals, init_confirm_share=share))
+        assert tr.confirm_evals() == each
+    assert checked >= 1
+
+
 def test_heading_check_ends_at_a_gap(scene320):
     # after a gap (real time: the sets that came during the initialization were dropped) both
     # hypotheses are still catching up: the check ends there without stepping the rival
@@ -258,6 +275,8 @@ def test_search_box_respects_radius_and_limits(scene):
     ({"init_keep": 1.5}, "init_keep: expected an integer >= 0"),
     ({"init_confirm_frames": -1}, "init_confirm_frames: expected an integer >= 0"),
     ({"init_confirm_ratio": 0.9}, "init_confirm_ratio: expected a finite number >= 1.0"),
+    ({"init_confirm_share": 0.0}, "init_confirm_share: expected a finite number > 0.0"),
+    ({"init_confirm_share": 1.5}, "init_confirm_share: expected a share in \\(0, 1\\], received 1.5"),
     ({"init_confirm_margin": float("nan")}, "init_confirm_margin: expected a finite number >= 1.0"),
 ])
 def test_config_errors(kw, match):

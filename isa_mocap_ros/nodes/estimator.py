@@ -96,6 +96,10 @@ class EstimatorNode(Node):
         confirm = declare(self, "init_confirm_frames", tc.init_confirm_frames, "heading check after the automatic "
                           "initialization: frames an opposite-heading rival of similar energy is tracked beside the "
                           "winner before the lower energy sum decides (0 = off)", lo=0, hi=100)
+        confirm_share = declare(self, "init_confirm_share", tc.init_confirm_share, "share of the frame budget each "
+                                "hypothesis of the heading check gets (0.5: a frame of the check costs one frame's "
+                                "budget but decides worse on fast motion; never below 500 evaluations or the frame "
+                                "budget)", lo=0.01, hi=1.0)
         predictor = declare(self, "predictor", tc.predictor, "ar, constant_pose or constant_velocity")
         order = declare(self, "predictor_order", tc.predictor_order, "AR order (past motions used; keep equal to the prediction node's order)", lo=1, hi=20)
         self.prior_eta = declare(self, "prior_eta", 0.0, "weight of the pose prior (0 = off)", lo=0.0, hi=1e6)
@@ -144,7 +148,8 @@ class EstimatorNode(Node):
                                      limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs),
                                      partition_order=tuple(part_order), refine_fraction=refine,
                                      refine_partitions=tuple(refine_parts), gate_margin_px=gate,
-                                     max_frames_ahead=ahead, init_confirm_frames=confirm)
+                                     max_frames_ahead=ahead, init_confirm_frames=confirm,
+                                     init_confirm_share=confirm_share)
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
                                       slop_ns=0 if sync == "exact" else int(slop_s * 1e9),
                                       max_wait_s=self.view_timeout_s, min_views=min(min_views, self.n_views))

@@ -55,6 +55,7 @@ automatically and then tracks from that pose.
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import time
@@ -87,6 +88,9 @@ PELVIS_SPREAD_SCALE = 2.0
 REFINE_MIN_GENERATIONS = 4
 #: Share of a view's foreground the mask gate may remove before ``FrameResult.notes`` says so.
 GATE_NOTE_SHARE = 0.25
+#: Smallest budget of a heading-check hypothesis (``TrackerConfig.init_confirm_share``) unless the frame
+#: budget is smaller: the comparison paper's smallest budget, the least the tracker is measured at.
+CONFIRM_MIN_EVALS = 500
 ESTIMATES = ("optimizer", "best")
 
 #: Optimizer parameters used unless ``optimizer_params`` sets them (tuned on the silhouette energy,
@@ -206,7 +210,8 @@ class TrackerConfig:
         winner faced backwards, 2 % below the right heading, and the whole run was lost). When the
         best run whose final heading differs from the winner's by more than 90° has an energy
         within ``init_confirm_ratio`` of the winner's, it is kept as a *rival* and tracked beside
-        the winner (its own predictor, the same frame streams and budget) for up to this many
+        the winner (its own predictor, the same frame streams; each hypothesis with
+        ``init_confirm_share`` of the frame budget) for up to this many
         frames: once the person moves, the wrong heading fits markedly worse (knees do not bend
         forwards). The energy sums decide: the winner is kept as soon as the rival's sum exceeds its
         own by the factor ``init_confirm_margin``; the rival wins only if, over all the frames, the
@@ -221,6 +226,15 @@ class TrackerConfig:
         arrived during the initialization were dropped) ends it and keeps the winner, because
         after a gap both hypotheses are still catching up and their energies decided wrongly
         (measured). 0 turns it off (``docs/tracking.md``, "Checking the heading").
+    init_confirm_share : float
+        Share of the frame budget each hypothesis of the heading check gets, in (0, 1]; never below
+        ``CONFIRM_MIN_EVALS`` (500, the comparison paper's smallest budget) or the frame budget if
+        that is smaller. Default 1.0: each hypothesis is tracked as the frame would be. 0.5 makes a
+        frame of the check cost one frame's budget (in real time 1-3 fewer sets dropped after the
+        initialization on bags/demo) but decides worse when the person moves fast: on 120 first
+        frames started mid-motion (CMU walk and the generated walk, jog, wave, box) it switched to
+        the right heading 7 times instead of 12, lost runs 19 instead of 14 (``docs/tracking.md``,
+        "Checking the heading").
     init_confirm_ratio : float
         How close (>= 1, a factor on the winner's energy) the rival's energy on the initialized
         frame must be for the heading check to run. Default 1.25.
@@ -328,6 +342,7 @@ class TrackerConfig:
     init_spread_scale: float = 2.0
     init_keep: int = 3
     init_confirm_frames: int = 3
+    init_confirm_share: float = 1.0
     init_confirm_ratio: float = 1.25
     init_confirm_margin: float = 1.1
     pelvis_fraction: float = 0.15
@@ -381,6 +396,9 @@ class TrackerConfig:
         _check_number("init_spread_scale", self.init_spread_scale, lo=0.0, strict=True)
         _check_number("init_keep", self.init_keep, lo=0, integer=True)
         _check_number("init_confirm_frames", self.init_confirm_frames, lo=0, integer=True)
+        _check_number("init_confirm_share", self.init_confirm_share, lo=0.0, strict=True)
+        if self.init_confirm_share > 1.0:
+            raise TrackerError(f"init_confirm_share: expected a share in (0, 1], received {self.init_confirm_share!r}")
         _check_number("init_confirm_ratio", self.init_confirm_ratio, lo=1.0)
         _check_number("init_confirm_margin", self.init_confirm_margin, lo=1.0)
         _check_number("pelvis_fraction", self.pelvis_fraction, lo=0.0)
@@ -1224,7 +1242,10 @@ class Tracker:
         """
         t0 = time.perf_counter()
         rival = self._rival
-        res = self._step(masks, frame_index, prediction=prediction, frames_elapsed=frames_elapsed)
+        # a frame of the heading check (consecutive frames only, see below) shares the budget
+        evals = self.confirm_evals() if rival is not None and frames_elapsed == 1 else self.config.evals_per_frame
+        with self._budget(evals):
+            res = self._step(masks, frame_index, prediction=prediction, frames_elapsed=frames_elapsed)
         if self._own_prediction_frames > 0:
             self._own_prediction_frames -= 1
         if res.initialized:
@@ -1247,13 +1268,32 @@ class Tracker:
                 "it compares consecutive frames only); kept this heading",))
         return self._confirm_heading(res, masks, frame_index, frames_elapsed, t0)
 
+    def confirm_evals(self) -> int:
+        """Evaluations of each hypothesis on a frame of the heading check (``config.init_confirm_share``
+        of the frame budget, at least ``min(CONFIRM_MIN_EVALS, evals_per_frame)``)."""
+        cfg = self.config
+        return max(int(cfg.evals_per_frame * cfg.init_confirm_share), min(CONFIRM_MIN_EVALS, cfg.evals_per_frame))
+
+    @contextlib.contextmanager
+    def _budget(self, evals: int):
+        """Within the block, every stage of :meth:`_step` sizes its share from ``evals`` evaluations
+        per frame instead of ``config.evals_per_frame``."""
+        cfg = self.config
+        if evals != cfg.evals_per_frame:
+            self.config = dataclasses.replace(cfg, evals_per_frame=evals)
+        try:
+            yield
+        finally:
+            self.config = cfg
+
     def _confirm_heading(self, res: FrameResult, masks, frame_index: int, frames_elapsed: float,
                          t0: float) -> FrameResult:
         """One frame of the heading check: step the rival on the same masks, add both energies, decide
         (see ``TrackerConfig.init_confirm_frames``); the frame's result (the rival's when it wins)."""
         cfg = self.config
         rival = self._rival
-        other = rival._step(masks, frame_index, prediction=None, frames_elapsed=frames_elapsed)
+        with rival._budget(self.confirm_evals()):
+            other = rival._step(masks, frame_index, prediction=None, frames_elapsed=frames_elapsed)
         n_evals = res.n_evals + other.n_evals
         if res.fell_back and other.fell_back:       # nothing to compare this frame
             return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0)
