@@ -34,6 +34,13 @@ def test_quick_json_resume_and_results(tmp_path, capsys):
     orig = recs[1]
     assert redo["key"] == orig["key"] and redo["mpjpe_mm"] == orig["mpjpe_mm"]     # same seed, same numbers
     assert s2["cells"] == s["cells"]
+    # cells of other sequences (another design's frames or images) are never resumed into this one
+    d = json.loads((out / "design.json").read_text())
+    d["sequences"][0]["duration_s"] = 1.0
+    (out / "design.json").write_text(json.dumps(d))
+    assert main(["bench", "compare", "--quick", "--resume", str(out), "--jobs", "1", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "holds the cells of other sequences" in err and "walk 30@30 96x72" in err and "walk 4@30 96x72" in err
 
 
 def test_resume_needs_a_run(tmp_path, capsys):

@@ -59,15 +59,26 @@ def _machine() -> str:
 
 
 def run_design(design, out: Path, *, jobs: int = 2, progress: bool = True) -> list[dict]:
-    """Run (or finish) ``design`` in ``out``; return all records of its cells."""
+    """Run (or finish) ``design`` in ``out``; return all records of its cells.
+
+    Raises ``ValueError`` when ``out`` already holds cells of other sequences (another design's
+    frames, images or views): cells are found again by algorithm, model, budget, sequence name and
+    seed only, so they would mix."""
     from tqdm import tqdm
 
     from isa_mocap_ros.eval.compare import cell_key, prepare_sequence
 
     out.mkdir(parents=True, exist_ok=True)
-    (out / "design.json").write_text(json.dumps(design.to_dict(), indent=2) + "\n")
-    cache = {s.name: str(prepare_sequence(s, out / "cache")) for s in design.sequences}
     jl = out / "cells.jsonl"
+    new = json.loads(json.dumps(design.to_dict()))
+    if jl.exists() and (out / "design.json").exists():
+        old = json.loads((out / "design.json").read_text())
+        if old.get("sequences") != new["sequences"]:
+            raise ValueError(f"{out} holds the cells of other sequences (design {old.get('name')!r}: "
+                             f"{_seq_summary(old.get('sequences'))}; now {_seq_summary(new['sequences'])}); "
+                             "resume only the same design, or give a new --out")
+    (out / "design.json").write_text(json.dumps(new, indent=2) + "\n")
+    cache = {s.name: str(prepare_sequence(s, out / "cache")) for s in design.sequences}
     done: dict[str, dict] = {}
     if jl.exists():
         for ln in jl.read_text().splitlines():
@@ -102,6 +113,15 @@ def run_design(design, out: Path, *, jobs: int = 2, progress: bool = True) -> li
     bar.close()
     keys = {cell_key(c) for c in cells}
     return [r for k, r in done.items() if k in keys]
+
+
+def _seq_summary(seqs) -> str:
+    """``name frames@fps WxH`` per sequence of a design's JSON."""
+    try:
+        return ", ".join(f"{s['name']} {round(s['duration_s'] * s['fps'])}@{s['fps']:g} {s['width']}x{s['height']}"
+                         for s in seqs)
+    except (TypeError, KeyError):
+        return repr(seqs)
 
 
 def collect(kind: str, out: Path, *, jobs: int = 2, progress: bool = True, algorithms=None):
@@ -170,6 +190,9 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print(f"\nbench compare: interrupted; resume with --resume {out}", file=sys.stderr)
         return 130
+    except ValueError as exc:
+        print(f"isa-mocap bench compare: error: {exc}", file=sys.stderr)
+        return 2
     seconds = time.perf_counter() - t0
     summary = summarize(records)
     summary["design"] = design.to_dict()

@@ -105,7 +105,8 @@ def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK
       0.14 s at 30 fps (4 frames, 3 scored) in 2 views of 96 × 72 — a smoke test.
     * ``"default"``: the 12 algorithms (10 of the paper's families incl. ISA/H-ISA, + pycma, scipy-de)
       × {28, 39} × {500, 1500, 3000} × 3 seeds × 5 sequences (CMU walk from 1 s if present, walk,
-      jog, wave, box) of 11 frames at 30 fps (10 scored) in 4 views of 128 × 96.
+      jog, wave, box) of 31 frames at 30 fps (30 scored) in 4 views of 128 × 96 (11 frames until
+      session 12: too short, see docs/evaluation.md).
     * ``"full"``: as default with 30 seeds and 2 s at 30 fps (60 frames) in 4 views of 320 × 240.
     """
     notes = []
@@ -114,7 +115,7 @@ def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK
         seqs = (SequenceSpec("walk", "walk", duration_s=0.14, fps=30.0, width=96, height=72, views=2),)
         return Design("quick", ("isa", "pycma"), (39,), (200,), (0,), seqs, None, ())
     if kind == "default":
-        dur, fps, w, h, seeds = 11 / 30, 30.0, 128, 96, (0, 1, 2)
+        dur, fps, w, h, seeds = 31 / 30, 30.0, 128, 96, (0, 1, 2)
     elif kind == "full":
         dur, fps, w, h, seeds = 2.0, 30.0, 320, 240, tuple(range(30))
     else:
