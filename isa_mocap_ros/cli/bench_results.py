@@ -34,7 +34,11 @@ from pathlib import Path
 
 import numpy as np
 
-ORDER = ("ackley", "adapters", "render", "energy", "compare", "robustness", "speed")
+#: Run order of ``bench all``: the timed benches first, on a rested machine. After the 20 minutes of
+#: both cores at full load that ackley, compare and robustness take, the node network's real-time run
+#: in ``speed`` dropped 24 of 145 frame sets (tracker 31 ms a frame, p50) where the same bench alone
+#: a minute later dropped 6 (22.7 ms; session 12, docs/evaluation.md).
+ORDER = ("energy", "speed", "adapters", "render", "ackley", "compare", "robustness")
 _SRC_ROOT = Path(__file__).resolve().parents[2]
 
 
