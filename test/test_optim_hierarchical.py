@@ -48,6 +48,34 @@ def test_budget_split_is_proportional_with_remainder_to_the_first():
     assert [n for _, n in opt.partition_log] + [opt._inner_used] == [501, 333, 166]
 
 
+def test_whole_generations_split():
+    # 866 over the 39-DOF partitions (6, 6, 6, 9, 6, 6), generations of 30: floors 133 -> 120, 199 -> 180,
+    # then 746 - 720... handed out a generation at a time in order while one fits
+    assert split_budget(866, [6, 6, 6, 9, 6, 6], [30] * 6) == [150, 150, 120, 180, 120, 120]
+    # a partition whose proportional share is below a generation gets one first
+    assert split_budget(100, [8, 1], [20, 20]) == [80, 20]
+    assert split_budget(100, [8, 1], [30, 30]) == [60, 30]           # 10 stay unspent
+    for B in range(60, 2000, 37):
+        shares = split_budget(B, [6, 6, 6, 9, 6, 6], [30] * 6)
+        assert all(s % 30 == 0 for s in shares) and B - 30 < sum(shares) <= B
+
+
+@pytest.mark.parametrize("inner", ["isa", "cmaes", "pso"])
+def test_whole_generations_run_no_truncated_generation(inner):
+    """A run with ``whole_generations`` spends whole generations of every partition (what remains of the
+    budget, less than one generation, stays unspent); the same draws as far as the shares agree."""
+    opt = Hierarchical(np.zeros(7), 0.5, partitions=PARTS, optimizer=inner, whole_generations=True,
+                       rng=np.random.default_rng(0))
+    res = minimize(opt, sphere, max_evals=1000)
+    gens = [make_optimizer(inner, np.zeros(len(p)), 0.5, rng=np.random.default_rng(0)).generation_size
+            for p in PARTS]
+    spent = [n for _, n in opt.partition_log] + [opt._inner_used]
+    assert spent == split_budget(1000, [3, 2, 1], gens)
+    assert all(n % g == 0 for n, g in zip(spent, gens)) and res.n_evals == sum(spent) > 1000 - max(gens)
+    steps = np.diff([0] + [h.n_evals for h in res.history])          # every generation evaluated whole
+    assert set(steps.tolist()) <= set(gens)
+
+
 @pytest.mark.parametrize("parts,msg", [
     ([[0, 1], [1, 2]], r"index 1 is in partitions\[0\] and partitions\[1\]"),
     ([[0, 9]], r"partitions\[0\]: indices must lie in \[0, 4\)"),

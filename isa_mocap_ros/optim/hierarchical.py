@@ -63,11 +63,30 @@ def check_partitions(partitions, d: int) -> list[np.ndarray]:
     return out
 
 
-def split_budget(max_evals: int, dims: Sequence[int]) -> list[int]:
-    """Shares ``floor(B d_k / sum d)``, remainder to the first partition."""
+def split_budget(max_evals: int, dims: Sequence[int], generations: Sequence[int] | None = None) -> list[int]:
+    """Shares ``floor(B d_k / sum d)``, remainder to the first partition.
+
+    With ``generations`` (the inner optimizers' generation sizes ``g_k``), shares are whole
+    generations: each ``floor(B d_k / sum d)`` rounded down to a multiple of ``g_k``; then the
+    remaining evaluations are handed out one generation at a time, first to partitions left without
+    one (in order), then to all partitions in order (cycling) while one still fits; fewer than the
+    smallest fitting generation stay unspent, so the shares may sum to less than ``B``."""
     tot = sum(dims)
     shares = [max_evals * dk // tot for dk in dims]
-    shares[0] += max_evals - sum(shares)
+    if generations is None:
+        shares[0] += max_evals - sum(shares)
+        return shares
+    shares = [s // g * g for s, g in zip(shares, generations)]
+    left = max_evals - sum(shares)
+    for k, g in enumerate(generations):
+        if shares[k] == 0 and g <= left:
+            shares[k] += g
+            left -= g
+    while any(g <= left for g in generations):
+        for k, g in enumerate(generations):
+            if g <= left:
+                shares[k] += g
+                left -= g
     return shares
 
 
@@ -86,6 +105,12 @@ class Hierarchical(Optimizer):
         ``f(x0_sub, spread_sub, *, rng, bounds, initial_population, rotation_blocks, **params)``.
     evals_per_partition : int or list of int, optional
         Shares when no budget is bound (``minimize`` binds one and overrides this).
+    whole_generations : bool
+        Split a bound budget into whole generations of the inner optimizers (:func:`split_budget`
+        with their generation sizes), leaving fewer than one generation unspent, instead of ending
+        partitions on a truncated generation. A truncated last generation of a few rows makes the
+        partition's estimate that of a few random particles for the weighted-mean estimators (ISA,
+        APF): measured in the tracker (``docs/tracking.md``, "Whole generations"). Default False.
     **params
         Passed to every inner optimizer.
     """
@@ -93,7 +118,7 @@ class Hierarchical(Optimizer):
     name = "hierarchical"
 
     def __init__(self, x0, spread, *, partitions, optimizer="cmaes",
-                 evals_per_partition=None, rng, bounds=None, initial_population=None,
+                 evals_per_partition=None, whole_generations=False, rng, bounds=None, initial_population=None,
                  rotation_blocks=(), init="normal", max_iter=None, **params):
         super().__init__(x0, spread, rng=rng, bounds=bounds, initial_population=initial_population,
                          rotation_blocks=rotation_blocks, init=init, max_iter=max_iter)
@@ -128,6 +153,7 @@ class Hierarchical(Optimizer):
         else:
             raise OptimError(f"optimizer: expected a name or a factory, got {optimizer!r}")
         self.params = params
+        self.whole_generations = bool(whole_generations)
         self._x = self.x0.copy()
         self.k = 0                      # current partition
         self._inner: Optimizer | None = None
@@ -173,7 +199,13 @@ class Hierarchical(Optimizer):
         if self.n_iter != 0:
             return
         if max_evals is not None:
-            self.shares = split_budget(max_evals, [len(p) for p in self.partitions])
+            gens = None
+            if self.whole_generations:
+                # generation sizes of the inner optimizers, built without drawing from the run's stream
+                state = self.rng.bit_generator.state
+                gens = [self._make_inner(k, None).generation_size for k in range(len(self.partitions))]
+                self.rng.bit_generator.state = state
+            self.shares = split_budget(max_evals, [len(p) for p in self.partitions], gens)
             if min(self.shares) < 1:
                 raise OptimError(f"max_evals: budget {max_evals} gives an empty share to a "
                                  f"partition (shares {self.shares})")

@@ -288,7 +288,8 @@ class HisaRun:
                              f"c={self.c}, rho={self.rho}")
         self.opt, self.energy, self.max_evals = opt, energy, int(max_evals)
         self.parts = opt.partitions
-        self.shares = split_budget(self.max_evals, [len(q) for q in self.parts])
+        self.shares = split_budget(self.max_evals, [len(q) for q in self.parts],
+                                   [self.n] * len(self.parts) if opt.whole_generations else None)
         if min(self.shares) < n:
             k = int(np.argmin(self.shares))
             raise OptimError(f"max_evals: partition {k} ({len(self.parts[k])} coordinates) gets {self.shares[k]} "
