@@ -257,5 +257,5 @@ def test_tracker_steps_are_the_same_with_and_without_restriction(scene, monkeypa
     tr2, without = track()
     for a, b in zip(with_, without):
         np.testing.assert_array_equal(a.x, b.x)
-        assert a.energy == b.energy and a.n_evals == b.n_evals == 600
+        assert a.energy == b.energy and a.n_evals == b.n_evals and 600 - 2 < a.n_evals <= 600   # whole generations
     assert tr2.energy.n_evals == n

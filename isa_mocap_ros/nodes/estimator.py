@@ -75,11 +75,19 @@ class EstimatorNode(Node):
         radius = declare(self, "search_radius_rad", tc.search_radius_rad,
                          "joint-angle search radius around the prediction", lo=0.01, hi=3.2)
         pelvis = declare(self, "pelvis_fraction", tc.pelvis_fraction, "share of the budget for the pelvis stage "
-                         "(root re-fit with its children held in the world; 0 = off)", lo=0.0, hi=0.9)
+                         "(root re-fit with the limbs below it kept in place; 0 = off)", lo=0.0, hi=0.9)
+        pelvis_move = declare(self, "pelvis_move", tc.pelvis_move, "move of the pelvis stage: reaim (thighs swung "
+                              "about the knees, lower spine about the chest) or world (children keep their world "
+                              "rotations)")
+        torso = declare(self, "torso_fraction", tc.torso_fraction, "share of the budget for the torso stage (spine "
+                        "and neck re-fit with the upper arms swung about the elbows; 0 = off)", lo=0.0, hi=0.9)
         limb_n = declare(self, "limb_proposals", tc.limb_proposals, "twist-and-hinge proposals per limb and frame "
                          "(limb stage: re-opens a folded arm; 0 = off)", lo=0, hi=10_000)
         limbs = declare(self, "limb_proposal_limbs", list(tc.limb_proposal_limbs),
                         "limbs of the limb stage: left_arm, right_arm, left_leg, right_leg")
+        fold = declare(self, "limb_fold_deg", tc.limb_fold_deg, "any other limb joins the limb stage on frames whose "
+                       "prediction bends its hinge beyond this many degrees (a folded knee; 0 = never)",
+                       lo=0.0, hi=360.0)
         part_order = declare(self, "partition_order", list(tc.partition_order),
                              "order in which hierarchical optimizers search the model's partitions (root, "
                              "left_arm, right_arm, torso, left_leg, right_leg; the paper's: root, torso, arms, legs)")
@@ -145,7 +153,8 @@ class EstimatorNode(Node):
                                      seed=self.seed, energy=energy, downsample=downsample,
                                      search_radius_rad=radius, predictor=predictor, predictor_order=order,
                                      prior_eta=self.prior_eta, prior_file=prior_file, pelvis_fraction=pelvis,
-                                     limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs),
+                                     pelvis_move=pelvis_move, torso_fraction=torso,
+                                     limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs), limb_fold_deg=fold,
                                      partition_order=tuple(part_order), refine_fraction=refine,
                                      refine_partitions=tuple(refine_parts), gate_margin_px=gate,
                                      max_frames_ahead=ahead, init_confirm_frames=confirm,

@@ -25,13 +25,19 @@ One call of :meth:`Tracker.step` per frame set:
    (defaults per optimizer in :data:`DEFAULT_PARAMS`), hierarchical ones (``h-*``, ``psapf``) over
    ``model.partitions`` in the order ``partition_order`` (default root, left arm, right arm, torso,
    left leg, right leg: the arms before the torso, unlike §3.3's root, torso, limbs);
-   exactly ``evals_per_frame`` evaluations (:func:`~isa_mocap_ros.optim.minimize`), of which
-   the three stages below take their shares: the **pelvis stage** (:meth:`Tracker.refit_pelvis`)
-   re-fits the root with its children held in the world, the **limb stage**
-   (:meth:`Tracker.propose_limbs`) tries twist-and-hinge proposals for the arms and keeps any that
-   lowers the energy, then the **refinement stage** (:meth:`Tracker.refine`, hierarchical
-   algorithms) searches the torso and both arms again together with the algorithm's flat form and
-   keeps the result if it lowers the energy. None runs on the automatically initialized frame.
+   at most ``evals_per_frame`` evaluations (:func:`~isa_mocap_ros.optim.minimize`), of which
+   the stages below take their shares: the **pelvis stage** (:meth:`Tracker.refit_pelvis`)
+   re-fits the root with the limbs below it kept in place (:mod:`.reaim`), the **torso stage**
+   (:meth:`Tracker.refit_torso`) re-fits the spine and neck with the upper arms swung about the
+   elbows, the **limb stage** (:meth:`Tracker.propose_limbs`) tries twist-and-hinge proposals for
+   the arms (and a folded leg) and keeps any that lowers the energy, then the optional
+   **refinement stage** (:meth:`Tracker.refine`, hierarchical algorithms, off by default) searches
+   the torso and both arms together with the algorithm's flat form. None runs on the automatically
+   initialized frame. Every search runs **whole generations** (a hierarchical one splits its share
+   into whole generations per partition, ``whole_generations``): fewer than one generation of a
+   search's share stays unspent rather than end on a truncated generation of a few rows, whose
+   weighted mean (ISA, APF) is that of a few random particles (``docs/tracking.md``, "Whole
+   generations").
 5. **Estimate.** ``estimate="optimizer"``: the algorithm's own estimate (ISA/APF weighted mean,
    CMA-ES mean, DE/PSO best); ``"best"``: the best evaluated particle. Then the predictor is updated.
 
@@ -73,6 +79,7 @@ from .gate import gate_masks
 from .init import InitError, initial_pose, root_from_masks
 from .limbs import LIMBS, LimbMove
 from .pelvis import PelvisMove
+from .reaim import ReaimMove
 from .predict import (ArPredictor, ConstantPosePredictor, ConstantVelocityPredictor, PredictionError, frame_periods,
                       frames_kwargs)
 
@@ -80,8 +87,11 @@ __all__ = ["TrackerError", "TrackerConfig", "FrameResult", "Tracker", "make_trac
            "PREDICTORS", "frame_rng"]
 
 PREDICTORS = ("ar", "constant_pose", "constant_velocity")
-#: Factor on the root's search spreads in the pelvis stage (:meth:`Tracker.refit_pelvis`).
-PELVIS_SPREAD_SCALE = 2.0
+#: Factor on the root's search spreads in the pelvis stage (:meth:`Tracker.refit_pelvis`), per
+#: ``TrackerConfig.pelvis_move`` (each the measured best for its move, ``docs/tracking.md``).
+PELVIS_SPREAD_SCALE = MappingProxyType({"reaim": 1.0, "world": 2.0})
+#: Moves of the pelvis stage (``TrackerConfig.pelvis_move``).
+PELVIS_MOVES = ("reaim", "world")
 #: Generations the refinement stage's share must hold (:meth:`Tracker.refine`): with fewer, its estimate is
 #: the weighted mean of a few random draws, and the budget it takes from the main search costs more than it
 #: gives (measured: 7-frame walks at 160x120, 600 evaluations, 2 generations: 19.6 -> 28.7 mm).
@@ -105,6 +115,14 @@ DEFAULT_PARAMS: Mapping[str, Mapping[str, Any]] = MappingProxyType({
 
 class TrackerError(ValueError):
     """Bad tracker configuration or argument (names the argument, the expected and the received value)."""
+
+
+def _whole_generations(evals: int, generation: int) -> int:
+    """``evals`` rounded down to whole generations (unchanged below one generation: the optimizer's error
+    names it). The tracker's searches never end on a truncated generation, whose few rows would make a
+    weighted-mean estimate (ISA, APF) that of a few random particles (``docs/tracking.md``, "Whole
+    generations")."""
+    return evals // generation * generation if evals >= generation else evals
 
 
 def frame_rng(seed: int, frame_index: int, *extra: int) -> np.random.Generator:
@@ -242,13 +260,30 @@ class TrackerConfig:
         Factor (>= 1) by which a hypothesis' energy sum must be below the other's to decide the
         heading check. Default 1.1.
     pelvis_fraction : float
-        Share of the frame budget spent, after the main search, on the **pelvis stage**
-        (:mod:`.pelvis`): the configured algorithm re-fits the 6 root DOF with the root's child
-        joints held still in the world. It undoes the slow drift of the weakly observed pelvis
-        orientation that the spine and hips otherwise compensate (CMU walk, 4 seeds: mean joint
-        error 34-64 mm → 29-31 mm, ``docs/tracking.md``). 0 disables it; skipped (with a note)
+        Share of the frame budget spent, after the main search, on the **pelvis stage**: the
+        configured algorithm's flat form re-fits the 6 root DOF with the limbs below the root kept in
+        place (``pelvis_move``). It undoes the slow drift of the weakly observed pelvis orientation
+        that the spine and hips otherwise compensate (CMU walk, 4 seeds: mean joint error 34-64 mm →
+        29-31 mm with the world move, ``docs/tracking.md``). 0 disables it; skipped (with a note)
         when its share is below one generation of the algorithm, and on the automatically
         initialized frame.
+    pelvis_move : {"reaim", "world"}
+        The pelvis stage's move. ``"reaim"`` (default, :mod:`.reaim`): the thighs swing about the
+        knees and the lower spine about the chest, so a new pelvis moves the hip joint centres with
+        the knees, shanks, chest, arms and head kept in the world — the hip centres set the knee
+        angle, and they were the worst-estimated joints (CMU walk: 29 mm). ``"world"``
+        (:mod:`.pelvis`, the stage before session 13): the root's children keep their world
+        rotations, so the legs move with the hips. Measured with the torso stage and whole
+        generations, 8 seeds (``docs/tracking.md``, "Re-aimed moves"): see the docs for the figures.
+    torso_fraction : float
+        Share of the frame budget spent, after the pelvis stage, on the **torso stage**
+        (:meth:`Tracker.refit_torso`): the flat form searches the torso partition (spine, neck) with
+        the upper arms swung about the elbows (:mod:`.reaim`), everything else held; the result
+        replaces the pose when it lowers the energy. The hierarchy fits the torso with the arms held
+        at their angles, so a torso move there drags the arms along; this one leaves the elbows and
+        hands where they are. 0 disables it; skipped (with a note) when its share is below one
+        generation + 2, for models without a ``torso`` partition, and on the automatically
+        initialized frame. Default 0.25 (0.2 and 0.3 measured, ``docs/tracking.md``).
     limb_proposals : int
         Twist-and-hinge proposals per limb and frame of the **limb stage** (:mod:`.limbs`), after
         the pelvis stage: each limb's base joint turned about its upper bone and its hinge redrawn
@@ -262,6 +297,12 @@ class TrackerConfig:
     limb_proposal_limbs : tuple of str
         Limbs of the limb stage, among ``left_arm``, ``right_arm``, ``left_leg``, ``right_leg``
         (limbs the model does not have are ignored).
+    limb_fold_deg : float
+        Any other limb joins the limb stage on a frame whose prediction bends its hinge by more than
+        this many degrees (absolute). Default 130: a fast stride's prediction overshoots the knee
+        to its 155° limit and the leg stayed folded there for the rest of the sequence (CMU walk:
+        3 of 16 seeds); with the proposals for a folded knee, 0 of 16. A walk bends the knee to
+        about 70°, a run to about 130°. 0 (or >= 180): never.
     partition_order : tuple of str
         Order in which a hierarchical algorithm (``h-*``, ``psapf``) searches ``model.partitions``
         (names the model does not have are ignored; every partition the model has must be named).
@@ -288,7 +329,8 @@ class TrackerConfig:
         "The refinement stage"). 0 disables it; not for flat algorithms (their search is holistic
         already); skipped (with a note) when its share is below :data:`REFINE_MIN_GENERATIONS` (4)
         generations of the algorithm + 2 (h-isa: 1220 evaluations per frame at 0.1), and on the
-        automatically initialized frame. Default 0.1.
+        automatically initialized frame. Default 0 (0.1 before session 13): the torso stage does its
+        job at the same budget with the arms kept in place (``docs/tracking.md``, "Re-aimed moves").
     refine_partitions : tuple of str
         Names of ``model.partitions`` searched together by the refinement stage (default the upper
         body: ``torso``, ``left_arm``, ``right_arm``; partitions the model does not have are
@@ -346,10 +388,13 @@ class TrackerConfig:
     init_confirm_ratio: float = 1.25
     init_confirm_margin: float = 1.1
     pelvis_fraction: float = 0.15
+    pelvis_move: str = "reaim"
+    torso_fraction: float = 0.25
     limb_proposals: int = 16
     limb_proposal_limbs: tuple = ("left_arm", "right_arm")
+    limb_fold_deg: float = 130.0
     partition_order: tuple = ("root", "left_arm", "right_arm", "torso", "left_leg", "right_leg")
-    refine_fraction: float = 0.1
+    refine_fraction: float = 0.0
     refine_partitions: tuple = ("torso", "left_arm", "right_arm")
     gate_margin_px: int = 10
     max_frames_ahead: float = 5.0
@@ -404,6 +449,11 @@ class TrackerConfig:
         _check_number("pelvis_fraction", self.pelvis_fraction, lo=0.0)
         if self.pelvis_fraction >= 1.0:
             raise TrackerError(f"pelvis_fraction: expected a share in [0, 1), received {self.pelvis_fraction!r}")
+        if self.pelvis_move not in PELVIS_MOVES:
+            raise TrackerError(f"pelvis_move: expected one of {', '.join(PELVIS_MOVES)}, received {self.pelvis_move!r}")
+        _check_number("torso_fraction", self.torso_fraction, lo=0.0)
+        if self.torso_fraction >= 1.0:
+            raise TrackerError(f"torso_fraction: expected a share in [0, 1), received {self.torso_fraction!r}")
         _check_number("limb_proposals", self.limb_proposals, lo=0, integer=True)
         limbs = self.limb_proposal_limbs
         if isinstance(limbs, str) or not isinstance(limbs, Sequence) or any(v not in LIMBS for v in limbs) \
@@ -411,6 +461,7 @@ class TrackerConfig:
             raise TrackerError(f"limb_proposal_limbs: expected distinct names among {', '.join(LIMBS)}, "
                                f"received {limbs!r}")
         object.__setattr__(self, "limb_proposal_limbs", tuple(limbs))
+        _check_number("limb_fold_deg", self.limb_fold_deg, lo=0.0)
         object.__setattr__(self, "partition_order", _partition_names(
             "partition_order", self.partition_order, "root, left_arm, right_arm, torso, left_leg, right_leg",
             empty=False))
@@ -419,9 +470,10 @@ class TrackerConfig:
             raise TrackerError(f"refine_fraction: expected a share in [0, 1), received {self.refine_fraction!r}")
         object.__setattr__(self, "refine_partitions", _partition_names(
             "refine_partitions", self.refine_partitions, "torso, left_arm, right_arm", empty=True))
-        if self.pelvis_fraction + self.refine_fraction >= 1.0:
-            raise TrackerError(f"pelvis_fraction + refine_fraction: expected below 1 (the main search needs a "
-                               f"share), received {self.pelvis_fraction!r} + {self.refine_fraction!r}")
+        if self.pelvis_fraction + self.torso_fraction + self.refine_fraction >= 1.0:
+            raise TrackerError(f"pelvis_fraction + torso_fraction + refine_fraction: expected below 1 (the main "
+                               f"search needs a share), received {self.pelvis_fraction!r} + "
+                               f"{self.torso_fraction!r} + {self.refine_fraction!r}")
         _check_number("gate_margin_px", self.gate_margin_px, lo=0, integer=True)
 
     def params(self) -> dict:
@@ -557,6 +609,10 @@ class Tracker:
         self._masks_last: list | None = None   # usable masks of the last estimate's frame (re-centring)
         self._masks_now: list | None = None    # usable masks of the frame being tracked
         self._pelvis = PelvisMove(model) if "root" in model.partitions else None
+        self._pelvis_reaim = ReaimMove(model, [0]) if "root" in model.partitions else None
+        # the torso stage's move: the joints of the torso partition (e.g. spine and neck), the arms re-aimed
+        torso_joints = sorted({int(model.dof_joint[d]) for d in model.partitions.get("torso", ())})
+        self._torso = ReaimMove(model, torso_joints) if torso_joints else None
         self._flat_generations: dict[int, int] = {}     # _flat_generation's cache
         self._limbs = LimbMove(model)
         self._refine_coords = np.array(sorted(int(i) for k in config.refine_partitions if k in model.partitions
@@ -877,6 +933,9 @@ class Tracker:
         params = cfg.params()
         if inner_optimizer(cfg.optimizer) is not None:
             params.setdefault("partitions", self._partitions)
+            # whole generations (not on the automatically initialized frame, whose runs from the heading
+            # candidates keep the proportional split their pruning and heading choice were measured with)
+            params.setdefault("whole_generations", stages)
         elif cfg.include_prediction and "initial_population" not in params:
             # first generation: the prediction itself plus draws around it (so the estimate
             # can never be worse than the prediction by the energy's own measure)
@@ -888,37 +947,64 @@ class Tracker:
         opt = make_optimizer(cfg.optimizer, x0, spread, rng=rng, bounds=(lo, hi),
                              rotation_blocks=self.model.rotation_blocks, **params)
         share = self._pelvis_share(notes) if stages else None
-        limbs = self._limb_stage(notes) if stages else []
+        torso = self._torso_share(notes) if stages else None
+        limbs = self._limb_stage(notes, x0) if stages else []
         refine = self._refine_share(notes) if stages else None
-        budget = cfg.evals_per_frame - (share or 0) - self._limb_share(len(limbs)) - (refine or 0)
-        return opt, budget, (share, limbs, refine), (lo, hi, spread, base)
+        budget = cfg.evals_per_frame - (share or 0) - (torso or 0) - self._limb_share(len(limbs)) - (refine or 0)
+        if torso is not None:
+            # the torso stage never starves the main search: two generations per partition stay
+            need = 2 * (sum(self._flat_generation(len(p)) for p in self._partitions)
+                        if inner_optimizer(cfg.optimizer) is not None else opt.generation_size)
+            if budget < need:
+                if notes is not None:
+                    notes.append(f"torso stage skipped: with its share ({torso} evaluations) the main search would "
+                                 f"keep {budget}, fewer than two generations per partition ({need})")
+                budget += torso
+                torso = None
+        if inner_optimizer(cfg.optimizer) is None:
+            budget = _whole_generations(budget, opt.generation_size)     # (hierarchical: its split does this)
+        return opt, budget, (share, torso, limbs, refine), (lo, hi, spread, base)
 
     def _optimize(self, pred: np.ndarray, rng: np.random.Generator, spread_scale: float = 1.0, notes=None,
                   stages: bool = True):
         """One optimizer run of the frame budget around ``pred`` (raises the optimizer's errors), then
-        the pelvis stage (``config.pelvis_fraction`` of the budget), the limb stage
-        (``config.limb_proposals``) and the refinement stage (``config.refine_fraction``);
+        the pelvis stage (``config.pelvis_fraction`` of the budget), the torso stage
+        (``config.torso_fraction``), the limb stage (``config.limb_proposals``) and the refinement
+        stage (``config.refine_fraction``), each also given what the searches before it left unspent
+        (they run whole generations; the limb stage takes the rest as more proposals, so a frame
+        leaves fewer evaluations unspent than it has limbs in the stage);
         ``spread_scale`` multiplies the initial spreads (the first frame starts from a rough pose);
         skipped stages are noted in ``notes``. The automatically initialized frame has no stage
         (``stages=False``): from a rough standing pose the pelvis stage turned the pelvis against the
         legs (bags/demo: 270-340 mm on the first frames, measured)."""
         from isa_mocap_ros.optim import minimize
 
-        opt, budget, (share, limbs, refine), (lo, hi, spread, base) = self._search(pred, rng, spread_scale, notes,
-                                                                                   stages)
+        opt, budget, (share, torso, limbs, refine), (lo, hi, spread, base) = self._search(pred, rng, spread_scale,
+                                                                                          notes, stages)
         if self._compiled_search and _fast_search.supported(opt, self.energy, self._prior_active()):
             res = _fast_search.run_hisa(opt, self.energy, budget)      # the same numbers, compiled per partition
         else:
             res = minimize(opt, _TotalEnergy(self), max_evals=budget)
+        # what a search leaves unspent (less than a generation: whole generations) goes to the next stage
+        spare = budget - res.n_evals
         if share is not None:
-            x, e, n = self.refit_pelvis(res.x, evals=share, rng=rng, bounds=(lo, hi), spread=spread)
+            x, e, n = self.refit_pelvis(res.x, evals=share + spare, rng=rng, bounds=(lo, hi), spread=spread)
+            spare += share - n
+            res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
+        if torso is not None:
+            x, e, n, _ = self.refit_torso(res.x, evals=torso + spare, rng=rng,
+                                          energy=res.energy if share is not None else None, bounds=(lo, hi),
+                                          spread=spread)
+            spare += torso - n
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         if limbs:
-            x, e, n, _ = self.propose_limbs(res.x, n=self.config.limb_proposals, rng=rng, limbs=limbs)
+            extra = 0 if refine is not None else spare // len(limbs)       # more proposals with the rest
+            x, e, n, _ = self.propose_limbs(res.x, n=self.config.limb_proposals + extra, rng=rng, limbs=limbs)
+            spare -= extra * len(limbs)
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         if refine is not None:
-            exact = share is not None or bool(limbs)     # else res.energy may be a particle's, not res.x's
-            x, e, n, _ = self.refine(res.x, evals=refine, rng=rng, energy=res.energy if exact else None,
+            exact = share is not None or torso is not None or bool(limbs)   # else res.energy may be a particle's
+            x, e, n, _ = self.refine(res.x, evals=refine + spare, rng=rng, energy=res.energy if exact else None,
                                      bounds=(lo, hi), spread=base)
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         return res
@@ -970,11 +1056,20 @@ class Tracker:
         the final pose."""
         return self.config.limb_proposals * n_limbs + 2 if n_limbs else 0
 
-    def _limb_stage(self, notes) -> list[str]:
-        """Limbs of the limb stage this frame, or [] (off, none in the model, or over a tenth of the budget)."""
+    def _limb_stage(self, notes, pred=None) -> list[str]:
+        """Limbs of the limb stage this frame, or [] (off, none in the model, or over a tenth of the budget):
+        ``limb_proposal_limbs``, then any other limb whose hinge is folded in ``pred`` (``limb_fold_deg``)."""
         cfg = self.config
         have = {limb.name for limb in self._limbs.limbs}
         limbs = [name for name in cfg.limb_proposal_limbs if name in have]
+        if pred is not None and 0 < cfg.limb_fold_deg < 180:
+            fold = np.deg2rad(cfg.limb_fold_deg)
+            for limb in self._limbs.limbs:
+                if limb.name not in limbs and abs(float(pred[limb.hinge_dof])) > fold:
+                    limbs.append(limb.name)
+                    if notes is not None:
+                        notes.append(f"limb stage: {limb.name} folded in the prediction "
+                                     f"({np.rad2deg(float(pred[limb.hinge_dof])):.0f} deg), proposals for it too")
         if cfg.limb_proposals <= 0 or not limbs:
             return []
         if 10 * self._limb_share(len(limbs)) > cfg.evals_per_frame:
@@ -991,7 +1086,8 @@ class Tracker:
         cfg = self.config
         name = inner_optimizer(cfg.optimizer) or cfg.optimizer
         params = {k: v for k, v in cfg.params().items()
-                  if k not in ("partitions", "optimizer", "initial_population", "evals_per_partition")}
+                  if k not in ("partitions", "optimizer", "initial_population", "evals_per_partition",
+                               "whole_generations")}
         return name, params
 
     def _flat_generation(self, d: int) -> int:
@@ -1009,7 +1105,9 @@ class Tracker:
     def _pelvis_share(self, notes) -> int | None:
         """Evaluations of the pelvis stage, or None (off, no root children, or below one generation + 1)."""
         cfg = self.config
-        if cfg.pelvis_fraction <= 0 or self._pelvis is None or not self._pelvis.children:
+        if cfg.pelvis_fraction <= 0 or self._pelvis is None:
+            return None
+        if not (self._pelvis_reaim.ops if cfg.pelvis_move == "reaim" else self._pelvis.children):
             return None
         share = int(cfg.evals_per_frame * cfg.pelvis_fraction)
         n = self._flat_generation(6)
@@ -1017,6 +1115,20 @@ class Tracker:
             if notes is not None:
                 notes.append(f"pelvis stage skipped: its share ({share} evaluations) is below one generation "
                              f"of {self._flat_algorithm()[0]} ({n}) + 1")
+            return None
+        return share
+
+    def _torso_share(self, notes) -> int | None:
+        """Evaluations of the torso stage, or None (off, no torso partition, or below one generation + 2)."""
+        cfg = self.config
+        if cfg.torso_fraction <= 0 or self._torso is None:
+            return None
+        share = int(cfg.evals_per_frame * cfg.torso_fraction)
+        n = self._flat_generation(self._torso.coords.size)
+        if share - 2 < n:       # the start's and the result's energies
+            if notes is not None:
+                notes.append(f"torso stage skipped: its share ({share} evaluations) is below one generation "
+                             f"of {self._flat_algorithm()[0]} ({n}) + 2")
             return None
         return share
 
@@ -1084,7 +1196,7 @@ class Tracker:
         P[0] = x[c]
         opt = make_optimizer(name, x[c], spread[c], rng=rng, bounds=(lo[c], hi[c]), initial_population=P,
                              rotation_blocks=blocks, **params)
-        r = minimize(opt, energy_of, max_evals=int(evals) - used - 1)
+        r = minimize(opt, energy_of, max_evals=_whole_generations(int(evals) - used - 1, n))
         y = x.copy()
         y[c] = np.clip(r.x, m.lower[c], m.upper[c])
         ey = float(self.total_energy(y[None, :])[0])
@@ -1095,13 +1207,15 @@ class Tracker:
 
     def refit_pelvis(self, x, *, evals: int, rng: np.random.Generator, optimizer: str | None = None,
                      params: Mapping | None = None, bounds=None, spread=None) -> tuple[np.ndarray, float, int]:
-        """Re-fit the 6 root DOF of pose ``x`` under the current masks with the root's child joints
-        held in the world (:class:`~.pelvis.PelvisMove`); returns ``(pose, its energy, evaluations)``.
+        """Re-fit the 6 root DOF of pose ``x`` under the current masks with the limbs below the root
+        kept in place: ``config.pelvis_move`` ``"reaim"`` (:class:`~.reaim.ReaimMove`: thighs swung
+        about the knees, the lower spine about the chest) or ``"world"`` (:class:`~.pelvis.PelvisMove`:
+        the root's child joints keep their world rotations); returns ``(pose, its energy, evaluations)``.
 
         ``evals - 1`` evaluations go to the search (``optimizer``: a flat algorithm name, default the
         configured one's flat form, with ``params``), one to the final pose's energy. ``bounds`` and
         ``spread`` default to :meth:`search_box` around ``x``; the spreads are scaled by
-        ``PELVIS_SPREAD_SCALE``.
+        ``PELVIS_SPREAD_SCALE[config.pelvis_move]``.
         """
         from isa_mocap_ros.optim import make_optimizer, minimize
 
@@ -1114,19 +1228,71 @@ class Tracker:
         if optimizer is None:
             optimizer, params = self._flat_algorithm()
         x1 = np.clip(x, lo, hi)
-        move = self._pelvis.around(x1)
+        kind = self.config.pelvis_move
+        move = (self._pelvis_reaim if kind == "reaim" else self._pelvis).around(x1)
 
         def energy(roots):
             return self.total_energy(np.clip(move(roots), m.lower, m.upper))
 
-        opt = make_optimizer(optimizer, x1[:6], spread[:6] * PELVIS_SPREAD_SCALE, rng=rng, bounds=(lo[:6], hi[:6]),
-                             rotation_blocks=((3, 4, 5),), **dict(params or {}))
+        opt = make_optimizer(optimizer, x1[:6], spread[:6] * PELVIS_SPREAD_SCALE[kind], rng=rng,
+                             bounds=(lo[:6], hi[:6]), rotation_blocks=((3, 4, 5),), **dict(params or {}))
+        evals_search = _whole_generations(int(evals) - 1, opt.generation_size)
         if self._compiled_search and _fast_search.supported_flat(opt):
-            r = _fast_search.run_isa(opt, energy, int(evals) - 1)     # the same numbers, generations compiled
+            r = _fast_search.run_isa(opt, energy, evals_search)     # the same numbers, generations compiled
         else:
-            r = minimize(opt, energy, max_evals=int(evals) - 1)
+            r = minimize(opt, energy, max_evals=evals_search)
         out = np.clip(move(r.x)[0], m.lower, m.upper)
         return out, float(self.total_energy(out[None, :])[0]), r.n_evals + 1
+
+    def refit_torso(self, x, *, evals: int, rng: np.random.Generator, energy: float | None = None, bounds=None,
+                    spread=None) -> tuple[np.ndarray, float, int, bool]:
+        """The torso stage on pose ``x`` under the current masks: the configured algorithm's flat form
+        searches the torso partition's DOFs with the arms re-aimed (:class:`~.reaim.ReaimMove`: each
+        upper arm swung about its elbow, the forearm keeping its direction), everything else held; the
+        result replaces ``x`` when it lowers the energy.
+
+        ``energy`` is ``x``'s energy if known (else one evaluation computes it); the search gets the
+        rest of ``evals`` but one, which gives the result's energy, so the stage spends exactly
+        ``evals``. ``bounds``/``spread`` default to :meth:`search_box` around ``x`` (the bounds are
+        widened to hold ``x``). Returns ``(pose, its energy, evaluations, replaced)``.
+        """
+        from isa_mocap_ros.optim import make_optimizer, minimize
+
+        m = self.model
+        if self._torso is None:
+            raise TrackerError(f"refit_torso: model {m.name} has no torso partition")
+        x = np.clip(np.asarray(x, dtype=float), m.lower, m.upper)
+        if bounds is None or spread is None:
+            box = self.search_box(x)
+            bounds = box[:2] if bounds is None else bounds
+            spread = box[2] if spread is None else spread
+        c = self._torso.coords
+        spread = np.asarray(spread, dtype=float)[c]
+        lo, hi = np.minimum(bounds[0][c], x[c]), np.maximum(bounds[1][c], x[c])
+        used = 0
+        if energy is None:
+            energy, used = float(self.total_energy(x[None, :])[0]), 1
+        move = self._torso.around(x)
+        # the poses differ from x in the torso and the re-aimed joints only: the restricted energy (same values)
+        changed = np.union1d(c, [d for j in self._torso.ops for d in m.joint_dofs[j]])
+        data = self.restricted_energy(x, changed) or self.total_energy
+
+        def energy_of(C):
+            return data(np.clip(move(C), m.lower, m.upper))
+
+        name, params = self._flat_algorithm()
+        opt = make_optimizer(name, x[c], spread, rng=rng, bounds=(lo, hi), **params)
+        evals_search = _whole_generations(int(evals) - used - 1, opt.generation_size)
+        if self._compiled_search and _fast_search.supported_flat(opt):
+            r = _fast_search.run_isa(opt, energy_of, evals_search)
+        else:
+            r = minimize(opt, energy_of, max_evals=evals_search)
+        y = np.clip(move(r.x[None, :])[0], m.lower, m.upper)
+        ey = float(self.total_energy(y[None, :])[0])
+        used += r.n_evals + 1
+        if ey < energy:
+            return y, ey, used, True
+        return x, float(energy), used, False
 
     def propose_limbs(self, x, *, n: int, rng: np.random.Generator,
                       limbs: Sequence[str] | None = None) -> tuple[np.ndarray, float, int, list[str]]:
