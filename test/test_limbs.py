@@ -157,4 +157,10 @@ def test_a_leg_folded_in_the_prediction_joins_the_stage(scene):
     tr = Tracker(model, cams, TrackerConfig(seed=1))
     tr.initialize(pose=truth)
     assert tr._limb_stage([], truth) == ["left_arm", "right_arm"]
-    assert tr._limb_stage([], folded) == ["left_arm", "right_arm", "right_leg"]
+    notes = []
+    assert tr._limb_stage(notes, folded) == ["left_arm", "right_arm", "right_leg"] and len(notes) == 1
+    # the folded leg joins only while the stage stays within a tenth of the budget (16 x 3 + 2 = 50 > 40)
+    tr = Tracker(model, cams, TrackerConfig(seed=1, evals_per_frame=400))
+    notes = []
+    assert tr._limb_stage(notes, folded) == ["left_arm", "right_arm"] and notes == []
+    assert Tracker(model, cams, TrackerConfig(seed=1, limb_proposals=0))._limb_stage(notes, folded) == []

@@ -1062,21 +1062,22 @@ class Tracker:
         cfg = self.config
         have = {limb.name for limb in self._limbs.limbs}
         limbs = [name for name in cfg.limb_proposal_limbs if name in have]
-        if pred is not None and 0 < cfg.limb_fold_deg < 180:
-            fold = np.deg2rad(cfg.limb_fold_deg)
-            for limb in self._limbs.limbs:
-                if limb.name not in limbs and abs(float(pred[limb.hinge_dof])) > fold:
-                    limbs.append(limb.name)
-                    if notes is not None:
-                        notes.append(f"limb stage: {limb.name} folded in the prediction "
-                                     f"({np.rad2deg(float(pred[limb.hinge_dof])):.0f} deg), proposals for it too")
-        if cfg.limb_proposals <= 0 or not limbs:
+        if cfg.limb_proposals <= 0:
             return []
-        if 10 * self._limb_share(len(limbs)) > cfg.evals_per_frame:
+        if limbs and 10 * self._limb_share(len(limbs)) > cfg.evals_per_frame:
             if notes is not None:
                 notes.append(f"limb stage skipped: its share ({self._limb_share(len(limbs))} evaluations) is more "
                              f"than a tenth of the frame budget ({cfg.evals_per_frame})")
             return []
+        if pred is not None and 0 < cfg.limb_fold_deg < 180:
+            fold = np.deg2rad(cfg.limb_fold_deg)
+            for limb in self._limbs.limbs:       # a folded limb joins while the stage stays within its tenth
+                if limb.name not in limbs and abs(float(pred[limb.hinge_dof])) > fold \
+                        and 10 * self._limb_share(len(limbs) + 1) <= cfg.evals_per_frame:
+                    limbs.append(limb.name)
+                    if notes is not None:
+                        notes.append(f"limb stage: {limb.name} folded in the prediction "
+                                     f"({np.rad2deg(float(pred[limb.hinge_dof])):.0f} deg), proposals for it too")
         return limbs
 
     def _flat_algorithm(self) -> tuple[str, dict]:
@@ -1158,10 +1159,10 @@ class Tracker:
         generation ``x`` and draws around it; its estimate replaces those coordinates when it lowers
         the energy.
 
-        ``energy`` is ``x``'s energy if known (else one evaluation computes it); the search gets the
-        rest of ``evals`` but one, which gives the final pose's energy, so the stage spends exactly
-        ``evals``. ``bounds``/``spread`` default to :meth:`search_box` around ``x``. Returns
-        ``(pose, its energy, evaluations, replaced)``.
+        ``energy`` is ``x``'s energy if known (else one evaluation computes it); the search gets whole
+        generations of the rest of ``evals`` but one, which gives the final pose's energy, so the stage
+        spends at most ``evals`` (less by under a generation). ``bounds``/``spread`` default to
+        :meth:`search_box` around ``x``. Returns ``(pose, its energy, evaluations, replaced)``.
         """
         from isa_mocap_ros.optim import inner_optimizer, make_optimizer, minimize
 
@@ -1212,8 +1213,9 @@ class Tracker:
         about the knees, the lower spine about the chest) or ``"world"`` (:class:`~.pelvis.PelvisMove`:
         the root's child joints keep their world rotations); returns ``(pose, its energy, evaluations)``.
 
-        ``evals - 1`` evaluations go to the search (``optimizer``: a flat algorithm name, default the
-        configured one's flat form, with ``params``), one to the final pose's energy. ``bounds`` and
+        Whole generations of ``evals - 1`` evaluations go to the search (``optimizer``: a flat algorithm
+        name, default the configured one's flat form, with ``params``), one to the final pose's energy;
+        the count spent is returned. ``bounds`` and
         ``spread`` default to :meth:`search_box` around ``x``; the spreads are scaled by
         ``PELVIS_SPREAD_SCALE[config.pelvis_move]``.
         """
@@ -1251,10 +1253,11 @@ class Tracker:
         upper arm swung about its elbow, the forearm keeping its direction), everything else held; the
         result replaces ``x`` when it lowers the energy.
 
-        ``energy`` is ``x``'s energy if known (else one evaluation computes it); the search gets the
-        rest of ``evals`` but one, which gives the result's energy, so the stage spends exactly
-        ``evals``. ``bounds``/``spread`` default to :meth:`search_box` around ``x`` (the bounds are
-        widened to hold ``x``). Returns ``(pose, its energy, evaluations, replaced)``.
+        ``energy`` is ``x``'s energy if known (else one evaluation computes it); the search gets whole
+        generations of the rest of ``evals`` but one, which gives the result's energy, so the stage
+        spends at most ``evals`` (less by under a generation). ``bounds``/``spread`` default to
+        :meth:`search_box` around ``x`` (the bounds are widened to hold ``x``). Returns ``(pose, its
+        energy, evaluations, replaced)``.
         """
         from isa_mocap_ros.optim import make_optimizer, minimize
 
@@ -1302,7 +1305,7 @@ class Tracker:
 
         Returns ``(pose, its energy, evaluations, limbs replaced)``; evaluations are always
         ``n × limbs + 2``: the batch, then the returned pose once more (its energy is not among the
-        batch's when two limbs changed), so a frame spends exactly its budget.
+        batch's when two limbs changed), so the stage spends exactly its share.
         """
         m = self.model
         names = [limb.name for limb in self._limbs.limbs] if limbs is None else list(limbs)
