@@ -282,3 +282,17 @@ def test_world_move_is_the_pelvis_move(scene):
     P0, P = joint_positions(model, np.clip(x, lo, hi)[None])[0], joint_positions(model, got[None])[0]
     np.testing.assert_allclose(P[k] - P[h], P0[k] - P0[h], atol=1e-9)
     assert PelvisMove(model).children
+
+
+def test_flat_algorithms_have_no_torso_stage(scene):
+    """Like the refinement stage: a flat search moves torso and arms together already."""
+    model, cams, walk, masks = scene
+    calls = []
+    for name in ("isa", "pso", "h-pso"):
+        tr = Tracker(model, cams, TrackerConfig(optimizer=name, evals_per_frame=1500, seed=1))
+        orig = tr.refit_torso
+        tr.refit_torso = lambda *a, _n=name, **k: calls.append(_n) or orig(*a, **k)
+        tr.initialize(pose=walk[0])
+        r = tr.step(masks[1], 1)
+        assert not r.fell_back and not any("torso" in n for n in r.notes)
+    assert calls == ["h-pso"]

@@ -281,9 +281,12 @@ class TrackerConfig:
         the upper arms swung about the elbows (:mod:`.reaim`), everything else held; the result
         replaces the pose when it lowers the energy. The hierarchy fits the torso with the arms held
         at their angles, so a torso move there drags the arms along; this one leaves the elbows and
-        hands where they are. 0 disables it; skipped (with a note) when its share is below one
-        generation + 2, for models without a ``torso`` partition, and on the automatically
-        initialized frame. Default 0.25 (0.2 and 0.3 measured, ``docs/tracking.md``).
+        hands where they are. Hierarchical algorithms only (``h-*``, ``psapf``): a flat search moves torso
+        and arms together already, and the stage's share cost the reference peers most (28 DOF, 1500,
+        comparison design, 3 seeds: scipy-DE wave 16.0 → 19.9 mm, CMU walk 33.6 → 41.2; pycma 22.6 →
+        32.8 / 51.7 → 65.2; our CMA-ES unchanged, PSO mixed). 0 disables it; skipped (with a note) when
+        its share is below one generation + 2; not for models without a ``torso`` partition, nor on the
+        automatically initialized frame. Default 0.25 (0.2 and 0.3 measured, ``docs/tracking.md``).
     limb_proposals : int
         Twist-and-hinge proposals per limb and frame of the **limb stage** (:mod:`.limbs`), after
         the pelvis stage: each limb's base joint turned about its upper bone and its hinge redrawn
@@ -1120,9 +1123,12 @@ class Tracker:
         return share
 
     def _torso_share(self, notes) -> int | None:
-        """Evaluations of the torso stage, or None (off, no torso partition, or below one generation + 2)."""
+        """Evaluations of the torso stage, or None (off, a flat algorithm, no torso partition, or below one
+        generation + 2)."""
+        from isa_mocap_ros.optim import inner_optimizer
+
         cfg = self.config
-        if cfg.torso_fraction <= 0 or self._torso is None:
+        if cfg.torso_fraction <= 0 or self._torso is None or inner_optimizer(cfg.optimizer) is None:
             return None
         share = int(cfg.evals_per_frame * cfg.torso_fraction)
         n = self._flat_generation(self._torso.coords.size)
