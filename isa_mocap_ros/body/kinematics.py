@@ -74,7 +74,7 @@ def _fk(model: BodyModel, X: np.ndarray, *, want_axes: bool = False):
     return R, P, axes
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def rodrigues_into(wx, wy, wz, R):  # pragma: no cover - compiled
     """``R (3, 3) ← exp([w]×)`` for the rotation vector ``w`` (Eq. 13.20; Taylor series near 0): the
     root rotation of :func:`_fk_kernel`, for other compiled kernels."""
@@ -102,25 +102,7 @@ def _fk_kernel(X, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover 
     n = X.shape[0]
     J = parents.shape[0]
     for i in numba.prange(n):
-        # root: Rodrigues (Eq. 13.20) with a Taylor series near 0
-        wx, wy, wz = X[i, 3], X[i, 4], X[i, 5]
-        t2 = wx * wx + wy * wy + wz * wz
-        th = np.sqrt(t2)
-        if th < 1e-4:
-            A = 1.0 - t2 / 6.0 + t2 * t2 / 120.0
-            B = 0.5 - t2 / 24.0 + t2 * t2 / 720.0
-        else:
-            A = np.sin(th) / th
-            B = (1.0 - np.cos(th)) / t2
-        R[i, 0, 0, 0] = 1.0 - B * (wy * wy + wz * wz)
-        R[i, 0, 1, 1] = 1.0 - B * (wx * wx + wz * wz)
-        R[i, 0, 2, 2] = 1.0 - B * (wx * wx + wy * wy)
-        R[i, 0, 0, 1] = -A * wz + B * wx * wy
-        R[i, 0, 1, 0] = A * wz + B * wx * wy
-        R[i, 0, 0, 2] = A * wy + B * wx * wz
-        R[i, 0, 2, 0] = -A * wy + B * wx * wz
-        R[i, 0, 1, 2] = -A * wx + B * wy * wz
-        R[i, 0, 2, 1] = A * wx + B * wy * wz
+        rodrigues_into(X[i, 3], X[i, 4], X[i, 5], R[i, 0])       # root: Eq. 13.20, Taylor series near 0
         for c in range(3):
             P[i, 0, c] = X[i, c]
         for j in range(1, J):

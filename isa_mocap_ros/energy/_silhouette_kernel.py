@@ -30,6 +30,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from isa_mocap_ros.body.kinematics import rodrigues_into
+
 __all__ = ["fk_positions_batch", "silhouette_batch", "project_capsules", "inside_points"]
 
 
@@ -59,24 +61,7 @@ def _fk_joint(x, j, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cove
 @numba.njit(cache=True, inline="always")
 def _fk_one(x, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
     """Joint positions ``P (J, 3)`` of pose ``x``; ``R (J, 3, 3)`` is scratch (world rotations)."""
-    wx, wy, wz = x[3], x[4], x[5]
-    t2 = wx * wx + wy * wy + wz * wz
-    th = np.sqrt(t2)
-    if th < 1e-4:
-        A = 1.0 - t2 / 6.0 + t2 * t2 / 120.0
-        B = 0.5 - t2 / 24.0 + t2 * t2 / 720.0
-    else:
-        A = np.sin(th) / th
-        B = (1.0 - np.cos(th)) / t2
-    R[0, 0, 0] = 1.0 - B * (wy * wy + wz * wz)
-    R[0, 1, 1] = 1.0 - B * (wx * wx + wz * wz)
-    R[0, 2, 2] = 1.0 - B * (wx * wx + wy * wy)
-    R[0, 0, 1] = -A * wz + B * wx * wy
-    R[0, 1, 0] = A * wz + B * wx * wy
-    R[0, 0, 2] = A * wy + B * wx * wz
-    R[0, 2, 0] = -A * wy + B * wx * wz
-    R[0, 1, 2] = -A * wx + B * wy * wz
-    R[0, 2, 1] = A * wx + B * wy * wz
+    rodrigues_into(x[3], x[4], x[5], R[0])                      # the root, as body.kinematics
     P[0, 0], P[0, 1], P[0, 2] = x[0], x[1], x[2]
     for j in range(1, parents.shape[0]):
         _fk_joint(x, j, parents, offsets, ptr, dofs, axes, R, P)
