@@ -3,13 +3,12 @@ that uses them (budget, notes, and what it is for: undoing a compensated pelvis)
 import numpy as np
 import pytest
 
-from isa_mocap_ros.body import capsule_endpoints, joint_positions, make_model
-from isa_mocap_ros.body.motion import generate_motion
+from isa_mocap_ros.body import joint_positions, make_model
 from isa_mocap_ros.geometry import exp_so3, log_so3
 from isa_mocap_ros.tracking import Tracker, TrackerConfig, TrackerError
 from isa_mocap_ros.tracking import pelvis as pelvis_mod
 from isa_mocap_ros.tracking.pelvis import PelvisMove
-from isa_mocap_ros.vision import default_rig, render_mask
+from walk_scene import walk_scene
 
 
 def _random_pose(model, rng):
@@ -94,12 +93,8 @@ def test_compiled_unavailable_is_named(monkeypatch):
 
 @pytest.fixture(scope="module")
 def scene():
-    model = make_model(39)
-    rig = default_rig(width=160, height=120)
-    walk = generate_motion("walk", model, duration_s=0.2, fps=30, rng=np.random.default_rng(1))
-    masks = [[render_mask(c, capsule_endpoints(model, x)[0], model.capsule_radii) for c in rig.cameras]
-             for x in walk]
-    return model, rig.cameras, walk, masks
+    """A generated walk, 0.2 s at 160x120 (every frame of it)."""
+    return walk_scene(width=160, height=120, frames=100, duration_s=0.2, seed=1)
 
 
 def _root_angle_deg(a, b):

@@ -14,6 +14,8 @@ from isa_mocap_ros.tracking.reaim import ReaimMove, euler_angles
 from isa_mocap_ros.tracking.tracker import frame_rng
 from isa_mocap_ros.vision import default_rig, render_mask
 
+from walk_scene import walk_scene
+
 
 def _random_pose(model, rng, scale=0.25):
     x = model.rest_pose().copy()
@@ -163,12 +165,8 @@ def test_bad_input_is_named():
 
 @pytest.fixture(scope="module")
 def scene():
-    model = make_model(39)
-    rig = default_rig(width=160, height=120)
-    walk = generate_motion("walk", model, duration_s=0.2, fps=30, rng=np.random.default_rng(1))
-    masks = [[render_mask(c, capsule_endpoints(model, x)[0], model.capsule_radii) for c in rig.cameras]
-             for x in walk]
-    return model, rig.cameras, walk, masks
+    """A generated walk, 0.2 s at 160x120 (every frame of it)."""
+    return walk_scene(width=160, height=120, frames=100, duration_s=0.2, seed=1)
 
 
 def _hip_error_mm(model, x, truth):
