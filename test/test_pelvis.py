@@ -145,11 +145,12 @@ def test_stage_budget_and_skip_note(scene):
     tr = Tracker(model, cams, TrackerConfig(evals_per_frame=700, seed=1))          # default share 0.15
     tr.initialize(pose=walk[0])
     r = tr.step(masks[1], 1)
-    assert r.n_evals == 700 and not any("pelvis" in n for n in r.notes)
+    # the limb stage takes what the searches leave as more proposals: < 4 (its limbs) unspent
+    assert 700 - 4 < r.n_evals <= 700 and not any("pelvis" in n for n in r.notes)
     tr = Tracker(model, cams, TrackerConfig(evals_per_frame=700, seed=1, pelvis_fraction=0.02))   # 14 < 30 + 1
     tr.initialize(pose=walk[0])
     r = tr.step(masks[1], 1)
-    assert r.n_evals == 700 and not r.fell_back
+    assert 700 - 4 < r.n_evals <= 700 and not r.fell_back
     assert any(n.startswith("pelvis stage skipped: its share (14 evaluations)") for n in r.notes)
 
 

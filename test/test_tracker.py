@@ -143,8 +143,9 @@ def test_heading_check_keeps_a_right_first_heading_bit_for_bit(scene320, monkeyp
     assert notes[0].startswith("heading check started: a run heading the other way ended") and \
         notes[1].startswith("heading check decided: kept the initial heading")
     checked = [k for k, r in enumerate(on) if any("kept the initial heading" in n for n in r.notes)][0]
-    assert [r.n_evals for r in on[1:checked + 1]] == [2 * 1500] * checked
-    assert all(r.n_evals == 1500 for r in on[checked + 1:])
+    # each hypothesis' limb stage takes the rest as proposals: fewer unspent than its 4 limbs
+    assert all(2 * 1500 - 8 < r.n_evals <= 2 * 1500 for r in on[1:checked + 1]) and checked >= 1
+    assert all(1500 - 4 < r.n_evals <= 1500 for r in on[checked + 1:])
 
 
 def test_heading_check_shares_the_frame_budget(scene320, monkeypatch):
@@ -155,7 +156,7 @@ def test_heading_check_shares_the_frame_budget(scene320, monkeypatch):
     checked = [k for k, r in enumerate(on) if any("kept the initial heading" in n for n in r.notes)][0]
     assert checked >= 1
     # the check's frames (two hypotheses of 750) cost what the frames after it (one of 1500) cost
-    assert [r.n_evals for r in on[1:]] == [1500] * (len(on) - 1)
+    assert all(1500 - 8 < r.n_evals <= 1500 for r in on[1:]) and len(on) > 2
     assert err.max() < 60.0
     model, cams, _, _ = scene320
     # never below 500 (or the frame budget when it is smaller)
@@ -174,7 +175,8 @@ def test_heading_check_ends_at_a_gap(scene320):
     assert any("both tracked" in n for n in tr.step(masks[0], 0).notes)
     assert tr.checking_heading          # the estimator node keeps the next sets in sequence meanwhile
     r = tr.step(masks[2], 2, frames_elapsed=2)
-    assert r.n_evals == 1500 and any("heading check ended: no decision (2 frame periods" in n for n in r.notes)
+    assert 1500 - 4 < r.n_evals <= 1500
+    assert any("heading check ended: no decision (2 frame periods" in n for n in r.notes)
     assert not tr.checking_heading
     assert not any("heading check" in n for n in tr.step(masks[3], 3).notes)
 
@@ -314,7 +316,7 @@ def test_hierarchical_and_prior(scene):
     tr = Tracker(model, cams, TrackerConfig(optimizer="h-cmaes", evals_per_frame=600, prior_eta=0.01), prior=prior)
     tr.initialize(pose=walk[0])
     r = tr.step(masks[1], 1)
-    assert not r.fell_back and r.n_evals == 600
+    assert not r.fell_back and 600 - 4 < r.n_evals <= 600       # < 4 limbs left unspent
     np.testing.assert_allclose(tr.total_energy(r.x[None]) - tr.energy(r.x[None]),
                                prior.energy(r.x[None], eta=0.01))
 

@@ -85,9 +85,12 @@ class EstimatorNode(Node):
                          "(limb stage: re-opens a folded arm; 0 = off)", lo=0, hi=10_000)
         limbs = declare(self, "limb_proposal_limbs", list(tc.limb_proposal_limbs),
                         "limbs of the limb stage: left_arm, right_arm, left_leg, right_leg")
-        fold = declare(self, "limb_fold_deg", tc.limb_fold_deg, "any other limb joins the limb stage on frames whose "
-                       "prediction bends its hinge beyond this many degrees (a folded knee; 0 = never)",
-                       lo=0.0, hi=360.0)
+        hinge_limbs = declare(self, "limb_hinge_limbs", list(tc.limb_hinge_limbs),
+                              "limbs of the limb stage with hinge proposals only (the legs: a knee faster than the "
+                              "search box; twist too when folded)")
+        fold = declare(self, "limb_fold_deg", tc.limb_fold_deg, "a limb whose prediction bends its hinge beyond this "
+                       "many degrees gets twist-and-hinge proposals, joining the limb stage if not in it (a folded "
+                       "knee; 0 = never)", lo=0.0, hi=360.0)
         part_order = declare(self, "partition_order", list(tc.partition_order),
                              "order in which hierarchical optimizers search the model's partitions (root, "
                              "left_arm, right_arm, torso, left_leg, right_leg; the paper's: root, torso, arms, legs)")
@@ -154,7 +157,8 @@ class EstimatorNode(Node):
                                      search_radius_rad=radius, predictor=predictor, predictor_order=order,
                                      prior_eta=self.prior_eta, prior_file=prior_file, pelvis_fraction=pelvis,
                                      pelvis_move=pelvis_move, torso_fraction=torso,
-                                     limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs), limb_fold_deg=fold,
+                                     limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs),
+                                     limb_hinge_limbs=tuple(hinge_limbs), limb_fold_deg=fold,
                                      partition_order=tuple(part_order), refine_fraction=refine,
                                      refine_partitions=tuple(refine_parts), gate_margin_px=gate,
                                      max_frames_ahead=ahead, init_confirm_frames=confirm,

@@ -16,6 +16,12 @@ The move that leaves it keeps the upper bone's direction and re-draws the two hi
     ``L_s' = R_p^T R_s'`` is re-read as Euler angles in the joint's own axis order; the hinge gets
     ``θ``. ``φ ~ U[−π, π)`` and ``θ ~ U[lower, upper]`` of the hinge.
 
+For the legs the tracker draws the hinge only (``twist=False``, the thigh kept): a knee that the
+search box cannot follow — the CMU walk's kick straightens and re-bends the knee by 25-30° per frame
+— is caught by a knee proposal, while redrawing the hip's twist as well lost a right leg after the
+kick in 1 of 16 seeds (its knee 0.5 m off to the end); a leg folded in the prediction gets the
+twist as well (``TrackerConfig.limb_hinge_limbs``).
+
 Every proposal is evaluated with the rest of the pose held at the estimate; the best one replaces
 the limb when its energy is lower than the estimate's (the next frame's search refines it). This is
 a proposal distribution over the same energy, not a new energy.
@@ -108,10 +114,15 @@ class LimbMove:
         X[:, limb.hinge_dof] = theta
         return np.clip(X, m.lower, m.upper)
 
-    def draw(self, x: np.ndarray, limb: Limb, n: int, rng: np.random.Generator) -> np.ndarray:
+    def draw(self, x: np.ndarray, limb: Limb, n: int, rng: np.random.Generator, *, twist: bool = True) -> np.ndarray:
         """``n`` proposals for ``limb`` around pose ``x``: twist uniform on the circle, hinge
-        uniform within its limits (both from ``rng``)."""
+        uniform within its limits (both from ``rng``). ``twist=False``: hinge proposals only (the
+        base joint kept; one draw per proposal from ``rng``)."""
         m, k = self.model, limb.hinge_dof
+        if not twist:
+            X = np.repeat(np.asarray(x, dtype=float)[None, :], n, axis=0)
+            X[:, k] = rng.uniform(m.lower[k], m.upper[k], n)
+            return np.clip(X, m.lower, m.upper)
         phi = rng.uniform(-np.pi, np.pi, n)
         theta = rng.uniform(m.lower[k], m.upper[k], n)
         return self.proposals(x, limb, phi, theta)

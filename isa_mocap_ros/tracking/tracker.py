@@ -101,6 +101,9 @@ GATE_NOTE_SHARE = 0.25
 #: Smallest budget of a heading-check hypothesis (``TrackerConfig.init_confirm_share``) unless the frame
 #: budget is smaller: the comparison paper's smallest budget, the least the tracker is measured at.
 CONFIRM_MIN_EVALS = 500
+
+#: Fewest proposals per limb of the limb stage: when fewer fit in a tenth of the budget, the stage is skipped.
+MIN_LIMB_PROPOSALS = 4
 ESTIMATES = ("optimizer", "best")
 
 #: Optimizer parameters used unless ``optimizer_params`` sets them (tuned on the silhouette energy,
@@ -294,18 +297,30 @@ class TrackerConfig:
         it lowers the energy. It re-opens an arm the search left folded (forearm on the upper arm,
         twist 140-180° off) — a trap the ±0.5 rad search box cannot leave (CMU walk, 8 seeds: mean
         joint error 35.2 → 31.7 mm, the folded right arm gone; ``docs/tracking.md``). Takes
-        ``limb_proposals × limbs + 2`` evaluations of the budget; 0 disables it; skipped (with a
-        note) when that is more than a tenth of the budget, and on the automatically initialized
-        frame.
+        ``limb_proposals × limbs + 2`` evaluations of the budget; when that is more than a tenth of
+        the budget, each limb gets as many proposals as fit in the tenth (500 evaluations, four
+        limbs: 12), and the stage is skipped (with a note) when fewer than
+        :data:`MIN_LIMB_PROPOSALS` fit. 0 disables it; not on the automatically initialized frame.
     limb_proposal_limbs : tuple of str
         Limbs of the limb stage, among ``left_arm``, ``right_arm``, ``left_leg``, ``right_leg``
-        (limbs the model does not have are ignored).
+        (limbs the model does not have are ignored). Default all four (the arms only before
+        session 14).
+    limb_hinge_limbs : tuple of str
+        Limbs of the limb stage whose proposals redraw the hinge only, the base joint kept (no twist),
+        unless the prediction folds the limb beyond ``limb_fold_deg``. Default both legs: the CMU
+        walk's kick straightens and re-bends a knee by 25-30° per frame, beyond the search box, and
+        the estimate trailed it by a frame or stayed folded (right knee 31° RMSE over frames 25-50,
+        seed 0); with knee proposals on every frame the knee RMSE went 7.4 → 6.2° over 16 seeds
+        (mean joint error 17.3 → 16.9 mm); twist-and-hinge proposals for the legs lost a right leg after
+        the kick in 1 of 16 seeds (``docs/tracking.md``, "Knee proposals").
     limb_fold_deg : float
-        Any other limb joins the limb stage on a frame whose prediction bends its hinge by more than
-        this many degrees (absolute). Default 130: a fast stride's prediction overshoots the knee
-        to its 155° limit and the leg stayed folded there for the rest of the sequence (CMU walk:
-        3 of 16 seeds); with the proposals for a folded knee, 0 of 16. A walk bends the knee to
-        about 70°, a run to about 130°. 0 (or >= 180): never.
+        A limb folded in the prediction (hinge bent by more than this many degrees, absolute) gets
+        twist-and-hinge proposals on that frame, and a limb not in ``limb_proposal_limbs`` joins the
+        stage (while each limb keeps ``limb_proposals`` within the tenth). Default 130: a fast
+        stride's prediction overshoots the knee to its 155° limit and the leg stayed folded there with
+        the hip twisted for the rest of the sequence (CMU walk: 3 of 16 seeds); with the proposals
+        for a folded knee, 0 of 16. A walk bends the knee to about 70°, a run to about 130°.
+        0 (or >= 180): never.
     partition_order : tuple of str
         Order in which a hierarchical algorithm (``h-*``, ``psapf``) searches ``model.partitions``
         (names the model does not have are ignored; every partition the model has must be named).
@@ -394,7 +409,8 @@ class TrackerConfig:
     pelvis_move: str = "reaim"
     torso_fraction: float = 0.25
     limb_proposals: int = 16
-    limb_proposal_limbs: tuple = ("left_arm", "right_arm")
+    limb_proposal_limbs: tuple = ("left_arm", "right_arm", "left_leg", "right_leg")
+    limb_hinge_limbs: tuple = ("left_leg", "right_leg")
     limb_fold_deg: float = 130.0
     partition_order: tuple = ("root", "left_arm", "right_arm", "torso", "left_leg", "right_leg")
     refine_fraction: float = 0.0
@@ -464,6 +480,12 @@ class TrackerConfig:
             raise TrackerError(f"limb_proposal_limbs: expected distinct names among {', '.join(LIMBS)}, "
                                f"received {limbs!r}")
         object.__setattr__(self, "limb_proposal_limbs", tuple(limbs))
+        hinge = self.limb_hinge_limbs
+        if isinstance(hinge, str) or not isinstance(hinge, Sequence) or any(v not in LIMBS for v in hinge) \
+                or len(set(hinge)) != len(hinge):
+            raise TrackerError(f"limb_hinge_limbs: expected distinct names among {', '.join(LIMBS)}, "
+                               f"received {hinge!r}")
+        object.__setattr__(self, "limb_hinge_limbs", tuple(hinge))
         _check_number("limb_fold_deg", self.limb_fold_deg, lo=0.0)
         object.__setattr__(self, "partition_order", _partition_names(
             "partition_order", self.partition_order, "root, left_arm, right_arm, torso, left_leg, right_leg",
@@ -951,9 +973,10 @@ class Tracker:
                              rotation_blocks=self.model.rotation_blocks, **params)
         share = self._pelvis_share(notes) if stages else None
         torso = self._torso_share(notes) if stages else None
-        limbs = self._limb_stage(notes, x0) if stages else []
+        limbs = self._limb_stage(notes, x0) if stages else ([], [], 0)
         refine = self._refine_share(notes) if stages else None
-        budget = cfg.evals_per_frame - (share or 0) - (torso or 0) - self._limb_share(len(limbs)) - (refine or 0)
+        budget = cfg.evals_per_frame - (share or 0) - (torso or 0) - self._limb_share(len(limbs[0]), limbs[2]) \
+            - (refine or 0)
         if torso is not None:
             # the torso stage never starves the main search: two generations per partition stay
             need = 2 * (sum(self._flat_generation(len(p)) for p in self._partitions)
@@ -1000,9 +1023,10 @@ class Tracker:
                                           spread=spread)
             spare += torso - n
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
+        limbs, hinge, n_limb = limbs
         if limbs:
             extra = 0 if refine is not None else spare // len(limbs)       # more proposals with the rest
-            x, e, n, _ = self.propose_limbs(res.x, n=self.config.limb_proposals + extra, rng=rng, limbs=limbs)
+            x, e, n, _ = self.propose_limbs(res.x, n=n_limb + extra, rng=rng, limbs=limbs, hinge_only=hinge)
             spare -= extra * len(limbs)
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         if refine is not None:
@@ -1054,34 +1078,52 @@ class Tracker:
             out.append((j, opt.result(), pred))
         return out, n_pruned + sum(res.n_evals for _, res, _ in out)
 
-    def _limb_share(self, n_limbs: int) -> int:
-        """Evaluations of the limb stage for ``n_limbs`` limbs: the proposals, the starting pose and
-        the final pose."""
-        return self.config.limb_proposals * n_limbs + 2 if n_limbs else 0
+    def _limb_share(self, n_limbs: int, n: int | None = None) -> int:
+        """Evaluations of the limb stage for ``n_limbs`` limbs with ``n`` proposals each (default
+        ``limb_proposals``): the proposals, the starting pose and the final pose."""
+        n = self.config.limb_proposals if n is None else n
+        return n * n_limbs + 2 if n_limbs else 0
 
-    def _limb_stage(self, notes, pred=None) -> list[str]:
-        """Limbs of the limb stage this frame, or [] (off, none in the model, or over a tenth of the budget):
-        ``limb_proposal_limbs``, then any other limb whose hinge is folded in ``pred`` (``limb_fold_deg``)."""
+    def _limb_proposals(self, n_limbs: int) -> int:
+        """Proposals per limb for ``n_limbs`` limbs: ``limb_proposals``, or as many as fit in a tenth
+        of the frame budget."""
+        if not n_limbs:
+            return 0
+        return max(0, min(self.config.limb_proposals, (self.config.evals_per_frame // 10 - 2) // n_limbs))
+
+    def _limb_stage(self, notes, pred=None) -> tuple[list[str], list[str], int]:
+        """The limb stage this frame: ``(limbs, those with hinge proposals only, proposals per limb)``,
+        no limb when off, none in the model, or fewer than :data:`MIN_LIMB_PROPOSALS` fit in a tenth of
+        the budget. The limbs are ``limb_proposal_limbs``, then any other limb whose hinge is folded in
+        ``pred`` (``limb_fold_deg``, while each keeps ``limb_proposals`` within the tenth); a folded
+        limb gets twist-and-hinge proposals even if it is in ``limb_hinge_limbs``."""
         cfg = self.config
         have = {limb.name for limb in self._limbs.limbs}
         limbs = [name for name in cfg.limb_proposal_limbs if name in have]
         if cfg.limb_proposals <= 0:
-            return []
-        if limbs and 10 * self._limb_share(len(limbs)) > cfg.evals_per_frame:
+            return [], [], 0
+        if limbs and self._limb_proposals(len(limbs)) < min(MIN_LIMB_PROPOSALS, cfg.limb_proposals):
             if notes is not None:
-                notes.append(f"limb stage skipped: its share ({self._limb_share(len(limbs))} evaluations) is more "
-                             f"than a tenth of the frame budget ({cfg.evals_per_frame})")
-            return []
+                notes.append(f"limb stage skipped: fewer than {min(MIN_LIMB_PROPOSALS, cfg.limb_proposals)} "
+                             f"proposals per limb fit in a tenth of the frame budget ({cfg.evals_per_frame}; "
+                             f"{len(limbs)} limbs)")
+            return [], [], 0
+        folded = set()
         if pred is not None and 0 < cfg.limb_fold_deg < 180:
             fold = np.deg2rad(cfg.limb_fold_deg)
-            for limb in self._limbs.limbs:       # a folded limb joins while the stage stays within its tenth
-                if limb.name not in limbs and abs(float(pred[limb.hinge_dof])) > fold \
-                        and 10 * self._limb_share(len(limbs) + 1) <= cfg.evals_per_frame:
+            for limb in self._limbs.limbs:
+                if abs(float(pred[limb.hinge_dof])) <= fold:
+                    continue
+                if limb.name in limbs:
+                    folded.add(limb.name)
+                elif 10 * self._limb_share(len(limbs) + 1) <= cfg.evals_per_frame:   # joins while it fits
                     limbs.append(limb.name)
+                    folded.add(limb.name)
                     if notes is not None:
                         notes.append(f"limb stage: {limb.name} folded in the prediction "
                                      f"({np.rad2deg(float(pred[limb.hinge_dof])):.0f} deg), proposals for it too")
-        return limbs
+        hinge = [name for name in limbs if name in cfg.limb_hinge_limbs and name not in folded]
+        return limbs, hinge, self._limb_proposals(len(limbs))
 
     def _flat_algorithm(self) -> tuple[str, dict]:
         """The configured algorithm's flat form (``h-isa`` → ``isa``, ``psapf`` → ``apf``) and its parameters."""
@@ -1303,11 +1345,12 @@ class Tracker:
             return y, ey, used, True
         return x, float(energy), used, False
 
-    def propose_limbs(self, x, *, n: int, rng: np.random.Generator,
-                      limbs: Sequence[str] | None = None) -> tuple[np.ndarray, float, int, list[str]]:
+    def propose_limbs(self, x, *, n: int, rng: np.random.Generator, limbs: Sequence[str] | None = None,
+                      hinge_only: Sequence[str] = ()) -> tuple[np.ndarray, float, int, list[str]]:
         """The limb stage on pose ``x`` under the current masks (:class:`~.limbs.LimbMove`): ``n``
-        twist-and-hinge proposals per limb, evaluated in one batch with ``x`` itself; each limb whose
-        best proposal has a lower energy than ``x`` takes that proposal's angles.
+        twist-and-hinge proposals per limb (hinge proposals only for the limbs in ``hinge_only``),
+        evaluated in one batch with ``x`` itself; each limb whose best proposal has a lower energy than
+        ``x`` takes that proposal's angles.
 
         Returns ``(pose, its energy, evaluations, limbs replaced)``; evaluations are always
         ``n × limbs + 2``: the batch, then the returned pose once more (its energy is not among the
@@ -1320,7 +1363,7 @@ class Tracker:
         if int(n) < 1 or not chosen:
             return x, float(self.total_energy(x[None, :])[0]), 1, []
         n = int(n)
-        batches = [self._limbs.draw(x, limb, n, rng) for limb in chosen]
+        batches = [self._limbs.draw(x, limb, n, rng, twist=limb.name not in hinge_only) for limb in chosen]
         E = self.total_energy(np.vstack([x[None, :]] + batches))
         out, changed = x.copy(), []
         for k, (limb, P) in enumerate(zip(chosen, batches)):
