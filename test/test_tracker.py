@@ -113,13 +113,15 @@ def _heading_runs(scene, monkeypatch, *, wrong_first: bool, external=None, **cfg
         orig = T.Tracker._initial_runs
         yaw = _yaw_of(walk[0][3:6])
 
-        def runs(self, starts, frame_index, notes):
-            out, n = orig(self, starts, frame_index, notes)
+        def runs(self, starts, frame_index, notes, stream=()):
+            out, n = orig(self, starts, frame_index, notes, stream)
+            if stream:                                  # the heading re-check's runs are left alone
+                return out, n
             return [(j, dataclasses.replace(r, energy=1.4 * r.energy, best_energy=1.4 * r.best_energy)
                      if abs(_wrap(_yaw_of(r.x[3:6]) - yaw)) < np.pi / 2 else r, p) for j, r, p in out], n
         monkeypatch.setattr(T.Tracker, "_initial_runs", runs)
     # init_confirm_ratio 1.5: here the right and the wrong heading end 29 % apart on the first frame
-    tr = Tracker(model, cams, TrackerConfig(seed=0, init_confirm_ratio=1.5, **cfg))
+    tr = Tracker(model, cams, TrackerConfig(**{"seed": 0, "init_confirm_ratio": 1.5, **cfg}))
     out = [tr.step(masks[0], 0)]
     out += [tr.step(masks[k], k, prediction=(external or {}).get(k)) for k in range(1, len(masks))]
     monkeypatch.undo()
@@ -146,6 +148,42 @@ def test_heading_check_keeps_a_right_first_heading_bit_for_bit(scene320, monkeyp
     # each hypothesis' limb stage takes the rest as proposals: fewer unspent than its 4 limbs
     assert all(2 * 1500 - 8 < r.n_evals <= 2 * 1500 for r in on[1:checked + 1]) and checked >= 1
     assert all(1500 - 4 < r.n_evals <= 1500 for r in on[checked + 1:])
+
+
+@pytest.fixture(scope="module")
+def scene320_long():
+    return walk_scene(width=320, height=240, frames=9, duration_s=0.5, seed=0)
+
+
+def test_heading_recheck_when_views_join(scene320_long, monkeypatch):
+    """The generated walk starts seen by two cameras only (the person walks into the others' view):
+    the automatic initialization can face backwards and the heading check on those frames cannot
+    tell. When more views see the person, a search from a standing pose heading the other way runs
+    on that frame and, as close in energy, is checked beside the track: the check switches."""
+    model, cams, walk, masks = scene320_long
+    two = [[m if v in (0, 2) else None for v, m in enumerate(ms)] if k < 3 else ms for k, ms in enumerate(masks)]
+    scene = (model, cams, walk, two)
+    # init_confirm_ratio 1.0: the first frame's rival (the right heading, 1.4x) is not checked at all
+    _, off, err_off = _heading_runs(scene, monkeypatch, wrong_first=True, init_confirm_ratio=1.0,
+                                    init_confirm_frames=0)
+    tr, on, err_on = _heading_runs(scene, monkeypatch, wrong_first=True, init_confirm_ratio=1.0,
+                                   init_confirm_frames=2)
+    assert [r.views_used for r in on] == [2, 2, 2] + [4] * 6
+    assert err_off[-3:].min() > 150.0                         # facing backwards to the end
+    notes = [(k, n) for k, r in enumerate(on) for n in r.notes if n.startswith("heading")]
+    assert notes[0][0] == 3 and notes[0][1].startswith("heading re-check: 4 views see the person (2 when the "
+                                                       "heading was checked): a run heading the other way ended")
+    assert notes[1][0] == 5 and notes[1][1].startswith("heading check decided: switched to the other heading")
+    assert len(notes) == 2                                    # no views join after: no second re-check
+    assert err_on[5:].max() < 60.0
+    assert on[3].n_evals > 3 * 1500 and 2 * 1500 - 8 < on[4].n_evals <= 2 * 1500
+    # the frames before the re-check are as without it
+    for a, b in zip(off[:3], on[:3]):
+        np.testing.assert_array_equal(a.x, b.x)
+    # a given pose's heading is not re-checked
+    tr = Tracker(model, cams, TrackerConfig(seed=0))
+    tr.initialize(pose=walk[2])
+    assert not any(n.startswith("heading") for n in tr.step(masks[3], 3).notes)
 
 
 def test_heading_check_shares_the_frame_budget(scene320, monkeypatch):

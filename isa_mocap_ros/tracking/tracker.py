@@ -246,7 +246,16 @@ class TrackerConfig:
         comes after a gap (``step``'s ``frames_elapsed`` > 1, as in real time when the sets that
         arrived during the initialization were dropped) ends it and keeps the winner, because
         after a gap both hypotheses are still catching up and their energies decided wrongly
-        (measured). 0 turns it off (``docs/tracking.md``, "Checking the heading").
+        (measured). **Heading re-check**: on a later frame where more views use the person's
+        foreground than when the heading was checked (the person walks into a camera's view), one
+        search from a standing pose heading the other way runs on that frame (the initialization's
+        four standing variants, pruned as ``init_keep`` says; about three frame budgets) and, when
+        its estimate is within ``init_confirm_ratio`` of the frame's energy, is checked beside the
+        track for up to this many frames as above. Not after an initialization from a given pose.
+        The generated walk starts seen by two cameras, which cannot tell front from back: 4 of 8
+        seeds faced backwards to the end (163.8 mm); with the re-check, when the other two cameras
+        see the person (frame 14-16), all 8 turn (34.5 mm; the frames before stay wrong).
+        0 turns both off (``docs/tracking.md``, "Checking the heading", "The heading re-check").
     init_confirm_share : float
         Share of the frame budget each hypothesis of the heading check gets, in (0, 1]; never below
         ``CONFIRM_MIN_EVALS`` (500, the comparison paper's smallest budget) or the frame budget if
@@ -652,6 +661,7 @@ class Tracker:
         self._rival_start: tuple[np.ndarray, float, float] | None = None   # (pose, energy, winner's energy)
         self._rival: Tracker | None = None
         self._confirm = [0, 0.0, 0.0]      # frames compared, energy sums: this tracker, the rival
+        self._heading_views = 0            # views the heading was checked with (re-checked when more see the person)
         self._own_prediction_frames = 0    # frames left that ignore external predictions (after a switch)
         # h-isa on the fast energy runs compiled per partition (tracking/_fast_search.py, the same
         # numbers as the optimizer protocol); False: always through the protocol (tests compare both)
@@ -682,6 +692,7 @@ class Tracker:
         self.predictor.reset()
         self._rival_start = self._rival = None
         self._own_prediction_frames = 0
+        self._heading_views = 0
 
     def _prior_active(self) -> bool:
         return self.prior is not None and self.config.prior_eta > 0
@@ -805,6 +816,7 @@ class Tracker:
             x = np.clip(x, self.model.lower, self.model.upper)
             self._masks_now = None          # no frame: nothing to re-centre from later
             self._accept(x)
+            self._heading_views = len(self.cameras)     # a given pose's heading is not re-checked
             return None
         if masks is None:
             raise TrackerError("initialize: expected masks= or pose=, received neither")
@@ -820,6 +832,7 @@ class Tracker:
         except InitError as exc:
             raise TrackerError(f"masks: automatic initialization failed: {exc}") from None
         self._accept(res.x)
+        self._heading_views = res.views_used
         return res
 
     def _init_energy_fn(self, usable: list, frame_index: int):
@@ -1036,7 +1049,7 @@ class Tracker:
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         return res
 
-    def _initial_runs(self, starts: list, frame_index: int, notes: list[str]) -> tuple[list, int]:
+    def _initial_runs(self, starts: list, frame_index: int, notes: list[str], stream: tuple = ()) -> tuple[list, int]:
         """The automatically initialized frame's search from every start (heading candidate), pruned
         to ``config.init_keep`` runs at the checkpoint (see :class:`TrackerConfig`): the list of
         ``(start index, result, start)`` of the runs that ended, and the evaluations of all runs.
@@ -1044,7 +1057,10 @@ class Tracker:
         cfg = self.config
         runs = []
         for j, pred in enumerate(starts):
-            rng = frame_rng(cfg.seed, frame_index) if j == 0 else frame_rng(cfg.seed, frame_index, 3, j)
+            if stream:          # the heading re-check's runs: their own streams
+                rng = frame_rng(cfg.seed, frame_index, *stream, j)
+            else:
+                rng = frame_rng(cfg.seed, frame_index) if j == 0 else frame_rng(cfg.seed, frame_index, 3, j)
             opt, budget, _, _ = self._search(pred, rng, cfg.init_spread_scale, notes if j == 0 else None,
                                              stages=False)
             if self._compiled_search and _fast_search.supported(opt, self.energy, self._prior_active()):
@@ -1468,6 +1484,7 @@ class Tracker:
             self._own_prediction_frames -= 1
         if res.initialized:
             self._rival = None
+            self._heading_views = res.views_used
             if self._rival_start is not None:
                 e_rival, e_win = self._rival_start[1], self._rival_start[2]
                 self._start_rival(frame_index)
@@ -1475,8 +1492,12 @@ class Tracker:
                     f"heading check started: a run heading the other way ended {e_rival:.4g} (winner {e_win:.4g}); both "
                     f"tracked for up to {self.config.init_confirm_frames} frames",))
             return res
-        if rival is None or rival is not self._rival:
+        if rival is None:
+            return self._recheck_heading(res, frame_index, frames_elapsed, t0)
+        if rival is not self._rival:
             return res
+        # the check's frames see what they see: views joining meanwhile are part of its decision
+        self._heading_views = max(self._heading_views, res.views_used)
         if frames_elapsed != 1:
             # after a gap both hypotheses are still catching up and their energies say little (real
             # time, the sets that arrived during the initialization dropped: wrong switches measured)
@@ -1485,6 +1506,43 @@ class Tracker:
                 f"heading check ended: no decision ({frames_elapsed:g} frame periods since the last frame; "
                 "it compares consecutive frames only); kept this heading",))
         return self._confirm_heading(res, masks, frame_index, frames_elapsed, t0)
+
+    def _recheck_heading(self, res: FrameResult, frame_index: int, frames_elapsed: float, t0: float) -> FrameResult:
+        """The heading re-check (``TrackerConfig.init_confirm_frames``): on a tracked frame where more
+        views use the person's foreground than when the heading was last checked, one search of the
+        frame budget from a standing pose heading the other way (at the estimate's root position,
+        the best of the standing variants, the automatic initialization's spreads); when its
+        estimate heads more than 90° away and its energy is within ``init_confirm_ratio`` of this
+        frame's, it becomes the rival of a heading check as after the initialization."""
+        from .init import _wrap, _yaw_of, standing_poses
+
+        cfg = self.config
+        if cfg.init_confirm_frames <= 0 or res.fell_back or res.initialized or frames_elapsed != 1 \
+                or res.views_used <= self._heading_views or not np.isfinite(res.energy) \
+                or 3 not in {len(b) for b in self.model.rotation_blocks}:
+            return res
+        before, self._heading_views = self._heading_views, res.views_used
+        x = np.asarray(res.x, dtype=float)
+        yaw = _yaw_of(x[3:6])
+        starts, _ = standing_poses(self.model, x[:3], [yaw + np.pi])
+        head = f"heading re-check: {res.views_used} views see the person ({before} when the heading was checked)"
+        try:
+            runs, n = self._initial_runs(list(starts), frame_index, None, stream=(5,))
+        except ValueError as exc:
+            return dataclasses.replace(res, time_s=time.perf_counter() - t0,
+                                       notes=res.notes + (f"{head}; its search failed ({exc}); kept this heading",))
+        xr, er = min((self._final_pose(r) for _, r, _ in runs), key=lambda t: t[1])
+        turned = abs(float(_wrap(_yaw_of(xr[3:6]) - yaw))) > np.pi / 2
+        if turned and np.isfinite(er) and er <= cfg.init_confirm_ratio * max(res.energy, 0.0):
+            self._rival_start = (xr, er, res.energy)
+            self._start_rival(frame_index)
+            note = (f"{head}: a run heading the other way ended {er:.4g} (estimate {res.energy:.4g}); both tracked for "
+                    f"up to {cfg.init_confirm_frames} frames")
+        else:
+            note = (f"{head}: a run heading the other way ended {er:.4g}"
+                    f"{'' if turned else ' turned back'} (estimate {res.energy:.4g}); kept this heading")
+        return dataclasses.replace(res, n_evals=res.n_evals + n, time_s=time.perf_counter() - t0,
+                                   notes=res.notes + (note,))
 
     def confirm_evals(self) -> int:
         """Evaluations of each hypothesis on a frame of the heading check (``config.init_confirm_share``
