@@ -186,6 +186,26 @@ def test_heading_recheck_when_views_join(scene320_long, monkeypatch):
     assert not any(n.startswith("heading") for n in tr.step(masks[3], 3).notes)
 
 
+def test_an_undecided_heading_check_is_rechecked_once(scene320_long, monkeypatch):
+    """A check that keeps the winner only for want of evidence (sums within init_confirm_margin: the
+    rival may still have been converging, the generated box seed 2) is re-checked once, a few frames
+    later, from standing poses heading the other way."""
+    from isa_mocap_ros.tracking import tracker as T
+
+    monkeypatch.setattr(T, "UNDECIDED_RECHECK_FRAMES", 2)
+    _, on, _ = _heading_runs(scene320_long, monkeypatch, wrong_first=False, init_confirm_margin=10.0)
+    notes = [(k, n) for k, r in enumerate(on) for n in r.notes if n.startswith("heading")]
+    assert notes[0][0] == 0 and notes[0][1].startswith("heading check started")
+    assert notes[1][0] == 3 and notes[1][1].startswith("heading check decided: kept the initial heading") \
+        and notes[1][1].endswith("; undecided, re-checked in 2 frames)")
+    assert notes[2][0] == 5 and notes[2][1].startswith("heading re-check: the last check was undecided: a run "
+                                                       "heading the other way ended")
+    assert on[5].n_evals > 3 * 1500
+    # once only: a second undecided check is not re-checked again
+    assert not any("re-checked in" in n for _, n in notes[2:])
+    assert sum(n.startswith("heading re-check") for _, n in notes) == 1
+
+
 def test_heading_check_shares_the_frame_budget(scene320, monkeypatch):
     # init_confirm_share 0.5: a frame of the check costs one frame's budget, 750 evaluations each
     _, on, err = _heading_runs(scene320, monkeypatch, wrong_first=False, init_confirm_share=0.5)
