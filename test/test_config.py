@@ -21,6 +21,7 @@ def test_estimator_section_matches_tracker_defaults():
              "torso_fraction": tc.torso_fraction, "limb_fold_deg": tc.limb_fold_deg,
              "limb_proposals": tc.limb_proposals,
              "limb_proposal_limbs": list(tc.limb_proposal_limbs), "limb_hinge_limbs": list(tc.limb_hinge_limbs),
+             "limb_extrapolations": list(tc.limb_extrapolations),
              "init_confirm_frames": tc.init_confirm_frames,
              "init_confirm_share": tc.init_confirm_share,
              "refine_fraction": tc.refine_fraction, "refine_partitions": list(tc.refine_partitions),

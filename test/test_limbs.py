@@ -108,8 +108,8 @@ def test_stage_reopens_a_folded_arm(scene):
 
 def test_stage_budget_skip_note_and_off(scene):
     model, cams, walk, truth, masks = scene
-    for cfg, note in [(TrackerConfig(evals_per_frame=700, seed=1), False),        # 16 x 4 + 2 = 66 <= 70
-                      (TrackerConfig(evals_per_frame=330, seed=1, pelvis_fraction=0.0), False),   # 7 per limb
+    for cfg, note in [(TrackerConfig(evals_per_frame=700, seed=1), False),        # (14 + 3) x 4 + 2 = 70
+                      (TrackerConfig(evals_per_frame=330, seed=1, pelvis_fraction=0.0), False),   # 4 + 3 per limb
                       (TrackerConfig(evals_per_frame=700, seed=1, limb_proposals=0), False)]:
         tr = Tracker(model, cams, cfg)
         tr.initialize(pose=walk[2])
@@ -118,15 +118,16 @@ def test_stage_budget_skip_note_and_off(scene):
         slack = 4 if cfg.limb_proposals and not note else 30
         assert cfg.evals_per_frame - slack < r.n_evals <= cfg.evals_per_frame and not r.fell_back
         assert not any(n.startswith("limb stage skipped") for n in r.notes)
-    # proposals per limb: limb_proposals, or as many as fit in a tenth of the budget; below 4 no stage
-    for evals, limbs, n in [(1500, LIMBS, 16), (700, LIMBS, 16), (500, LIMBS, 12), (330, LIMBS, 7),
-                            (180, LIMBS, 4), (330, ("left_arm", "right_arm"), 15), (170, LIMBS, 0)]:
+    # drawn proposals per limb: limb_proposals, or as many as fit in a tenth of the budget beside the 3
+    # extrapolated ones; below 4 no stage
+    for evals, limbs, n in [(1500, LIMBS, 16), (700, LIMBS, 14), (500, LIMBS, 9), (330, LIMBS, 4),
+                            (330, ("left_arm", "right_arm"), 12), (290, LIMBS, 0), (170, LIMBS, 0)]:
         tr = Tracker(model, cams, TrackerConfig(evals_per_frame=evals, seed=1, limb_proposal_limbs=limbs))
         notes = []
         got = tr._limb_stage(notes, truth)
         assert got == ((list(limbs), [v for v in limbs if v.endswith("_leg")], n) if n else ([], [], 0))
         assert (notes == ["limb stage skipped: fewer than 4 proposals per limb fit in a tenth of the frame "
-                          "budget (170; 4 limbs)"]) == (n == 0)
+                          f"budget ({evals}; 4 limbs)"]) == (n == 0)
 
 
 def test_not_on_the_automatically_initialized_frame(scene, monkeypatch):
@@ -144,7 +145,10 @@ def test_not_on_the_automatically_initialized_frame(scene, monkeypatch):
                                        ({"limb_proposal_limbs": "left_arm"}, "limb_proposal_limbs"),
                                        ({"limb_proposal_limbs": ("left_arm", "left_arm")}, "limb_proposal_limbs"),
                                        ({"limb_hinge_limbs": ("left_leg", "knee")}, "limb_hinge_limbs"),
-                                       ({"limb_hinge_limbs": "left_leg"}, "limb_hinge_limbs")])
+                                       ({"limb_hinge_limbs": "left_leg"}, "limb_hinge_limbs"),
+                                       ({"limb_extrapolations": (1.0, -2.0)}, "limb_extrapolations"),
+                                       ({"limb_extrapolations": 2.0}, "limb_extrapolations"),
+                                       ({"limb_extrapolations": (float("nan"),)}, "limb_extrapolations")])
 def test_bad_settings(kw, match):
     with pytest.raises(TrackerError, match=match):
         TrackerConfig(**kw)
@@ -222,3 +226,39 @@ def test_knee_proposals_follow_a_knee_beyond_the_search_box(scene):
     keep = [k for k in range(model.dof) if k != leg.hinge_dof]
     np.testing.assert_array_equal(x[keep], off[keep])
     assert abs(x[leg.hinge_dof] - truth[leg.hinge_dof]) < np.deg2rad(12.0)
+
+
+def test_extrapolated_proposals_carry_a_limb_along_its_motion(scene):
+    """limb_extrapolations: a limb the search trails (a kick: the knee 25-30 deg per frame) is offered
+    ``x + k (x - last)`` for k in (1, 2, 3); a leg half-way from the last frame's angles to the truth is
+    put on the truth by k = 1."""
+    model, cams, walk, truth, masks = scene
+    lm = LimbMove(model)
+    leg = lm.limb("right_leg")
+    last = truth.copy()
+    last[leg.hinge_dof] += np.deg2rad(40.0)                    # the knee straightening fast
+    last[leg.base_dofs[0]] += 0.1                               # the hip moving too
+    half = truth.copy()
+    half[leg.hinge_dof] += np.deg2rad(20.0)
+    half[leg.base_dofs[0]] += 0.05
+    X = lm.extrapolate(half, last, leg, (1.0, 2.0, 3.0))
+    np.testing.assert_allclose(X[0, leg.dofs], truth[leg.dofs], atol=1e-12)
+    np.testing.assert_allclose(X[:, leg.base_dofs[0]], half[leg.base_dofs[0]] - np.array([1, 2, 3]) * 0.05)
+    keep = [k for k in range(model.dof) if k not in leg.dofs]
+    np.testing.assert_array_equal(X[:, keep], np.repeat(half[None, keep], 3, 0))
+    assert np.all(X >= model.lower) and np.all(X <= model.upper)
+    tr = Tracker(model, cams, TrackerConfig(seed=1))
+    tr.initialize(pose=half)
+    tr.step(masks, 3, prediction=half)                          # sets the masks
+    # one drawn proposal (a knee alone cannot reach the truth: the hip is off too) and the extrapolations
+    x, e, n, changed = tr.propose_limbs(half, n=1, rng=frame_rng(1, 3), limbs=["right_leg"],
+                                        hinge_only=["right_leg"], last=last)
+    assert n == (1 + 3) + 2 and changed == ["right_leg"]
+    assert abs(x[leg.hinge_dof] - truth[leg.hinge_dof]) < np.deg2rad(1.0)
+    # without the previous pose there is nothing to extrapolate
+    _, _, n, _ = tr.propose_limbs(half, n=1, rng=frame_rng(1, 3), limbs=["right_leg"], hinge_only=["right_leg"])
+    assert n == 1 + 2
+    # off
+    tr = Tracker(model, cams, TrackerConfig(seed=1, limb_extrapolations=()))
+    assert tr._limb_stage([], truth) == (list(LIMBS), ["left_leg", "right_leg"], 16)
+    assert tr._limb_share(4, 16) == 66

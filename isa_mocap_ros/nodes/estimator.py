@@ -88,6 +88,9 @@ class EstimatorNode(Node):
         hinge_limbs = declare(self, "limb_hinge_limbs", list(tc.limb_hinge_limbs),
                               "limbs of the limb stage with hinge proposals only (the legs: a knee faster than the "
                               "search box; twist too when folded)")
+        extrap = declare(self, "limb_extrapolations", list(tc.limb_extrapolations),
+                         "limb stage: factors k of the extrapolated proposals x + k (x - last) per limb (a limb "
+                         "the search trails; [0.0] = off)")
         fold = declare(self, "limb_fold_deg", tc.limb_fold_deg, "a limb whose prediction bends its hinge beyond this "
                        "many degrees gets twist-and-hinge proposals, joining the limb stage if not in it (a folded "
                        "knee; 0 = never)", lo=0.0, hi=360.0)
@@ -158,7 +161,8 @@ class EstimatorNode(Node):
                                      prior_eta=self.prior_eta, prior_file=prior_file, pelvis_fraction=pelvis,
                                      pelvis_move=pelvis_move, torso_fraction=torso,
                                      limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs),
-                                     limb_hinge_limbs=tuple(hinge_limbs), limb_fold_deg=fold,
+                                     limb_hinge_limbs=tuple(hinge_limbs),
+                                     limb_extrapolations=tuple(float(k) for k in extrap if k > 0), limb_fold_deg=fold,
                                      partition_order=tuple(part_order), refine_fraction=refine,
                                      refine_partitions=tuple(refine_parts), gate_margin_px=gate,
                                      max_frames_ahead=ahead, init_confirm_frames=confirm,

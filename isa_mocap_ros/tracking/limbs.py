@@ -22,6 +22,10 @@ search box cannot follow — the CMU walk's kick straightens and re-bends the kn
 kick in 1 of 16 seeds (its knee 0.5 m off to the end); a leg folded in the prediction gets the
 twist as well (``TrackerConfig.limb_hinge_limbs``).
 
+A limb that moves fast is trailed by the search (its box and spreads are centred on a damped
+prediction): **extrapolated proposals** carry the limb's angles further along the motion the frame's
+search gave them, ``x + k (x − x_prev)`` for a few factors ``k`` (:meth:`LimbMove.extrapolate`).
+
 Every proposal is evaluated with the rest of the pose held at the estimate; the best one replaces
 the limb when its energy is lower than the estimate's (the next frame's search refines it). This is
 a proposal distribution over the same energy, not a new energy.
@@ -112,6 +116,17 @@ class LimbMove:
         X = np.repeat(x[None, :], len(phi), axis=0)
         X[:, list(limb.base_dofs)] = local.as_euler(limb.seq)
         X[:, limb.hinge_dof] = theta
+        return np.clip(X, m.lower, m.upper)
+
+    def extrapolate(self, x: np.ndarray, last: np.ndarray, limb: Limb, factors) -> np.ndarray:
+        """Poses ``(len(factors), D)``: ``x`` with the limb's DOFs (base and hinge) carried further along
+        their motion since ``last``: ``x + k (x − last)`` for each factor ``k``, clipped to the limits."""
+        m = self.model
+        x = np.asarray(x, dtype=float)
+        d = limb.dofs
+        v = x[d] - np.asarray(last, dtype=float)[d]
+        X = np.repeat(x[None, :], len(factors), axis=0)
+        X[:, d] = x[d] + np.outer(np.asarray(factors, dtype=float), v)
         return np.clip(X, m.lower, m.upper)
 
     def draw(self, x: np.ndarray, limb: Limb, n: int, rng: np.random.Generator, *, twist: bool = True) -> np.ndarray:
