@@ -169,6 +169,11 @@ def test_heading_recheck_when_views_join(scene320_long, monkeypatch):
     tr, on, err_on = _heading_runs(scene, monkeypatch, wrong_first=True, init_confirm_ratio=1.0,
                                    init_confirm_frames=2)
     assert [r.views_used for r in on] == [2, 2, 2] + [4] * 6
+    # what the estimator node asks before a frame, to keep the frames after it in sequence
+    probe = Tracker(model, cams, TrackerConfig(seed=0, init_confirm_ratio=1.0))   # no check after the first frame
+    assert not probe.heading_recheck_pending(masks[3])          # nothing tracked yet
+    probe.step(two[0], 0)
+    assert not probe.heading_recheck_pending(two[1]) and probe.heading_recheck_pending(masks[3])
     assert err_off[-3:].min() > 150.0                         # facing backwards to the end
     notes = [(k, n) for k, r in enumerate(on) for n in r.notes if n.startswith("heading")]
     assert notes[0][0] == 3 and notes[0][1].startswith("heading re-check: 4 views see the person (2 when the "

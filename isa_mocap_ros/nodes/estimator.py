@@ -372,6 +372,10 @@ class EstimatorNode(Node):
                     # this set may initialize the tracker: keep the sets that follow it in sequence
                     # for the heading check (Tracker.checking_heading), not only the newest
                     self.slot.hold(self.tracker_settings["init_confirm_frames"])
+                elif not self.lockstep and self.tracker.heading_recheck_pending(item[0].items):
+                    # the same for a heading re-check (more views see the person): else its check ends at
+                    # the gap after the re-check's own, longer frame
+                    self.slot.hold(self.tracker_settings["init_confirm_frames"])
                 frame_set, t_ready = item
                 prediction = None
                 if self.use_prediction and self._published_any:

@@ -709,6 +709,18 @@ class Tracker:
         real time) should hand it the frames that follow in sequence meanwhile."""
         return self._rival is not None
 
+    def heading_recheck_pending(self, masks: Sequence) -> bool:
+        """True when stepping ``masks`` next may start a heading re-check (more views with foreground
+        than the heading was checked with, or an undecided check's re-check due): a caller that drops
+        frames (the estimator node in real time) should hand the tracker the frames that follow in
+        sequence, as for :attr:`checking_heading`, or the check ends at the first gap."""
+        if self.config.init_confirm_frames <= 0 or self._last is None or self._rival is not None:
+            return False
+        if self._recheck_at is not None and self.frames + 1 >= self._recheck_at:
+            return True
+        usable, _ = self._check_masks(masks)
+        return sum(m is not None for m in usable) > self._heading_views
+
     def reset(self) -> None:
         """Forget the estimates (the next step initializes again)."""
         self._last = None
