@@ -253,7 +253,7 @@ class TrackerConfig:
         (measured). **Heading re-check**: on a later frame where more views use the person's
         foreground than when the heading was checked (the person walks into a camera's view), one
         search from a standing pose heading the other way runs on that frame (the initialization's
-        four standing variants, pruned as ``init_keep`` says; about three frame budgets) and, when
+        four standing variants, pruned as ``init_keep`` says; about four frame budgets) and, when
         its estimate is within ``init_confirm_ratio`` of the frame's energy, is checked beside the
         track for up to this many frames as above. The same re-check runs once
         :data:`UNDECIDED_RECHECK_FRAMES` frames after a check that kept the winner for want of evidence
@@ -313,10 +313,11 @@ class TrackerConfig:
         it lowers the energy. It re-opens an arm the search left folded (forearm on the upper arm,
         twist 140-180° off) — a trap the ±0.5 rad search box cannot leave (CMU walk, 8 seeds: mean
         joint error 35.2 → 31.7 mm, the folded right arm gone; ``docs/tracking.md``). Takes
-        ``limb_proposals × limbs + 2`` evaluations of the budget; when that is more than a tenth of
-        the budget, each limb gets as many proposals as fit in the tenth (500 evaluations, four
-        limbs: 12), and the stage is skipped (with a note) when fewer than
-        :data:`MIN_LIMB_PROPOSALS` fit. 0 disables it; not on the automatically initialized frame.
+        ``(limb_proposals + len(limb_extrapolations)) × limbs + 2`` evaluations of the budget; when
+        that is more than a tenth of the budget, each limb gets as many drawn proposals as fit in the
+        tenth beside the extrapolated ones (500 evaluations, four limbs: 9), and the stage is skipped
+        (with a note) when fewer than :data:`MIN_LIMB_PROPOSALS` fit. 0 disables it; not on the
+        automatically initialized frame.
     limb_proposal_limbs : tuple of str
         Limbs of the limb stage, among ``left_arm``, ``right_arm``, ``left_leg``, ``right_leg``
         (limbs the model does not have are ignored). Default all four (the arms only before
