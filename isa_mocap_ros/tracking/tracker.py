@@ -155,6 +155,14 @@ def _partition_names(name: str, value, example: str, *, empty: bool) -> tuple:
     return tuple(value)
 
 
+def _limb_names(name: str, value) -> tuple:
+    """``value`` as a tuple of distinct names among :data:`~.limbs.LIMBS`, else :class:`TrackerError`."""
+    if isinstance(value, str) or not isinstance(value, Sequence) or any(v not in LIMBS for v in value) \
+            or len(set(value)) != len(value):
+        raise TrackerError(f"{name}: expected distinct names among {', '.join(LIMBS)}, received {value!r}")
+    return tuple(value)
+
+
 @dataclass(frozen=True)
 class TrackerConfig:
     """Fixed settings of a :class:`Tracker` (see the module docstring and ``docs/tracking.md``).
@@ -501,18 +509,8 @@ class TrackerConfig:
         if self.torso_fraction >= 1.0:
             raise TrackerError(f"torso_fraction: expected a share in [0, 1), received {self.torso_fraction!r}")
         _check_number("limb_proposals", self.limb_proposals, lo=0, integer=True)
-        limbs = self.limb_proposal_limbs
-        if isinstance(limbs, str) or not isinstance(limbs, Sequence) or any(v not in LIMBS for v in limbs) \
-                or len(set(limbs)) != len(limbs):
-            raise TrackerError(f"limb_proposal_limbs: expected distinct names among {', '.join(LIMBS)}, "
-                               f"received {limbs!r}")
-        object.__setattr__(self, "limb_proposal_limbs", tuple(limbs))
-        hinge = self.limb_hinge_limbs
-        if isinstance(hinge, str) or not isinstance(hinge, Sequence) or any(v not in LIMBS for v in hinge) \
-                or len(set(hinge)) != len(hinge):
-            raise TrackerError(f"limb_hinge_limbs: expected distinct names among {', '.join(LIMBS)}, "
-                               f"received {hinge!r}")
-        object.__setattr__(self, "limb_hinge_limbs", tuple(hinge))
+        for name in ("limb_proposal_limbs", "limb_hinge_limbs"):
+            object.__setattr__(self, name, _limb_names(name, getattr(self, name)))
         ext = self.limb_extrapolations
         if isinstance(ext, (str, bytes)) or not isinstance(ext, Sequence) or not all(
                 isinstance(k, (int, float, np.integer, np.floating)) and not isinstance(k, bool)
