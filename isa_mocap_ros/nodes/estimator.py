@@ -81,8 +81,9 @@ class EstimatorNode(Node):
                               "rotations)")
         torso = declare(self, "torso_fraction", tc.torso_fraction, "share of the budget for the torso stage (spine "
                         "and neck re-fit with the upper arms swung about the elbows; 0 = off)", lo=0.0, hi=0.9)
-        limb_n = declare(self, "limb_proposals", tc.limb_proposals, "twist-and-hinge proposals per limb and frame "
-                         "(limb stage: re-opens a folded arm; 0 = off)", lo=0, hi=10_000)
+        limb_n = declare(self, "limb_proposals", tc.limb_proposals, "drawn proposals per limb and frame "
+                         "(limb stage: twist and hinge for the arms, re-opening a folded arm; the knee for the legs; "
+                         "0 = off)", lo=0, hi=10_000)
         limbs = declare(self, "limb_proposal_limbs", list(tc.limb_proposal_limbs),
                         "limbs of the limb stage: left_arm, right_arm, left_leg, right_leg")
         hinge_limbs = declare(self, "limb_hinge_limbs", list(tc.limb_hinge_limbs),
