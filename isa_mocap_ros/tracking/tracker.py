@@ -30,7 +30,8 @@ One call of :meth:`Tracker.step` per frame set:
    re-fits the root with the limbs below it kept in place (:mod:`.reaim`), the **torso stage**
    (:meth:`Tracker.refit_torso`) re-fits the spine and neck with the upper arms swung about the
    elbows, the **limb stage** (:meth:`Tracker.propose_limbs`) tries twist-and-hinge proposals for
-   the arms (and a folded leg) and keeps any that lowers the energy, then the optional
+   the arms (and a folded leg), knee proposals for the legs and, for every limb, its angles carried
+   further along their motion, and keeps any that lowers the energy, then the optional
    **refinement stage** (:meth:`Tracker.refine`, hierarchical algorithms, off by default) searches
    the torso and both arms together with the algorithm's flat form. None runs on the automatically
    initialized frame. Every search runs **whole generations** (a hierarchical one splits its share
@@ -717,6 +718,8 @@ class Tracker:
             return False
         if self._recheck_at is not None and self.frames + 1 >= self._recheck_at:
             return True
+        if self._heading_views >= len(self.cameras):      # every view counted: no need to look at the masks
+            return False
         usable, _ = self._check_masks(masks)
         return sum(m is not None for m in usable) > self._heading_views
 
@@ -1555,11 +1558,12 @@ class Tracker:
 
     def _recheck_heading(self, res: FrameResult, frame_index: int, frames_elapsed: float, t0: float) -> FrameResult:
         """The heading re-check (``TrackerConfig.init_confirm_frames``): on a tracked frame where more
-        views use the person's foreground than when the heading was last checked, one search of the
-        frame budget from a standing pose heading the other way (at the estimate's root position,
-        the best of the standing variants, the automatic initialization's spreads); when its
-        estimate heads more than 90° away and its energy is within ``init_confirm_ratio`` of this
-        frame's, it becomes the rival of a heading check as after the initialization."""
+        views use the person's foreground than when the heading was last checked (or an undecided
+        check's re-check is due), the frame's search from each standing variant heading the other way
+        (at the estimate's root position, the automatic initialization's spreads, pruned as
+        :meth:`_initial_runs` does); when the lowest-energy run's estimate heads more than 90° away and
+        its energy is within ``init_confirm_ratio`` of this frame's, it becomes the rival of a heading
+        check as after the initialization."""
         from .init import _wrap, _yaw_of, standing_poses
 
         cfg = self.config
