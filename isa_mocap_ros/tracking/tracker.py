@@ -314,7 +314,9 @@ class TrackerConfig:
         comparison design, 3 seeds: scipy-DE wave 16.0 → 19.9 mm, CMU walk 33.6 → 41.2; pycma 22.6 →
         32.8 / 51.7 → 65.2; our CMA-ES unchanged, PSO mixed). 0 disables it; skipped (with a note) when
         its share is below one generation + 2; not for models without a ``torso`` partition, nor on the
-        automatically initialized frame. Default 0.25 (0.2 and 0.3 measured, ``docs/tracking.md``).
+        automatically initialized frame. Default 0.13 since session 15 (0.25 before; with the session-14
+        limb stage the main search gains more from the evaluations: CMU walk 16 seeds 16.74 → 15.75 mm,
+        knee 5.80 → 4.86°; 0.07-0.25 measured, ``docs/tracking.md``, "The torso stage's share").
     limb_proposals : int
         Twist-and-hinge proposals per limb and frame of the **limb stage** (:mod:`.limbs`), after
         the pelvis stage: each limb's base joint turned about its upper bone and its hinge redrawn
@@ -442,7 +444,7 @@ class TrackerConfig:
     init_confirm_margin: float = 1.1
     pelvis_fraction: float = 0.15
     pelvis_move: str = "reaim"
-    torso_fraction: float = 0.25
+    torso_fraction: float = 0.13
     limb_proposals: int = 16
     limb_proposal_limbs: tuple = ("left_arm", "right_arm", "left_leg", "right_leg")
     limb_hinge_limbs: tuple = ("left_leg", "right_leg")
