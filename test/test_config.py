@@ -23,7 +23,7 @@ def test_estimator_section_matches_tracker_defaults():
              "limb_proposal_limbs": list(tc.limb_proposal_limbs), "limb_hinge_limbs": list(tc.limb_hinge_limbs),
              "limb_extrapolations": list(tc.limb_extrapolations),
              "init_confirm_frames": tc.init_confirm_frames,
-             "init_confirm_share": tc.init_confirm_share,
+             "init_confirm_share": tc.init_confirm_share, "heading_travel_cue": tc.heading_travel_cue,
              "refine_fraction": tc.refine_fraction, "refine_partitions": list(tc.refine_partitions),
              "partition_order": list(tc.partition_order)}
     assert {k: est[k] for k in pairs} == pairs

@@ -211,6 +211,86 @@ def test_an_undecided_heading_check_is_rechecked_once(scene320_long, monkeypatch
     assert sum(n.startswith("heading re-check") for _, n in notes) == 1
 
 
+@pytest.fixture(scope="module")
+def scene320_two_views():
+    """Twelve frames of the generated walk seen by two cameras only (views 0 and 2): from the front and
+    from the back the person casts nearly the same silhouettes."""
+    model, cams, walk, masks = walk_scene(width=320, height=240, frames=12, duration_s=0.5, seed=0)
+    return model, cams, walk, [[m if v in (0, 2) else None for v, m in enumerate(ms)] for ms in masks]
+
+
+def test_travel_cue_rechecks_a_track_that_moves_backwards(scene320_two_views, monkeypatch):
+    """A track facing backwards (the first frame forced so, its heading check suppressed) whose root
+    travels against its heading is re-checked once it has moved for TRAVEL_FRAMES frames, and the
+    check switches; without the cue it faces backwards to the end."""
+    from isa_mocap_ros.tracking import tracker as T
+
+    def runs(**cfg):
+        monkeypatch.setattr(T.Tracker, "_pick_rival", lambda self, *a, **k: None)   # no check after the first frame
+        return _heading_runs(scene320_two_views, monkeypatch, wrong_first=True, init_confirm_frames=2, **cfg)
+    _, off, err_off = runs(heading_travel_cue=False)
+    assert not any(n.startswith("heading") for r in off for n in r.notes)
+    assert err_off[-3:].min() > 150.0
+    _, on, err_on = runs()
+    notes = [(k, n) for k, r in enumerate(on) for n in r.notes if n.startswith("heading")]
+    assert notes[0][0] == T.TRAVEL_FRAMES and notes[0][1].startswith("heading re-check: the person moves backwards (")
+    assert notes[1][0] == T.TRAVEL_FRAMES + 2 and notes[1][1].startswith(
+        "heading check decided: switched to the other heading") and "this heading moves backwards" in notes[1][1]
+    assert len(notes) == 2
+    assert err_on[T.TRAVEL_FRAMES + 2:].max() < 80.0
+    for a, b in zip(off[:T.TRAVEL_FRAMES], on[:T.TRAVEL_FRAMES]):      # the frames before are as without the cue
+        np.testing.assert_array_equal(a.x, b.x)
+
+
+def test_travel_cue_decides_a_close_heading_check(scene320_two_views, monkeypatch):
+    """A heading check the energies leave undecided (init_confirm_margin 10) switches to the hypothesis
+    that moves forwards; without the cue it keeps the initial heading for want of evidence."""
+    _, off, err_off = _heading_runs(scene320_two_views, monkeypatch, wrong_first=True, init_confirm_frames=2,
+                                    init_confirm_margin=10.0, heading_travel_cue=False)
+    assert any(n.startswith("heading check decided: kept the initial heading") for n in off[2].notes)
+    assert err_off[2:6].min() > 150.0
+    _, on, err_on = _heading_runs(scene320_two_views, monkeypatch, wrong_first=True, init_confirm_frames=2,
+                                  init_confirm_margin=10.0)
+    decided = [n for n in on[2].notes if n.startswith("heading check decided")]
+    assert len(decided) == 1 and decided[0].startswith("heading check decided: switched to the other heading") \
+        and "this heading moves backwards" in decided[0]
+    assert err_on[2:].max() < 80.0
+
+
+def test_travel_reads_the_root_motion(scene320_two_views):
+    from isa_mocap_ros.tracking import tracker as T
+
+    model, cams, walk, _ = scene320_two_views
+    tr = Tracker(model, cams, TrackerConfig(seed=0))
+    assert tr.travel() is None                                  # nothing tracked yet
+    tr.initialize(pose=walk[0])
+    assert tr.travel() is None                                  # one estimate: no travel
+    for x in walk[1:T.TRAVEL_FRAMES + 1]:
+        tr._accept(x)
+    direction, dist, span = tr.travel()
+    assert span == T.TRAVEL_FRAMES and dist == pytest.approx(np.hypot(*(walk[T.TRAVEL_FRAMES][:2] - walk[0][:2])))
+    assert tr._off_travel(direction, walk[T.TRAVEL_FRAMES]) < 20.0            # the generated walk moves forwards
+    assert tr.travel(min_periods=T.TRAVEL_FRAMES + 1) is None
+    assert tr._travel_recheck_due() is None                                   # forwards: no re-check
+    assert not tr.heading_recheck_pending([None] * len(cams))
+    from isa_mocap_ros.geometry.so3 import exp_so3, log_so3, rot_z
+
+    turned = tr._last.copy()
+    turned[3:6] = log_so3(rot_z(np.pi) @ exp_so3(turned[3:6]))              # heading the other way
+    tr._last = turned
+    assert tr._travel_recheck_due()[0] > 160.0
+    assert tr.heading_recheck_pending([None] * len(cams))                    # the estimator holds the frames after
+    tr.reset()
+    assert tr.travel() is None
+    still = Tracker(model, cams, TrackerConfig(seed=0))
+    still.initialize(pose=walk[0])
+    for _ in range(T.TRAVEL_FRAMES):
+        still._accept(walk[0])                                   # standing: no travel
+    assert still.travel() is None
+    with pytest.raises(TrackerError, match="heading_travel_cue"):
+        TrackerConfig(heading_travel_cue=1)
+
+
 def test_heading_check_shares_the_frame_budget(scene320, monkeypatch):
     # init_confirm_share 0.5: a frame of the check costs one frame's budget, 750 evaluations each
     _, on, err = _heading_runs(scene320, monkeypatch, wrong_first=False, init_confirm_share=0.5)

@@ -115,6 +115,10 @@ class EstimatorNode(Node):
                                 "hypothesis of the heading check gets (0.5: a frame of the check costs one frame's "
                                 "budget but decides worse on fast motion; never below 500 evaluations or the frame "
                                 "budget)", lo=0.01, hi=1.0)
+        travel_cue = declare(self, "heading_travel_cue", tc.heading_travel_cue, "heading check: a track that "
+                             "moves backwards (0.9 m/s, > 135 deg from its heading) is re-checked, and a check the "
+                             "energies leave close picks the heading that moves forwards (false: a person walking "
+                             "backwards on purpose)")
         predictor = declare(self, "predictor", tc.predictor, "ar, constant_pose or constant_velocity")
         order = declare(self, "predictor_order", tc.predictor_order, "AR order (past motions used; keep equal to the prediction node's order)", lo=1, hi=20)
         self.prior_eta = declare(self, "prior_eta", 0.0, "weight of the pose prior (0 = off)", lo=0.0, hi=1e6)
@@ -167,7 +171,7 @@ class EstimatorNode(Node):
                                      partition_order=tuple(part_order), refine_fraction=refine,
                                      refine_partitions=tuple(refine_parts), gate_margin_px=gate,
                                      max_frames_ahead=ahead, init_confirm_frames=confirm,
-                                     init_confirm_share=confirm_share)
+                                     init_confirm_share=confirm_share, heading_travel_cue=travel_cue)
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
                                       slop_ns=0 if sync == "exact" else int(slop_s * 1e9),
                                       max_wait_s=self.view_timeout_s, min_views=min(min_views, self.n_views))

@@ -62,6 +62,7 @@ automatically and then tracks from that pose.
 """
 from __future__ import annotations
 
+import collections
 import contextlib
 import dataclasses
 import math
@@ -106,6 +107,18 @@ CONFIRM_MIN_EVALS = 500
 #: Frames after a heading check that kept the winner for want of evidence (the sums within
 #: ``init_confirm_margin``) until the heading is re-checked once (``TrackerConfig.init_confirm_frames``).
 UNDECIDED_RECHECK_FRAMES = 10
+
+#: The heading check's **travel cue**: people walk and run forwards. Over the last ``TRAVEL_FRAMES`` frame
+#: periods, a root that moved at least ``TRAVEL_MIN_M_PER_FRAME`` per period (0.9 m/s at 30 fps) in a direction
+#: more than ``TRAVEL_BACKWARDS_DEG`` from the estimate's heading starts a heading re-check (once per
+#: ``TRAVEL_RECHECK_FRAMES`` frames), and a check the energies leave undecided switches to the hypothesis
+#: that moves forwards (within ``180 - TRAVEL_BACKWARDS_DEG``) when the kept one moves backwards. With two
+#: views a figure seen from the front and from the back casts nearly the same silhouettes (generated jog,
+#: seed 7: energy sums 0.2829 vs 0.2813 over the check), and the motion tells them apart.
+TRAVEL_FRAMES = 5
+TRAVEL_MIN_M_PER_FRAME = 0.03
+TRAVEL_BACKWARDS_DEG = 135.0
+TRAVEL_RECHECK_FRAMES = 15
 
 #: Fewest proposals per limb of the limb stage: when fewer fit in a tenth of the budget, the stage is skipped.
 MIN_LIMB_PROPOSALS = 4
@@ -287,6 +300,15 @@ class TrackerConfig:
     init_confirm_margin : float
         Factor (>= 1) by which a hypothesis' energy sum must be below the other's to decide the
         heading check. Default 1.1.
+    heading_travel_cue : bool
+        The heading check's **travel cue** (:data:`TRAVEL_FRAMES`): people walk and run forwards, so a track
+        whose root travelled at least 0.15 m over the last 5 frames (0.9 m/s at 30 fps) in a direction more
+        than 135° from its heading starts a heading re-check (at most every 15 frames), and a check where this
+        heading moves backwards and the other forwards runs to its last frame and keeps this heading only if
+        its energy sum is lower by ``init_confirm_margin``. With two views a person seen from the front and
+        from the back casts nearly the same silhouettes (generated jog, 16 seeds: 4 tracked backwards for
+        45-48 frames, 130-341 mm; with the cue 0, and 81.1 → 47.8 mm; generated walk 36.2 → 21.1 mm).
+        Default True; False for a person who walks backwards on purpose.
     pelvis_fraction : float
         Share of the frame budget spent, after the main search, on the **pelvis stage**: the
         configured algorithm's flat form re-fits the 6 root DOF with the limbs below the root kept in
@@ -442,6 +464,7 @@ class TrackerConfig:
     init_confirm_share: float = 1.0
     init_confirm_ratio: float = 1.25
     init_confirm_margin: float = 1.1
+    heading_travel_cue: bool = True
     pelvis_fraction: float = 0.15
     pelvis_move: str = "reaim"
     torso_fraction: float = 0.13
@@ -503,6 +526,8 @@ class TrackerConfig:
             raise TrackerError(f"init_confirm_share: expected a share in (0, 1], received {self.init_confirm_share!r}")
         _check_number("init_confirm_ratio", self.init_confirm_ratio, lo=1.0)
         _check_number("init_confirm_margin", self.init_confirm_margin, lo=1.0)
+        if not isinstance(self.heading_travel_cue, bool):
+            raise TrackerError(f"heading_travel_cue: expected a bool, received {self.heading_travel_cue!r}")
         _check_number("pelvis_fraction", self.pelvis_fraction, lo=0.0)
         if self.pelvis_fraction >= 1.0:
             raise TrackerError(f"pelvis_fraction: expected a share in [0, 1), received {self.pelvis_fraction!r}")
@@ -690,6 +715,10 @@ class Tracker:
         self._recheck_at: int | None = None   # self.frames at which an undecided check is re-checked
         self._rechecked_undecided = False
         self._own_prediction_frames = 0    # frames left that ignore external predictions (after a switch)
+        # (frame periods since the start, root x, y) of the last estimates: the travel cue (TRAVEL_FRAMES)
+        self._roots: collections.deque = collections.deque(maxlen=TRAVEL_FRAMES + 1)
+        self._clock = 0.0
+        self._travel_recheck_after = 0     # self.frames from which the travel cue may start a re-check
         # h-isa on the fast energy runs compiled per partition (tracking/_fast_search.py, the same
         # numbers as the optimizer protocol); False: always through the protocol (tests compare both)
         self._compiled_search = True
@@ -720,6 +749,8 @@ class Tracker:
             return False
         if self._recheck_at is not None and self.frames + 1 >= self._recheck_at:
             return True
+        if self._travel_recheck_due() is not None:
+            return True
         if self._heading_views >= len(self.cameras):      # every view counted: no need to look at the masks
             return False
         usable, _ = self._check_masks(masks)
@@ -736,6 +767,8 @@ class Tracker:
         self._heading_views = 0
         self._recheck_at = None
         self._rechecked_undecided = False
+        self._roots.clear()
+        self._travel_recheck_after = 0
 
     def _prior_active(self) -> bool:
         return self.prior is not None and self.config.prior_eta > 0
@@ -899,6 +932,8 @@ class Tracker:
     def _accept(self, x: np.ndarray) -> None:
         self._last = np.array(x, dtype=float)
         self.predictor.update(self._last, **frames_kwargs(self._elapsed or 1))
+        self._clock += self._elapsed or 1
+        self._roots.append((self._clock, float(self._last[0]), float(self._last[1])))
         self._elapsed = 0.0
         self._masks_last = self._masks_now
         self._masks_now = None
@@ -1558,6 +1593,38 @@ class Tracker:
                 "it compares consecutive frames only); kept this heading",))
         return self._confirm_heading(res, masks, frame_index, frames_elapsed, t0)
 
+    def travel(self, min_periods: float = 0.0) -> tuple[float, float, float] | None:
+        """The travel cue (:data:`TRAVEL_FRAMES`): ``(direction in radians, distance in m, frame periods)`` of the
+        root's horizontal travel over the last estimates, or None when they span fewer than ``min_periods``
+        periods (or none), the root moved less than :data:`TRAVEL_MIN_M_PER_FRAME` per period, or the model
+        has no 3-DOF root rotation."""
+        if len(self._roots) < 2 or 3 not in {len(b) for b in self.model.rotation_blocks}:
+            return None
+        (ta, xa, ya), (tb, xb, yb) = self._roots[0], self._roots[-1]
+        span, dist = tb - ta, math.hypot(xb - xa, yb - ya)
+        if span <= 0 or span < min_periods or dist < TRAVEL_MIN_M_PER_FRAME * span:
+            return None
+        return math.atan2(yb - ya, xb - xa), dist, span
+
+    @staticmethod
+    def _off_travel(direction: float, x) -> float:
+        """Degrees between pose ``x``'s heading and a travel ``direction`` (radians)."""
+        from .init import _wrap, _yaw_of
+
+        return math.degrees(abs(float(_wrap(direction - _yaw_of(np.asarray(x, dtype=float)[3:6])))))
+
+    def _travel_recheck_due(self) -> tuple[float, float, float] | None:
+        """The travel cue's trigger of a re-check: ``(degrees off the heading, m, periods)`` of :meth:`travel` over :data:`TRAVEL_FRAMES` periods when
+        it points backwards (beyond :data:`TRAVEL_BACKWARDS_DEG`) and no travel re-check ran in the last
+        :data:`TRAVEL_RECHECK_FRAMES` frames; else None."""
+        if not self.config.heading_travel_cue or self.frames < self._travel_recheck_after or self._last is None:
+            return None
+        t = self.travel(TRAVEL_FRAMES)
+        if t is None:
+            return None
+        off = self._off_travel(t[0], self._last)
+        return (off, t[1], t[2]) if off > TRAVEL_BACKWARDS_DEG else None
+
     def _recheck_heading(self, res: FrameResult, frame_index: int, frames_elapsed: float, t0: float) -> FrameResult:
         """The heading re-check (``TrackerConfig.init_confirm_frames``): on a tracked frame where more
         views use the person's foreground than when the heading was last checked (or an undecided
@@ -1571,17 +1638,25 @@ class Tracker:
         cfg = self.config
         due = self._recheck_at is not None and self.frames >= self._recheck_at
         if cfg.init_confirm_frames <= 0 or res.fell_back or res.initialized or frames_elapsed != 1 \
-                or not (due or res.views_used > self._heading_views) or not np.isfinite(res.energy) \
-                or 3 not in {len(b) for b in self.model.rotation_blocks}:
+                or not np.isfinite(res.energy) or 3 not in {len(b) for b in self.model.rotation_blocks}:
+            return res
+        travel = None if due or res.views_used > self._heading_views else self._travel_recheck_due()
+        if not (due or res.views_used > self._heading_views or travel):
             return res
         if due:
             self._recheck_at, self._rechecked_undecided = None, True
+        self._travel_recheck_after = self.frames + TRAVEL_RECHECK_FRAMES
         before, self._heading_views = self._heading_views, max(self._heading_views, res.views_used)
         x = np.asarray(res.x, dtype=float)
         yaw = _yaw_of(x[3:6])
         starts, _ = standing_poses(self.model, x[:3], [yaw + np.pi])
-        head = ("heading re-check: the last check was undecided" if res.views_used <= before else
-                f"heading re-check: {res.views_used} views see the person ({before} when the heading was checked)")
+        if travel:
+            head = (f"heading re-check: the person moves backwards ({travel[1]:.2f} m in {travel[2]:g} frames, "
+                    f"{travel[0]:.0f} deg from the heading)")
+        elif res.views_used <= before:
+            head = "heading re-check: the last check was undecided"
+        else:
+            head = f"heading re-check: {res.views_used} views see the person ({before} when the heading was checked)"
         try:
             runs, n = self._initial_runs(list(starts), frame_index, None, stream=(5,))
         except ValueError as exc:
@@ -1643,7 +1718,16 @@ class Tracker:
         # track as it would be without the check, a wrong switch loses a good one (and one frame's
         # sums misled on 3 of 120 first frames of generated motions, docs/tracking.md)
         last = c[0] >= cfg.init_confirm_frames
-        if c[2] > margin * c[1] or (last and not c[1] > margin * c[2]):
+        # the travel cue (TRAVEL_FRAMES): when this heading moves backwards and the other forwards, the check
+        # runs to its last frame and keeps this heading only if the energies clearly prefer it
+        t = self.travel() if cfg.heading_travel_cue else None
+        contra = t is not None and self._off_travel(t[0], res.x) > TRAVEL_BACKWARDS_DEG \
+            and self._off_travel(t[0], other.x) < 180.0 - TRAVEL_BACKWARDS_DEG
+        travel = contra and last and not c[2] > margin * c[1]
+        if travel:
+            sums += (f"; this heading moves backwards ({self._off_travel(t[0], res.x):.0f} deg from the travel, "
+                     f"{t[1]:.2f} m in {t[2]:g} frames), the other forwards")
+        if not travel and ((c[2] > margin * c[1] and not contra) or (last and not c[1] > margin * c[2])):
             self._rival = None
             if not c[2] > margin * c[1] and not self._rechecked_undecided:
                 # kept for want of evidence: the rival may still have been converging; once more later
@@ -1662,6 +1746,7 @@ class Tracker:
         self._heading_views = max(self._heading_views, res.views_used, other.views_used)
         self._last, self._elapsed = rival._last, rival._elapsed
         self._masks_last, self._masks_now = rival._masks_last, rival._masks_now
+        self._roots, self._clock = rival._roots, rival._clock
         self.predictor = rival.predictor
         cap = getattr(self.predictor, "capacity", None)
         self._own_prediction_frames = (int(cap) if cap is not None else cfg.predictor_order + 1) - 1
