@@ -111,8 +111,9 @@ UNDECIDED_RECHECK_FRAMES = 10
 #: The heading check's **travel cue**: people walk and run forwards. Over the last ``TRAVEL_FRAMES`` frame
 #: periods, a root that moved at least ``TRAVEL_MIN_M_PER_FRAME`` per period (0.9 m/s at 30 fps) in a direction
 #: more than ``TRAVEL_BACKWARDS_DEG`` from the estimate's heading starts a heading re-check (once per
-#: ``TRAVEL_RECHECK_FRAMES`` frames), and a check the energies leave undecided switches to the hypothesis
-#: that moves forwards (within ``180 - TRAVEL_BACKWARDS_DEG``) when the kept one moves backwards. With two
+#: ``TRAVEL_RECHECK_FRAMES`` frames), and in a check where this heading moves backwards and the other forwards
+#: (within ``180 - TRAVEL_BACKWARDS_DEG``) this heading is kept only on a clearly lower energy sum
+#: (``init_confirm_margin``) over all the check's frames, else the check switches. With two
 #: views a figure seen from the front and from the back casts nearly the same silhouettes (generated jog,
 #: seed 7: energy sums 0.2829 vs 0.2813 over the check), and the motion tells them apart.
 TRAVEL_FRAMES = 5
@@ -742,9 +743,10 @@ class Tracker:
 
     def heading_recheck_pending(self, masks: Sequence) -> bool:
         """True when stepping ``masks`` next may start a heading re-check (more views with foreground
-        than the heading was checked with, or an undecided check's re-check due): a caller that drops
-        frames (the estimator node in real time) should hand the tracker the frames that follow in
-        sequence, as for :attr:`checking_heading`, or the check ends at the first gap."""
+        than the heading was checked with, an undecided check's re-check due, or estimates that travel
+        backwards): a caller that drops frames (the estimator node in real time) should hand the tracker
+        the frames that follow in sequence, as for :attr:`checking_heading`, or the check ends at the
+        first gap."""
         if self.config.init_confirm_frames <= 0 or self._last is None or self._rival is not None:
             return False
         if self._recheck_at is not None and self.frames + 1 >= self._recheck_at:
@@ -1614,9 +1616,9 @@ class Tracker:
         return math.degrees(abs(float(_wrap(direction - _yaw_of(np.asarray(x, dtype=float)[3:6])))))
 
     def _travel_recheck_due(self) -> tuple[float, float, float] | None:
-        """The travel cue's trigger of a re-check: ``(degrees off the heading, m, periods)`` of :meth:`travel` over :data:`TRAVEL_FRAMES` periods when
-        it points backwards (beyond :data:`TRAVEL_BACKWARDS_DEG`) and no travel re-check ran in the last
-        :data:`TRAVEL_RECHECK_FRAMES` frames; else None."""
+        """The travel cue's trigger of a re-check: ``(degrees off the heading, m, periods)`` of :meth:`travel`
+        over :data:`TRAVEL_FRAMES` periods when it points backwards (beyond :data:`TRAVEL_BACKWARDS_DEG`) and no
+        re-check ran in the last :data:`TRAVEL_RECHECK_FRAMES` frames; else None."""
         if not self.config.heading_travel_cue or self.frames < self._travel_recheck_after or self._last is None:
             return None
         t = self.travel(TRAVEL_FRAMES)
@@ -1628,8 +1630,9 @@ class Tracker:
     def _recheck_heading(self, res: FrameResult, frame_index: int, frames_elapsed: float, t0: float) -> FrameResult:
         """The heading re-check (``TrackerConfig.init_confirm_frames``): on a tracked frame where more
         views use the person's foreground than when the heading was last checked (or an undecided
-        check's re-check is due), the frame's search from each standing variant heading the other way
-        (at the estimate's root position, the automatic initialization's spreads, pruned as
+        check's re-check is due, or the travel cue finds the track moving backwards,
+        ``TrackerConfig.heading_travel_cue``), the frame's search from each standing variant heading the
+        other way (at the estimate's root position, the automatic initialization's spreads, pruned as
         :meth:`_initial_runs` does); when the lowest-energy run's estimate heads more than 90° away and
         its energy is within ``init_confirm_ratio`` of this frame's, it becomes the rival of a heading
         check as after the initialization."""
@@ -1723,11 +1726,11 @@ class Tracker:
         t = self.travel() if cfg.heading_travel_cue else None
         contra = t is not None and self._off_travel(t[0], res.x) > TRAVEL_BACKWARDS_DEG \
             and self._off_travel(t[0], other.x) < 180.0 - TRAVEL_BACKWARDS_DEG
-        travel = contra and last and not c[2] > margin * c[1]
-        if travel:
+        by_travel = contra and last and not c[2] > margin * c[1]
+        if by_travel:
             sums += (f"; this heading moves backwards ({self._off_travel(t[0], res.x):.0f} deg from the travel, "
                      f"{t[1]:.2f} m in {t[2]:g} frames), the other forwards")
-        if not travel and ((c[2] > margin * c[1] and not contra) or (last and not c[1] > margin * c[2])):
+        if not by_travel and ((c[2] > margin * c[1] and not contra) or (last and not c[1] > margin * c[2])):
             self._rival = None
             if not c[2] > margin * c[1] and not self._rechecked_undecided:
                 # kept for want of evidence: the rival may still have been converging; once more later
