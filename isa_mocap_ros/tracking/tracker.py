@@ -116,7 +116,7 @@ UNDECIDED_RECHECK_FRAMES = 10
 #: (``init_confirm_margin``) over all the check's frames, else the check switches. With two
 #: views a figure seen from the front and from the back casts nearly the same silhouettes (generated jog,
 #: seed 7: energy sums 0.2829 vs 0.2813 over the check), and the motion tells them apart.
-TRAVEL_FRAMES = 5
+TRAVEL_FRAMES = 3
 TRAVEL_MIN_M_PER_FRAME = 0.03
 TRAVEL_BACKWARDS_DEG = 135.0
 TRAVEL_RECHECK_FRAMES = 15
@@ -303,13 +303,14 @@ class TrackerConfig:
         heading check. Default 1.1.
     heading_travel_cue : bool
         The heading check's **travel cue** (:data:`TRAVEL_FRAMES`): people walk and run forwards, so a track
-        whose root travelled at least 0.15 m over the last 5 frames (0.9 m/s at 30 fps) in a direction more
+        whose root travelled at least 0.09 m over the last 3 frames (0.9 m/s at 30 fps) in a direction more
         than 135° from its heading starts a heading re-check (at most every 15 frames), and a check where this
         heading moves backwards and the other forwards runs to its last frame and keeps this heading only if
         its energy sum is lower by ``init_confirm_margin``. With two views a person seen from the front and
         from the back casts nearly the same silhouettes (generated jog, 16 seeds: 4 tracked backwards for
-        45-48 frames, 130-341 mm; with the cue 0, and 81.1 → 47.8 mm; generated walk 36.2 → 21.1 mm).
-        Default True; False for a person who walks backwards on purpose.
+        45-48 frames, 130-341 mm; with the cue 0, and 81.1 → 46.0 mm; generated walk 36.2 → 20.1 mm). Also
+        after an initialization from a given pose (a track that flips later is turned back). Default True;
+        False for a person who walks backwards on purpose.
     pelvis_fraction : float
         Share of the frame budget spent, after the main search, on the **pelvis stage**: the
         configured algorithm's flat form re-fits the 6 root DOF with the limbs below the root kept in
