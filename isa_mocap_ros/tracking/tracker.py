@@ -773,6 +773,11 @@ class Tracker:
         self._roots.clear()
         self._travel_recheck_after = 0
 
+    @property
+    def _has_heading(self) -> bool:
+        """Whether the model's root turns by a 3-DOF rotation vector (a heading to check)."""
+        return 3 in {len(b) for b in self.model.rotation_blocks}
+
     def _prior_active(self) -> bool:
         return self.prior is not None and self.config.prior_eta > 0
 
@@ -1515,7 +1520,7 @@ class Tracker:
         energy is within ``config.init_confirm_ratio`` of ``energy``; else None."""
         from .init import _wrap, _yaw_of
 
-        if 3 not in {len(b) for b in self.model.rotation_blocks} or not np.isfinite(energy):
+        if not self._has_heading or not np.isfinite(energy):
             return None
         yaw = _yaw_of(x[3:6])
         best = None
@@ -1601,7 +1606,7 @@ class Tracker:
         root's horizontal travel over the last estimates, or None when they span fewer than ``min_periods``
         periods (or none), the root moved less than :data:`TRAVEL_MIN_M_PER_FRAME` per period, or the model
         has no 3-DOF root rotation."""
-        if len(self._roots) < 2 or 3 not in {len(b) for b in self.model.rotation_blocks}:
+        if len(self._roots) < 2 or not self._has_heading:
             return None
         (ta, xa, ya), (tb, xb, yb) = self._roots[0], self._roots[-1]
         span, dist = tb - ta, math.hypot(xb - xa, yb - ya)
@@ -1642,10 +1647,11 @@ class Tracker:
         cfg = self.config
         due = self._recheck_at is not None and self.frames >= self._recheck_at
         if cfg.init_confirm_frames <= 0 or res.fell_back or res.initialized or frames_elapsed != 1 \
-                or not np.isfinite(res.energy) or 3 not in {len(b) for b in self.model.rotation_blocks}:
+                or not np.isfinite(res.energy) or not self._has_heading:
             return res
-        travel = None if due or res.views_used > self._heading_views else self._travel_recheck_due()
-        if not (due or res.views_used > self._heading_views or travel):
+        more_views = res.views_used > self._heading_views
+        travel = None if due or more_views else self._travel_recheck_due()
+        if not (due or more_views or travel):
             return res
         if due:
             self._recheck_at, self._rechecked_undecided = None, True
@@ -1657,7 +1663,7 @@ class Tracker:
         if travel:
             head = (f"heading re-check: the person moves backwards ({travel[1]:.2f} m in {travel[2]:g} frames, "
                     f"{travel[0]:.0f} deg from the heading)")
-        elif res.views_used <= before:
+        elif not more_views:
             head = "heading re-check: the last check was undecided"
         else:
             head = f"heading re-check: {res.views_used} views see the person ({before} when the heading was checked)"
@@ -1725,12 +1731,13 @@ class Tracker:
         # the travel cue (TRAVEL_FRAMES): when this heading moves backwards and the other forwards, the check
         # runs to its last frame and keeps this heading only if the energies clearly prefer it
         t = self.travel() if cfg.heading_travel_cue else None
-        contra = t is not None and self._off_travel(t[0], res.x) > TRAVEL_BACKWARDS_DEG \
+        off = self._off_travel(t[0], res.x) if t is not None else None
+        contra = off is not None and off > TRAVEL_BACKWARDS_DEG \
             and self._off_travel(t[0], other.x) < 180.0 - TRAVEL_BACKWARDS_DEG
         by_travel = contra and last and not c[2] > margin * c[1]
         if by_travel:
-            sums += (f"; this heading moves backwards ({self._off_travel(t[0], res.x):.0f} deg from the travel, "
-                     f"{t[1]:.2f} m in {t[2]:g} frames), the other forwards")
+            sums += (f"; this heading moves backwards ({off:.0f} deg from the travel, {t[1]:.2f} m in {t[2]:g} "
+                     "frames), the other forwards")
         if not by_travel and ((c[2] > margin * c[1] and not contra) or (last and not c[1] > margin * c[2])):
             self._rival = None
             if not c[2] > margin * c[1] and not self._rechecked_undecided:
