@@ -103,6 +103,13 @@ class EstimatorNode(Node):
                          lo=0.0, hi=0.9)
         refine_parts = declare(self, "refine_partitions", list(tc.refine_partitions),
                                "partitions the refinement stage searches together (torso, left_arm, right_arm, ...)")
+        contour_it = declare(self, "contour_iterations", tc.contour_iterations, "contour stage: Levenberg-Marquardt "
+                             "steps on the mask contours after the search, each charged D + 1 evaluations (0 = off)",
+                             lo=0, hi=100)
+        contour_pts = declare(self, "contour_points", tc.contour_points, "contour stage: model contour points per "
+                              "view and step", lo=1, hi=100_000)
+        contour_px = declare(self, "contour_max_px", tc.contour_max_px, "contour stage: drop pairs farther apart "
+                             "than this many pixels", lo=0.01, hi=10_000.0)
         gate = declare(self, "gate_margin_px", tc.gate_margin_px, "mask gate: keep only foreground components "
                        "touching the predicted silhouette grown by this many pixels (drops far occluders; 0 = off)",
                        lo=0, hi=10_000)
@@ -169,7 +176,8 @@ class EstimatorNode(Node):
                                      limb_hinge_limbs=tuple(hinge_limbs),
                                      limb_extrapolations=tuple(float(k) for k in extrap if k > 0), limb_fold_deg=fold,
                                      partition_order=tuple(part_order), refine_fraction=refine,
-                                     refine_partitions=tuple(refine_parts), gate_margin_px=gate,
+                                     refine_partitions=tuple(refine_parts), contour_iterations=contour_it,
+                                     contour_points=contour_pts, contour_max_px=contour_px, gate_margin_px=gate,
                                      max_frames_ahead=ahead, init_confirm_frames=confirm,
                                      init_confirm_share=confirm_share, heading_travel_cue=travel_cue)
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,

@@ -77,6 +77,7 @@ import numpy as np
 from isa_mocap_ros.geometry import nearest_rotvec
 
 from . import _fast_search
+from .contour import ContourFit
 from .gate import gate_masks
 from .init import InitError, initial_pose, root_from_masks
 from .limbs import LIMBS, LimbMove
@@ -414,6 +415,23 @@ class TrackerConfig:
         Names of ``model.partitions`` searched together by the refinement stage (default the upper
         body: ``torso``, ``left_arm``, ``right_arm``; partitions the model does not have are
         ignored, none left: no stage).
+    contour_iterations : int
+        Iterations of the **contour stage** (:mod:`.contour`, :meth:`Tracker.fit_contours`), the last
+        stage of a frame: Levenberg-Marquardt steps on the Plücker-line contour correspondences of ISA
+        13.30-13.31 (model contour points of the current pose matched to the closest mask contour
+        points, re-matched every iteration), the pose replaced by the result. The population's weighted
+        mean trails a fast knee and leaves a shared error of pelvis, torso and limbs that no partition
+        alone can undo; the local fit removes most of it (CMU walk, 16 seeds: 15.74 → CONTOUR_MM mm, knee
+        4.86 → CONTOUR_KNEE°; ``docs/tracking.md``, "The contour stage"). Each iteration is charged
+        ``D + 1`` evaluations of the frame budget (what the Jacobian costs by finite differences of the
+        correspondence energy; the stage itself evaluates no silhouette energy but the final pose's),
+        taken from the main search. 0 disables it; skipped (with a note) when its share is above a
+        quarter of the budget, and on the automatically initialized frame. Default 3.
+    contour_points : int
+        Model contour points per view and iteration of the contour stage (default 200).
+    contour_max_px : float
+        The contour stage drops pairs whose image contour point lies farther than this many pixels from
+        the model's (default 5: a farther match is more often another limb's edge or noise).
     gate_margin_px : int
         **Mask gate** (:mod:`.gate`): once the tracker has an estimate, each usable mask keeps only
         the foreground components touching the predicted pose's silhouette grown by this many
@@ -478,6 +496,9 @@ class TrackerConfig:
     partition_order: tuple = ("root", "left_arm", "right_arm", "torso", "left_leg", "right_leg")
     refine_fraction: float = 0.0
     refine_partitions: tuple = ("torso", "left_arm", "right_arm")
+    contour_iterations: int = 3
+    contour_points: int = 200
+    contour_max_px: float = 5.0
     gate_margin_px: int = 10
     max_frames_ahead: float = 5.0
 
@@ -556,6 +577,9 @@ class TrackerConfig:
             raise TrackerError(f"refine_fraction: expected a share in [0, 1), received {self.refine_fraction!r}")
         object.__setattr__(self, "refine_partitions", _partition_names(
             "refine_partitions", self.refine_partitions, "torso, left_arm, right_arm", empty=True))
+        _check_number("contour_iterations", self.contour_iterations, lo=0, integer=True)
+        _check_number("contour_points", self.contour_points, lo=1, integer=True)
+        _check_number("contour_max_px", self.contour_max_px, lo=0.0, strict=True)
         if self.pelvis_fraction + self.torso_fraction + self.refine_fraction >= 1.0:
             raise TrackerError(f"pelvis_fraction + torso_fraction + refine_fraction: expected below 1 (the main "
                                f"search needs a share), received {self.pelvis_fraction!r} + "
@@ -701,6 +725,8 @@ class Tracker:
         self._torso = ReaimMove(model, torso_joints) if torso_joints else None
         self._flat_generations: dict[int, int] = {}     # _flat_generation's cache
         self._limbs = LimbMove(model)
+        self._contour = ContourFit(model, self.cameras, n_points=config.contour_points,
+                                   max_px=config.contour_max_px)
         self._refine_coords = np.array(sorted(int(i) for k in config.refine_partitions if k in model.partitions
                                               for i in model.partitions[k]), dtype=np.int64)
         missing = [k for k in model.partitions if k not in config.partition_order]
@@ -1074,8 +1100,9 @@ class Tracker:
         torso = self._torso_share(notes) if stages else None
         limbs = self._limb_stage(notes, x0) if stages else ([], [], 0)
         refine = self._refine_share(notes) if stages else None
+        contour = self._contour_share(notes) if stages else None
         budget = cfg.evals_per_frame - (share or 0) - (torso or 0) - self._limb_share(len(limbs[0]), limbs[2]) \
-            - (refine or 0)
+            - (refine or 0) - (contour or 0)
         if torso is not None:
             # the torso stage never starves the main search: two generations per partition stay
             need = 2 * (sum(self._flat_generation(len(p)) for p in self._partitions)
@@ -1088,7 +1115,7 @@ class Tracker:
                 torso = None
         if inner_optimizer(cfg.optimizer) is None:
             budget = _whole_generations(budget, opt.generation_size)     # (hierarchical: its split does this)
-        return opt, budget, (share, torso, limbs, refine), (lo, hi, spread, base)
+        return opt, budget, (share, torso, limbs, refine, contour), (lo, hi, spread, base)
 
     def _optimize(self, pred: np.ndarray, rng: np.random.Generator, spread_scale: float = 1.0, notes=None,
                   stages: bool = True):
@@ -1104,8 +1131,8 @@ class Tracker:
         legs (bags/demo: 270-340 mm on the first frames, measured)."""
         from isa_mocap_ros.optim import minimize
 
-        opt, budget, (share, torso, limbs, refine), (lo, hi, spread, base) = self._search(pred, rng, spread_scale,
-                                                                                          notes, stages)
+        opt, budget, stage_shares, (lo, hi, spread, base) = self._search(pred, rng, spread_scale, notes, stages)
+        share, torso, limbs, refine, contour = stage_shares
         if self._compiled_search and _fast_search.supported(opt, self.energy, self._prior_active()):
             res = _fast_search.run_hisa(opt, self.energy, budget)      # the same numbers, compiled per partition
         else:
@@ -1133,6 +1160,11 @@ class Tracker:
             exact = share is not None or torso is not None or bool(limbs)   # else res.energy may be a particle's
             x, e, n, _ = self.refine(res.x, evals=refine + spare, rng=rng, energy=res.energy if exact else None,
                                      bounds=(lo, hi), spread=base)
+            res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
+        if contour is not None:
+            x, e, n, info = self.fit_contours(res.x)
+            if info.stopped and notes is not None:
+                notes.append(f"contour stage: stopped after {info.iterations} iterations ({info.stopped})")
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         return res
 
@@ -1304,6 +1336,36 @@ class Tracker:
                              f"({REFINE_MIN_GENERATIONS} x {n}) + 2")
             return None
         return share
+
+    def _contour_share(self, notes) -> int | None:
+        """Evaluations charged for the contour stage (``contour_iterations`` × (D + 1) + 2 for the energies
+        of the pose before and after), or None (off, or above a quarter of the frame budget)."""
+        cfg = self.config
+        if cfg.contour_iterations <= 0:
+            return None
+        share = cfg.contour_iterations * (self.model.dof + 1) + 2
+        if 4 * share > cfg.evals_per_frame:
+            if notes is not None:
+                notes.append(f"contour stage skipped: its share ({share} evaluations) is above a quarter of the "
+                             f"frame budget ({cfg.evals_per_frame})")
+            return None
+        return share
+
+    def fit_contours(self, x, *, iterations: int | None = None):
+        """The contour stage on pose ``x`` under the current masks (:class:`~.contour.ContourFit`,
+        ``config.contour_iterations`` unless ``iterations`` is given): ``(pose, its energy, evaluations
+        charged, ContourFitInfo)``. The fitted pose replaces ``x`` only when it has the lower silhouette
+        energy (both evaluated in one batch: a mask contour bent by an occluder or noise can pull the
+        fit away); the evaluations charged are ``(D + 1)`` per iteration taken + 2."""
+        if self._masks_now is None:
+            raise TrackerError("fit_contours: no masks yet (call step first)")
+        iterations = self.config.contour_iterations if iterations is None else iterations
+        x = np.asarray(x, dtype=np.float64)
+        self._contour.set_masks(self._masks_now)
+        y, info = self._contour.fit(x, iterations=iterations)
+        e_x, e_y = (float(v) for v in self.total_energy(np.stack([x, y])))
+        n = info.iterations * (self.model.dof + 1) + 2
+        return (y, e_y, n, info) if e_y < e_x else (x, e_x, n, info)
 
     def refine(self, x, *, evals: int, rng: np.random.Generator, energy: float | None = None, bounds=None,
                spread=None) -> tuple[np.ndarray, float, int, bool]:

@@ -1,0 +1,263 @@
+"""The contour stage: a damped Gauss-Newton fit of the pose to the silhouette contours.
+
+Source: the 3-D-2-D correspondences of ISA §13.4.2 ("Silhouette", Eq. 13.30-13.31): model points on
+the contour of a pose, each paired with its closest point on the extracted image contour, whose
+projection ray is a Plücker line ``(n_i, m_i)``; the pose error of a pair is the distance
+``‖x_i(x) × n_i − m_i‖`` of the moved model point from that line. Gall, Rosenhahn and Seidel
+minimise that energy with ISA; the authors' own earlier pose estimation (Rosenhahn's, cited there)
+solves it by linearizing the kinematic chain, which is what this stage does after the tracker's
+global search: a few **iterated closest point** steps, each
+
+1. rendering the current pose per usable view (:func:`~isa_mocap_ros.vision.render_labels`), taking the
+   outer contour of that silhouette and back-projecting its pixels onto the visible capsules
+   (:func:`~isa_mocap_ros.energy.correspondence.model_contour_points`, at most ``n_points`` per view);
+2. pairing each model contour pixel with the closest pixel of the mask's outer contour (kept when
+   within ``max_px`` pixels: a farther match is more often another limb's edge than this one's);
+3. one Levenberg-Marquardt step on the stacked residuals ``e_i = x_i × n_i − m_i``:
+   ``(JᵀJ + λ diag(JᵀJ)) δ = −Jᵀe`` with the analytic Jacobian ``∂e_i/∂q = (∂x_i/∂q) × n_i``:
+   a joint angle about world axis ``a`` at joint centre ``c`` moves the points below it by
+   ``a × (x − c)``; the root translation by the identity; the root rotation is perturbed on the left,
+   ``R₀ ← exp(δ̂) R₀`` about the root position (as :func:`~isa_mocap_ros.body.position_jacobian`), and
+   written back as a rotation vector continuous with the old one;
+4. the new pose clipped to the model's limits.
+
+New here (neither paper has it): the papers' searches are global; this local step after the global
+search removes the residual error a population's weighted mean leaves (the knees of the CMU walk
+trail their motion, see docs/tracking.md "The contour stage"). It needs no silhouette-energy
+evaluation; the tracker charges each iteration ``D + 1`` evaluations of its budget — the cost of
+the same Jacobian by finite differences of the correspondence energy — and evaluates the silhouette
+energy once at the end.
+
+Pure numpy (no ROS); :class:`ContourFit` is usable on its own.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import cv2
+import numba
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..body import BodyModel
+from ..body.kinematics import _descendant_mask, _fk
+from ..energy.correspondence import capsule_frames, model_contour_points, plucker_lines
+from ..geometry import exp_so3, log_so3
+from ..geometry.so3 import nearest_rotvec
+
+__all__ = ["ContourFit", "ContourFitError", "ContourFitInfo"]
+
+#: Fewest correspondences (over all views) for a step: fewer leave the 39 coordinates underdetermined.
+MIN_CORRESPONDENCES = 60
+
+
+class ContourFitError(ValueError):
+    """A bad setting or input of :class:`ContourFit`."""
+
+
+@dataclass(frozen=True)
+class ContourFitInfo:
+    """What :meth:`ContourFit.fit` did: ``iterations`` steps taken, ``correspondences`` per step,
+    ``rms_px``: root mean square pixel distance of the matched pairs per step (before the step),
+    ``stopped``: why it ended early (empty when it ran all its iterations)."""
+    iterations: int
+    correspondences: tuple
+    rms_px: tuple
+    stopped: str = ""
+
+
+def _outer_contour(mask: np.ndarray) -> np.ndarray:
+    contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        return np.zeros((0, 2), dtype=np.int64)
+    return np.concatenate([c.reshape(-1, 2) for c in contours]).astype(np.int64)
+
+
+def _check_positive(name: str, value, *, integer: bool = False, zero: bool = False):
+    bad = isinstance(value, bool) or not isinstance(value, (int, np.integer) if integer else (int, float, np.number))
+    if bad or not np.isfinite(value) or value < 0 or (value == 0 and not zero):
+        kind = "an integer" if integer else "a number"
+        raise ContourFitError(f"{name}: expected {kind} {'>= 0' if zero else '> 0'}, received {value!r}")
+    return int(value) if integer else float(value)
+
+
+@numba.njit(cache=True)
+def _normal_equations(R, P, axes, frames, local, n, m, dof_joint, below):  # pragma: no cover - compiled
+    """``JᵀJ (D, D)`` and ``Jᵀe (D,)`` of the residuals ``e_k = x_k × n_k − m_k`` (13.30) with the
+    analytic Jacobian (root translation: identity; root rotation: left perturbation about the root;
+    a joint angle: ``a_d × (x − c_d)`` for the points below its joint), rows with zero columns skipped."""
+    D = axes.shape[0]
+    A = np.zeros((D, D))
+    g = np.zeros(D)
+    G = np.zeros((D, 3))
+    act = np.zeros(D, dtype=np.int64)
+    for k in range(frames.shape[0]):
+        f = frames[k]
+        X = np.empty(3)
+        for r in range(3):
+            X[r] = P[f, r] + R[f, r, 0] * local[k, 0] + R[f, r, 1] * local[k, 1] + R[f, r, 2] * local[k, 2]
+        nx, ny, nz = n[k, 0], n[k, 1], n[k, 2]
+        e0 = X[1] * nz - X[2] * ny - m[k, 0]
+        e1 = X[2] * nx - X[0] * nz - m[k, 1]
+        e2 = X[0] * ny - X[1] * nx - m[k, 2]
+        na = 0
+        for d in range(D):
+            if d < 3:
+                dx, dy, dz = 0.0, 0.0, 0.0
+                if d == 0:
+                    dx = 1.0
+                elif d == 1:
+                    dy = 1.0
+                else:
+                    dz = 1.0
+            else:
+                if d < 6:
+                    c = P[0]
+                    ax, ay, az = 0.0, 0.0, 0.0
+                    if d == 3:
+                        ax = 1.0
+                    elif d == 4:
+                        ay = 1.0
+                    else:
+                        az = 1.0
+                else:
+                    j = dof_joint[d]
+                    if not below[j, f]:
+                        continue
+                    c = P[j]
+                    ax, ay, az = axes[d, 0], axes[d, 1], axes[d, 2]
+                ux, uy, uz = X[0] - c[0], X[1] - c[1], X[2] - c[2]
+                dx = ay * uz - az * uy
+                dy = az * ux - ax * uz
+                dz = ax * uy - ay * ux
+            G[d, 0] = dy * nz - dz * ny            # (∂x/∂q) × n
+            G[d, 1] = dz * nx - dx * nz
+            G[d, 2] = dx * ny - dy * nx
+            act[na] = d
+            na += 1
+        for a in range(na):
+            da = act[a]
+            g[da] += G[da, 0] * e0 + G[da, 1] * e1 + G[da, 2] * e2
+            for b in range(a, na):
+                db = act[b]
+                v = G[da, 0] * G[db, 0] + G[da, 1] * G[db, 1] + G[da, 2] * G[db, 2]
+                A[da, db] += v
+                if db != da:
+                    A[db, da] += v
+    return A, g
+
+
+class ContourFit:
+    """Levenberg-Marquardt on Plücker-line contour correspondences, re-matched every iteration.
+
+    Parameters
+    ----------
+    model : BodyModel
+    cameras : sequence of Camera
+    n_points : int
+        At most this many model contour points per view and iteration (evenly spaced).
+    max_px : float
+        Pairs whose image contour point is farther than this (pixels) from the model's are dropped.
+    damping : float
+        Levenberg-Marquardt ``λ`` (relative to the diagonal of ``JᵀJ``; ``0``: Gauss-Newton).
+
+    Examples
+    --------
+    >>> fit = ContourFit(model, cameras)                  # doctest: +SKIP
+    >>> fit.set_masks(masks)                              # doctest: +SKIP
+    >>> x, info = fit.fit(x0, iterations=3)               # doctest: +SKIP
+    """
+
+    def __init__(self, model: BodyModel, cameras: Sequence, *, n_points: int = 200, max_px: float = 8.0,
+                 damping: float = 1e-3) -> None:
+        self.model = model
+        self.cameras = list(cameras)
+        self.n_points = _check_positive("n_points", n_points, integer=True)
+        self.max_px = _check_positive("max_px", max_px)
+        self.damping = _check_positive("damping", damping, zero=True)
+        self._frames_of_capsule = capsule_frames(model)
+        self._below = _descendant_mask(model)                 # (J, J): [j, f] frame f at or below joint j
+        self._dof_joint = np.asarray(model.dof_joint)
+        self._images: list = [None] * len(self.cameras)
+
+    def set_masks(self, masks: Sequence[Any]) -> int:
+        """Take this frame's foreground masks (one per camera; None for a view to leave out); return the
+        number of views with an image contour."""
+        masks = list(masks)
+        if len(masks) != len(self.cameras):
+            raise ContourFitError(f"masks: expected {len(self.cameras)} (one per camera), received {len(masks)}")
+        self._images = []
+        for m, cam in zip(masks, self.cameras):
+            if m is None:
+                self._images.append(None)
+                continue
+            m = np.asarray(m)
+            if m.shape != (cam.height, cam.width):
+                raise ContourFitError(f"masks: expected ({cam.height}, {cam.width}) for this camera, received "
+                                      f"shape {m.shape}")
+            c = _outer_contour(m > 0)
+            self._images.append((c, cKDTree(c.astype(np.float64))) if len(c) else None)
+        return sum(c is not None for c in self._images)
+
+    def correspondences(self, x: np.ndarray):
+        """Pairs of pose ``x`` under the current masks: ``(frames (K,), local (K, 3), n (K, 3), m (K, 3),
+        pixel distances (K,))`` — joint frame and position in it of each model point, the Plücker line
+        of its matched image contour pixel, and how far apart the two pixels are."""
+        F, L, N, M, Dst = [], [], [], [], []
+        for img, cam in zip(self._images, self.cameras):
+            if img is None:
+                continue
+            pix, fr, loc = model_contour_points(self.model, cam, x, n_points=self.n_points)
+            if len(pix) == 0:
+                continue
+            dist, idx = img[1].query(pix.astype(np.float64))
+            ok = dist <= self.max_px
+            if not ok.any():
+                continue
+            n, mom = plucker_lines(cam, img[0][idx[ok]].astype(np.float64))
+            F.append(fr[ok])
+            L.append(loc[ok])
+            N.append(n)
+            M.append(mom)
+            Dst.append(dist[ok])
+        if not F:
+            z = np.zeros((0, 3))
+            return np.zeros(0, dtype=np.int64), z, z, z, np.zeros(0)
+        return (np.concatenate(F), np.concatenate(L), np.concatenate(N), np.concatenate(M),
+                np.concatenate(Dst))
+
+    def step(self, x: np.ndarray, frames, local, n, m) -> np.ndarray:
+        """One damped Gauss-Newton step of pose ``x`` on the given pairs (clipped to the limits)."""
+        model = self.model
+        R, P, axes = _fk(model, x[None], want_axes=True)
+        f64 = [np.ascontiguousarray(a, dtype=np.float64) for a in (local, n, m)]
+        A, g = _normal_equations(R[0], P[0], axes[0], np.ascontiguousarray(frames, dtype=np.int64), *f64,
+                                 self._dof_joint, self._below)
+        D = model.dof
+        A[np.diag_indices(D)] *= 1.0 + self.damping
+        A[np.diag_indices(D)] += 1e-9
+        delta = -np.linalg.solve(A, g)
+        out = x + delta
+        w = log_so3(exp_so3(delta[3:6]) @ exp_so3(x[3:6]))
+        out[3:6] = nearest_rotvec(w, x[3:6])
+        return np.clip(out, model.lower, model.upper)
+
+    def fit(self, x: Any, *, iterations: int) -> tuple[np.ndarray, ContourFitInfo]:
+        """``iterations`` closest-point steps from pose ``x``; returns the new pose and what happened
+        (the pose unchanged when the masks give too few pairs)."""
+        iterations = _check_positive("iterations", iterations, integer=True, zero=True)
+        x = np.array(x, dtype=np.float64)
+        if x.shape != (self.model.dof,) or not np.all(np.isfinite(x)):
+            raise ContourFitError(f"x: expected a finite pose of shape ({self.model.dof},), received "
+                                  f"{'shape ' + str(x.shape) if x.shape != (self.model.dof,) else 'non-finite values'}")
+        counts, rms = [], []
+        for _ in range(iterations):
+            frames, local, n, m, dist = self.correspondences(x)
+            counts.append(len(frames))
+            rms.append(float(np.sqrt(np.mean(dist ** 2))) if len(dist) else float("nan"))
+            if len(frames) < MIN_CORRESPONDENCES:
+                return x, ContourFitInfo(len(counts) - 1, tuple(counts), tuple(rms),
+                                         f"{len(frames)} contour pairs, fewer than {MIN_CORRESPONDENCES}")
+            x = self.step(x, frames, local, n, m)
+        return x, ContourFitInfo(len(counts), tuple(counts), tuple(rms))

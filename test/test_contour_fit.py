@@ -1,0 +1,120 @@
+"""The contour stage: Levenberg-Marquardt on Plücker-line contour correspondences (tracking/contour.py)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from isa_mocap_ros.body import capsule_endpoints, forward_kinematics, make_model
+from isa_mocap_ros.geometry import exp_so3, log_so3
+from isa_mocap_ros.tracking.contour import ContourFit, ContourFitError, _normal_equations
+from isa_mocap_ros.body.kinematics import _fk
+from isa_mocap_ros.vision import default_rig, render_mask
+
+
+@pytest.fixture(scope="module")
+def scene():
+    model = make_model(39)
+    rig = default_rig()
+    x0 = model.rest_pose()
+    x0[3:6] = [0.05, -0.1, 0.4]
+    x0[model.knee_dofs[1]] = 0.6
+    x0[model.dof_names.index("left_shoulder_x")] = 0.5
+    x0[model.dof_names.index("right_hip_y")] = -0.3
+    E = capsule_endpoints(model, x0)[0]
+    masks = [render_mask(c, E, model.capsule_radii) for c in rig]
+    return model, rig, x0, masks
+
+
+def _residuals(model, x, frames, local, n, m):
+    T = forward_kinematics(model, x)[0]
+    X = T[frames, :3, 3] + np.einsum("kij,kj->ki", T[frames, :3, :3], local)
+    return (np.cross(X, n) - m).ravel()
+
+
+def _perturbed(model, x, d, h):
+    """``x`` moved by ``h`` along coordinate ``d`` of the stage's parametrization (root rotation on the left)."""
+    y = x.copy()
+    if 3 <= d < 6:
+        w = np.zeros(3)
+        w[d - 3] = h
+        y[3:6] = log_so3(exp_so3(w) @ exp_so3(x[3:6]))
+    else:
+        y[d] += h
+    return y
+
+
+def test_normal_equations_match_finite_differences(scene):
+    model, rig, x0, masks = scene
+    fit = ContourFit(model, rig, n_points=60, max_px=50.0)
+    fit.set_masks(masks)
+    x = x0 + np.random.default_rng(1).normal(0, 0.03, model.dof)
+    frames, local, n, m, _ = fit.correspondences(x)
+    assert len(frames) > 150
+    e = _residuals(model, x, frames, local, n, m)
+    h = 1e-6
+    J = np.stack([(_residuals(model, _perturbed(model, x, d, h), frames, local, n, m) - e) / h
+                  for d in range(model.dof)], axis=1)
+    R, P, axes = _fk(model, x[None], want_axes=True)
+    A, g = _normal_equations(R[0], P[0], axes[0], frames, local, n, m, np.asarray(model.dof_joint),
+                             fit._below)
+    np.testing.assert_allclose(A, J.T @ J, rtol=1e-4, atol=1e-7)
+    np.testing.assert_allclose(g, J.T @ e, rtol=1e-4, atol=1e-8)
+
+
+def test_fit_recovers_a_displaced_pose(scene):
+    model, rig, x0, masks = scene
+    fit = ContourFit(model, rig, max_px=20.0)
+    assert fit.set_masks(masks) == 4
+    x = x0.copy()
+    x[0] += 0.03
+    x[model.knee_dofs[1]] -= 0.15
+    x[model.dof_names.index("left_shoulder_x")] += 0.12
+    x1, info = fit.fit(x, iterations=6)
+    assert info.iterations == 6 and not info.stopped
+    assert info.rms_px[-1] < info.rms_px[0]
+    j0 = forward_kinematics(model, x0)[0][:, :3, 3]
+    before = np.linalg.norm(forward_kinematics(model, x)[0][:, :3, 3] - j0, axis=1).mean()
+    after = np.linalg.norm(forward_kinematics(model, x1)[0][:, :3, 3] - j0, axis=1).mean()
+    assert after < 0.25 * before
+    assert abs(x1[model.knee_dofs[1]] - x0[model.knee_dofs[1]]) < np.deg2rad(2.0)
+    assert np.all(x1 >= model.lower) and np.all(x1 <= model.upper)
+
+
+def test_at_the_true_pose_it_stays(scene):
+    model, rig, x0, masks = scene
+    fit = ContourFit(model, rig)
+    fit.set_masks(masks)
+    x1, _ = fit.fit(x0, iterations=2)
+    j0 = forward_kinematics(model, x0)[0][:, :3, 3]
+    assert np.linalg.norm(forward_kinematics(model, x1)[0][:, :3, 3] - j0, axis=1).mean() < 0.004
+
+
+def test_too_few_pairs_leave_the_pose_and_say_why(scene):
+    model, rig, x0, masks = scene
+    fit = ContourFit(model, rig)
+    assert fit.set_masks([None] * len(rig.cameras)) == 0
+    x1, info = fit.fit(x0, iterations=3)
+    np.testing.assert_array_equal(x1, x0)
+    assert info.iterations == 0 and "fewer than" in info.stopped
+    empty = [np.zeros_like(masks[0])] * len(rig.cameras)
+    assert fit.set_masks(empty) == 0
+
+
+def test_bad_settings_and_inputs(scene):
+    model, rig, x0, masks = scene
+    for kw, what in [({"n_points": 0}, "n_points"), ({"max_px": -1.0}, "max_px"), ({"damping": np.nan}, "damping"),
+                     ({"n_points": 2.5}, "n_points")]:
+        with pytest.raises(ContourFitError, match=what):
+            ContourFit(model, rig, **kw)
+    fit = ContourFit(model, rig)
+    with pytest.raises(ContourFitError, match="one per camera"):
+        fit.set_masks(masks[:2])
+    with pytest.raises(ContourFitError, match="received shape"):
+        fit.set_masks([np.zeros((5, 5), np.uint8)] * len(rig.cameras))
+    fit.set_masks(masks)
+    bad = x0.copy()
+    bad[7] = np.nan
+    with pytest.raises(ContourFitError, match="non-finite"):
+        fit.fit(bad, iterations=1)
+    with pytest.raises(ContourFitError, match="iterations"):
+        fit.fit(x0, iterations=-1)
