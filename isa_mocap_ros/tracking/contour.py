@@ -26,7 +26,8 @@ search removes the residual error a population's weighted mean leaves (the knees
 trail their motion, see docs/tracking.md "The contour stage"). It needs no silhouette-energy
 evaluation; the tracker charges each iteration ``D + 1`` evaluations of its budget — the cost of
 the same Jacobian by finite differences of the correspondence energy — and evaluates the silhouette
-energy once at the end.
+energy of the poses before and after (``Tracker.fit_contours`` keeps the fit unless its energy is more
+than ``CONTOUR_KEEP_TOLERANCE`` above the pose's).
 
 Pure numpy (no ROS); :class:`ContourFit` is usable on its own.
 """

@@ -431,7 +431,8 @@ class TrackerConfig:
         alone can undo; the local fit removes most of it (CMU walk, 16 seeds: 15.74 → 10.09 mm, knee
         4.86 → 2.60°; ``docs/tracking.md``, "The contour stage"). Each iteration is charged
         ``D + 1`` evaluations of the frame budget (what the Jacobian costs by finite differences of the
-        correspondence energy; the stage itself evaluates no silhouette energy but the final pose's),
+        correspondence energy; the stage itself evaluates the silhouette energy only for the poses before and
+        after it, + 2),
         taken from the main search. 0 disables it; skipped (with a note) when its share is above a
         quarter of the budget, and on the automatically initialized frame. Default 3.
     contour_points : int
@@ -1373,7 +1374,7 @@ class Tracker:
         y, info = self._contour.fit(x, iterations=iterations)
         e_x, e_y = (float(v) for v in self.total_energy(np.stack([x, y])))
         n = info.iterations * (self.model.dof + 1) + 2
-        return (y, e_y, n, info) if e_y < e_x * (1.0 + CONTOUR_KEEP_TOLERANCE) else (x, e_x, n, info)
+        return (y, e_y, n, info) if e_y < e_x + CONTOUR_KEEP_TOLERANCE * abs(e_x) else (x, e_x, n, info)
 
     def refine(self, x, *, evals: int, rng: np.random.Generator, energy: float | None = None, bounds=None,
                spread=None) -> tuple[np.ndarray, float, int, bool]:
