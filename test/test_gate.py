@@ -153,7 +153,9 @@ def test_tracker_with_occluder_blobs_tracks_better_with_the_gate():
     for seed in range(3):
         out = {}
         for j, margin in enumerate((0, 5)):
-            tr = Tracker(model, cams, TrackerConfig(evals_per_frame=600, seed=seed, gate_margin_px=margin))
+            # (the contour stage off: it follows contours the blobs bend, docs/tracking.md "The contour stage")
+            tr = Tracker(model, cams, TrackerConfig(evals_per_frame=600, seed=seed, gate_margin_px=margin,
+                                                    contour_iterations=0))
             tr.initialize(pose=walk[0])
             out[margin] = [tr.step(masks[k], k) for k in range(1, n)]
             err[seed, j] = frame_errors_mm(marker_positions(model, np.array([r.x for r in out[margin]])),
