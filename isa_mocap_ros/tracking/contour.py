@@ -36,14 +36,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Sequence
 
-import cv2
 import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
 from ..body import BodyModel
 from ..body.kinematics import _descendant_mask, _fk
-from ..energy.correspondence import capsule_frames, model_contour_points, plucker_lines
+from ..energy.correspondence import _contour_pixels, model_contour_points, plucker_lines
 from ..geometry import exp_so3, log_so3
 from ..geometry.so3 import nearest_rotvec
 
@@ -66,13 +65,6 @@ class ContourFitInfo:
     correspondences: tuple
     rms_px: tuple
     stopped: str = ""
-
-
-def _outer_contour(mask: np.ndarray) -> np.ndarray:
-    contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    if not contours:
-        return np.zeros((0, 2), dtype=np.int64)
-    return np.concatenate([c.reshape(-1, 2) for c in contours]).astype(np.int64)
 
 
 def _check_positive(name: str, value, *, integer: bool = False, zero: bool = False):
@@ -104,24 +96,12 @@ def _normal_equations(R, P, axes, frames, local, n, m, dof_joint, below):  # pra
         e2 = X[0] * ny - X[1] * nx - m[k, 2]
         na = 0
         for d in range(D):
-            if d < 3:
-                dx, dy, dz = 0.0, 0.0, 0.0
-                if d == 0:
-                    dx = 1.0
-                elif d == 1:
-                    dy = 1.0
-                else:
-                    dz = 1.0
+            if d < 3:                               # root translation: the unit vector e_d
+                dx, dy, dz = 1.0 if d == 0 else 0.0, 1.0 if d == 1 else 0.0, 1.0 if d == 2 else 0.0
             else:
-                if d < 6:
+                if d < 6:                           # root rotation about e_(d-3) through the root
                     c = P[0]
-                    ax, ay, az = 0.0, 0.0, 0.0
-                    if d == 3:
-                        ax = 1.0
-                    elif d == 4:
-                        ay = 1.0
-                    else:
-                        az = 1.0
+                    ax, ay, az = 1.0 if d == 3 else 0.0, 1.0 if d == 4 else 0.0, 1.0 if d == 5 else 0.0
                 else:
                     j = dof_joint[d]
                     if not below[j, f]:
@@ -177,7 +157,6 @@ class ContourFit:
         self.n_points = _check_positive("n_points", n_points, integer=True)
         self.max_px = _check_positive("max_px", max_px)
         self.damping = _check_positive("damping", damping, zero=True)
-        self._frames_of_capsule = capsule_frames(model)
         self._below = _descendant_mask(model)                 # (J, J): [j, f] frame f at or below joint j
         self._dof_joint = np.asarray(model.dof_joint)
         self._images: list = [None] * len(self.cameras)
@@ -197,7 +176,7 @@ class ContourFit:
             if m.shape != (cam.height, cam.width):
                 raise ContourFitError(f"masks: expected ({cam.height}, {cam.width}) for this camera, received "
                                       f"shape {m.shape}")
-            c = _outer_contour(m > 0)
+            c = _contour_pixels(m)
             self._images.append((c, cKDTree(c.astype(np.float64))) if len(c) else None)
         return sum(c is not None for c in self._images)
 
