@@ -80,6 +80,26 @@ def test_fit_recovers_a_displaced_pose(scene):
     assert np.all(x1 >= model.lower) and np.all(x1 <= model.upper)
 
 
+def test_fit_over_some_coordinates_holds_the_others(scene):
+    """``coords``: the steps move those coordinates only (the tracker's extra iterations on the legs)."""
+    model, rig, x0, masks = scene
+    fit = ContourFit(model, rig, max_px=20.0)
+    fit.set_masks(masks)
+    k = model.knee_dofs[1]
+    x = x0.copy()
+    x[k] -= 0.15
+    x[model.dof_names.index("left_shoulder_x")] += 0.1
+    legs = np.concatenate([model.partitions["left_leg"], model.partitions["right_leg"]])
+    x1, info = fit.fit(x, iterations=4, coords=legs)
+    assert info.iterations == 4 and not info.stopped
+    others = np.setdiff1d(np.arange(model.dof), legs)
+    np.testing.assert_array_equal(x1[others], x[others])
+    assert abs(x1[k] - x0[k]) < 0.25 * abs(x[k] - x0[k])
+    for bad in ([], [-1], [model.dof], [30, 30]):
+        with pytest.raises(ContourFitError, match="coords: expected distinct coordinate indices"):
+            fit.fit(x, iterations=1, coords=bad)
+
+
 def test_at_the_true_pose_it_stays(scene):
     model, rig, x0, masks = scene
     fit = ContourFit(model, rig)

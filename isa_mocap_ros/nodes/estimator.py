@@ -106,6 +106,12 @@ class EstimatorNode(Node):
         contour_it = declare(self, "contour_iterations", tc.contour_iterations, "contour stage: Levenberg-Marquardt "
                              "steps on the mask contours after the search, each charged D + 1 evaluations (0 = off)",
                              lo=0, hi=100)
+        contour_extra = declare(self, "contour_extra_iterations", tc.contour_extra_iterations, "contour stage: "
+                                "further steps on the coordinates of contour_extra_partitions alone, each charged k + 1 "
+                                "evaluations for their k coordinates (0 = none)", lo=0, hi=100)
+        contour_extra_parts = declare(self, "contour_extra_partitions", list(tc.contour_extra_partitions),
+                                      "partitions of the contour stage's further steps (the legs: the knees trail "
+                                      "their motion)")
         contour_pts = declare(self, "contour_points", tc.contour_points, "contour stage: model contour points per "
                               "view and step", lo=1, hi=100_000)
         contour_px = declare(self, "contour_max_px", tc.contour_max_px, "contour stage: drop pairs farther apart "
@@ -115,6 +121,8 @@ class EstimatorNode(Node):
                        lo=0, hi=10_000)
         ahead = declare(self, "max_frames_ahead", tc.max_frames_ahead, "after frame sets this node could not keep up "
                         "with, its own prediction looks as many periods ahead, at most this many", lo=1.0, hi=1000.0)
+        polish = declare(self, "init_polish", tc.init_polish, "automatic initialization: search the winner once more "
+                         "as a tracked frame (all stages, one more frame budget), kept if its energy is lower")
         confirm = declare(self, "init_confirm_frames", tc.init_confirm_frames, "heading check after the automatic "
                           "initialization: frames an opposite-heading rival of similar energy is tracked beside the "
                           "winner before the lower energy sum decides (0 = off)", lo=0, hi=100)
@@ -177,6 +185,8 @@ class EstimatorNode(Node):
                                      limb_extrapolations=tuple(float(k) for k in extrap if k > 0), limb_fold_deg=fold,
                                      partition_order=tuple(part_order), refine_fraction=refine,
                                      refine_partitions=tuple(refine_parts), contour_iterations=contour_it,
+                                     contour_extra_iterations=contour_extra,
+                                     contour_extra_partitions=tuple(contour_extra_parts), init_polish=polish,
                                      contour_points=contour_pts, contour_max_px=contour_px, gate_margin_px=gate,
                                      max_frames_ahead=ahead, init_confirm_frames=confirm,
                                      init_confirm_share=confirm_share, heading_travel_cue=travel_cue)

@@ -176,30 +176,49 @@ class ContourFit:
             if m.shape != (cam.height, cam.width):
                 raise ContourFitError(f"masks: expected ({cam.height}, {cam.width}) for this camera, received "
                                       f"shape {m.shape}")
-            c = _contour_pixels(m)
-            self._images.append((c, cKDTree(c.astype(np.float64))) if len(c) else None)
+            c = _contour_pixels(m).astype(np.float64)
+            # the contour pixels, their KD-tree and the Plücker line of each (13.30), once per frame
+            self._images.append((c, cKDTree(c), *plucker_lines(cam, c)) if len(c) else None)
         return sum(c is not None for c in self._images)
 
-    def correspondences(self, x: np.ndarray):
-        """Pairs of pose ``x`` under the current masks: ``(frames (K,), local (K, 3), n (K, 3), m (K, 3),
-        pixel distances (K,))`` — joint frame and position in it of each model point, the Plücker line
-        of its matched image contour pixel, and how far apart the two pixels are."""
-        F, L, N, M, Dst = [], [], [], [], []
-        for img, cam in zip(self._images, self.cameras):
+    def model_points(self, x: np.ndarray) -> list:
+        """The model contour points of pose ``x`` in every view with an image contour: a list of
+        ``(view, frames (k,), local (k, 3))`` (:func:`~isa_mocap_ros.energy.correspondence.model_contour_points`:
+        one rendering per view)."""
+        out = []
+        for v, (img, cam) in enumerate(zip(self._images, self.cameras)):
             if img is None:
                 continue
             pix, fr, loc = model_contour_points(self.model, cam, x, n_points=self.n_points)
-            if len(pix) == 0:
-                continue
-            dist, idx = img[1].query(pix.astype(np.float64))
+            if len(pix):
+                out.append((v, fr, loc))
+        return out
+
+    def correspondences(self, x: np.ndarray, points: list | None = None, fk=None):
+        """Pairs of pose ``x`` under the current masks: ``(frames (K,), local (K, 3), n (K, 3), m (K, 3),
+        pixel distances (K,))`` — joint frame and position in it of each model point, the Plücker line
+        of its matched image contour pixel, and how far apart the two are in the image.
+
+        ``points``: model contour points from :meth:`model_points` (default: those of ``x``), moved with
+        their joints to pose ``x`` and projected; ``fk``: ``(R, P)`` of ``x`` if known."""
+        if points is None:
+            points = self.model_points(x)
+        if fk is None:
+            R, P, _ = _fk(self.model, x[None])
+            fk = R[0], P[0]
+        R, P = fk
+        F, L, N, M, Dst = [], [], [], [], []
+        for v, fr, loc in points:
+            img = self._images[v]
+            X = P[fr] + np.einsum("kij,kj->ki", R[fr], loc)
+            dist, idx = img[1].query(self.cameras[v].project(X))
             ok = dist <= self.max_px
             if not ok.any():
                 continue
-            n, mom = plucker_lines(cam, img[0][idx[ok]].astype(np.float64))
             F.append(fr[ok])
             L.append(loc[ok])
-            N.append(n)
-            M.append(mom)
+            N.append(img[2][idx[ok]])
+            M.append(img[3][idx[ok]])
             Dst.append(dist[ok])
         if not F:
             z = np.zeros((0, 3))
@@ -207,37 +226,61 @@ class ContourFit:
         return (np.concatenate(F), np.concatenate(L), np.concatenate(N), np.concatenate(M),
                 np.concatenate(Dst))
 
-    def step(self, x: np.ndarray, frames, local, n, m) -> np.ndarray:
-        """One damped Gauss-Newton step of pose ``x`` on the given pairs (clipped to the limits)."""
+    def step(self, x: np.ndarray, frames, local, n, m, *, coords=None, fk=None) -> np.ndarray:
+        """One damped Gauss-Newton step of pose ``x`` on the given pairs (clipped to the limits), over the
+        coordinates ``coords`` (default all; the others held); ``fk``: ``_fk(model, x, want_axes=True)``
+        if known."""
         model = self.model
-        R, P, axes = _fk(model, x[None], want_axes=True)
+        R, P, axes = _fk(model, x[None], want_axes=True) if fk is None else fk
         f64 = [np.ascontiguousarray(a, dtype=np.float64) for a in (local, n, m)]
         A, g = _normal_equations(R[0], P[0], axes[0], np.ascontiguousarray(frames, dtype=np.int64), *f64,
                                  self._dof_joint, self._below)
         D = model.dof
         A[np.diag_indices(D)] *= 1.0 + self.damping
         A[np.diag_indices(D)] += 1e-9
-        delta = -np.linalg.solve(A, g)
+        if coords is None:
+            delta = -np.linalg.solve(A, g)
+        else:
+            delta = np.zeros(D)
+            delta[coords] = -np.linalg.solve(A[np.ix_(coords, coords)], g[coords])
         out = x + delta
         w = log_so3(exp_so3(delta[3:6]) @ exp_so3(x[3:6]))
         out[3:6] = nearest_rotvec(w, x[3:6])
         return np.clip(out, model.lower, model.upper)
 
-    def fit(self, x: Any, *, iterations: int) -> tuple[np.ndarray, ContourFitInfo]:
-        """``iterations`` closest-point steps from pose ``x``; returns the new pose and what happened
-        (the pose unchanged when the masks give too few pairs)."""
+    def fit(self, x: Any, *, iterations: int, coords: Any = None,
+            render_each: bool = True) -> tuple[np.ndarray, ContourFitInfo]:
+        """``iterations`` closest-point steps from pose ``x`` over the coordinates ``coords`` (default all;
+        the others held); returns the new pose and what happened (the pose unchanged when the masks
+        give too few pairs).
+
+        ``render_each``: the model contour points are those of the current pose at every step (one
+        rendering per view and step); False: those of ``x``, moved with their joints at each step —
+        a third of the cost, but the contour generator of a capsule slides over its surface as the
+        pose turns, and on fast arms that fitted worse (generated wave, 8 seeds: 8.94 → 9.76 mm;
+        the CMU walk alike, docs/tracking.md)."""
         iterations = _check_positive("iterations", iterations, integer=True, zero=True)
         x = np.array(x, dtype=np.float64)
         if x.shape != (self.model.dof,) or not np.all(np.isfinite(x)):
             raise ContourFitError(f"x: expected a finite pose of shape ({self.model.dof},), received "
                                   f"{'shape ' + str(x.shape) if x.shape != (self.model.dof,) else 'non-finite values'}")
+        if coords is not None:
+            coords = np.asarray(coords, dtype=np.int64)
+            if coords.ndim != 1 or not len(coords) or coords.min() < 0 or coords.max() >= self.model.dof \
+                    or len(np.unique(coords)) != len(coords):
+                raise ContourFitError(f"coords: expected distinct coordinate indices in [0, {self.model.dof}), "
+                                      f"received {coords.tolist()}")
         counts, rms = [], []
+        points = None
         for _ in range(iterations):
-            frames, local, n, m, dist = self.correspondences(x)
+            if points is None or render_each:
+                points = self.model_points(x)
+            fk = _fk(self.model, x[None], want_axes=True)
+            frames, local, n, m, dist = self.correspondences(x, points, (fk[0][0], fk[1][0]))
             counts.append(len(frames))
             rms.append(float(np.sqrt(np.mean(dist ** 2))) if len(dist) else float("nan"))
             if len(frames) < MIN_CORRESPONDENCES:
                 return x, ContourFitInfo(len(counts) - 1, tuple(counts), tuple(rms),
                                          f"{len(frames)} contour pairs, fewer than {MIN_CORRESPONDENCES}")
-            x = self.step(x, frames, local, n, m)
+            x = self.step(x, frames, local, n, m, coords=coords, fk=fk)
         return x, ContourFitInfo(len(counts), tuple(counts), tuple(rms))

@@ -77,7 +77,7 @@ import numpy as np
 from isa_mocap_ros.geometry import nearest_rotvec
 
 from . import _fast_search
-from .contour import ContourFit
+from .contour import ContourFit, ContourFitInfo
 from .gate import gate_masks
 from .init import InitError, initial_pose, root_from_masks
 from .limbs import LIMBS, LimbMove
@@ -488,6 +488,7 @@ class TrackerConfig:
     init_refine_evals: int = 400
     init_spread_scale: float = 2.0
     init_keep: int = 3
+    init_polish: bool = True
     init_confirm_frames: int = 3
     init_confirm_share: float = 1.0
     init_confirm_ratio: float = 1.25
@@ -505,6 +506,8 @@ class TrackerConfig:
     refine_fraction: float = 0.0
     refine_partitions: tuple = ("torso", "left_arm", "right_arm")
     contour_iterations: int = 3
+    contour_extra_iterations: int = 3
+    contour_extra_partitions: tuple = ("left_leg", "right_leg")
     contour_points: int = 200
     contour_max_px: float = 5.0
     gate_margin_px: int = 10
@@ -586,6 +589,11 @@ class TrackerConfig:
         object.__setattr__(self, "refine_partitions", _partition_names(
             "refine_partitions", self.refine_partitions, "torso, left_arm, right_arm", empty=True))
         _check_number("contour_iterations", self.contour_iterations, lo=0, integer=True)
+        _check_number("contour_extra_iterations", self.contour_extra_iterations, lo=0, integer=True)
+        object.__setattr__(self, "contour_extra_partitions", _partition_names(
+            "contour_extra_partitions", self.contour_extra_partitions, "left_leg, right_leg", empty=True))
+        if not isinstance(self.init_polish, (bool, np.bool_)):
+            raise TrackerError(f"init_polish: expected true or false, received {self.init_polish!r}")
         _check_number("contour_points", self.contour_points, lo=1, integer=True)
         _check_number("contour_max_px", self.contour_max_px, lo=0.0, strict=True)
         if self.pelvis_fraction + self.torso_fraction + self.refine_fraction >= 1.0:
@@ -737,6 +745,9 @@ class Tracker:
                                    max_px=config.contour_max_px)
         self._refine_coords = np.array(sorted(int(i) for k in config.refine_partitions if k in model.partitions
                                               for i in model.partitions[k]), dtype=np.int64)
+        self._contour_extra_coords = np.array(sorted(int(i) for k in config.contour_extra_partitions
+                                                     if k in model.partitions for i in model.partitions[k]),
+                                              dtype=np.int64)
         missing = [k for k in model.partitions if k not in config.partition_order]
         if missing:
             raise TrackerError(f"partition_order: expected every partition of model {model.name} "
@@ -1345,13 +1356,20 @@ class Tracker:
             return None
         return share
 
+    def _contour_extra(self) -> int:
+        """The contour stage's extra iterations on ``contour_extra_partitions`` (0 without such partitions)."""
+        return self.config.contour_extra_iterations if self._contour_extra_coords.size else 0
+
     def _contour_share(self, notes) -> int | None:
-        """Evaluations charged for the contour stage (``contour_iterations`` × (D + 1) + 2 for the energies
-        of the pose before and after), or None (off, or above a quarter of the frame budget)."""
+        """Evaluations charged for the contour stage (``contour_iterations`` × (D + 1), plus
+        ``contour_extra_iterations`` × (k + 1) for the k coordinates of ``contour_extra_partitions``,
+        + 2 for the energies of the pose before and after), or None (off, or above a quarter of the
+        frame budget)."""
         cfg = self.config
         if cfg.contour_iterations <= 0:
             return None
-        share = cfg.contour_iterations * (self.model.dof + 1) + 2
+        share = cfg.contour_iterations * (self.model.dof + 1) \
+            + self._contour_extra() * (self._contour_extra_coords.size + 1) + 2
         if 4 * share > cfg.evals_per_frame:
             if notes is not None:
                 notes.append(f"contour stage skipped: its share ({share} evaluations) is above a quarter of the "
@@ -1359,21 +1377,31 @@ class Tracker:
             return None
         return share
 
-    def fit_contours(self, x, *, iterations: int | None = None):
-        """The contour stage on pose ``x`` under the current masks (:class:`~.contour.ContourFit`,
-        ``config.contour_iterations`` unless ``iterations`` is given): ``(pose, its energy, evaluations
-        charged, ContourFitInfo)``. The fitted pose replaces ``x`` unless its silhouette energy is more than
+    def fit_contours(self, x, *, iterations: int | None = None, extra_iterations: int | None = None):
+        """The contour stage on pose ``x`` under the current masks (:class:`~.contour.ContourFit`):
+        ``config.contour_iterations`` (or ``iterations``) steps over all coordinates, then
+        ``config.contour_extra_iterations`` (or ``extra_iterations``) over the coordinates of
+        ``config.contour_extra_partitions`` alone, from that pose's contour points (rendered again);
+        returns ``(pose, its energy, evaluations charged, ContourFitInfo)`` (the info of both fits
+        together). The fitted pose replaces ``x`` unless its silhouette energy is more than
         :data:`CONTOUR_KEEP_TOLERANCE` above ``x``'s (both evaluated in one batch: a mask contour bent by an
         occluder or noise can pull the fit away); the evaluations charged are ``(D + 1)`` per iteration
-        taken + 2."""
+        taken over all coordinates, ``(k + 1)`` per iteration over ``k`` of them, + 2."""
         if self._masks_now is None:
             raise TrackerError("fit_contours: no masks yet (call step first)")
         iterations = self.config.contour_iterations if iterations is None else iterations
+        extra = self._contour_extra() if extra_iterations is None else extra_iterations
         x = np.asarray(x, dtype=np.float64)
         self._contour.set_masks(self._masks_now)
         y, info = self._contour.fit(x, iterations=iterations)
-        e_x, e_y = (float(v) for v in self.total_energy(np.stack([x, y])))
         n = info.iterations * (self.model.dof + 1) + 2
+        if extra and self._contour_extra_coords.size and not info.stopped:
+            y, more = self._contour.fit(y, iterations=extra, coords=self._contour_extra_coords,
+                                        render_each=False)
+            n += more.iterations * (self._contour_extra_coords.size + 1)
+            info = ContourFitInfo(info.iterations + more.iterations, info.correspondences + more.correspondences,
+                                  info.rms_px + more.rms_px, more.stopped)
+        e_x, e_y = (float(v) for v in self.total_energy(np.stack([x, y])))
         return (y, e_y, n, info) if e_y < e_x + CONTOUR_KEEP_TOLERANCE * abs(e_x) else (x, e_x, n, info)
 
     def refine(self, x, *, evals: int, rng: np.random.Generator, energy: float | None = None, bounds=None,
@@ -1904,6 +1932,17 @@ class Tracker:
         x, energy = self._final_pose(res)
         if initialized and cfg.init_confirm_frames > 0:
             self._rival_start = self._pick_rival(runs, res, x, energy)
+        if initialized and cfg.init_polish:
+            # config.init_polish: the winner searched once more as a tracked frame (all stages), from itself
+            try:
+                res2 = self._optimize(x, frame_rng(cfg.seed, frame_index, 6), notes=notes)
+            except ValueError as exc:
+                notes.append(f"initialization polish failed: {exc}")
+            else:
+                n_evals += res2.n_evals
+                x2, e2 = self._final_pose(res2)
+                if e2 < energy:
+                    x, energy, res = x2, e2, res2
         if res.n_nonfinite:
             notes.append(f"energy: {res.n_nonfinite} non-finite evaluations")
         spread_out = res.history[-1].spread if res.history else float("nan")
