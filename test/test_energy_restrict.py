@@ -243,7 +243,7 @@ def test_tracker_steps_are_the_same_with_and_without_restriction(scene, monkeypa
     frames = [[render_mask(c, capsule_endpoints(model, x)[0], model.capsule_radii) for c in cams] for x in walk]
 
     def track():
-        tr = Tracker(model, cams, TrackerConfig(optimizer="h-isa", evals_per_frame=800, seed=2))
+        tr = Tracker(model, cams, TrackerConfig(optimizer="h-isa", evals_per_frame=850, seed=2))
         tr.initialize(pose=walk[0])
         return tr, [tr.step(frames[k], k) for k in (1, 2)]
 
@@ -251,11 +251,11 @@ def test_tracker_steps_are_the_same_with_and_without_restriction(scene, monkeypa
     orig = SilhouetteEnergy.restrict
     monkeypatch.setattr(SilhouetteEnergy, "restrict", lambda self, x, c: calls.append(1) or orig(self, x, c))
     tr, with_ = track()
-    assert len(calls) == 2 * (len(PARTS) + 1)  # once per partition and frame, and the torso stage's (from 769 with the contour stage)
+    assert len(calls) == 2 * (len(PARTS) + 1)  # once per partition and frame, and the torso stage's (from 830 with the contour stage)
     monkeypatch.setattr(Tracker, "restricted_energy", lambda self, x, c: None)
     n = tr.energy.n_evals
     tr2, without = track()
     for a, b in zip(with_, without):
         np.testing.assert_array_equal(a.x, b.x)
-        assert a.energy == b.energy and a.n_evals == b.n_evals and 800 - 4 < a.n_evals <= 800   # whole generations
+        assert a.energy == b.energy and a.n_evals == b.n_evals and 850 - 4 < a.n_evals <= 850   # whole generations
     assert tr2.energy.n_evals == n

@@ -6,6 +6,7 @@ from isa_mocap_ros.body import capsule_endpoints, make_model
 from isa_mocap_ros.body.motion import generate_motion
 from isa_mocap_ros.eval import frame_errors_mm, marker_positions
 from isa_mocap_ros.tracking import FrameResult, Tracker, TrackerConfig, TrackerError, make_tracker
+from isa_mocap_ros.tracking.contour import ContourFitInfo
 from isa_mocap_ros.vision import default_rig, render_mask
 
 from walk_scene import walk_scene
@@ -110,6 +111,27 @@ def test_initialization_polish_searches_the_winner_once_more(scene):
     assert on.energy < off.energy
     err = [frame_errors_mm(marker_positions(model, r.x[None]), marker_positions(model, walk[:1]))[0] for r in (off, on)]
     assert err[1] < err[0]
+
+
+def test_a_frame_without_the_contour_stage(scene):
+    """step(contour_stage=False), what the estimator does in real time with a set that waited too long: that frame
+    is tracked as with contour_iterations=0 (the share goes to the main search), bit for bit; the next with it."""
+    model, cams, walk, masks = scene
+
+    def tracker(**kw):
+        tr = Tracker(model, cams, TrackerConfig(evals_per_frame=1000, seed=4, **kw))
+        tr.initialize(pose=walk[0])
+        return tr
+
+    light, off = tracker(), tracker(contour_iterations=0)
+    a, b = light.step(masks[1], 1, contour_stage=False), off.step(masks[1], 1)
+    np.testing.assert_array_equal(a.x, b.x)
+    assert a.energy == b.energy and a.n_evals == b.n_evals
+    assert light.config.contour_iterations == 3
+    stage = []
+    light._contour.fit = lambda x, **kw: stage.append(1) or (x, ContourFitInfo(0, (), ()))
+    light.step(masks[2], 2)
+    assert stage
 
 
 @pytest.fixture(scope="module")

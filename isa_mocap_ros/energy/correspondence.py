@@ -114,8 +114,14 @@ def model_contour_points(model: BodyModel, camera: Camera, x: Any, *,
         The surface point hit by the pixel's ray, in that joint's frame (metres).
     """
     x = np.asarray(x, dtype=np.float64)
-    E = capsule_endpoints(model, x)[0]
-    labels, depth = render_labels(camera, E, model.capsule_radii)
+    return _contour_points(camera, capsule_endpoints(model, x)[0], model.capsule_radii, forward_kinematics(model, x)[0],
+                           capsule_frames(model), n_points)
+
+
+def _contour_points(camera: Camera, E: np.ndarray, radii, T: np.ndarray, cap_frames: np.ndarray, n_points: int):
+    """:func:`model_contour_points` from the pose's capsule end points ``E``, joint transforms ``T`` and
+    :func:`capsule_frames` (computed once per pose for several views)."""
+    labels, depth = render_labels(camera, E, radii)
     pix = _contour_pixels(labels >= 0)
     if len(pix) > n_points:
         pix = pix[np.floor(np.arange(n_points) * (len(pix) / n_points)).astype(np.int64)]
@@ -124,8 +130,7 @@ def model_contour_points(model: BodyModel, camera: Camera, x: Any, *,
     c, d = camera.ray(pix[:, 0].astype(float), pix[:, 1].astype(float))
     d = np.asarray(d).reshape(-1, 3)
     X = c + (z / (d @ camera.R[2]))[:, None] * d       # depth is the camera-frame z of the hit
-    frames = capsule_frames(model)[cap]
-    T = forward_kinematics(model, x)[0]
+    frames = cap_frames[cap]
     Rf, pf = T[frames, :3, :3], T[frames, :3, 3]
     local = np.einsum("kji,kj->ki", Rf, X - pf)           # R^T (X - p)
     return pix, frames, local

@@ -150,6 +150,9 @@ class EstimatorNode(Node):
         min_views = declare(self, "min_views", 2, "views a partial frame set needs", lo=1, hi=64)
         self.lockstep = declare(self, "lockstep", False, "process every frame set (no dropping) and wait "
                                 "for the prediction of each frame")
+        self.catch_up_ms = declare(self, "catch_up_ms", 15.0, "real time: a frame set that waited longer than this "
+                                   "for the tracker is tracked without the contour stage, so the tracker catches up "
+                                   "instead of dropping sets (0 = never)", lo=0.0, hi=60_000.0)
         self.backlog = declare(self, "backlog", 1, "real time: frame sets kept waiting while the tracker is busy "
                                "(the newest; older ones are dropped)", lo=1, hi=100)
         self.use_prediction = declare(self, "use_prediction", True, "use prediction/joint_states when it arrives")
@@ -203,6 +206,7 @@ class EstimatorNode(Node):
         self._prev_stamp_ns: int | None = None   # stamp of the last frame set given to the tracker
         self.tracker = None
         self.frames_done = 0
+        self.frames_caught_up = 0       # real-time sets tracked without the contour stage (catch_up_ms)
         self.last_result = None
         # the last 300 of each, for the 1 Hz diagnostics' percentiles
         self.latencies_ms: deque[float] = deque(maxlen=300)
@@ -451,8 +455,14 @@ class EstimatorNode(Node):
         # lack of time (or missing views), so the tracker's own prediction looks as far ahead
         gap = periods_between(self._prev_stamp_ns, frame_set.stamp_ns, self.frame_period_s)
         self._prev_stamp_ns = frame_set.stamp_ns
-        result = self.tracker.step(masks, frame_set.stamp_ns, prediction=prediction, frames_elapsed=gap)
+        # real time: a set that waited for the tracker (the one before took longer than a frame period)
+        # is tracked without the contour stage (catch_up_ms), so the tracker catches up instead of dropping
+        late = not self.lockstep and 0 < self.catch_up_ms < (time.monotonic() - t_ready) * 1e3
+        result = self.tracker.step(masks, frame_set.stamp_ns, prediction=prediction, frames_elapsed=gap,
+                                   contour_stage=not late)
         self.frames_done += 1
+        if late and result.x is not None and not result.fell_back and not result.initialized:
+            self.frames_caught_up += 1
         self.last_result = result
         if result.x is not None and not result.fell_back and not result.initialized:
             self.step_ms.append(result.time_s * 1e3)   # tracked sets (not the initialization)
@@ -520,6 +530,7 @@ class EstimatorNode(Node):
         t50, t95 = (float(np.percentile(steps, 50)), float(np.percentile(steps, 95))) if steps.size else (0.0, 0.0)
         values = {
             "frames": self.frames_done, "dropped_frame_sets": self.slot.dropped,
+            "frames_without_contour_stage": self.frames_caught_up,
             "sync_dropped_messages": self.sync.dropped, "bad_inputs": self.problems.total,
             "optimizer": self.optimizer, "evals_per_frame": self.evals, "tracker_threads": self.threads_in_use,
             "energy": getattr(r, "energy", float("nan")), "evaluations": getattr(r, "n_evals", 0),

@@ -41,8 +41,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..body import BodyModel
+from ..body import capsule_endpoints, forward_kinematics
 from ..body.kinematics import _descendant_mask, _fk
-from ..energy.correspondence import _contour_pixels, model_contour_points, plucker_lines
+from ..energy.correspondence import _contour_pixels, _contour_points, capsule_frames, plucker_lines
 from ..geometry import exp_so3, log_so3
 from ..geometry.so3 import nearest_rotvec
 
@@ -159,6 +160,7 @@ class ContourFit:
         self.damping = _check_positive("damping", damping, zero=True)
         self._below = _descendant_mask(model)                 # (J, J): [j, f] frame f at or below joint j
         self._dof_joint = np.asarray(model.dof_joint)
+        self._cap_frames = capsule_frames(model)
         self._images: list = [None] * len(self.cameras)
 
     def set_masks(self, masks: Sequence[Any]) -> int:
@@ -186,10 +188,14 @@ class ContourFit:
         ``(view, frames (k,), local (k, 3))`` (:func:`~isa_mocap_ros.energy.correspondence.model_contour_points`:
         one rendering per view)."""
         out = []
+        if not any(img is not None for img in self._images):
+            return out
+        E = capsule_endpoints(self.model, x)[0]
+        T = forward_kinematics(self.model, x)[0]
         for v, (img, cam) in enumerate(zip(self._images, self.cameras)):
             if img is None:
                 continue
-            pix, fr, loc = model_contour_points(self.model, cam, x, n_points=self.n_points)
+            pix, fr, loc = _contour_points(cam, E, self.model.capsule_radii, T, self._cap_frames, self.n_points)
             if len(pix):
                 out.append((v, fr, loc))
         return out

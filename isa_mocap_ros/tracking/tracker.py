@@ -754,6 +754,7 @@ class Tracker:
                                f"({', '.join(model.partitions)}), missing {', '.join(missing)}")
         self._partitions = [np.asarray(model.partitions[k]) for k in config.partition_order if k in model.partitions]
         self.frames = 0
+        self._contour_now = True               # step(contour_stage=...) of the frame being tracked
         # the heading check after an automatic initialization (config.init_confirm_frames)
         self._rival_start: tuple[np.ndarray, float, float] | None = None   # (pose, energy, winner's energy)
         self._rival: Tracker | None = None
@@ -1651,7 +1652,8 @@ class Tracker:
         self._rival = rival
         self._confirm = [0, 0.0, 0.0]
 
-    def step(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1) -> FrameResult:
+    def step(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1,
+             contour_stage: bool = True) -> FrameResult:
         """Track one frame (see the module docstring). Never raises on bad masks or predictions.
 
         Parameters
@@ -1664,6 +1666,10 @@ class Tracker:
             External prediction; default the tracker's predictor.
         frames_elapsed : float
             Frame periods since the previous call's frame (> 0; default 1). See "Gaps" above.
+        contour_stage : bool
+            False: this frame without the contour stage (its share goes to the main search, as with
+            ``contour_iterations=0``): what the estimator node does in real time with a frame set that
+            waited too long (its ``catch_up_ms``; the stage is the costliest in time per evaluation).
 
         Returns
         -------
@@ -1673,7 +1679,8 @@ class Tracker:
         rival = self._rival
         # a frame of the heading check (consecutive frames only, see below) shares the budget
         evals = self.confirm_evals() if rival is not None and frames_elapsed == 1 else self.config.evals_per_frame
-        with self._budget(evals):
+        self._contour_now = bool(contour_stage)
+        with self._budget(evals, contour=self._contour_now):
             res = self._step(masks, frame_index, prediction=prediction, frames_elapsed=frames_elapsed)
         if self._own_prediction_frames > 0:
             self._own_prediction_frames -= 1
@@ -1791,12 +1798,14 @@ class Tracker:
         return max(int(cfg.evals_per_frame * cfg.init_confirm_share), min(CONFIRM_MIN_EVALS, cfg.evals_per_frame))
 
     @contextlib.contextmanager
-    def _budget(self, evals: int):
+    def _budget(self, evals: int, *, contour: bool = True):
         """Within the block, every stage of :meth:`_step` sizes its share from ``evals`` evaluations
-        per frame instead of ``config.evals_per_frame``."""
+        per frame instead of ``config.evals_per_frame`` (and, ``contour`` False, runs without the
+        contour stage)."""
         cfg = self.config
-        if evals != cfg.evals_per_frame:
-            self.config = dataclasses.replace(cfg, evals_per_frame=evals)
+        if evals != cfg.evals_per_frame or (not contour and cfg.contour_iterations):
+            self.config = dataclasses.replace(cfg, evals_per_frame=evals,
+                                              contour_iterations=cfg.contour_iterations if contour else 0)
         try:
             yield
         finally:
@@ -1808,7 +1817,7 @@ class Tracker:
         (see ``TrackerConfig.init_confirm_frames``); the frame's result (the rival's when it wins)."""
         cfg = self.config
         rival = self._rival
-        with rival._budget(self.confirm_evals()):
+        with rival._budget(self.confirm_evals(), contour=self._contour_now):
             other = rival._step(masks, frame_index, prediction=None, frames_elapsed=frames_elapsed)
         n_evals = res.n_evals + other.n_evals
         if res.fell_back and other.fell_back:       # nothing to compare this frame
