@@ -23,14 +23,10 @@ CLI = [sys.executable, "-m", "isa_mocap_ros.cli.main"]
 
 def test_real_time_run_mends_a_backwards_first_heading(tmp_path, rosenv):
     out = tmp_path / "rt"
-    # the contour stage off: it makes a set ~15 ms dearer, and beside the other test worker the estimator then
-    # drops so many sets that the track is lost (122 mm in session 16's clean-clone run; 17 mm with 28 of 145
-    # sets dropped on an idle machine) — this test is about the heading check's hold in real time
-    params = tmp_path / "pipeline.yaml"
-    params.write_text((REPO / "config" / "pipeline.yaml").read_text().replace("contour_iterations: 3",
-                                                                              "contour_iterations: 0"))
-    res = subprocess.run(CLI + ["run", str(REPO / "bags" / "demo"), "--out", str(out), "--seed", "0",
-                                "--params", str(params)],
+    # the default parameters, the contour stage with them: it makes a set ~18 ms dearer, and without the
+    # estimator's catch_up_ms (sets that waited tracked without it) the drops lost the track beside the other
+    # test worker (122 mm in session 16's clean-clone run)
+    res = subprocess.run(CLI + ["run", str(REPO / "bags" / "demo"), "--out", str(out), "--seed", "0"],
                          env=rosenv, capture_output=True, text=True, timeout=500)
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
     log = res.stdout + res.stderr
@@ -41,3 +37,5 @@ def test_real_time_run_mends_a_backwards_first_heading(tmp_path, rosenv):
     assert s["mpjpe_mm"] < 60.0, s
     # the start-up's drops (initialization + heading check) are counted, and within all the drops
     assert 1 <= s["dropped_while_initializing"] <= s["dropped_frames"], s
+    # sets that waited for the tracker went without the contour stage (27-88 of 145 on an idle machine, session 17)
+    assert 0 <= s["frames_without_contour_stage"] <= s["frames_processed"], s

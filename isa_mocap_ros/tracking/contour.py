@@ -263,8 +263,8 @@ class ContourFit:
         ``render_each``: the model contour points are those of the current pose at every step (one
         rendering per view and step); False: those of ``x``, moved with their joints at each step —
         a third of the cost, but the contour generator of a capsule slides over its surface as the
-        pose turns, and on fast arms that fitted worse (generated wave, 8 seeds: 8.94 → 9.76 mm;
-        the CMU walk alike, docs/tracking.md)."""
+        pose turns, and on fast arms that fitted worse (generated wave, 8 seeds: 8.94 → 9.76 mm; no
+        difference on the CMU walk; docs/tracking.md, "The knee target")."""
         iterations = _check_positive("iterations", iterations, integer=True, zero=True)
         x = np.array(x, dtype=np.float64)
         if x.shape != (self.model.dof,) or not np.all(np.isfinite(x)):
