@@ -133,10 +133,17 @@ def test_stage_budget_skip_note_and_off(scene):
 def test_not_on_the_automatically_initialized_frame(scene, monkeypatch):
     model, cams, walk, truth, masks = scene
     calls = []
-    monkeypatch.setattr(Tracker, "propose_limbs", lambda self, *a, **k: calls.append(1))
-    tr = Tracker(model, cams, TrackerConfig(seed=1, evals_per_frame=600, init_refine_evals=50, init_yaw_steps=8))
-    r = tr.step(masks, 0)
-    assert r.initialized and not calls
+    orig = Tracker.propose_limbs
+    monkeypatch.setattr(Tracker, "propose_limbs", lambda self, *a, **k: calls.append(1) or orig(self, *a, **k))
+    # not in the heading candidates' searches; init_polish's search of the winner (and of a heading check's
+    # rival) is a tracked frame's, with every stage
+    for polish in (False, True):
+        calls.clear()
+        tr = Tracker(model, cams, TrackerConfig(seed=1, evals_per_frame=600, init_refine_evals=50, init_yaw_steps=8,
+                                                init_polish=polish))
+        r = tr.step(masks, 0)
+        polished = 1 + any(n.startswith("heading check started") for n in r.notes)
+        assert r.initialized and len(calls) == (polished if polish else 0)
 
 
 @pytest.mark.parametrize("kw, match", [({"limb_proposals": -1}, "limb_proposals"),

@@ -208,11 +208,12 @@ def test_reaim_stage_puts_the_hip_centres_back(scene):
 
 def test_torso_stage_budget_replacement_and_skip_note(scene):
     model, cams, walk, masks = scene
-    tr = Tracker(model, cams, TrackerConfig(evals_per_frame=800, seed=1))          # default share 0.25
+    # the torso stage runs from 830 evaluations with the contour stage's share (161, session 17)
+    tr = Tracker(model, cams, TrackerConfig(evals_per_frame=900, seed=1))
     tr.initialize(pose=walk[0])
     r = tr.step(masks[1], 1)
     # whole generations: what a search leaves goes to the next stage, the limb stage's 4 limbs take the rest
-    assert 796 < r.n_evals <= 800 and not any("torso" in n for n in r.notes)
+    assert 896 < r.n_evals <= 900 and not any("torso" in n for n in r.notes)
     tr = Tracker(model, cams, TrackerConfig(evals_per_frame=700, seed=1, torso_fraction=0.04))   # 28 < 30 + 2
     tr.initialize(pose=walk[0])
     r = tr.step(masks[1], 1)

@@ -457,7 +457,11 @@ class TrackerConfig:
         Model contour points per view and iteration of the contour stage (default 200).
     contour_max_px : float
         The contour stage drops pairs whose image contour point lies farther than this many pixels from
-        the model's (default 5: a farther match is more often another limb's edge or noise).
+        the model's (default 2; 5 in session 16: a farther match is more often another limb's edge, noise
+        or an occluder's edge; at 2 px the stage aligns what is nearly aligned and leaves the rest to the
+        search: CMU walk 8 seeds 9.75 → 8.56 mm, wave 9.06 → 6.26, bags/demo 9.13 → 6.19; from the true
+        first pose, CMU walk with 35 occluders knee RMSE 10.7 → 2.98°; ``docs/tracking.md``, "Tighter
+        contour pairs").
     gate_margin_px : int
         **Mask gate** (:mod:`.gate`): once the tracker has an estimate, each usable mask keeps only
         the foreground components touching the predicted pose's silhouette grown by this many
@@ -527,7 +531,7 @@ class TrackerConfig:
     contour_extra_iterations: int = 3
     contour_extra_partitions: tuple = ("left_leg", "right_leg")
     contour_points: int = 200
-    contour_max_px: float = 5.0
+    contour_max_px: float = 2.0
     gate_margin_px: int = 10
     max_frames_ahead: float = 5.0
 
@@ -1164,9 +1168,10 @@ class Tracker:
         (they run whole generations; the limb stage takes the rest as more proposals, so a frame
         leaves fewer evaluations unspent than it has limbs in the stage);
         ``spread_scale`` multiplies the initial spreads (the first frame starts from a rough pose);
-        skipped stages are noted in ``notes``. The automatically initialized frame has no stage
-        (``stages=False``): from a rough standing pose the pelvis stage turned the pelvis against the
-        legs (bags/demo: 270-340 mm on the first frames, measured)."""
+        skipped stages are noted in ``notes``. The heading candidates' searches of the automatically
+        initialized frame have no stage (``stages=False``): from a rough standing pose the pelvis stage
+        turned the pelvis against the legs (bags/demo: 270-340 mm on the first frames, measured); its
+        polish (``config.init_polish``) then searches the winner with every stage."""
         from isa_mocap_ros.optim import minimize
 
         opt, budget, stage_shares, (lo, hi, spread, base) = self._search(pred, rng, spread_scale, notes, stages)
