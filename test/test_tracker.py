@@ -379,6 +379,7 @@ def test_a_polished_rival_mends_a_wrong_first_heading(scene320, monkeypatch):
     assert err_off[0] > 200.0                         # facing backwards until the check switches
     tr, on, err = _heading_runs(scene320, monkeypatch, wrong_first=True)
     assert any(n.startswith("heading check started") for n in on[0].notes)
+    assert any(n.startswith("initialization polish: the heading check's rival fits better") for n in on[0].notes)
     assert err.max() < 60.0
     assert not any("switched to the other heading" in n for r in on for n in r.notes)
 

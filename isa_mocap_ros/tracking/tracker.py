@@ -1989,6 +1989,8 @@ class Tracker:
                     if er2 < er:
                         xr, er = xr2, er2
                 if er < energy:
+                    notes.append(f"initialization polish: the heading check's rival fits better ({er:.4g} against "
+                                 f"{energy:.4g}) and leads")
                     self._rival_start = (x, energy, er)
                     x, energy = xr, er
                     res = res_r if res_r is not None else res
