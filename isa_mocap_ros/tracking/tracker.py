@@ -177,6 +177,12 @@ def _partition_names(name: str, value, example: str, *, empty: bool) -> tuple:
     return tuple(value)
 
 
+def _partition_coords(model, names) -> np.ndarray:
+    """Sorted coordinate indices of the partitions ``names`` the model has (the others ignored)."""
+    return np.array(sorted(int(i) for k in names if k in model.partitions for i in model.partitions[k]),
+                    dtype=np.int64)
+
+
 def _limb_names(name: str, value) -> tuple:
     """``value`` as a tuple of distinct names among :data:`~.limbs.LIMBS`, else :class:`TrackerError`."""
     if isinstance(value, str) or not isinstance(value, Sequence) or any(v not in LIMBS for v in value) \
@@ -765,11 +771,8 @@ class Tracker:
         self._limbs = LimbMove(model)
         self._contour = ContourFit(model, self.cameras, n_points=config.contour_points,
                                    max_px=config.contour_max_px)
-        self._refine_coords = np.array(sorted(int(i) for k in config.refine_partitions if k in model.partitions
-                                              for i in model.partitions[k]), dtype=np.int64)
-        self._contour_extra_coords = np.array(sorted(int(i) for k in config.contour_extra_partitions
-                                                     if k in model.partitions for i in model.partitions[k]),
-                                              dtype=np.int64)
+        self._refine_coords = _partition_coords(model, config.refine_partitions)
+        self._contour_extra_coords = _partition_coords(model, config.contour_extra_partitions)
         missing = [k for k in model.partitions if k not in config.partition_order]
         if missing:
             raise TrackerError(f"partition_order: expected every partition of model {model.name} "
@@ -1637,6 +1640,19 @@ class Tracker:
             x[idx] = nearest_rotvec(x[idx], np.zeros(3))
         return x, float(energy)
 
+    def _polish(self, x: np.ndarray, energy: float, frame_index: int, stream: int, notes):
+        """``config.init_polish``'s search of the initialized frame's pose ``x`` (energy ``energy``) as a tracked
+        frame, every stage, stream ``[seed, frame, stream]``: ``(result or None if the optimizer refused, the
+        lower-energy pose of the two, its energy)``; a refusal is noted in ``notes`` (when given)."""
+        try:
+            res = self._optimize(x, frame_rng(self.config.seed, frame_index, stream), notes=notes)
+        except ValueError as exc:
+            if notes is not None:
+                notes.append(f"initialization polish failed: {exc}")
+            return None, x, energy
+        xp, ep = self._final_pose(res)
+        return (res, xp, ep) if ep < energy else (res, x, energy)
+
     def _pick_rival(self, runs: list, winner, x: np.ndarray, energy: float):
         """The heading check's rival among the initialized frame's runs (``config.init_confirm_frames``):
         the lowest-energy run heading more than 90° away from the winner's estimate ``x``, if its
@@ -1966,28 +1982,17 @@ class Tracker:
             self._rival_start = self._pick_rival(runs, res, x, energy)
         if initialized and cfg.init_polish:
             # config.init_polish: the winner searched once more as a tracked frame (all stages), from itself
-            try:
-                res2 = self._optimize(x, frame_rng(cfg.seed, frame_index, 6), notes=notes)
-            except ValueError as exc:
-                notes.append(f"initialization polish failed: {exc}")
-            else:
+            res2, x2, e2 = self._polish(x, energy, frame_index, 6, notes)
+            if res2 is not None:
                 n_evals += res2.n_evals
-                x2, e2 = self._final_pose(res2)
                 if e2 < energy:
                     x, energy, res = x2, e2, res2
             if self._rival_start is not None:
                 # the heading check's rival polished alike: the heading that fits better after it wins (the
                 # check still tracks both)
-                xr, er, _ = self._rival_start
-                try:
-                    res_r = self._optimize(xr, frame_rng(cfg.seed, frame_index, 7))
-                except ValueError:
-                    res_r = None
+                res_r, xr, er = self._polish(*self._rival_start[:2], frame_index, 7, None)
                 if res_r is not None:
                     n_evals += res_r.n_evals
-                    xr2, er2 = self._final_pose(res_r)
-                    if er2 < er:
-                        xr, er = xr2, er2
                 if er < energy:
                     notes.append(f"initialization polish: the heading check's rival fits better ({er:.4g} against "
                                  f"{energy:.4g}) and leads")
