@@ -69,8 +69,12 @@ _PARAMS = {
     "robust_detect_fraction": ("robust=auto: outlying share of the learning samples that switches it on",
                                0.001, 0.999),
     "robust_radius": ("robust background: samples agree within this many levels per channel", 0.0, 255.0),
-    "vote_sigma_px": ("robust mode: Gaussian vote window sigma, px (0 = from the measured noise level)",
+    "vote": ("robust mode's per-frame decision: field (pixel evidence + mean-field MRF) or window "
+             "(share of differing pixels in a Gaussian window)", None, None),
+    "vote_sigma_px": ("robust mode, vote=window: Gaussian vote window sigma, px (0 = from the measured noise level)",
                       0.0, 50.0),
+    "field_coupling": ("robust mode, vote=field: coupling of a pixel to its 8 neighbours", 0.0, 10.0),
+    "field_iterations": ("robust mode, vote=field: mean-field iterations", 0, 1000),
 }
 
 
