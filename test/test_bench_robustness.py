@@ -57,7 +57,7 @@ def test_seeds_are_summarized_with_their_spread():
     (t,) = [t for t in br.check_targets(runs) if t["measure"] == "mpjpe_mm"]
     assert t["values"] == {"walk": 23.0} and t["met"]          # targets on the mean over the seeds
     d = br.make_design("default", cmu_path=None)
-    assert d.seeds == br.DEFAULT_SEEDS == (0, 1, 2) and d.seed == 0 and d.gate_margin_px is None
+    assert d.seeds == br.DEFAULT_SEEDS == tuple(range(8)) and d.seed == 0 and d.gate_margin_px is None
     q = br.make_design("quick", seeds=(4, 5), gate_margin_px=0)
     assert q.seeds == (4, 5) and q.seed == 4 and q.gate_margin_px == 0 and br.make_design("quick").seeds == (0,)
     for bad in ({"seeds": ()}, {"seeds": (1, 1)}, {"seeds": (-1,)}, {"gate_margin_px": -2}, {"gate_margin_px": 1.5}):
@@ -66,7 +66,7 @@ def test_seeds_are_summarized_with_their_spread():
     md = br.render_markdown({"design": d.to_dict(), "runs": [dict(r, frames=10, max_frame_error_mm=1.0, fps=5.0,
                                                                   frames_fell_back=0) for r in runs],
                              "conditions": [c], "seconds": 1.0})
-    assert "seeds 0, 1, 2 (mean, min-max)" in md and "5.00° (4.0-6.0) / 23.0 (20-26)" in md
+    assert "seeds 0, 1, 2, 3, 4, 5, 6, 7 (mean, min-max)" in md and "5.00° (4.0-6.0) / 23.0 (20-26)" in md
 
 
 def test_seeds_and_gate_from_the_command_line(tmp_path, capsys):

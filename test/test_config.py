@@ -19,6 +19,7 @@ def test_estimator_section_matches_tracker_defaults():
              "predictor_order": tc.predictor_order, "prior_eta": tc.prior_eta, "seed": tc.seed,
              "pelvis_fraction": tc.pelvis_fraction, "pelvis_move": tc.pelvis_move,
              "torso_fraction": tc.torso_fraction, "limb_fold_deg": tc.limb_fold_deg,
+             "limb_hinge_window_deg": tc.limb_hinge_window_deg,
              "limb_proposals": tc.limb_proposals,
              "limb_proposal_limbs": list(tc.limb_proposal_limbs), "limb_hinge_limbs": list(tc.limb_hinge_limbs),
              "limb_extrapolations": list(tc.limb_extrapolations),

@@ -62,6 +62,13 @@ def test_proposals_turn_the_limb_about_its_upper_bone(name, base, hinge, tip):
     lo, hi = model.lower[limb.hinge_dof], model.upper[limb.hinge_dof]
     assert np.all((X[:, limb.hinge_dof] >= lo) & (X[:, limb.hinge_dof] <= hi))
     assert np.ptp(X[:, limb.hinge_dof]) > 0.7 * (hi - lo)
+    # within a window about the pose's hinge (and still within the limits)
+    for w in (0.3, 5.0):
+        X = lm.draw(x, limb, 50, rng, twist=False, window=w)
+        np.testing.assert_array_equal(X[:, keep], np.repeat(x[None, keep], 50, 0))
+        h = X[:, limb.hinge_dof]
+        assert np.all((h >= max(lo, x[limb.hinge_dof] - w)) & (h <= min(hi, x[limb.hinge_dof] + w)))
+        assert np.ptp(h) > 0.7 * (min(hi, x[limb.hinge_dof] + w) - max(lo, x[limb.hinge_dof] - w))
 
 
 @pytest.fixture(scope="module")
@@ -155,7 +162,9 @@ def test_not_on_the_automatically_initialized_frame(scene, monkeypatch):
                                        ({"limb_hinge_limbs": "left_leg"}, "limb_hinge_limbs"),
                                        ({"limb_extrapolations": (1.0, -2.0)}, "limb_extrapolations"),
                                        ({"limb_extrapolations": 2.0}, "limb_extrapolations"),
-                                       ({"limb_extrapolations": (float("nan"),)}, "limb_extrapolations")])
+                                       ({"limb_extrapolations": (float("nan"),)}, "limb_extrapolations"),
+                                       ({"limb_hinge_window_deg": -1.0}, "limb_hinge_window_deg"),
+                                       ({"limb_hinge_window_deg": float("nan")}, "limb_hinge_window_deg")])
 def test_bad_settings(kw, match):
     with pytest.raises(TrackerError, match=match):
         TrackerConfig(**kw)
@@ -202,15 +211,16 @@ def test_a_leg_folded_in_the_prediction_joins_the_stage(scene):
     assert tr._limb_stage(notes, folded) == (list(LIMBS), ["left_leg"], 16) and notes == []
 
 
-def test_knee_proposals_follow_a_knee_beyond_the_search_box(scene):
+@pytest.mark.parametrize("off_deg, window", [(70.0, 0.0), (70.0, 90.0), (40.0, 45.0)])
+def test_knee_proposals_follow_a_knee_beyond_the_search_box(scene, off_deg, window):
     """The legs' hinge proposals (default): the CMU walk's kick straightens a knee by 25-30 deg per
-    frame, beyond what the search from the prediction reaches. A knee 70 deg off in the prediction (not
-    folded: 100 deg) is put back by the stage, the hip untouched by it; without the legs in the stage
-    it stays off."""
+    frame, beyond what the search from the prediction reaches. A knee off in the prediction (not
+    folded: < 130 deg) is put back by the stage, the hip untouched by it; without the legs in the stage
+    it stays off. The proposals reach as far as their window (``limb_hinge_window_deg``, default 90)."""
     model, cams, walk, truth, masks = scene
     leg = LimbMove(model).limb("right_leg")
     off = truth.copy()
-    off[leg.hinge_dof] = truth[leg.hinge_dof] + np.deg2rad(70.0)
+    off[leg.hinge_dof] = truth[leg.hinge_dof] + np.deg2rad(off_deg)
     assert np.rad2deg(off[leg.hinge_dof]) < 130.0
     a = model.joint_index("right_ankle")
 
@@ -219,14 +229,16 @@ def test_knee_proposals_follow_a_knee_beyond_the_search_box(scene):
     out = {}
     for limbs in (LIMBS, ("left_arm", "right_arm")):
         # (the contour stage off: it would mend the knee too; this is the limb stage's test)
-        tr = Tracker(model, cams, TrackerConfig(seed=1, limb_proposal_limbs=limbs, contour_iterations=0))
+        tr = Tracker(model, cams, TrackerConfig(seed=1, limb_proposal_limbs=limbs, contour_iterations=0,
+                                                limb_hinge_window_deg=window))
         tr.initialize(pose=off)
         r = tr.step(masks, 3, prediction=off)
         assert 1500 - 4 < r.n_evals <= 1500 and not r.fell_back
         out[limbs] = ankle_err(r.x)
-    assert out[LIMBS] < 0.06 and out[("left_arm", "right_arm")] > 0.15
+    assert out[LIMBS] < 0.06 and out[LIMBS] < 0.7 * out[("left_arm", "right_arm")], out
+    assert off_deg < 60 or out[("left_arm", "right_arm")] > 0.15, out    # 70 deg: beyond the search box
     # the stage itself: hinge proposals only change the knee
-    tr = Tracker(model, cams, TrackerConfig(seed=1))
+    tr = Tracker(model, cams, TrackerConfig(seed=1, limb_hinge_window_deg=window))
     tr.initialize(pose=off)
     tr.step(masks, 3, prediction=off)
     x, e, n, changed = tr.propose_limbs(off, n=16, rng=frame_rng(1, 3), limbs=["right_leg"], hinge_only=["right_leg"])

@@ -21,6 +21,24 @@ import pytest
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.timeout(600)]
 REPO = Path(__file__).resolve().parents[1]
 CLI = [sys.executable, "-m", "isa_mocap_ros.cli.main"]
+#: `isa-mocap track bags/demo` (default settings, 135 frames) on the machine this test's bounds were
+#: measured on (session 17's `make bench`: 24.4 frames/s)
+REFERENCE_FPS = 24.4
+
+
+def replay_rate(tmp_path: Path, env: dict) -> float:
+    """The replay rate that loads this machine as real time (rate 1) loaded the reference machine.
+
+    The test is about the estimator's hold in real time, not about the machine's speed: session 18's
+    machine tracked 2.5x slower (9.6 frames/s offline), dropped ~90 of 145 sets at rate 1 and lost
+    the track in 2 runs of 6 (56-130 mm; at the commit before, 88 mm in 3 of 3). So the bag is replayed
+    at ``min(1, fps / REFERENCE_FPS)``, with ``fps`` measured here with `isa-mocap track`."""
+    out = tmp_path / "speed"
+    res = subprocess.run(CLI + ["track", str(REPO / "bags" / "demo"), "--out", str(out), "--seed", "0", "--no-progress"],
+                         env=env, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    fps = json.loads((out / "summary.json").read_text())["fps"]
+    return min(1.0, fps / REFERENCE_FPS)
 
 
 def test_real_time_run_mends_a_backwards_first_heading(tmp_path, rosenv):
@@ -32,8 +50,9 @@ def test_real_time_run_mends_a_backwards_first_heading(tmp_path, rosenv):
     text = (REPO / "config" / "pipeline.yaml").read_text()
     assert "init_polish: true" in text
     params.write_text(text.replace("init_polish: true", "init_polish: false"))
+    rate = replay_rate(tmp_path, rosenv)
     res = subprocess.run(CLI + ["run", str(REPO / "bags" / "demo"), "--out", str(out), "--seed", "0",
-                                "--params", str(params)],
+                                "--params", str(params), "--rate", f"{rate:.3f}"],
                          env=rosenv, capture_output=True, text=True, timeout=500)
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
     log = res.stdout + res.stderr

@@ -95,6 +95,9 @@ class EstimatorNode(Node):
         fold = declare(self, "limb_fold_deg", tc.limb_fold_deg, "a limb whose prediction bends its hinge beyond this "
                        "many degrees gets twist-and-hinge proposals, joining the limb stage if not in it (a folded "
                        "knee; 0 = never)", lo=0.0, hi=360.0)
+        window = declare(self, "limb_hinge_window_deg", tc.limb_hinge_window_deg,
+                         "limb stage: hinge-only proposals (the knees) within this many degrees of the pose's "
+                         "hinge (0 = the whole range)", lo=0.0, hi=360.0)
         part_order = declare(self, "partition_order", list(tc.partition_order),
                              "order in which hierarchical optimizers search the model's partitions (root, "
                              "left_arm, right_arm, torso, left_leg, right_leg; the paper's: root, torso, arms, legs)")
@@ -186,6 +189,7 @@ class EstimatorNode(Node):
                                      limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs),
                                      limb_hinge_limbs=tuple(hinge_limbs),
                                      limb_extrapolations=tuple(float(k) for k in extrap if k > 0), limb_fold_deg=fold,
+                                     limb_hinge_window_deg=window,
                                      partition_order=tuple(part_order), refine_fraction=refine,
                                      refine_partitions=tuple(refine_parts), contour_iterations=contour_it,
                                      contour_extra_iterations=contour_extra,

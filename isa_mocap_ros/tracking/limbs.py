@@ -129,14 +129,19 @@ class LimbMove:
         X[:, d] = x[d] + np.outer(np.asarray(factors, dtype=float), v)
         return np.clip(X, m.lower, m.upper)
 
-    def draw(self, x: np.ndarray, limb: Limb, n: int, rng: np.random.Generator, *, twist: bool = True) -> np.ndarray:
+    def draw(self, x: np.ndarray, limb: Limb, n: int, rng: np.random.Generator, *, twist: bool = True,
+             window: float | None = None) -> np.ndarray:
         """``n`` proposals for ``limb`` around pose ``x``: twist uniform on the circle, hinge
         uniform within its limits (both from ``rng``). ``twist=False``: hinge proposals only (the
-        base joint kept; one draw per proposal from ``rng``)."""
+        base joint kept; one draw per proposal from ``rng``), uniform within ``window`` radians of
+        ``x``'s hinge (and its limits) when ``window`` is given."""
         m, k = self.model, limb.hinge_dof
         if not twist:
             X = np.repeat(np.asarray(x, dtype=float)[None, :], n, axis=0)
-            X[:, k] = rng.uniform(m.lower[k], m.upper[k], n)
+            lo, hi = float(m.lower[k]), float(m.upper[k])
+            if window is not None:
+                lo, hi = max(lo, float(X[0, k]) - window), min(hi, float(X[0, k]) + window)
+            X[:, k] = rng.uniform(lo, hi, n)
             return np.clip(X, m.lower, m.upper)
         phi = rng.uniform(-np.pi, np.pi, n)
         theta = rng.uniform(m.lower[k], m.upper[k], n)
