@@ -843,10 +843,10 @@ class BackgroundSegmenter:
         fg = cv2.bitwise_and(fg, rel)
         outside = rel if self._vote_exclude is None else cv2.bitwise_and(rel, cv2.bitwise_not(self._vote_exclude))
         n_out = cv2.countNonZero(outside)
-        if c.vote == "field":
-            return self._field(fg, img, rel, outside, n_out)
         if n_out:
             self._outlier_fraction = cv2.countNonZero(cv2.bitwise_and(fg, outside)) / n_out
+        if c.vote == "field":
+            return self._field(fg, img, rel, outside, n_out)
         f = min(self._outlier_fraction or 0.0, 0.99)
         if self._vote_norm is None:
             self._vote_sigma = float(c.vote_sigma_px) or _auto_sigma(f)
@@ -875,7 +875,6 @@ class BackgroundSegmenter:
         c = self.config
         agree = _KERNELS[c.kernel][4](self._as3(img), fg, float(c.robust_radius))
         if n_out:
-            self._outlier_fraction = cv2.countNonZero(cv2.bitwise_and(fg, outside)) / n_out
             self._agree_fraction = cv2.countNonZero(cv2.bitwise_and(agree, outside)) / n_out
         f = min(max(self._outlier_fraction or 0.0, 1e-4), 0.999)
         a = min(max(self._agree_fraction, 1e-4), f)
