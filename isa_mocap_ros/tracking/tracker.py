@@ -412,8 +412,8 @@ class TrackerConfig:
         whole range. Default 90 (session 18): under 70 % pixel noise a knee proposal over the whole
         range found a folded knee (140-155°, truth 5°) that the noisy masks scored lower on the
         generated walk's third frame in 8 of 8 seeds (knee RMSE 10.1°); with a 90° window 4.1°
-        (45°: 5.4, 60°: 3.8; clean walks unchanged; 8 seeds, ``docs/tracking.md``, "The knee
-        proposals' window"). 0 (or >= 180): the whole range.
+        (45°: 5.4, 60°: 3.8; clean walks unchanged; 8 seeds, ``docs/tracking.md``, "Noise: the
+        field vote and the knee proposals' window"). 0 (or >= 180): the whole range.
     partition_order : tuple of str
         Order in which a hierarchical algorithm (``h-*``, ``psapf``) searches ``model.partitions``
         (names the model does not have are ignored; every partition the model has must be named).
