@@ -497,7 +497,8 @@ class TrackerConfig:
         RMSE) it helps the CMU walk with 35 occluders (5.03 → 3.80°) but a hole in one view's mask
         costs the other views those pixels, and the generated walk at 70 % pixel noise lost a seed
         (4.13 → 8.5°); no setting tried (dilation 2 / 4 px, one miss allowed) was better on every
-        condition (``docs/tracking.md``, "The visual-hull filter").
+        condition (``docs/tracking.md``, "The CMU walk's occluder failures analysed, and the visual-hull
+        filter").
     hull_misses : int
         Views that may fail to confirm a point (default 0; 1 kept the occluders: CMU walk 5.9°).
     hull_dilate_px : int
