@@ -28,6 +28,7 @@ def test_estimator_section_matches_tracker_defaults():
              "refine_fraction": tc.refine_fraction, "refine_partitions": list(tc.refine_partitions),
              "partition_order": list(tc.partition_order), "gate_margin_px": tc.gate_margin_px,
              "hull_filter": tc.hull_filter, "hull_misses": tc.hull_misses, "hull_dilate_px": tc.hull_dilate_px,
+             "hull_keep_px": tc.hull_keep_px,
              "hull_pad_m": tc.hull_pad_m}
     assert {k: est[k] for k in pairs} == pairs
 

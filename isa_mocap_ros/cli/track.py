@@ -66,9 +66,9 @@ def register(sub) -> None:
     p.add_argument("--gate-margin-px", type=int, default=None, metavar="PX",
                    help="mask gate: keep only foreground components within PX pixels of the predicted silhouette "
                         "(0 = off; default: the tracker's default)")
-    p.add_argument("--hull", action="store_true",
-                   help="visual-hull filter on: foreground pixels the other views do not confirm are dropped "
-                        "(off by default)")
+    p.add_argument("--no-hull", action="store_true",
+                   help="visual-hull filter off (on by default: foreground pixels the other views do not confirm, "
+                        "beyond the predicted silhouette, are dropped)")
     p.add_argument("--init-confirm-frames", type=int, default=None, metavar="N",
                    help="heading check after the automatic initialization: frames an opposite-heading rival is "
                         "tracked beside the winner (0 = off; default: the tracker's default)")
@@ -228,8 +228,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         cfg_kw["predictor"] = args.predictor
     if getattr(args, "gate_margin_px", None) is not None:
         cfg_kw["gate_margin_px"] = args.gate_margin_px
-    if getattr(args, "hull", False):
-        cfg_kw["hull_filter"] = True
+    if getattr(args, "no_hull", False):
+        cfg_kw["hull_filter"] = False
     if getattr(args, "init_confirm_frames", None) is not None:
         cfg_kw["init_confirm_frames"] = args.init_confirm_frames
     if getattr(args, "init_confirm_share", None) is not None:

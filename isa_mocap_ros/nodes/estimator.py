@@ -124,11 +124,13 @@ class EstimatorNode(Node):
                        lo=0, hi=10_000)
         hull = declare(self, "hull_filter", tc.hull_filter, "visual-hull filter: keep only foreground pixels whose "
                        "viewing ray the other views' foreground confirms (drops what one view alone reports, e.g. "
-                       "an occluder glued to the person there; off by default)")
+                       "an occluder glued to the person there)")
         hull_misses = declare(self, "hull_misses", tc.hull_misses, "visual-hull filter: other views that may fail "
                               "to confirm a pixel", lo=0, hi=64)
         hull_dil = declare(self, "hull_dilate_px", tc.hull_dilate_px, "visual-hull filter: dilation of the "
                            "confirming views' foreground, pixels", lo=0, hi=1000)
+        hull_keep = declare(self, "hull_keep_px", tc.hull_keep_px, "visual-hull filter: foreground inside the "
+                            "predicted silhouette grown by this many pixels is kept unconfirmed", lo=0, hi=1000)
         hull_pad = declare(self, "hull_pad_m", tc.hull_pad_m, "visual-hull filter: growth of the predicted joints' "
                            "bounding box, metres", lo=0.01, hi=100.0)
         ahead = declare(self, "max_frames_ahead", tc.max_frames_ahead, "after frame sets this node could not keep up "
@@ -205,7 +207,7 @@ class EstimatorNode(Node):
                                      contour_extra_partitions=tuple(contour_extra_parts), init_polish=polish,
                                      contour_points=contour_pts, contour_max_px=contour_px, gate_margin_px=gate,
                                      hull_filter=hull, hull_misses=hull_misses, hull_dilate_px=hull_dil,
-                                     hull_pad_m=hull_pad,
+                                     hull_keep_px=hull_keep, hull_pad_m=hull_pad,
                                      max_frames_ahead=ahead, init_confirm_frames=confirm,
                                      init_confirm_share=confirm_share, heading_travel_cue=travel_cue)
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,

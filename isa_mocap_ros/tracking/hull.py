@@ -83,6 +83,25 @@ def _check(masks, cameras, box, dilate_px, step_m, misses):
     return fg, cameras, lo, hi
 
 
+def _check_keep(keep, fg, cameras):
+    """``keep`` as a list of bool arrays (or None per view), checked against the masks."""
+    if keep is None:
+        return [None] * len(fg)
+    keep = list(keep)
+    if len(keep) != len(fg):
+        raise GateError(f"keep: expected {len(fg)} masks or None (one per camera), received {len(keep)}")
+    out = []
+    for v, (cam, k) in enumerate(zip(cameras, keep)):
+        if k is None:
+            out.append(None)
+            continue
+        a = np.asarray(k)
+        if a.shape != (cam.height, cam.width):
+            raise GateError(f"keep[{v}]: expected shape ({cam.height}, {cam.width}), received {a.shape}")
+        out.append(a > 0)
+    return out
+
+
 def _support(fg, cameras, dilate_px):
     """Per view: the dilated foreground resampled onto the undistorted pinhole image (uint8 0/1)."""
     import cv2
@@ -212,7 +231,7 @@ _RAYS = _Rays()
 
 
 def hull_filter(masks: Sequence, cameras: Sequence, box, *, dilate_px: int = 2, step_m: float = 0.02,
-                misses: int = 0) -> GateResult:
+                misses: int = 0, keep: Sequence | None = None) -> GateResult:
     """Keep the foreground pixels that the other views confirm (see the module docstring).
 
     Parameters
@@ -228,6 +247,9 @@ def hull_filter(masks: Sequence, cameras: Sequence, box, *, dilate_px: int = 2, 
         Sampling step along each ray, metres.
     misses : int
         How many of the other views may fail to confirm a point.
+    keep : sequence of (H, W) array_like or None, optional
+        Per view, pixels kept without confirmation (nonzero; e.g. the predicted silhouette, where the
+        person is expected: a hole in another view's mask then costs nothing there); None = none.
 
     Returns
     -------
@@ -240,11 +262,13 @@ def hull_filter(masks: Sequence, cameras: Sequence, box, *, dilate_px: int = 2, 
         A bad argument (names it, the expected and the received value).
     """
     fg, cameras, lo, hi = _check(masks, cameras, box, dilate_px, step_m, misses)
+    kp = _check_keep(keep, fg, cameras)
     V = len(fg)
     total = np.array([0 if f is None else int(np.count_nonzero(f)) for f in fg], dtype=np.int64)
     if sum(f is not None for f in fg) < 2 or numba is None:
         if numba is None and sum(f is not None for f in fg) >= 2:   # pragma: no cover
-            return hull_filter_numpy(masks, cameras, (lo, hi), dilate_px=dilate_px, step_m=step_m, misses=misses)
+            return hull_filter_numpy(masks, cameras, (lo, hi), dilate_px=dilate_px, step_m=step_m, misses=misses,
+                                     keep=keep)
         return GateResult([None if f is None else f * np.uint8(255) for f in fg], np.zeros(V, np.int64), total)
     sup = _support(fg, cameras, dilate_px)
     H = max(c.height for c in cameras)
@@ -267,15 +291,18 @@ def hull_filter(masks: Sequence, cameras: Sequence, box, *, dilate_px: int = 2, 
             continue
         kept = _carve_numba(v, f, _RAYS(cam), np.asarray(cam.center, dtype=float), S, WH, has, K, R, t, lo, hi,
                             float(step_m), int(misses))
+        if kp[v] is not None:
+            kept[(f > 0) & kp[v]] = 255
         out.append(kept)
         lost[v] = total[v] - int(np.count_nonzero(kept))
     return GateResult(out, lost, total)
 
 
 def hull_filter_numpy(masks: Sequence, cameras: Sequence, box, *, dilate_px: int = 2, step_m: float = 0.02,
-                      misses: int = 0) -> GateResult:
+                      misses: int = 0, keep: Sequence | None = None) -> GateResult:
     """:func:`hull_filter` in plain numpy (the reference the tests hold the kernel to)."""
     fg, cameras, lo, hi = _check(masks, cameras, box, dilate_px, step_m, misses)
+    kp = _check_keep(keep, fg, cameras)
     V = len(fg)
     total = np.array([0 if f is None else int(np.count_nonzero(f)) for f in fg], dtype=np.int64)
     if sum(f is not None for f in fg) < 2:
@@ -291,11 +318,11 @@ def hull_filter_numpy(masks: Sequence, cameras: Sequence, box, *, dilate_px: int
         dirs = _rays(cam)[jj, ii]                                  # (P, 3)
         c = np.asarray(cam.center, dtype=float)
         s0, s1 = _entry_exit(c, dirs, lo, hi)
-        keep = np.zeros(len(jj), bool)
+        ok = np.zeros(len(jj), bool)
         hit = s1 >= s0
         n = np.where(hit, np.floor(np.where(hit, s1 - s0, 0.0) / step_m).astype(np.int64) + 1, 0)
         for q in range(int(n.max(initial=0))):
-            live = (q < n) & ~keep
+            live = (q < n) & ~ok
             if not live.any():
                 continue
             s = s0 + q * step_m
@@ -317,9 +344,11 @@ def hull_filter_numpy(masks: Sequence, cameras: Sequence, box, *, dilate_px: int
                 val = np.zeros(len(jj), bool)
                 val[seen] = sup[b][iw[seen].astype(np.int64), iu[seen].astype(np.int64)] > 0
                 miss += seen & ~val
-            keep |= live & (miss <= misses)
+            ok |= live & (miss <= misses)
         kept = np.zeros(f.shape, np.uint8)
-        kept[jj[keep], ii[keep]] = 255
+        kept[jj[ok], ii[ok]] = 255
+        if kp[a] is not None:
+            kept[(f > 0) & kp[a]] = 255
         out.append(kept)
-        lost[a] = total[a] - int(keep.sum())
+        lost[a] = total[a] - int(np.count_nonzero(kept))
     return GateResult(out, lost, total)

@@ -78,7 +78,7 @@ from isa_mocap_ros.geometry import nearest_rotvec
 
 from . import _fast_search
 from .contour import ContourFit, ContourFitInfo
-from .gate import gate_masks
+from .gate import gate_masks, predicted_silhouettes
 from .hull import hull_filter, pose_box
 from .init import InitError, initial_pose, root_from_masks
 from .limbs import LIMBS, LimbMove
@@ -491,19 +491,23 @@ class TrackerConfig:
         **Visual-hull filter** (:mod:`.hull`), after the gate, once the tracker has an estimate:
         each view keeps the foreground pixels whose viewing ray has a point, inside the predicted
         pose's box (joints grown by ``hull_pad_m``), that the other views' foreground (dilated by
-        ``hull_dilate_px``) confirms, all but ``hull_misses`` of them. What one view alone reports —
-        an occluder glued to the person there, which the gate keeps whole — goes. Needs two views
-        or more (else nothing changes). Default **off**: on the robustness bench (8 seeds, knee
-        RMSE) it helps the CMU walk with 35 occluders (5.03 → 3.80°) but a hole in one view's mask
-        costs the other views those pixels, and the generated walk at 70 % pixel noise lost a seed
-        (4.13 → 8.5°); no setting tried (dilation 2 / 4 px, one miss allowed) was better on every
-        condition (``docs/tracking.md``, "The CMU walk's occluder failures analysed, and the visual-hull
-        filter").
+        ``hull_dilate_px``) confirms, all but ``hull_misses`` of them, and every foreground pixel
+        inside the predicted silhouette grown by ``hull_keep_px``. What one view alone reports
+        beyond where the person is expected — an occluder glued to the person there, which the gate
+        keeps whole — goes. Needs two views or more (else nothing changes). Default on (robustness
+        bench, 8 seeds, knee RMSE: 35 occluders CMU walk 5.03 → 3.23°, generated walk 2.95 → 3.00°
+        and 16.3 → 13.8 mm; 70 % noise CMU walk 2.71 → 2.66°, generated walk 4.13 → 4.38°; clean
+        walks unchanged; ``docs/tracking.md``, "The CMU walk's occluder failures analysed, and the
+        visual-hull filter").
     hull_misses : int
-        Views that may fail to confirm a point (default 0; 1 kept the occluders: CMU walk 5.9°).
+        Views that may fail to confirm a point (default 0; 1 let the occluders back: CMU walk 5.9°).
     hull_dilate_px : int
-        Dilation of the confirming views' foreground, pixels (default 2; 4 px: CMU walk with
-        occluders 5.72°, walk at 70 % noise 4.05°).
+        Dilation of the confirming views' foreground, pixels (default 2).
+    hull_keep_px : int
+        Foreground inside the predicted silhouette grown by this many pixels is kept unconfirmed
+        (default 3): there the person is expected, and a hole in another view's mask (pixel noise, a
+        limb at that view's border) must not cut it — without it the generated walk at 70 % noise
+        lost a seed (8.5°).
     hull_pad_m : float
         Growth of the predicted joints' bounding box, metres (default 0.35: the limbs' radii and a
         fast limb's motion in one frame).
@@ -569,9 +573,10 @@ class TrackerConfig:
     contour_points: int = 200
     contour_max_px: float = 2.0
     gate_margin_px: int = 10
-    hull_filter: bool = False
+    hull_filter: bool = True
     hull_misses: int = 0
     hull_dilate_px: int = 2
+    hull_keep_px: int = 3
     hull_pad_m: float = 0.35
     max_frames_ahead: float = 5.0
 
@@ -668,6 +673,7 @@ class TrackerConfig:
             raise TrackerError(f"hull_filter: expected a bool, received {self.hull_filter!r}")
         _check_number("hull_misses", self.hull_misses, lo=0, integer=True)
         _check_number("hull_dilate_px", self.hull_dilate_px, lo=0, integer=True)
+        _check_number("hull_keep_px", self.hull_keep_px, lo=0, integer=True)
         _check_number("hull_pad_m", self.hull_pad_m, lo=0.0, strict=True)
 
     def params(self) -> dict:
@@ -1672,12 +1678,17 @@ class Tracker:
 
     def _hull(self, usable: list, pred: np.ndarray, notes: list[str]) -> list:
         """The usable masks through the visual-hull filter (:func:`.hull.hull_filter`) in the box of
-        ``pred``; views left empty become None."""
+        ``pred``, keeping ``pred``'s silhouette grown by ``hull_keep_px``; views left empty become None."""
         cfg = self.config
         if sum(m is not None for m in usable) < 2:
             return usable
+        idx = [v for v, m in enumerate(usable) if m is not None]
+        keep: list = [None] * len(usable)
+        for v, s in zip(idx, predicted_silhouettes(self.model, [self.cameras[v] for v in idx], pred,
+                                                   margin_px=cfg.hull_keep_px)):
+            keep[v] = s
         g = hull_filter(usable, self.cameras, pose_box(self.model, pred, cfg.hull_pad_m),
-                        dilate_px=cfg.hull_dilate_px, misses=cfg.hull_misses)
+                        dilate_px=cfg.hull_dilate_px, misses=cfg.hull_misses, keep=keep)
         out = []
         for v, (m, lost, total) in enumerate(zip(g.masks, g.lost_px, g.total_px)):
             if m is not None and total and lost >= total:
