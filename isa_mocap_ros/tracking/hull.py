@@ -25,6 +25,9 @@ Details:
   confirm it (a hole in one view's mask then costs nothing).
 * Views that are None (missing, or skipped by the tracker) neither confirm nor deny; with fewer
   than two views the masks come back unchanged.
+* ``keep``: pixels kept without confirmation — the tracker passes the predicted silhouette grown by a
+  few pixels, where the person is expected, so a hole in another view's mask (pixel noise) does not
+  cut the person; only what lies beyond it must be confirmed.
 * Lens distortion: the other views' masks are resampled once per call onto their undistorted
   pinhole image (``cv2.remap``, nearest), so the kernel projects without distortion.
 
