@@ -127,6 +127,21 @@ def predicted_silhouettes(model, cameras: Sequence, pose, *, margin_px: int = 0,
     return out
 
 
+def view_masks(masks: Sequence, cameras: Sequence, name: str = "masks") -> list:
+    """Each view's mask as a contiguous bool array (None stays None), its shape checked against its
+    camera (GateError naming ``name[v]``)."""
+    out = []
+    for v, (cam, m) in enumerate(zip(cameras, masks)):
+        if m is None:
+            out.append(None)
+            continue
+        a = np.asarray(m)
+        if a.shape != (cam.height, cam.width):
+            raise GateError(f"{name}[{v}]: expected shape ({cam.height}, {cam.width}), received {a.shape}")
+        out.append(np.ascontiguousarray(a > 0 if a.dtype != bool else a))
+    return out
+
+
 def gate_masks(masks: Sequence, cameras: Sequence, model, pose, margin_px: int, *,
                rule: str = "components") -> GateResult:
     """Keep the foreground near the model's silhouette at ``pose`` (see the module docstring).
@@ -168,15 +183,7 @@ def gate_masks(masks: Sequence, cameras: Sequence, model, pose, margin_px: int, 
     if x.shape != (model.dof,) or not np.all(np.isfinite(x)):
         raise GateError(f"pose: expected a finite ({model.dof},) vector, received shape {x.shape}"
                         + ("" if x.shape != (model.dof,) else " with non-finite values"))
-    fg = []
-    for v, (cam, m) in enumerate(zip(cameras, masks)):
-        if m is None:
-            fg.append(None)
-            continue
-        a = np.asarray(m)
-        if a.shape != (cam.height, cam.width):
-            raise GateError(f"masks[{v}]: expected shape ({cam.height}, {cam.width}), received {a.shape}")
-        fg.append(np.ascontiguousarray(a > 0 if a.dtype != bool else a))      # viewed as uint8 0/1 below
+    fg = view_masks(masks, cameras)                 # viewed as uint8 0/1 below
     V = len(masks)
     total = np.array([0 if f is None else int(np.count_nonzero(f)) for f in fg], dtype=np.int64)
     if margin_px == 0 or not any(f is not None and t > 0 for f, t in zip(fg, total)):

@@ -43,7 +43,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .gate import GateError, GateResult
+from .gate import GateError, GateResult, view_masks
 
 __all__ = ["hull_filter", "hull_filter_numpy", "pose_box"]
 
@@ -76,15 +76,7 @@ def _check(masks, cameras, box, dilate_px, step_m, misses):
         raise GateError(f"box: expected two finite 3-vectors (lo, hi), received shapes {lo.shape}, {hi.shape}")
     if np.any(hi < lo):
         raise GateError(f"box: expected lo <= hi, received lo {lo.tolist()} and hi {hi.tolist()}")
-    fg = []
-    for v, (cam, m) in enumerate(zip(cameras, masks)):
-        if m is None:
-            fg.append(None)
-            continue
-        a = np.asarray(m)
-        if a.shape != (cam.height, cam.width):
-            raise GateError(f"masks[{v}]: expected shape ({cam.height}, {cam.width}), received {a.shape}")
-        fg.append(np.ascontiguousarray(a > 0 if a.dtype != bool else a).view(np.uint8))
+    fg = [None if f is None else f.view(np.uint8) for f in view_masks(masks, cameras)]
     return fg, cameras, lo, hi
 
 
@@ -95,16 +87,7 @@ def _check_keep(keep, fg, cameras):
     keep = list(keep)
     if len(keep) != len(fg):
         raise GateError(f"keep: expected {len(fg)} masks or None (one per camera), received {len(keep)}")
-    out = []
-    for v, (cam, k) in enumerate(zip(cameras, keep)):
-        if k is None:
-            out.append(None)
-            continue
-        a = np.asarray(k)
-        if a.shape != (cam.height, cam.width):
-            raise GateError(f"keep[{v}]: expected shape ({cam.height}, {cam.width}), received {a.shape}")
-        out.append(a > 0)
-    return out
+    return view_masks(keep, cameras, "keep")
 
 
 def _support(fg, cameras, dilate_px):

@@ -1664,17 +1664,8 @@ class Tracker:
     def _gate(self, usable: list, pred: np.ndarray, notes: list[str]) -> list:
         """The usable masks gated around ``pred`` (:func:`.gate.gate_masks`); views left empty become None."""
         g = gate_masks(usable, self.cameras, self.model, pred, self.config.gate_margin_px)
-        out = []
-        for v, (m, lost, total) in enumerate(zip(g.masks, g.lost_px, g.total_px)):
-            if m is not None and lost >= total:
-                notes.append(f"view {v}: empty mask after the gate (all {total} foreground pixels farther than "
-                             f"{self.config.gate_margin_px} px from the predicted silhouette); skipped")
-                m = None
-            elif m is not None and lost > GATE_NOTE_SHARE * total:
-                notes.append(f"view {v}: the gate removed {lost} of {total} foreground pixels "
-                             f"({100 * lost / total:.0f} %)")
-            out.append(m)
-        return out
+        return _noted(g, notes, "the gate", lambda total: f"all {total} foreground pixels farther than "
+                      f"{self.config.gate_margin_px} px from the predicted silhouette")
 
     def _hull(self, usable: list, pred: np.ndarray, notes: list[str]) -> list:
         """The usable masks through the visual-hull filter (:func:`.hull.hull_filter`) in the box of
@@ -1689,17 +1680,7 @@ class Tracker:
             keep[v] = s
         g = hull_filter(usable, self.cameras, pose_box(self.model, pred, cfg.hull_pad_m),
                         dilate_px=cfg.hull_dilate_px, misses=cfg.hull_misses, keep=keep)
-        out = []
-        for v, (m, lost, total) in enumerate(zip(g.masks, g.lost_px, g.total_px)):
-            if m is not None and total and lost >= total:
-                notes.append(f"view {v}: empty mask after the hull filter (no foreground pixel confirmed by the "
-                             f"other views); skipped")
-                m = None
-            elif m is not None and lost > GATE_NOTE_SHARE * total:
-                notes.append(f"view {v}: the hull filter removed {lost} of {total} foreground pixels "
-                             f"({100 * lost / total:.0f} %)")
-            out.append(m)
-        return out
+        return _noted(g, notes, "the hull filter", lambda total: "no foreground pixel confirmed by the other views")
 
     def _final_pose(self, res) -> tuple[np.ndarray, float]:
         """The estimate of an optimizer result (``config.estimate``) in the model's limits, rotation
@@ -2089,6 +2070,21 @@ class Tracker:
         return FrameResult(x=x, energy=float(energy), n_evals=int(n_evals), spread=float(spread_out),
                            time_s=time.perf_counter() - t0, views_used=views, notes=tuple(notes), fell_back=False,
                            prediction=pred, initialized=initialized)
+
+
+def _noted(g, notes: list[str], what: str, why_empty: Callable[[int], str]) -> list:
+    """The masks of a mask filter's :class:`.gate.GateResult` ``g`` for the energy: a view it emptied
+    becomes None (note: ``why_empty(total)``), one it cut by more than :data:`GATE_NOTE_SHARE` gets a note.
+    (The views given to the filters are never empty: :meth:`Tracker._check_masks` skips empty ones.)"""
+    out = []
+    for v, (m, lost, total) in enumerate(zip(g.masks, g.lost_px, g.total_px)):
+        if m is not None and lost >= total:
+            notes.append(f"view {v}: empty mask after {what} ({why_empty(total)}); skipped")
+            m = None
+        elif m is not None and lost > GATE_NOTE_SHARE * total:
+            notes.append(f"view {v}: {what} removed {lost} of {total} foreground pixels ({100 * lost / total:.0f} %)")
+        out.append(m)
+    return out
 
 
 class _TotalEnergy:
