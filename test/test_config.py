@@ -29,7 +29,7 @@ def test_estimator_section_matches_tracker_defaults():
              "partition_order": list(tc.partition_order), "gate_margin_px": tc.gate_margin_px,
              "hull_filter": tc.hull_filter, "hull_misses": tc.hull_misses, "hull_dilate_px": tc.hull_dilate_px,
              "hull_keep_px": tc.hull_keep_px,
-             "hull_pad_m": tc.hull_pad_m}
+             "hull_pad_m": tc.hull_pad_m, "view_weights": tc.view_weights}
     assert {k: est[k] for k in pairs} == pairs
 
 

@@ -42,6 +42,7 @@ SETTINGS = {
     "area term 2 (n_mask_points=0)": dict(n_mask_points=0),
     "a view skipped": dict(skip=1),
     "lens distortion": dict(distorted=True),
+    "view weights": dict(weights=(1.0, 0.25, 0.0, 0.6)),
 }
 
 
@@ -58,7 +59,10 @@ def test_restricted_equals_full_bit_for_bit_in_every_partition(scene, name):
     if skip is not None:
         masks = list(masks)
         masks[skip] = None
+    weights = kw.pop("weights", None)
     en = SilhouetteEnergy(model, cams, masks, rng=np.random.default_rng(0), **kw)
+    if weights is not None:
+        en.set_masks(masks, weights)
     rng = np.random.default_rng(1)
     for part in PARTS:
         cols = model.partitions[part]

@@ -69,6 +69,9 @@ def register(sub) -> None:
     p.add_argument("--no-hull", action="store_true",
                    help="visual-hull filter off (on by default: foreground pixels the other views do not confirm, "
                         "beyond the predicted silhouette, are dropped)")
+    p.add_argument("--no-view-weights", action="store_true",
+                   help="count every view alike in the silhouette energy (Eq. 5 as printed; by default a view counts "
+                        "by the share of the predicted body inside its image)")
     p.add_argument("--init-confirm-frames", type=int, default=None, metavar="N",
                    help="heading check after the automatic initialization: frames an opposite-heading rival is "
                         "tracked beside the winner (0 = off; default: the tracker's default)")
@@ -230,6 +233,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         cfg_kw["gate_margin_px"] = args.gate_margin_px
     if getattr(args, "no_hull", False):
         cfg_kw["hull_filter"] = False
+    if getattr(args, "no_view_weights", False):
+        cfg_kw["view_weights"] = False
     if getattr(args, "init_confirm_frames", None) is not None:
         cfg_kw["init_confirm_frames"] = args.init_confirm_frames
     if getattr(args, "init_confirm_share", None) is not None:
@@ -309,6 +314,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                      "stride": stride,
                      "optimizer_params": cfg.params(), "model_dof": model.dof, "seed": args.seed,
                      "gate_margin_px": cfg.gate_margin_px, "hull_filter": cfg.hull_filter,
+                     "view_weights": cfg.view_weights,
                      "init_confirm_frames": cfg.init_confirm_frames,
                      "init_confirm_share": cfg.init_confirm_share,
                      "partition_order": list(cfg.partition_order),

@@ -23,7 +23,7 @@ Per particle and view:
 
 ``f_v = term1 / 2 + term2 / 2``; a view where the model covers no sampled point gets term 1 = 1/2
 (Eq. 4 is undefined there; the exact reference makes the same choice). The output is the mean
-over the views passed in (Eq. 5).
+over the views passed in (Eq. 5), weighted by ``view_w`` (all ones: Eq. 5 to the bit).
 """
 from __future__ import annotations
 
@@ -154,6 +154,50 @@ def _project_cap(CP, caps, radii, G, c):  # pragma: no cover - compiled
     G[c, 10] = max(ra, L + rb)
     G[c, 11] = max(ra, rb)
     G[c, 12] = 1.0
+
+
+@numba.njit(cache=True, inline="always")
+def _clip_cap(G, c, v, cam_K, cov_wh, cam_hasd):  # pragma: no cover - compiled
+    """Capsule ``c``'s template rectangle in view ``v`` shortened, along its axis, to the part that
+    can meet the image (pinhole views; a lens-distorted view keeps it whole).
+
+    Term 1 counts only template points inside the image, so for a capsule that leaves the image
+    the points off it are wasted: with few left, the estimate of ``|M|`` and of its uncovered part
+    is noisy (a body 5 % inside a view got 0.5 where the exact count gives 0.08). The axis points
+    whose cross-section (half width ``G[c, 11]``) lies entirely outside the image are cut off: the
+    axis is clipped against the image grown by that half width, so no point that lands in the image
+    is lost and the estimate stays unbiased, with all of the capsule's points where they count.
+    A capsule inside the image, or missing it altogether, keeps its rectangle to the bit."""
+    if cam_hasd[v] or G[c, 12] == 0.0:
+        return
+    xm = G[c, 11]
+    fx = cam_K[v, 0]
+    fy = cam_K[v, 1]
+    x0 = (-0.5 - cam_K[v, 2]) / fx - xm         # pixel u in [-0.5, W - 0.5): _t1_points' test
+    x1 = (cov_wh[v, 0] - 0.5 - cam_K[v, 2]) / fx + xm
+    y0 = (-0.5 - cam_K[v, 3]) / fy - xm
+    y1 = (cov_wh[v, 1] - 0.5 - cam_K[v, 3]) / fy + xm
+    ax, ay, ux, uy = G[c, 0], G[c, 1], G[c, 2], G[c, 3]
+    lo = G[c, 9]
+    hi = G[c, 10]
+    if ux != 0.0:
+        ta = (x0 - ax) / ux
+        tb = (x1 - ax) / ux
+        lo = max(lo, min(ta, tb))
+        hi = min(hi, max(ta, tb))
+    elif ax < x0 or ax > x1:
+        return
+    if uy != 0.0:
+        ta = (y0 - ay) / uy
+        tb = (y1 - ay) / uy
+        lo = max(lo, min(ta, tb))
+        hi = min(hi, max(ta, tb))
+    elif ay < y0 or ay > y1:
+        return
+    if hi - lo <= 1e-9 * (G[c, 10] - G[c, 9]):
+        return                                   # misses the image: no point counts anyway
+    G[c, 9] = lo
+    G[c, 10] = hi
 
 
 @numba.njit(cache=True, inline="always")
@@ -553,7 +597,7 @@ DETERMINISTIC_FASTMATH = {"contract", "nnan", "ninf", "nsz", "arcp", "afn"}
 def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                      cam_R, cam_t, cam_K, cam_D, cam_hasd, cov, cov_wh,
                      order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_xr, fg_area,
-                     n_chunks, out):  # pragma: no cover - compiled
+                     view_w, n_chunks, out):  # pragma: no cover - compiled
     """Fast Eq. 5 for poses ``X (n, D)`` into ``out (n,)``.
 
     Parameters
@@ -580,6 +624,8 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
         (the strip's count at NB)
     fg_bins : (V S, 2) ``y0, 1 / dy`` of those bins;  fg_xr : (V S, 2) x range of each strip
     fg_area : (V,) area of the foreground in the normalized plane (full-resolution pixels)
+    view_w : (V,) float64 weights of the views, >= 0 with a positive sum: Eq. 5 becomes
+        ``sum_v w_v f_v / sum_v w_v`` (all ones: Eq. 5 itself, to the bit)
     n_chunks : int, work units of the parallel loop
     out : (n,) float64
     """
@@ -590,6 +636,9 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
     zero = np.float32(0.0)
     n_strips = fg_tab.shape[0] // V
     fg_ms = fg_x.shape[0] // fg_tab.shape[0]
+    wsum = 0.0
+    for v in range(V):
+        wsum += view_w[v]
     for chunk in numba.prange(n_chunks):
         lo = chunk * n // n_chunks
         hi = (chunk + 1) * n // n_chunks
@@ -616,6 +665,7 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                 _to_camera(P, cam_R, cam_t, v, CP)
                 _project_caps(CP, caps, radii, G)
                 for c in range(C):
+                    _clip_cap(G, c, v, cam_K, cov_wh, cam_hasd)
                     _cap_box(G, G32, box, c)
                 for ci in range(C):     # boxes and hulls in processing order, for the overlap candidates
                     _eb_set(EB, ci, G, box, order[ci])
@@ -656,8 +706,8 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                     for k in range(n_strips * fg_ms):
                         hit += flag[numba.uint64(r0 * fg_ms + k)] != zero
                     t2 = 1.0 - float(hit) / fg_n[v]
-                total += 0.5 * t1 + 0.5 * t2
-            out[i] = total / V
+                total += view_w[v] * (0.5 * t1 + 0.5 * t2)
+            out[i] = total / wsum
 
 
 # ---------------------------------------------------------------------- restricted evaluation
@@ -747,6 +797,7 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
         _to_camera(P, cam_R, cam_t, v, CP[v])
         _project_caps(CP[v], caps, radii, G[v])
         for c in range(C):
+            _clip_cap(G[v], c, v, cam_K, cov_wh, cam_hasd)
             _cap_box(G[v], G32[v], box[v], c)
         for ci in range(C):
             c = order[ci]
@@ -819,7 +870,7 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
 def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps, mov_ci, moving_ci,
                           parents, offsets, ptr, dofs, axes, caps, radii, cam_R, cam_t, cam_K, cam_D, cam_hasd,
                           cov, cov_wh, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, fg_n, fg_tab, fg_bins, fg_xr, fg_area,
-                          R0, P0, CP0, G0, G320, box0, BX0_, t1, s_px, s_py, s_idx, s_f, s_pre, u_x, u_y, u_pre,
+                          view_w, R0, P0, CP0, G0, G320, box0, BX0_, t1, s_px, s_py, s_idx, s_f, s_pre, u_x, u_y, u_pre,
                           base_hit, n_chunks, out):  # pragma: no cover - compiled
     """:func:`silhouette_batch` for poses ``X (n, D)`` equal to ``x_base`` at ``fixed_dofs``, from the
     stage data of :func:`restrict_prepare` (``R0 .. base_hit``). Per pose: forward kinematics of the
@@ -839,6 +890,9 @@ def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps
     n_strips = fg_tab.shape[0] // V
     fg_ms = u_x.shape[0] // fg_tab.shape[0]
     nb = fg_tab.shape[1] - 1
+    wsum = 0.0
+    for v in range(V):
+        wsum += view_w[v]
     first_moving = mov_ci[0] if nm > 0 else C
     S = np.zeros((4, 1))    # not used (the moving capsules' earlier ones: box tests first)
     OK = np.zeros(1, np.int64)
@@ -885,6 +939,7 @@ def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps
                 for m in range(nm):
                     c = mov_caps[m]
                     _project_cap(CPv, caps, radii, Gv, c)
+                    _clip_cap(Gv, c, v, cam_K, cov_wh, cam_hasd)
                     _cap_box(Gv, G32v, boxv, c)
                     ci = mov_ci[m]
                     BX0[ci], BX1[ci], BY0[ci], BY1[ci] = boxv[c, 0], boxv[c, 1], boxv[c, 2], boxv[c, 3]
@@ -969,5 +1024,5 @@ def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps
                         for k in range(u_pre[r, fg_ms]):
                             ihit += flag[r * fg_ms + k] != zero
                     t2 = 1.0 - (base_hit[v] + float(ihit)) / fg_n[v]
-                total += 0.5 * t1v + 0.5 * t2
-            out[i] = total / V
+                total += view_w[v] * (0.5 * t1v + 0.5 * t2)
+            out[i] = total / wsum

@@ -104,6 +104,21 @@ def _foreground(mask: np.ndarray) -> np.ndarray:
     return np.asarray(mask) > 0
 
 
+def _view_weights(weights: Any, n_views: int) -> np.ndarray:
+    """``(n_views,)`` float64 view weights of :meth:`SilhouetteEnergy.set_masks` (None: ones)."""
+    if weights is None:
+        return np.ones(n_views)
+    try:
+        w = np.array(weights, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise EnergyError(f"weights: expected {n_views} numbers (one per camera), received {weights!r}") from exc
+    if w.shape != (n_views,):
+        raise EnergyError(f"weights: expected {n_views} numbers (one per camera), received shape {w.shape}")
+    if not (np.isfinite(w).all() and (w >= 0).all()):
+        raise EnergyError(f"weights: expected finite numbers >= 0, received {w.tolist()}")
+    return w
+
+
 def _mask_problem(mask: Any, camera: Camera) -> str | None:
     """Why ``mask`` cannot be used for ``camera`` (None: usable)."""
     if mask is None:
@@ -314,17 +329,23 @@ class SilhouetteEnergy:
             self.set_masks(masks)
 
     # ------------------------------------------------------------------ frames
-    def set_masks(self, masks: Sequence[Any]) -> None:
+    def set_masks(self, masks: Sequence[Any], weights: Sequence[float] | None = None) -> None:
         """Take the foreground masks of a new frame, one per camera (``None`` allowed).
 
         A view whose mask is ``None``, empty, not a numeric 2-D array or not of its camera's size
         is skipped and listed in :attr:`skipped_views` as ``(view index, reason)``.
 
+        ``weights`` (one finite number >= 0 per camera, optional) turn Eq. 5's mean over the views
+        into ``sum_v w_v f_v / sum_v w_v``; None (all ones) is Eq. 5 itself, to the bit. The tracker
+        uses them to count a view by the share of the body it sees (``TrackerConfig.view_weights``).
+
         Raises
         ------
         EnergyError
-            ``masks`` is not a sequence of one entry per camera, or no view is usable.
+            ``masks`` is not a sequence of one entry per camera, no view is usable, or ``weights``
+            is not one finite number >= 0 per camera with a positive sum over the usable views.
         """
+        w = _view_weights(weights, len(self.cameras))
         try:
             masks = list(masks)
         except TypeError as exc:
@@ -345,8 +366,12 @@ class SilhouetteEnergy:
             self.skipped_views, self._used, self.n_views_used = skipped, [], 0
             raise EnergyError("masks: expected at least one usable view, received none: "
                               + "; ".join(f"view {v}: {why}" for v, why in skipped))
+        view_w = np.ascontiguousarray(w[used])
+        if not view_w.sum() > 0:
+            raise EnergyError(f"weights: expected a positive sum over the usable views {used}, received "
+                              f"{view_w.tolist()}")
         F = {v: _foreground(masks[v]) for v in used}
-        frame: dict = {"F": F, "n_fg": {v: int(np.count_nonzero(F[v])) for v in used}}
+        frame: dict = {"F": F, "n_fg": {v: int(np.count_nonzero(F[v])) for v in used}, "view_w": view_w}
         if self.method == "fast":
             frame.update(self._fast_frame(used, F))
         self._frame = frame
@@ -437,9 +462,9 @@ class SilhouetteEnergy:
         E = capsule_endpoints(self.model, X)
         fr = self._frame
         total = np.zeros(X.shape[0])
-        for v in self._used:
-            total += _view_terms(self.cameras[v], fr["F"][v], fr["n_fg"][v], E, self._radii)
-        return total / len(self._used)
+        for v, w in zip(self._used, fr["view_w"]):
+            total += w * _view_terms(self.cameras[v], fr["F"][v], fr["n_fg"][v], E, self._radii)
+        return total / fr["view_w"].sum()
 
     def _kernel_args(self) -> tuple:
         """The arguments of :func:`~._silhouette_kernel.silhouette_batch` between the poses and
@@ -448,7 +473,7 @@ class SilhouetteEnergy:
         return (*self._kin, self._caps, self._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"], fr["cam_D"],
                 fr["cam_hasd"], fr["cov"], fr["cov_wh"], self._order, self._tmpl_a, self._tmpl_s, self._tmpl_ptr,
                 self._tmpl_na, fr["fg_x"], fr["fg_y"], fr["fg_n"], fr["fg_tab"], fr["fg_bins"], fr["fg_xr"],
-                fr["fg_area"])
+                fr["fg_area"], fr["view_w"])
 
     def _fast(self, X: np.ndarray) -> np.ndarray:
         out = np.empty(X.shape[0])
@@ -571,7 +596,7 @@ class RestrictedSilhouetteEnergy:
                       self._moving_ci, *energy._kin, energy._caps, energy._radii, fr["cam_R"], fr["cam_t"],
                       fr["cam_K"], fr["cam_D"], fr["cam_hasd"], fr["cov"], fr["cov_wh"], energy._order,
                       energy._tmpl_a, energy._tmpl_s, energy._tmpl_ptr, energy._tmpl_na, fr["fg_n"], fr["fg_tab"],
-                      fr["fg_bins"], fr["fg_xr"], fr["fg_area"], *stage)
+                      fr["fg_bins"], fr["fg_xr"], fr["fg_area"], fr["view_w"], *stage)
 
     def _violation(self, X: np.ndarray, rows: np.ndarray) -> EnergyError:
         i = int(rows[0])

@@ -133,6 +133,9 @@ class EstimatorNode(Node):
                             "predicted silhouette grown by this many pixels is kept unconfirmed", lo=0, hi=1000)
         hull_pad = declare(self, "hull_pad_m", tc.hull_pad_m, "visual-hull filter: growth of the predicted joints' "
                            "bounding box, metres", lo=0.01, hi=100.0)
+        view_w = declare(self, "view_weights", tc.view_weights, "count each view in the silhouette energy by the "
+                         "share of the predicted body inside its image (a person entering or leaving a view at its "
+                         "border counts for what that view sees)")
         ahead = declare(self, "max_frames_ahead", tc.max_frames_ahead, "after frame sets this node could not keep up "
                         "with, its own prediction looks as many periods ahead, at most this many", lo=1.0, hi=1000.0)
         polish = declare(self, "init_polish", tc.init_polish, "automatic initialization: search the winner once more "
@@ -207,7 +210,7 @@ class EstimatorNode(Node):
                                      contour_extra_partitions=tuple(contour_extra_parts), init_polish=polish,
                                      contour_points=contour_pts, contour_max_px=contour_px, gate_margin_px=gate,
                                      hull_filter=hull, hull_misses=hull_misses, hull_dilate_px=hull_dil,
-                                     hull_keep_px=hull_keep, hull_pad_m=hull_pad,
+                                     hull_keep_px=hull_keep, hull_pad_m=hull_pad, view_weights=view_w,
                                      max_frames_ahead=ahead, init_confirm_frames=confirm,
                                      init_confirm_share=confirm_share, heading_travel_cue=travel_cue)
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,

@@ -29,7 +29,7 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["GateError", "GateResult", "gate_masks", "predicted_silhouettes", "RULES"]
+__all__ = ["GateError", "GateResult", "gate_masks", "predicted_silhouettes", "visible_shares", "RULES"]
 
 RULES = ("components", "pixels")
 
@@ -113,7 +113,7 @@ def predicted_silhouettes(model, cameras: Sequence, pose, *, margin_px: int = 0,
         # nested lists costs a tenth of indexing the arrays)
         ends = np.round(uv * scale).tolist()
         rr = np.round(r * scale).tolist()
-        quads = np.round(np.where(np.isfinite(quads), quads, 0) * scale).astype(np.int32)
+        quads = np.round(np.clip(np.where(np.isfinite(quads), quads, 0), -1e6, 1e6) * scale).astype(np.int32)
         has_quad = has_quad.tolist()
         circle, poly, line = cv2.circle, cv2.fillConvexPoly, cv2.LINE_8
         for c in np.flatnonzero(ok).tolist():
@@ -124,6 +124,31 @@ def predicted_silhouettes(model, cameras: Sequence, pose, *, margin_px: int = 0,
             if has_quad[c]:
                 poly(img, quads[c], 255, line, shift)
         out.append(img)
+    return out
+
+
+def visible_shares(model, cameras: Sequence, pose, *, scale: float = 0.25) -> np.ndarray:
+    """``(V,)`` share of the model's silhouette at ``pose`` that falls inside each camera's image,
+    in [0, 1] (0 when the model projects nowhere, e.g. behind the camera).
+
+    The silhouette of :func:`predicted_silhouettes` is drawn at ``scale`` of the image's size on a
+    canvas three times as wide and high, the image in its middle; the share is the drawn area
+    inside the image over all drawn area. A silhouette reaching beyond the canvas (a person more
+    than one image width off-image) counts only its part on the canvas. ≈ 0.1 ms per view at
+    320×240.
+    """
+    out = np.zeros(len(cameras))
+    for v, cam in enumerate(cameras):
+        s = cam.scaled(scale)
+        w, h = s.width, s.height
+        K = s.K.copy()
+        K[0, 2] += w
+        K[1, 2] += h
+        big = type(cam)(cam.name, 3 * w, 3 * h, K, cam.dist, cam.R, cam.t)
+        img = predicted_silhouettes(model, [big], pose)[0]
+        total = np.count_nonzero(img)
+        if total:
+            out[v] = np.count_nonzero(img[h:2 * h, w:2 * w]) / total
     return out
 
 

@@ -78,7 +78,7 @@ from isa_mocap_ros.geometry import nearest_rotvec
 
 from . import _fast_search
 from .contour import ContourFit, ContourFitInfo
-from .gate import gate_masks, predicted_silhouettes
+from .gate import gate_masks, predicted_silhouettes, visible_shares
 from .hull import hull_filter, pose_box
 from .init import InitError, initial_pose, root_from_masks
 from .limbs import LIMBS, LimbMove
@@ -511,6 +511,17 @@ class TrackerConfig:
     hull_pad_m : float
         Growth of the predicted joints' bounding box, metres (default 0.35: the limbs' radii and a
         fast limb's motion in one frame).
+    view_weights : bool
+        **Views counted by what they see**: once the tracker has an estimate, Eq. 5's mean over the
+        views becomes ``sum_v w_v f_v / sum_v w_v`` with ``w_v`` the share of the predicted pose's
+        silhouette inside view ``v``'s image (:func:`.gate.visible_shares`; 1 for a view that sees
+        the whole body, so nothing changes while every view does). A view that sees a person
+        entering or leaving it at its border — a few per cent of the body — no longer counts as
+        much as one that sees all of it: its Eq. 4 compares only the visible sliver, normalised by
+        that sliver's area, and a pose that fits the sliver at the legs' expense won. Default on
+        (robustness bench, 8 seeds, generated walk, knee RMSE: clean 1.77 → 1.48°, 70 % noise
+        3.71 → 3.46°, 35 occluders 2.95 → 2.07°; the CMU walk, seen whole by every view, unchanged
+        bit for bit; ``docs/tracking.md``, "Views at the image border").
     max_frames_ahead : float
         After frames the tracker did not see (``step``'s ``frames_elapsed`` > 1, or frames that
         fell back), its own prediction looks that many periods ahead, but at most this many
@@ -578,6 +589,7 @@ class TrackerConfig:
     hull_dilate_px: int = 2
     hull_keep_px: int = 3
     hull_pad_m: float = 0.35
+    view_weights: bool = True
     max_frames_ahead: float = 5.0
 
     def __post_init__(self) -> None:
@@ -675,6 +687,8 @@ class TrackerConfig:
         _check_number("hull_dilate_px", self.hull_dilate_px, lo=0, integer=True)
         _check_number("hull_keep_px", self.hull_keep_px, lo=0, integer=True)
         _check_number("hull_pad_m", self.hull_pad_m, lo=0.0, strict=True)
+        if not isinstance(self.view_weights, (bool, np.bool_)):
+            raise TrackerError(f"view_weights: expected a bool, received {self.view_weights!r}")
 
     def params(self) -> dict:
         """Optimizer keyword arguments: :data:`DEFAULT_PARAMS` of the optimizer, then ``optimizer_params``."""
@@ -967,15 +981,24 @@ class Tracker:
             out.append(a)
         return out, notes
 
-    def _set_masks(self, masks: list, notes: list[str], frame_index: int | None) -> int:
-        """Give the usable masks to the energy; returns the number of views it uses (0: none)."""
+    def _set_masks(self, masks: list, notes: list[str], frame_index: int | None, weights=None) -> int:
+        """Give the usable masks to the energy (with the view weights, if any, and if the energy takes
+        them); returns the number of views it uses (0: none)."""
         if not any(m is not None for m in masks):
             return 0
         if frame_index is not None and isinstance(getattr(self.energy, "rng", None), np.random.Generator):
             # the energy samples foreground pixels at set_masks: draw them from this frame's stream
             self.energy.rng = frame_rng(self.config.seed, frame_index, 2)
+        from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
+
         try:
-            self.energy.set_masks(masks)
+            if weights is not None and isinstance(self.energy, SilhouetteEnergy):
+                used = np.array([m is not None for m in masks])
+                if not np.any(weights[used] > 0):
+                    weights = None             # no view sees the predicted body: count them all alike
+                self.energy.set_masks(masks, weights)
+            else:
+                self.energy.set_masks(masks)
         except ValueError as exc:          # EnergyError and friends: nothing usable after all
             notes.append(f"energy: masks rejected ({exc})")
             return 0
@@ -1682,6 +1705,11 @@ class Tracker:
                         dilate_px=cfg.hull_dilate_px, misses=cfg.hull_misses, keep=keep)
         return _noted(g, notes, "the hull filter", lambda total: "no foreground pixel confirmed by the other views")
 
+    def _view_weights(self, pred: np.ndarray) -> np.ndarray:
+        """Eq. 5's view weights for this frame (``config.view_weights``): the share of ``pred``'s
+        silhouette inside each view's image (:func:`.gate.visible_shares`)."""
+        return visible_shares(self.model, self.cameras, pred)
+
     def _final_pose(self, res) -> tuple[np.ndarray, float]:
         """The estimate of an optimizer result (``config.estimate``) in the model's limits, rotation
         vectors shortened (|r| <= pi), and its energy."""
@@ -1989,7 +2017,12 @@ class Tracker:
             if cfg.hull_filter:
                 # the visual-hull filter (config.hull_filter): foreground the other views do not confirm
                 usable = self._hull(usable, gated_pred, notes)
-        views = self._set_masks(usable, notes, frame_index)
+        weights = None
+        if cfg.view_weights and self._last is not None:
+            if gated_pred is None:
+                gated_pred = self._prediction(prediction, notes)
+            weights = self._view_weights(gated_pred)
+        views = self._set_masks(usable, notes, frame_index, weights)
         if views == 0:
             notes.append("no usable view: falling back to the last estimate" if self._last is not None
                          else "no usable view and no estimate yet: nothing to track")
