@@ -2018,7 +2018,7 @@ class Tracker:
                 # the visual-hull filter (config.hull_filter): foreground the other views do not confirm
                 usable = self._hull(usable, gated_pred, notes)
         weights = None
-        if cfg.view_weights and self._last is not None:
+        if cfg.view_weights and self._last is not None and any(m is not None for m in usable):
             if gated_pred is None:
                 gated_pred = self._prediction(prediction, notes)
             weights = self._view_weights(gated_pred)
