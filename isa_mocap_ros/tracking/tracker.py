@@ -519,9 +519,10 @@ class TrackerConfig:
         entering or leaving it at its border — a few per cent of the body — no longer counts as
         much as one that sees all of it: its Eq. 4 compares only the visible sliver, normalised by
         that sliver's area, and a pose that fits the sliver at the legs' expense won. Default on
-        (robustness bench, 8 seeds, generated walk, knee RMSE: clean 1.77 → 1.48°, 70 % noise
-        3.71 → 3.46°, 35 occluders 2.95 → 2.07°; the CMU walk, seen whole by every view, unchanged
-        bit for bit; ``docs/tracking.md``, "Views at the image border").
+        (``make bench`` robustness, 8 seeds, generated walk, knee RMSE: clean 1.77 → 1.50°, 70 % noise
+        3.71 → 3.38°, 35 occluders 2.95 → 2.09°, with the energy's template cut at the image border;
+        the CMU walk, seen whole by every view, unchanged bit for bit; ``docs/tracking.md``, "Views at
+        the image border").
     max_frames_ahead : float
         After frames the tracker did not see (``step``'s ``frames_elapsed`` > 1, or frames that
         fell back), its own prediction looks that many periods ahead, but at most this many
