@@ -67,6 +67,25 @@ def test_the_tracker_weighs_the_views_by_the_predicted_share(rig):
             np.testing.assert_array_equal(got, np.ones(4))
 
 
+def test_an_empty_mask_where_the_body_is_predicted_does_not_drop_the_frame(rig):
+    """The only view that sees the predicted body has an empty mask (the others see none of it): the
+    views left are counted alike instead of the energy rejecting the weights."""
+    model, cams, x = rig
+    side = x.copy()
+    side[0] += 2.7
+    w = visible_shares(model, cams, side)
+    assert w[0] == 0.0 and w[3] == 0.0 and w[1] > 0 and w[2] > 0, w
+    masks = _masks(model, cams, x)
+    masks[1] = np.zeros_like(masks[1])
+    masks[2] = np.zeros_like(masks[2])
+    tr = Tracker(model, cams, TrackerConfig(evals_per_frame=200, contour_iterations=0, contour_extra_iterations=0,
+                                            limb_proposals=0, gate_margin_px=0, hull_filter=False))
+    tr.initialize(pose=side)
+    res = tr.step(masks, 1)
+    assert not res.fell_back and res.views_used == 2, res.notes
+    np.testing.assert_array_equal(tr.energy._frame["view_w"], np.ones(2))
+
+
 def test_views_that_see_the_whole_body_change_nothing(rig):
     """Every view sees the whole person: the weights are all 1 and the estimates equal, bit for bit."""
     model, cams, x = rig

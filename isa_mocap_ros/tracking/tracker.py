@@ -990,13 +990,13 @@ class Tracker:
         if frame_index is not None and isinstance(getattr(self.energy, "rng", None), np.random.Generator):
             # the energy samples foreground pixels at set_masks: draw them from this frame's stream
             self.energy.rng = frame_rng(self.config.seed, frame_index, 2)
-        from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
+        from isa_mocap_ros.energy.silhouette import SilhouetteEnergy, _mask_problem
 
         try:
             if weights is not None and isinstance(self.energy, SilhouetteEnergy):
-                used = np.array([m is not None for m in masks])
+                used = [_mask_problem(m, c) is None for m, c in zip(masks, self.cameras)]
                 if not np.any(weights[used] > 0):
-                    weights = None             # no view sees the predicted body: count them all alike
+                    weights = None             # no usable view sees the predicted body: count them alike
                 self.energy.set_masks(masks, weights)
             else:
                 self.energy.set_masks(masks)
@@ -1706,11 +1706,6 @@ class Tracker:
                         dilate_px=cfg.hull_dilate_px, misses=cfg.hull_misses, keep=keep)
         return _noted(g, notes, "the hull filter", lambda total: "no foreground pixel confirmed by the other views")
 
-    def _view_weights(self, pred: np.ndarray) -> np.ndarray:
-        """Eq. 5's view weights for this frame (``config.view_weights``): the share of ``pred``'s
-        silhouette inside each view's image (:func:`.gate.visible_shares`)."""
-        return visible_shares(self.model, self.cameras, pred)
-
     def _final_pose(self, res) -> tuple[np.ndarray, float]:
         """The estimate of an optimizer result (``config.estimate``) in the model's limits, rotation
         vectors shortened (|r| <= pi), and its energy."""
@@ -2022,7 +2017,8 @@ class Tracker:
         if cfg.view_weights and self._last is not None and any(m is not None for m in usable):
             if gated_pred is None:
                 gated_pred = self._prediction(prediction, notes)
-            weights = self._view_weights(gated_pred)
+            # Eq. 5's view weights (config.view_weights): the share of the predicted body each view sees
+            weights = visible_shares(self.model, self.cameras, gated_pred)
         views = self._set_masks(usable, notes, frame_index, weights)
         if views == 0:
             notes.append("no usable view: falling back to the last estimate" if self._last is not None
