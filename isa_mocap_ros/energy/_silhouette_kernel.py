@@ -157,6 +157,18 @@ def _project_cap(CP, caps, radii, G, c):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always")
+def _slab(a, u, b0, b1, lo, hi):  # pragma: no cover - compiled
+    """The parameters ``t`` in ``[lo, hi]`` with ``a + t u`` in ``[b0, b1]`` (one coordinate of a
+    segment clipped against a box): ``(meets, lo, hi)``, ``meets`` False for a segment parallel to
+    the slab and outside it."""
+    if u != 0.0:
+        ta = (b0 - a) / u
+        tb = (b1 - a) / u
+        return True, max(lo, min(ta, tb)), min(hi, max(ta, tb))
+    return not (a < b0 or a > b1), lo, hi
+
+
+@numba.njit(cache=True, inline="always")
 def _clip_cap(G, c, v, cam_K, cov_wh, cam_hasd):  # pragma: no cover - compiled
     """Capsule ``c``'s template rectangle in view ``v`` shortened, along its axis, to the part that
     can meet the image (pinhole views; a lens-distorted view keeps it whole).
@@ -178,21 +190,11 @@ def _clip_cap(G, c, v, cam_K, cov_wh, cam_hasd):  # pragma: no cover - compiled
     y0 = (-0.5 - cam_K[v, 3]) / fy - xm
     y1 = (cov_wh[v, 1] - 0.5 - cam_K[v, 3]) / fy + xm
     ax, ay, ux, uy = G[c, 0], G[c, 1], G[c, 2], G[c, 3]
-    lo = G[c, 9]
-    hi = G[c, 10]
-    if ux != 0.0:
-        ta = (x0 - ax) / ux
-        tb = (x1 - ax) / ux
-        lo = max(lo, min(ta, tb))
-        hi = min(hi, max(ta, tb))
-    elif ax < x0 or ax > x1:
+    meets, lo, hi = _slab(ax, ux, x0, x1, G[c, 9], G[c, 10])
+    if not meets:
         return
-    if uy != 0.0:
-        ta = (y0 - ay) / uy
-        tb = (y1 - ay) / uy
-        lo = max(lo, min(ta, tb))
-        hi = min(hi, max(ta, tb))
-    elif ay < y0 or ay > y1:
+    meets, lo, hi = _slab(ay, uy, y0, y1, lo, hi)
+    if not meets:
         return
     if hi - lo <= 1e-9 * (G[c, 10] - G[c, 9]):
         return                                   # misses the image: no point counts anyway

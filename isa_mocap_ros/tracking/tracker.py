@@ -994,8 +994,7 @@ class Tracker:
 
         try:
             if weights is not None and isinstance(self.energy, SilhouetteEnergy):
-                used = [_mask_problem(m, c) is None for m, c in zip(masks, self.cameras)]
-                if not np.any(weights[used] > 0):
+                if not any(w > 0 and _mask_problem(m, c) is None for w, m, c in zip(weights, masks, self.cameras)):
                     weights = None             # no usable view sees the predicted body: count them alike
                 self.energy.set_masks(masks, weights)
             else:
