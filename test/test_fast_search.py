@@ -48,6 +48,7 @@ class _Restrictable:
     ({}, 1241),                                                   # the tracker's: truncated last generations
     ({"kernel": "s1", "variance": "population"}, 900),
     ({"kernel": "s3", "n_particles": 20, "target_ess": 0.5, "c": 0.8, "rho": 1e-3}, 1000),
+    ({"kernel": "s1", "variance": "population", "c": 0.7, "c_scale": "deviation"}, 900),
 ])
 def test_compiled_hisa_equals_the_protocol(scene, params, budget):
     model, cams, walk, masks = scene
@@ -140,6 +141,7 @@ def test_cached_code_depends_on_the_kernels_it_calls():
      224),                                                        # the pelvis stage's (truncated last generation)
     ({"n_particles": 17, "kernel": "s1", "schedule": "adaptive", "target_ess": 0.5}, 170),
     ({"n_particles": 20, "kernel": "s3", "schedule": "adaptive", "variance": "population", "rho": 1e-3}, 333),
+    ({"n_particles": 20, "kernel": "s2", "schedule": "adaptive", "c": 0.6, "c_scale": "deviation"}, 333),
 ])
 def test_compiled_flat_isa_equals_the_protocol(params, budget):
     from isa_mocap_ros.optim import Isa

@@ -2,6 +2,8 @@
 import argparse
 import json
 
+import pytest
+
 from isa_mocap_ros.cli import bench_ackley
 
 
@@ -10,22 +12,23 @@ def test_bench_ackley_quick_json(capsys):
     bench_ackley.add_arguments(p)
     assert bench_ackley.run(p.parse_args(["--quick", "--json"])) == 0
     rows = json.loads(capsys.readouterr().out)["rows"]
-    keys = {"method", "kernel", "variance", "n", "b", "c", "noise", "mean_steps", "success_rate",
+    keys = {"method", "kernel", "variance", "c_scale", "n", "b", "c", "noise", "mean_steps", "success_rate",
             "mean_evals", "paper_mean_steps"}
     searched_keys = keys | {"paper_n", "paper_b", "paper_c", "selection_mean_steps", "selection_runs", "held_out_runs"}
     book = [r for r in rows if r["kernel"] is not None and "selection_mean_steps" not in r]
     searched = [r for r in rows if "selection_mean_steps" in r]
-    assert len(book) == 24 and all(set(r) == keys for r in book)
-    assert [r["variance"] for r in book] == ["population"] * 12 + ["selected"] * 12
+    assert len(book) == 48 and all(set(r) == keys for r in book)
+    assert [(r["variance"], r["c_scale"]) for r in book[::12]] == list(bench_ackley.READINGS)
+    assert bench_ackley.READINGS[0] == ("population", "deviation")
     assert {r["paper_mean_steps"] for r in book} >= {14.34, 15.14, 14.58, 22.4, 20.3, 21.54}
     assert {r["method"] for r in rows if r["kernel"] is None} == {"pycma", "CmaEs (ours)"}
     # noiseless n = 50 rows: every quick run succeeds, in a plausible number of steps
-    for r in book[:3] + book[12:15]:
+    for r in book[:3] + book[12:15] + book[24:27] + book[36:39]:
         assert r["success_rate"] == 1.0 and 5 < r["mean_steps"] < 40
-        assert r["mean_evals"] == r["n"] * (r["mean_steps"] + 1)
+        assert r["mean_evals"] == pytest.approx(r["n"] * (r["mean_steps"] + 1))
     # searched rows: both tables for the noiseless kernels of each reading, b, c and n from the grids
     assert all(set(r) == searched_keys for r in searched)
-    assert {r["variance"] for r in searched} == {"population"}       # the library's default reading only
+    assert {(r["variance"], r["c_scale"]) for r in searched} == {("population", "deviation")}   # the first only
     clean = {r["method"] for r in searched if r["noise"] == 0.0}
     assert clean == {f"ISA_S{k} (Table 13.{t}, searched)" for k in (1, 2, 3) for t in (1, 2)}
     for r in searched:
@@ -55,11 +58,21 @@ def test_the_printed_dynamic_variance_keeps_a_small_population_searching():
     """(13.16) over the generation's particles (as printed) vs over the selected ones: with 10
     particles the latter collapses onto a local minimum in a few steps (measured 42 % success over
     100 runs vs 93 %; the book reports 100 % for n >= 10)."""
-    pop = bench_ackley.run_isa("s1", 10, 0.993, 0.8, False, 20, seed=3, variance="population")
-    sel = bench_ackley.run_isa("s1", 10, 0.993, 0.8, False, 20, seed=3, variance="selected")
+    kw = dict(seed=3, c_scale="covariance")
+    pop = bench_ackley.run_isa("s1", 10, 0.993, 0.8, False, 20, variance="population", **kw)
+    sel = bench_ackley.run_isa("s1", 10, 0.993, 0.8, False, 20, variance="selected", **kw)
     assert pop["success_rate"] >= 0.8 and sel["success_rate"] <= 0.7
 
 
 def test_searched_rows_are_the_same_with_worker_processes():
     kw = dict(n_seeds=1, grid_b=(0.99,), grid_c=(0.5,), grid_n=(20, 30))
     assert bench_ackley.searched_rows(3, 0, jobs=2, **kw) == bench_ackley.searched_rows(3, 0, jobs=1, **kw)
+
+
+def test_one_reading_asked_for_is_the_only_one_run(capsys):
+    p = argparse.ArgumentParser()
+    bench_ackley.add_arguments(p)
+    args = p.parse_args(["--quick", "--json", "--no-search", "--variance", "selected", "--c-scale", "deviation"])
+    assert bench_ackley.run(args) == 0
+    rows = json.loads(capsys.readouterr().out)["rows"]
+    assert {(r["variance"], r["c_scale"]) for r in rows if r["kernel"] is not None} == {("selected", "deviation")}

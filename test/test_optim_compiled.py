@@ -111,6 +111,23 @@ def test_fused_h_isa_gives_the_numpy_run_bit_for_bit(variance):
     assert repr(a.history) == repr(b.history) and ha == hb
 
 
+@pytest.mark.parametrize("fused", [True, False])
+@pytest.mark.parametrize("variance", ["population", "selected"])
+def test_c_on_the_deviation_is_its_square_on_the_covariance_bit_for_bit(fused, variance):
+    """``c_scale="deviation"`` (the book's Fig. 13.13 and Ackley tables) is (13.16) with ``c^2``."""
+    runs = []
+    for c, c_scale in ((0.7, "deviation"), (0.7 * 0.7, "covariance")):
+        opt = Isa(np.full(3, 0.2), 0.4, n_particles=20, kernel="s2", schedule="polynomial", b=0.9, c=c,
+                  c_scale=c_scale, variance=variance, rng=np.random.default_rng(4),
+                  bounds=(np.full(3, -1.0), np.full(3, 1.5)))
+        opt._fused = fused
+        runs.append(minimize(opt, lambda X: np.sum((X - 0.3) ** 2, axis=1), max_evals=400))
+    (a, b), other = runs, Isa(np.zeros(3), 0.4, c=0.7, rng=np.random.default_rng(4))
+    np.testing.assert_array_equal(a.population, b.population)
+    assert repr(a.history) == repr(b.history)
+    assert other.c_scale == "covariance" and other.c_cov == 0.7          # the default: (13.16) as printed
+
+
 def _assert_same(a, b):
     """Bit equality where numpy's 3x3 ``@`` accumulates as _fast_so3 does (OpenBLAS's Haswell dgemm)
     and numpy's sin/cos/arccos are libm's (``libm_probe``: AVX2 machines); with another BLAS kernel

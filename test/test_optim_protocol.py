@@ -112,6 +112,8 @@ def test_bad_shapes_and_arguments_raise():
         Isa(np.zeros(2), 1.0, rng=rng, kernel="s4")
     with pytest.raises(OptimError, match="variance: expected one of"):
         Isa(np.zeros(2), 1.0, rng=rng, variance="weighted")
+    with pytest.raises(OptimError, match=r"c_scale: expected one of \['covariance', 'deviation'\], got 'std'"):
+        Isa(np.zeros(2), 1.0, rng=rng, c_scale="std")
     with pytest.raises(OptimError, match="name: expected one of"):
         make_optimizer("nelder-mead", np.zeros(2), 1.0, rng=rng)
     with pytest.raises(OptimError, match="initial_population: expected 40 rows"):

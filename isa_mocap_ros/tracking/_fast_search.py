@@ -89,7 +89,7 @@ def _register_dependent_cache() -> None:
 _register_dependent_cache()
 
 #: Inner ISA parameters this path implements (others: the protocol).
-_PARAMS = {"n_particles", "kernel", "schedule", "target_ess", "c", "rho", "variance", "resampling"}
+_PARAMS = {"n_particles", "kernel", "schedule", "target_ess", "c", "c_scale", "rho", "variance", "resampling"}
 _KERNELS = {"s1": 1, "s2": 2, "s3": 3}
 
 
@@ -107,7 +107,8 @@ def supported(opt, energy, prior_active: bool) -> bool:
     return (set(p) <= _PARAMS and p.get("kernel", "s1") in _KERNELS and p.get("schedule") == "adaptive"
             and p.get("resampling", "multinomial") == "multinomial" and opt._initial_population is None
             and opt.init == "normal" and opt.max_iter is None
-            and p.get("variance", "population") in ("population", "selected"))
+            and p.get("variance", "population") in ("population", "selected")
+            and p.get("c_scale", "covariance") in ("covariance", "deviation"))
 
 
 @numba.njit(cache=True)
@@ -282,10 +283,13 @@ class HisaRun:
         self.target = float(p.get("target_ess", 0.5))
         self.c = float(p.get("c", 0.8))
         self.rho = float(p.get("rho", 1e-4))
+        c_scale = p.get("c_scale", "covariance")
         self.population = p.get("variance", "population") == "population"
         if n < 2 or not (0.0 < self.target <= 1.0) or not self.c > 0 or not self.rho >= 0:
             raise OptimError(f"h-isa parameters out of range: n_particles={n}, target_ess={self.target}, "
                              f"c={self.c}, rho={self.rho}")
+        if c_scale == "deviation":      # Isa.c_cov (supported() admits the two values only)
+            self.c = self.c * self.c
         self.opt, self.energy, self.max_evals = opt, energy, int(max_evals)
         self.parts = opt.partitions
         self.shares = split_budget(self.max_evals, [len(q) for q in self.parts],
@@ -398,8 +402,8 @@ def run_isa(opt, energy, max_evals: int) -> Result:
         i = int(E.argmin())
         if E[i] < best:
             best, best_x = float(E[i]), X[i].copy()
-        Xn, x, beta, W, ess = _tell(X, E, opt.rng, beta, target, kernel, opt.c, opt.rho, opt.lo, opt.hi, population,
-                                    block)
+        Xn, x, beta, W, ess = _tell(X, E, opt.rng, beta, target, kernel, opt.c_cov, opt.rho, opt.lo, opt.hi,
+                                    population, block)
         mean_energy, spread = _fast.generation_stats(E, X)
         history.append(GenerationInfo(n_iter=len(history) + 1, n_evals=used, best_energy=float(best),
                                       mean_energy=float(mean_energy), spread=float(spread), beta=float(beta),
