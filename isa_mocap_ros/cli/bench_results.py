@@ -416,8 +416,8 @@ def _plot_ackley(d: dict, path: Path) -> Path:
                       f"{' (searched)' if 'selection_mean_steps' in r else ''}" for r in rows],
                   rotation=40, ha="right", fontsize=7)
     ax.set_ylabel("mean steps to δ")
-    ax.set_title(f"Ackley: ISA steps ((13.16) over the {first[0]}, c scales the {first[1]}), measured vs the paper "
-                 "(Tables 13.1-13.2; searched: b, c, n chosen as the book did, held-out runs)", fontsize=9)
+    ax.set_title(f"Ackley, ISA ((13.16): {first[0]}, c on the {first[1]}) vs the paper's Tables 13.1-13.2 "
+                 "(searched: b, c, n chosen as the book did; held-out runs)", fontsize=9)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=80)

@@ -27,8 +27,9 @@ plots "the standard deviations ..., which are scaled by c", ``"deviation"``: ``S
 times the sum, the standard deviation ``c`` times the particles'. The same family of kernels (``c``
 with ``"deviation"`` is ``c^2`` with ``"covariance"``, to the bit); it matters only when taking ``c``
 from the book. On the Ackley protocol the book's c is the deviation's: there the best ``c`` at its
-``b`` lies at 0.6-0.8 (the book: 0.7-0.8, "c in the range 0.5-1.0"), with ``"covariance"`` at 0.4-0.5,
-and the book's Tables 13.1-13.2 are met within 8-19 % (docs/optimizers.md).
+``b`` lies at 0.6-0.7 (the book: 0.7-0.8, "c in the range 0.5-1.0"), with ``"covariance"`` at 0.3-0.5,
+and the noiseless rows of the book's Tables 13.1-13.2 at its b, c, n come within -9..+19 % of its mean steps
+over 600 runs each (docs/optimizers.md, "What the book's c multiplies").
 
 Steps 1, 3 and 4 run compiled (:mod:`._fast`; 3 and 4 fused for multinomial replacement) with the
 random numbers drawn here, from the optimizer's generator and in the order of the numpy
