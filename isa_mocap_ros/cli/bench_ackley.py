@@ -12,9 +12,9 @@ ISA rows run once per reading of the dynamic variance scheme (13.16) (:data:`REA
 particles it is computed over (``Isa(variance=...)``, a row's ``variance``): ``population`` -- the
 equation as printed -- or ``selected`` -- the text's "after resampling"; and what the book's ``c``
 multiplies (``Isa(c_scale=...)``, a row's ``c_scale``): the standard deviation, ``deviation`` -- as
-Fig. 13.13 says ("the standard deviations ..., which are scaled by c"), and as the book's own best
-``c`` (0.7-0.8, "c in the range 0.5-1.0") is only with it -- or the covariance as (13.16) prints it,
-``covariance``. The first reading, population / deviation, is the benchmark's; docs/optimizers.md
+Fig. 13.13 says ("the standard deviations ..., which are scaled by c"), and only with it is the
+book's ``c`` (0.7-0.8, "c in the range 0.5-1.0") near our best -- or the covariance as (13.16) prints
+it, ``covariance``. The first reading, population / deviation, is the benchmark's; docs/optimizers.md
 compares them.
 CMA-ES rows (ours and pycma, the reference) start at a uniform point of E with sigma0 = 2 and
 bounds E; their estimate is the distribution mean; steps = generations (``t`` as above).
