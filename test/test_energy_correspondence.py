@@ -74,3 +74,33 @@ def test_skipped_views_and_bad_input(scene):
         CorrespondenceEnergy(model, rig, masks, bad)
     with pytest.raises(EnergyError, match="n_contour_points"):
         CorrespondenceEnergy(model, rig, masks, x0, n_contour_points=0)
+
+
+def test_model_contour_points_are_those_of_the_full_label_image_bit_for_bit(scene):
+    """The contour points come from the silhouette and labels at the chosen contour pixels only; they
+    are what labelling every pixel (``render_labels``, the first formulation) gives, to the bit."""
+    from isa_mocap_ros.body import forward_kinematics
+    from isa_mocap_ros.energy.correspondence import _contour_pixels, capsule_frames, model_contour_points
+    from isa_mocap_ros.vision import render_labels
+
+    model, rig, x0, _ = scene
+    rng = np.random.default_rng(2)
+    for trial in range(4):
+        x = np.clip(x0 + rng.normal(0, 0.15, model.dof) * (trial > 0), model.lower, model.upper)
+        E, T = capsule_endpoints(model, x)[0], forward_kinematics(model, x)[0]
+        for cam in rig:
+            n_points = (50, 200, 10_000)[trial % 3]
+            labels, depth = render_labels(cam, E, model.capsule_radii)
+            pix = _contour_pixels(labels >= 0)
+            if len(pix) > n_points:
+                pix = pix[np.floor(np.arange(n_points) * (len(pix) / n_points)).astype(np.int64)]
+            cap, z = labels[pix[:, 1], pix[:, 0]], depth[pix[:, 1], pix[:, 0]].astype(np.float64)
+            c, d = cam.ray(pix[:, 0].astype(float), pix[:, 1].astype(float))
+            d = np.asarray(d).reshape(-1, 3)
+            X = c + (z / (d @ cam.R[2]))[:, None] * d
+            frames = capsule_frames(model)[cap]
+            local = np.einsum("kji,kj->ki", T[frames, :3, :3], X - T[frames, :3, 3])
+            got = model_contour_points(model, cam, x, n_points=n_points)
+            assert len(pix) > 0
+            for a, b in zip(got, (pix, frames, local)):
+                np.testing.assert_array_equal(a, b)

@@ -5,8 +5,8 @@ import cv2
 import numpy as np
 import pytest
 
-from isa_mocap_ros.vision import (Camera, VisionError, capsule_contains, clothing_colors, look_at, make_background,
-                                  render, render_labels, render_mask)
+from isa_mocap_ros.vision import (Camera, VisionError, capsule_contains, capsule_data, clothing_colors, look_at,
+                                  make_background, render, render_labels, render_labels_at, render_mask)
 
 # A hand-made stick figure (joint centres, metres) and its capsules: (joint a, joint b, r_a, r_b).
 JOINTS = dict(pelvis=(0, 0, 0.95), neck=(0, 0, 1.45), head=(0, 0, 1.62), lsh=(0, 0.19, 1.42), rsh=(0, -0.19, 1.42),
@@ -147,6 +147,34 @@ def test_render_mask_equals_render_and_labels():
     labels, depth = render_labels(CAM, E, R)
     np.testing.assert_array_equal(labels >= 0, mask > 0)
     assert np.all(np.isnan(depth[mask == 0])) and np.all(depth[mask > 0] > 0)
+
+
+def test_labels_at_some_pixels_are_render_labels_there_bit_for_bit():
+    """Every pixel (label -1 and depth NaN off the silhouette) and a shuffled subset, with the capsule
+    data made once or per call; sizes that are not multiples of the tile; bad pixels named."""
+    rng = np.random.default_rng(8)
+    cam = look_at([1.2, 0.0, 1.0], [0, 0, 1.0], fov_deg=80, width=61, height=45)
+    for trial in range(6):
+        E, R = stick_figure(rng.normal(0, 0.05, 3)) if trial % 2 else random_capsules(rng, 12)
+        c = cam if trial < 3 else CAM
+        labels, depth = render_labels(c, E, R)
+        v, u = np.mgrid[0:c.height, 0:c.width]
+        every = np.stack([u.ravel(), v.ravel()], axis=1)
+        lab, dep = render_labels_at(c, E, R, every, capsules=capsule_data(E, R))
+        assert lab.dtype == np.int32 and dep.dtype == np.float32
+        np.testing.assert_array_equal(lab, labels.ravel())
+        np.testing.assert_array_equal(dep, depth.ravel())               # NaN where NaN
+        some = every[rng.permutation(len(every))[:50]]
+        lab, dep = render_labels_at(c, E, R, some)
+        np.testing.assert_array_equal(lab, labels[some[:, 1], some[:, 0]])
+        np.testing.assert_array_equal(dep, depth[some[:, 1], some[:, 0]])
+        np.testing.assert_array_equal(render_mask(c, E, R, capsules=capsule_data(E, R)), render_mask(c, E, R))
+    E, R = stick_figure()
+    assert [a.shape for a in render_labels_at(CAM, E, R, np.zeros((0, 2), int))] == [(0,), (0,)]
+    with pytest.raises(VisionError, match=r"pixels: expected u in \[0, 96\) and v in \[0, 72\)"):
+        render_labels_at(CAM, E, R, np.array([[96, 0]]))
+    with pytest.raises(VisionError, match=r"pixels: expected integer \(u, v\) rows of shape \(k, 2\)"):
+        render_labels_at(CAM, E, R, np.array([[1.5, 2.0]]))
 
 
 def test_occlusion_near_colour_wins():

@@ -16,8 +16,8 @@ and the pose error of a correspondence is (13.31)
 Here the energy of a pose is the mean of ``err_S²`` over all correspondences of all usable views
 (metres²). Choices (see ``docs/energy.md``):
 
-* **Model contour points.** The predicted pose is rendered per view (:func:`render_labels`: visible
-  capsule and depth per pixel); the outer contour of that silhouette (``cv2.findContours``,
+* **Model contour points.** The predicted pose is rendered per view (its silhouette, then the visible
+  capsule and depth at the contour pixels: :func:`render_labels` there); the outer contour of that silhouette (``cv2.findContours``,
   subsampled evenly to at most ``n_contour_points`` per view) is back-projected onto the visible
   capsule surface, and each point is stored in the frame of the joint that carries its capsule
   (both capsule end joints are fixed in that frame), so it moves rigidly with its limb.
@@ -34,7 +34,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..body import BodyModel, capsule_endpoints, forward_kinematics
-from ..vision import Camera, render_labels
+from ..vision import Camera, capsule_data, render_labels_at, render_mask
 from .silhouette import EnergyError, _check_cameras, _check_model, _check_poses, _mask_problem
 
 __all__ = ["CorrespondenceEnergy", "plucker_lines", "model_contour_points", "capsule_frames"]
@@ -118,15 +118,19 @@ def model_contour_points(model: BodyModel, camera: Camera, x: Any, *,
                            capsule_frames(model), n_points)
 
 
-def _contour_points(camera: Camera, E: np.ndarray, radii, T: np.ndarray, cap_frames: np.ndarray, n_points: int):
+def _contour_points(camera: Camera, E: np.ndarray, radii, T: np.ndarray, cap_frames: np.ndarray, n_points: int,
+                    capsules: tuple | None = None):
     """:func:`model_contour_points` from the pose's capsule end points ``E``, joint transforms ``T`` and
-    :func:`capsule_frames` (computed once per pose for several views)."""
-    labels, depth = render_labels(camera, E, radii)
-    pix = _contour_pixels(labels >= 0)
+    :func:`capsule_frames` (computed once per pose for several views, as ``capsules``:
+    :func:`~isa_mocap_ros.vision.capsule_data` of ``E``). The silhouette is rendered (rays stop at
+    their first hit), the visible capsule and depth found at the chosen contour pixels only: the
+    numbers :func:`~isa_mocap_ros.vision.render_labels` gives there, at about half the cost."""
+    capsules = capsule_data(E, radii) if capsules is None else capsules
+    pix = _contour_pixels(render_mask(camera, E, radii, capsules=capsules))
     if len(pix) > n_points:
         pix = pix[np.floor(np.arange(n_points) * (len(pix) / n_points)).astype(np.int64)]
-    cap = labels[pix[:, 1], pix[:, 0]]
-    z = depth[pix[:, 1], pix[:, 0]].astype(np.float64)
+    cap, z = render_labels_at(camera, E, radii, pix, capsules=capsules)
+    z = z.astype(np.float64)
     c, d = camera.ray(pix[:, 0].astype(float), pix[:, 1].astype(float))
     d = np.asarray(d).reshape(-1, 3)
     X = c + (z / (d @ camera.R[2]))[:, None] * d       # depth is the camera-frame z of the hit

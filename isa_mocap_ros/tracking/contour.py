@@ -46,6 +46,7 @@ from ..body.kinematics import _descendant_mask, _fk
 from ..energy.correspondence import _contour_pixels, _contour_points, capsule_frames, plucker_lines
 from ..geometry import exp_so3, log_so3
 from ..geometry.so3 import nearest_rotvec
+from ..vision import capsule_data
 
 __all__ = ["ContourFit", "ContourFitError", "ContourFitInfo"]
 
@@ -192,10 +193,12 @@ class ContourFit:
             return out
         E = capsule_endpoints(self.model, x)[0]
         T = forward_kinematics(self.model, x)[0]
+        capsules = capsule_data(E, self.model.capsule_radii)
         for v, (img, cam) in enumerate(zip(self._images, self.cameras)):
             if img is None:
                 continue
-            pix, fr, loc = _contour_points(cam, E, self.model.capsule_radii, T, self._cap_frames, self.n_points)
+            pix, fr, loc = _contour_points(cam, E, self.model.capsule_radii, T, self._cap_frames, self.n_points,
+                                           capsules)
             if len(pix):
                 out.append((v, fr, loc))
         return out

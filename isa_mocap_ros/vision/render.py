@@ -39,7 +39,8 @@ from .background import clothing_colors
 from .camera import Camera
 from .errors import VisionError
 
-__all__ = ["render", "render_mask", "render_labels", "capsule_contains", "clear_ray_cache", "TILE"]
+__all__ = ["render", "render_mask", "render_labels", "render_labels_at", "capsule_data", "capsule_contains",
+           "clear_ray_cache", "TILE"]
 
 #: tile edge in pixels for the culling
 TILE = 8
@@ -243,6 +244,23 @@ def _tile_candidates(o, axis, cos_t, sin_t, bs, nb, cand):  # pragma: no cover -
     return nc
 
 
+@numba.njit(cache=True, inline="always")
+def _nearest_hit(o, dx, dy, dz, caps, cand, nc, first):  # pragma: no cover - compiled
+    """Ray parameter and index of the nearest of the ``nc`` candidate capsules the ray meets (``first``:
+    of the first one met; ``(inf, -1)``: none)."""
+    best_t = np.inf
+    best_c = -1
+    for j in range(nc):
+        c = cand[j]
+        t = _hit_t(o[0], o[1], o[2], dx, dy, dz, caps[c])
+        if t < best_t:
+            best_t = t
+            best_c = c
+            if first:
+                break
+    return best_t, best_c
+
+
 @numba.njit(cache=True, nogil=True)
 def _raycast(o, dirs, H, W, axes, tcos, tsin, caps, bs, nb, mode, colors, light, zaxis,
              out_rgb, out_mask, out_label, out_depth):  # pragma: no cover - compiled
@@ -260,16 +278,7 @@ def _raycast(o, dirs, H, W, axes, tcos, tsin, caps, bs, nb, mode, colors, light,
             for px in range(tx * 8, min(tx * 8 + 8, W)):
                 p = py * W + px
                 dx, dy, dz = dirs[p, 0], dirs[p, 1], dirs[p, 2]
-                best_t = np.inf
-                best_c = -1
-                for j in range(nc):
-                    c = cand[j]
-                    t = _hit_t(o[0], o[1], o[2], dx, dy, dz, caps[c])
-                    if t < best_t:
-                        best_t = t
-                        best_c = c
-                        if mode == 0:
-                            break
+                best_t, best_c = _nearest_hit(o, dx, dy, dz, caps, cand, nc, mode == 0)
                 if best_c < 0:
                     continue
                 out_mask[py, px] = 255
@@ -289,12 +298,38 @@ def _raycast(o, dirs, H, W, axes, tcos, tsin, caps, bs, nb, mode, colors, light,
                         out_rgb[py, px, k] = np.uint8(min(255.0, colors[best_c, k] * shade + 0.5))
 
 
+@numba.njit(cache=True, nogil=True)
+def _raycast_at(o, dirs, W, axes, tcos, tsin, caps, bs, nb, zaxis, px, py, out_label,
+                out_depth):  # pragma: no cover - compiled
+    """Mode 1 of :func:`_raycast` at the pixels ``(px[i], py[i])`` only: the same tile candidates, the same
+    nearest hit, the same label and depth."""
+    ntx = (W + 7) // 8
+    C = caps.shape[0]
+    cand = np.empty(C, np.int64)
+    for i in range(px.shape[0]):
+        tile = (py[i] // 8) * ntx + px[i] // 8
+        nc = _tile_candidates(o, axes[tile], tcos[tile], tsin[tile], bs, nb, cand)
+        p = py[i] * W + px[i]
+        dx, dy, dz = dirs[p, 0], dirs[p, 1], dirs[p, 2]
+        best_t, best_c = _nearest_hit(o, dx, dy, dz, caps, cand, nc, False)
+        if best_c < 0:
+            continue
+        out_label[i] = best_c
+        out_depth[i] = best_t * (dx * zaxis[0] + dy * zaxis[1] + dz * zaxis[2])
+
+
 # ---------------------------------------------------------------------- public API
-def _prepare(camera: Any, endpoints: Any, radii: Any):
+def capsule_data(endpoints: Any, radii: Any) -> tuple:
+    """The capsules checked and turned into the ray kernel's data, once for several views of one pose:
+    pass it as ``capsules=`` to :func:`render_mask` / :func:`render_labels_at` (``endpoints`` and
+    ``radii`` are then ignored)."""
+    return _capsule_params(*_check_capsules(endpoints, radii))
+
+
+def _prepare(camera: Any, endpoints: Any, radii: Any, capsules: tuple | None = None):
     if not isinstance(camera, Camera):
         raise VisionError(f"camera: expected a Camera, received {type(camera).__name__}")
-    E, Rr = _check_capsules(endpoints, radii)
-    caps, bs, nb = _capsule_params(E, Rr)
+    caps, bs, nb = capsule_data(endpoints, radii) if capsules is None else capsules
     return _camera_data(camera), caps, bs, nb
 
 
@@ -362,9 +397,10 @@ def render(camera: Camera, endpoints: Any, radii: Any, colors: Any = None, *, ba
     return rgb, mask
 
 
-def render_mask(camera: Camera, endpoints: Any, radii: Any) -> np.ndarray:
-    """The silhouette only: ``(H, W)`` uint8, 255 where a pixel-centre ray hits a capsule (any hit)."""
-    cd, caps, bs, nb = _prepare(camera, endpoints, radii)
+def render_mask(camera: Camera, endpoints: Any, radii: Any, *, capsules: tuple | None = None) -> np.ndarray:
+    """The silhouette only: ``(H, W)`` uint8, 255 where a pixel-centre ray hits a capsule (any hit);
+    ``capsules``: :func:`capsule_data` of ``endpoints``, ``radii`` if already made."""
+    cd, caps, bs, nb = _prepare(camera, endpoints, radii, capsules)
     dummy = np.zeros((1, 1, 3), np.uint8)
     mask, _, _ = _run(camera, cd, caps, bs, nb, 0, np.zeros((max(1, caps.shape[0]), 3)), np.zeros(3), dummy)
     return mask
@@ -383,6 +419,28 @@ def render_labels(camera: Camera, endpoints: Any, radii: Any) -> tuple[np.ndarra
     cd, caps, bs, nb = _prepare(camera, endpoints, radii)
     dummy = np.zeros((1, 1, 3), np.uint8)
     _, label, depth = _run(camera, cd, caps, bs, nb, 1, np.zeros((max(1, caps.shape[0]), 3)), np.zeros(3), dummy)
+    return label, depth
+
+
+def render_labels_at(camera: Camera, endpoints: Any, radii: Any, pixels: Any, *,
+                     capsules: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`render_labels` at some pixels only, the same numbers: ``labels (k,)`` int32 and ``depth (k,)``
+    float32 at the integer pixels ``pixels (k, 2)`` ``(u, v)`` (inside the image). Where a silhouette's
+    contour is all that is wanted, :func:`render_mask` (which stops at a ray's first hit) and this cost
+    less than labelling every pixel. ``capsules``: :func:`capsule_data` if already made."""
+    cd, caps, bs, nb = _prepare(camera, endpoints, radii, capsules)
+    pix = np.asarray(pixels)
+    if pix.ndim != 2 or pix.shape[1] != 2 or not np.issubdtype(pix.dtype, np.integer):
+        raise VisionError(f"pixels: expected integer (u, v) rows of shape (k, 2), received {pix.dtype} {pix.shape}")
+    u, v = np.ascontiguousarray(pix[:, 0], np.int64), np.ascontiguousarray(pix[:, 1], np.int64)
+    if len(u) and (u.min() < 0 or v.min() < 0 or u.max() >= camera.width or v.max() >= camera.height):
+        raise VisionError(f"pixels: expected u in [0, {camera.width}) and v in [0, {camera.height}), received "
+                          f"u {u.min()}..{u.max()}, v {v.min()}..{v.max()}")
+    label = np.full(len(u), -1, np.int32)
+    depth = np.full(len(u), np.nan, np.float32)
+    if caps.shape[0] and len(u):
+        o, dirs, axes, tcos, tsin, zaxis = cd
+        _raycast_at(o, dirs, camera.width, axes, tcos, tsin, caps, bs, nb, zaxis, u, v, label, depth)
     return label, depth
 
 
