@@ -37,6 +37,10 @@ def test_visible_shares_whole_partial_gone_and_behind(rig):
     m = render_mask(big, capsule_endpoints(model, side)[0], model.capsule_radii) > 0
     exact = m[c.height:2 * c.height, c.width:2 * c.width].sum() / m.sum()
     assert abs(w[0] - exact) < 0.03, (w[0], exact)
+    # the canvases are made once per camera and scale: a finer scale is its own canvas, closer still
+    fine = visible_shares(model, cams, side, scale=0.5)
+    assert abs(fine[0] - exact) < 0.03 and fine[0] != w[0], (fine[0], w[0], exact)
+    np.testing.assert_array_equal(visible_shares(model, cams, side), w)
     far = x.copy()
     far[0] += 6.0
     assert np.all(visible_shares(model, cams, far)[[0, 3]] == 0.0)
