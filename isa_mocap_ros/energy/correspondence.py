@@ -16,11 +16,11 @@ and the pose error of a correspondence is (13.31)
 Here the energy of a pose is the mean of ``err_S²`` over all correspondences of all usable views
 (metres²). Choices (see ``docs/energy.md``):
 
-* **Model contour points.** The predicted pose is rendered per view (its silhouette, then the visible
-  capsule and depth at the contour pixels: :func:`render_labels` there); the outer contour of that silhouette (``cv2.findContours``,
-  subsampled evenly to at most ``n_contour_points`` per view) is back-projected onto the visible
-  capsule surface, and each point is stored in the frame of the joint that carries its capsule
-  (both capsule end joints are fixed in that frame), so it moves rigidly with its limb.
+* **Model contour points.** The predicted pose's silhouette is rendered per view; its outer contour
+  (``cv2.findContours``, subsampled evenly to at most ``n_contour_points`` per view) is back-projected
+  onto the visible capsule surface (capsule and depth at those pixels: ``render_labels_at``), and each
+  point is stored in the frame of the joint that carries its capsule (both capsule end joints are fixed
+  in that frame), so it moves rigidly with its limb.
 * **Matching.** Each model contour pixel is matched to the closest pixel of the image contour
   (outer contours of the foreground mask, ``cv2.findContours``; :class:`scipy.spatial.cKDTree`),
   once, at construction (the ICP step of the paper without its iterations and optic flow).
@@ -124,7 +124,7 @@ def _contour_points(camera: Camera, E: np.ndarray, radii, T: np.ndarray, cap_fra
     :func:`capsule_frames` (computed once per pose for several views, as ``capsules``:
     :func:`~isa_mocap_ros.vision.capsule_data` of ``E``). The silhouette is rendered (rays stop at
     their first hit), the visible capsule and depth found at the chosen contour pixels only: the
-    numbers :func:`~isa_mocap_ros.vision.render_labels` gives there, at about half the cost."""
+    numbers :func:`~isa_mocap_ros.vision.render_labels` gives there, without labelling every pixel."""
     capsules = capsule_data(E, radii) if capsules is None else capsules
     pix = _contour_pixels(render_mask(camera, E, radii, capsules=capsules))
     if len(pix) > n_points:
