@@ -49,12 +49,18 @@ from ._rotations import rotation_mean
 from .resampling import SCHEMES, SELECTION_KERNELS, multinomial
 from .schedules import AdaptiveEss, make_schedule
 
-__all__ = ["Isa", "weighted_estimate", "dynamic_variance", "VARIANCE_READINGS", "C_SCALES"]
+__all__ = ["Isa", "weighted_estimate", "dynamic_variance", "covariance_constant", "VARIANCE_READINGS", "C_SCALES"]
 
 #: Readings of the dynamic variance scheme (13.16); the first is the default (module doc).
 VARIANCE_READINGS = ("population", "selected")
 #: What the constant ``c`` of (13.16) multiplies; the first is the default (module doc).
 C_SCALES = ("covariance", "deviation")
+
+
+def covariance_constant(c: float, c_scale: str) -> float:
+    """The constant (13.16)'s covariance is multiplied with for ``c`` and ``c_scale`` (module doc): ``c``
+    on the covariance, ``c^2`` when ``c`` scales the standard deviation."""
+    return c if c_scale == "covariance" else c * c
 
 
 def weighted_estimate(X: np.ndarray, W: np.ndarray, rotation_blocks=()) -> np.ndarray:
@@ -140,7 +146,7 @@ class Isa(ParticleOptimizer):
             raise OptimError(f"c_scale: expected one of {list(C_SCALES)}, got {c_scale!r}")
         self.c, self.c_scale, self.rho = float(c), c_scale, float(rho)
         #: the constant the covariance of (13.16) is multiplied with
-        self.c_cov = self.c if c_scale == "covariance" else self.c * self.c
+        self.c_cov = covariance_constant(self.c, c_scale)
         if variance not in VARIANCE_READINGS:
             raise OptimError(f"variance: expected one of {list(VARIANCE_READINGS)}, got {variance!r}")
         self.variance = variance

@@ -28,6 +28,7 @@ from numba.extending import overload
 from isa_mocap_ros.energy import _silhouette_kernel as _k
 from isa_mocap_ros.optim import _fast, _fast_so3
 from isa_mocap_ros.optim._base import GenerationInfo, Result
+from isa_mocap_ros.optim.isa import C_SCALES, VARIANCE_READINGS, covariance_constant
 
 __all__ = ["supported", "run_hisa", "HisaRun", "supported_flat", "run_isa", "rotation_mean"]
 
@@ -107,8 +108,8 @@ def supported(opt, energy, prior_active: bool) -> bool:
     return (set(p) <= _PARAMS and p.get("kernel", "s1") in _KERNELS and p.get("schedule") == "adaptive"
             and p.get("resampling", "multinomial") == "multinomial" and opt._initial_population is None
             and opt.init == "normal" and opt.max_iter is None
-            and p.get("variance", "population") in ("population", "selected")
-            and p.get("c_scale", "covariance") in ("covariance", "deviation"))
+            and p.get("variance", VARIANCE_READINGS[0]) in VARIANCE_READINGS
+            and p.get("c_scale", C_SCALES[0]) in C_SCALES)
 
 
 @numba.njit(cache=True)
@@ -283,13 +284,11 @@ class HisaRun:
         self.target = float(p.get("target_ess", 0.5))
         self.c = float(p.get("c", 0.8))
         self.rho = float(p.get("rho", 1e-4))
-        c_scale = p.get("c_scale", "covariance")
         self.population = p.get("variance", "population") == "population"
         if n < 2 or not (0.0 < self.target <= 1.0) or not self.c > 0 or not self.rho >= 0:
             raise OptimError(f"h-isa parameters out of range: n_particles={n}, target_ess={self.target}, "
                              f"c={self.c}, rho={self.rho}")
-        if c_scale == "deviation":      # Isa.c_cov (supported() admits the two values only)
-            self.c = self.c * self.c
+        self.c = covariance_constant(self.c, p.get("c_scale", C_SCALES[0]))     # Isa.c_cov
         self.opt, self.energy, self.max_evals = opt, energy, int(max_evals)
         self.parts = opt.partitions
         self.shares = split_budget(self.max_evals, [len(q) for q in self.parts],
