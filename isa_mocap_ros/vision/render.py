@@ -302,13 +302,17 @@ def _raycast(o, dirs, H, W, axes, tcos, tsin, caps, bs, nb, mode, colors, light,
 def _raycast_at(o, dirs, W, axes, tcos, tsin, caps, bs, nb, zaxis, px, py, out_label,
                 out_depth):  # pragma: no cover - compiled
     """Mode 1 of :func:`_raycast` at the pixels ``(px[i], py[i])`` only: the same tile candidates, the same
-    nearest hit, the same label and depth."""
+    nearest hit, the same label and depth. A tile's candidates are found again only when the tile
+    changes (a contour's pixels come tile by tile)."""
     ntx = (W + 7) // 8
     C = caps.shape[0]
     cand = np.empty(C, np.int64)
+    last, nc = -1, 0
     for i in range(px.shape[0]):
         tile = (py[i] // 8) * ntx + px[i] // 8
-        nc = _tile_candidates(o, axes[tile], tcos[tile], tsin[tile], bs, nb, cand)
+        if tile != last:
+            nc = _tile_candidates(o, axes[tile], tcos[tile], tsin[tile], bs, nb, cand)
+            last = tile
         p = py[i] * W + px[i]
         dx, dy, dz = dirs[p, 0], dirs[p, 1], dirs[p, 2]
         best_t, best_c = _nearest_hit(o, dx, dy, dz, caps, cand, nc, False)
