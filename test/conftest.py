@@ -25,14 +25,27 @@ def _worker_index() -> int:
     return int(wid[2:]) if wid.startswith("gw") and wid[2:].isdigit() else 0
 
 
-def domain_for(worker: int, workers: int, run: int, k: int) -> int:
-    """ROS_DOMAIN_ID (10..99) of a worker's ``k``-th test: worker ``w`` of ``W`` only ever uses ids
-    ``≡ w (mod W)``, so tests running at the same time on different workers never share a domain
-    (a hash of pid and worker did, now and then: a recorder then got another test's masks); ``run``
-    shifts where the cycle starts, so consecutive runs do not reuse the same ids first."""
+def _domain_range() -> tuple[int, int]:
+    """The ROS_DOMAIN_IDs the suite may use: 10..99, or ``ISA_MOCAP_TEST_DOMAINS=LO-HI`` (inclusive),
+    so two suites running at once on one machine (two checkouts) can be kept apart."""
+    text = os.environ.get("ISA_MOCAP_TEST_DOMAINS", "10-99")
+    try:
+        lo, hi = (int(v) for v in text.split("-"))
+    except ValueError:
+        raise ValueError(f"ISA_MOCAP_TEST_DOMAINS={text!r}: expected LO-HI, e.g. 10-40") from None
+    if not 0 <= lo <= hi <= 101:
+        raise ValueError(f"ISA_MOCAP_TEST_DOMAINS={text!r}: ROS domain ids lie in 0..101")
+    return lo, hi
+
+
+def domain_for(worker: int, workers: int, run: int, k: int, lo: int = 10, hi: int = 99) -> int:
+    """ROS_DOMAIN_ID (``lo..hi``) of a worker's ``k``-th test: worker ``w`` of ``W`` only ever uses ids
+    ``≡ w (mod W)`` after ``lo``, so tests running at the same time on different workers never share a
+    domain (a hash of pid and worker did, now and then: a recorder then got another test's masks);
+    ``run`` shifts where the cycle starts, so consecutive runs do not reuse the same ids first."""
     workers = max(1, workers)
-    slots = 90 // workers
-    return 10 + ((run + k) % slots) * workers + worker % workers
+    slots = max(1, (hi - lo + 1) // workers)
+    return lo + ((run + k) % slots) * workers + worker % workers
 
 
 @pytest.fixture
@@ -40,7 +53,7 @@ def ros_domain() -> int:
     """A ROS_DOMAIN_ID of its own for each test (see :func:`domain_for`)."""
     workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
     run = os.getppid() if "PYTEST_XDIST_WORKER" in os.environ else os.getpid()   # the xdist controller's pid
-    return domain_for(_worker_index(), workers, run, next(_domain_counter))
+    return domain_for(_worker_index(), workers, run, next(_domain_counter), *_domain_range())
 
 
 @pytest.fixture
