@@ -23,7 +23,7 @@ from isa_mocap_ros.resources import default_bag, resource_dir
 from isa_mocap_ros.rosenv import ros_env
 
 NS = "/mocap"
-RECORDED = ["/mocap/joint_states", "/mocap/estimator/done", "/mocap/root_pose", "/mocap/prediction/joint_states",
+RECORDED = ["/mocap/joint_states", "/mocap/model", "/mocap/estimator/done", "/mocap/root_pose", "/mocap/prediction/joint_states",
             "/diagnostics", "/mocap/cam*/overlay", "/mocap/cam*/mask", "/mocap/cam0/image_raw", "/mocap/markers",
             "/humans/bodies/*/joint_states", "/humans/bodies/*/urdf"]
 
@@ -93,8 +93,9 @@ def _inspect(bag: Path) -> tuple[int, int | None]:
         n = sum(1 for t in r.topics if t.startswith("/mocap/cam") and t.endswith("/image_raw"))
         if n == 0:
             raise SystemExit(f"isa-mocap run: {bag} has no /mocap/cam<i>/image_raw topics")
-        gt = "/mocap/ground_truth/joint_states"
-        if gt not in r.topics:
+        gt = next((t for t in ("/mocap/ground_truth/joint_states", "/mocap/ground_truth/markers") if t in r.topics),
+                  None)
+        if gt is None:
             return n, None
         first_truth = next((ma.header_stamp_ns_from_cdr(m.data) for m in r.messages([gt])), None)
         stamps = {ma.header_stamp_ns_from_cdr(m.data) for m in r.messages(["/mocap/cam0/image_raw"])}

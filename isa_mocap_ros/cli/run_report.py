@@ -119,9 +119,14 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
 
     from isa_mocap_ros.body import make_model
     from isa_mocap_ros.cli.track import read_sequence
-    from isa_mocap_ros.eval.report import accuracy, plot_sequence
+    from isa_mocap_ros.eval.report import plot_sequence
 
     model = make_model(args.model or 39)
+    from isa_mocap_ros.cli.evaluate import _published_model
+
+    published = _published_model(out / "estimates")   # the estimator's own description (/mocap/model)
+    if published is not None and published.dof == model.dof:
+        model = published
     rec = read_estimates(out / "estimates", model)
     poses = rec["poses"]
     lat = np.array(rec["latencies_ms"], dtype=float)
@@ -161,16 +166,23 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
     est = sorted(poses)
     summary["dropped_while_initializing"] = (_first_gap(est, [f.stamp_ns for f in seq.frames])
                                              if len(est) >= 2 else None)
-    stamps = [f.stamp_ns for f in seq.frames if f.truth is not None and f.stamp_ns in poses]
-    if seq.has_truth and stamps:
-        truth = {f.stamp_ns: f.truth for f in seq.frames if f.truth is not None}
-        P = np.array([poses[s] for s in stamps])
-        T = np.array([truth[s] for s in stamps])
-        acc = accuracy(model, P, seq.truth_model, T)
+    from isa_mocap_ros.eval.report import plot_marker_score, score
+
+    acc = score(model, seq, poses)
+    if acc is not None:
+        stamps = acc.pop("stamps")
         summary.update(acc)
+        P = np.array([poses[s] for s in stamps])
         t = (np.array(stamps) - stamps[0]) / 1e9
-        plot_sequence(out / "knees_and_error.png", model, P, seq.truth_model, T, times_s=t,
-                      title=f"{summary['optimizer']}, {summary['evals_per_frame']} evals/frame, {model.dof} DOF")
+        title = f"{summary['optimizer']}, {summary['evals_per_frame']} evals/frame, {model.dof} DOF"
+        if acc["scored_by"] == "markers":
+            fm = {f.stamp_ns: f.truth_markers for f in seq.frames}
+            plot_marker_score(out / "knees_and_error.png", model, P, list(seq.truth_marker_names),
+                              np.array([fm[s] for s in stamps]), times_s=t, title=title)
+        else:
+            truth = {f.stamp_ns: f.truth for f in seq.frames if f.truth is not None}
+            plot_sequence(out / "knees_and_error.png", model, P, seq.truth_model,
+                          np.array([truth[s] for s in stamps]), times_s=t, title=title)
     else:
         summary["frames"] = len(poses)
     ov = rec["overlays"]

@@ -8,7 +8,8 @@ Publishes ``joint_states`` (JointState, ``model.dof_names``; root rotation as ro
 the exported URDF draws it), ``root_pose`` (PoseStamped), ``markers`` (MarkerArray skeleton),
 ``estimator/done`` (std_msgs/Header, one per processed frame set, tracked or not: the lockstep
 topic for the player), ``cam<i>/overlay`` (optional), ``/diagnostics`` and the REP-155 view
-``/humans/bodies/<id>/joint_states`` + latched ``/humans/bodies/<id>/urdf``.
+``/humans/bodies/<id>/joint_states`` + latched ``/humans/bodies/<id>/urdf``; latched ``model`` (String YAML:
+the tracking body model with its shape, the schema of ``/mocap/ground_truth/model``).
 
 Frame sets are synchronized exactly or approximately (:mod:`isa_mocap_ros.tracking.sync`); a
 worker thread runs the tracker so callbacks never block. In real-time mode a frame set that waits
@@ -253,6 +254,12 @@ class EstimatorNode(Node):
         self.pub_hri = self.create_publisher(JointState, f"/humans/bodies/{self.body_id}/joint_states", qos.RELIABLE)
         self.pub_urdf = self.create_publisher(String, f"/humans/bodies/{self.body_id}/urdf", qos.LATCHED)
         self.pub_urdf.publish(String(data=hri_urdf(self.model, self.body_id)))
+        # our own body model description (the schema of /mocap/ground_truth/model, with the shape we
+        # track with), latched, so a recording of our joint states describes itself
+        from isa_mocap_ros.sequence import model_to_yaml
+
+        self.pub_model = self.create_publisher(String, "model", qos.LATCHED)
+        self.pub_model.publish(String(data=model_to_yaml(self.model, role="estimator")))
         self.pub_overlay = [self.create_publisher(Image, f"cam{v}/overlay", qos.RELIABLE)
                             for v in range(self.n_views)] if self.overlay else []
         self.create_timer(0.05, self._poll_partial)
