@@ -146,3 +146,51 @@ def test_marker_score_equals_a_recomputation():
     Pt = {n: T[:, names.index(n)] for n in shared}
     d = np.concatenate([knee(Pe, s) - knee(Pt, s) for s in ("left", "right")])
     assert sc["knee_rmse_deg"] == pytest.approx(np.sqrt(np.mean(d ** 2)))
+
+
+def test_track_scores_a_markers_only_bag_and_the_result_describes_itself(tmp_path):
+    """A mesh bag without ground-truth joint states is scored by marker name; the figures equal a
+    recomputation from the estimates bag alone (its /mocap/joint_states and /mocap/model)."""
+    from isa_mocap_ros.bag import BagReader, BagWriter
+    from isa_mocap_ros.body import joint_positions, joint_state_to_pose
+    from isa_mocap_ros.cli.main import main
+    from isa_mocap_ros.cli.synth import write_bag
+    from isa_mocap_ros.sequence import model_from_yaml
+    from msg_adapters import from_cdr, joint_state_to_arrays
+
+    full, only = tmp_path / "full", tmp_path / "markers_only"
+    write_bag(_synth_args("walk", full, duration_s=0.2, views=3))
+    with BagReader(full) as r, BagWriter(only) as w:
+        keep = [t for t in r.topics if t != "/mocap/ground_truth/joint_states"]
+        for t in keep:
+            w.add_topic(t, r.topics[t].type, qos=list(r.topics[t].offered_qos) or None)
+        for m in r.messages(keep):
+            w.write(m.topic, m.data, m.log_time_ns)
+        truth = {}
+        for m in r.messages(["/mocap/ground_truth/markers"]):
+            msg = from_cdr(m.data, m.type)
+            truth[m.log_time_ns] = np.array([(p.position.x, p.position.y, p.position.z) for p in msg.poses])
+    out = tmp_path / "tr"
+    assert main(["track", str(only), "--out", str(out), "--frames", "3", "--evals", "60", "--use-masks",
+                 "--no-progress", "--init", "auto"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["scored_by"] == "markers" and s["frames"] == 3
+    with BagReader(out / "estimates") as bag:
+        model = model_from_yaml(from_cdr(*next((m.data, m.type) for m in bag.messages(["/mocap/model"]))).data)[0]
+        est = {}
+        for m in bag.messages(["/mocap/joint_states"]):
+            names, q = joint_state_to_arrays(from_cdr(m.data, m.type))
+            pos = dict(zip(names, q))
+            est[m.log_time_ns] = joint_state_to_pose(model, np.array([pos[n] for n in model.dof_names]))
+    with BagReader(full) as r:
+        import yaml
+        info = yaml.safe_load(from_cdr(*next((m.data, m.type) for m in r.messages(["/mocap/ground_truth/model"]))).data)
+    tn = info["model"]["marker_joints"]
+    stamps = sorted(est)
+    errs = []
+    for st in stamps:
+        J = joint_positions(model, est[st])[0]
+        names = [model.joint_names[j] for j in model.markers if model.joint_names[j] in tn]
+        errs.append(np.mean([np.linalg.norm(J[model.joint_names.index(n)] - truth[st][tn.index(n)]) for n in names]))
+    assert s["mpjpe_mm"] == pytest.approx(1000 * np.mean(errs), rel=1e-9)
+    assert s["max_frame_error_mm"] == pytest.approx(1000 * np.max(errs), rel=1e-9)
