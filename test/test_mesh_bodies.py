@@ -85,6 +85,25 @@ def test_mesh_render_is_a_person_and_fast_enough():
     assert ms_per_view < 200, f"{ms_per_view:.1f} ms a view (posing included)"
 
 
+def test_mesh_bag_is_the_default_and_byte_identical(tmp_path):
+    from isa_mocap_ros.bag import BagReader
+    from isa_mocap_ros.cli.main import main
+
+    def msgs(p):
+        with BagReader(p) as r:
+            return [(m.topic, m.log_time_ns, m.data) for m in r.messages()]
+    a, b = tmp_path / "a", tmp_path / "b"
+    for p in (a, b):      # the CLI's defaults: a mesh body
+        assert main(["synth", "walk", str(p), "--views", "2", "--width", "96", "--height", "72", "--duration-s", "0.1",
+                     "--subject", "random", "--seed", "3", "--no-progress"]) == 0
+    ma = msgs(a)
+    assert ma == msgs(b)
+    import yaml
+    from msg_adapters import from_cdr
+    desc = yaml.safe_load(from_cdr(next(d for t, _, d in ma if t.endswith("/model")), "std_msgs/msg/String").data)
+    assert desc["body"]["kind"] == "mesh" and desc["body"]["subject"]["name"] == "random"
+
+
 @pytest.mark.skipif(not CMU_WALK.is_file(), reason=f"{CMU_WALK} absent (shared data)")
 def test_bvh_mesh_bag_markers_match_the_bvh_joints(tmp_path):
     """Markers of a BVH-driven mesh bag = the BVH's own joints scaled by bvh_scale and shifted by

@@ -9,4 +9,4 @@ tracking/synthesis code (``cli.track.track_bag``, ``cli.synth.write_bag``).
 from __future__ import annotations
 
 #: benchmark names, each a module of this package (``isa-mocap bench NAME``)
-BENCHES: list[str] = ["ackley", "adapters", "render", "energy", "compare", "robustness", "speed"]
+BENCHES: list[str] = ["ackley", "adapters", "render", "energy", "compare", "robustness", "speed", "mesh_baseline"]

@@ -102,20 +102,6 @@ def _diag_energies(path: Path) -> list[tuple[int, float]]:
     return out
 
 
-def _published_model(est_path: Path):
-    """The tracking model the estimates bag names on ``/mocap/model`` (None when it has none)."""
-    from isa_mocap_ros.bag import BagReader
-    from isa_mocap_ros.sequence import model_from_yaml
-    from msg_adapters import from_cdr
-
-    with BagReader(est_path) as bag:
-        if "/mocap/model" not in bag.topics:
-            return None
-        for m in bag.messages(["/mocap/model"]):
-            return model_from_yaml(from_cdr(m.data, m.type).data)[0]
-    return None
-
-
 def evaluate(args) -> dict:
     """Do the work of ``isa-mocap evaluate`` (raises ValueError on bad input); return the evaluation."""
     from isa_mocap_ros.body import make_model
@@ -133,7 +119,9 @@ def evaluate(args) -> dict:
     if not (seq.has_truth and seq.truth_model is not None) and not seq.has_marker_truth:
         raise ValueError(f"--truth: expected ground truth (/mocap/ground_truth/*) in {truth_path}, received none")
     tm = seq.truth_model
-    published = _published_model(est_path)
+    from isa_mocap_ros.cli.run_report import published_model
+
+    published = published_model(est_path)
     if published is not None and args.model is None and args.shape == "auto":
         model, shape = published, "published by the tracker (/mocap/model)"
     else:

@@ -113,6 +113,20 @@ def _first_gap(estimated: list[int], played: list[int]) -> int:
     return 0
 
 
+def published_model(est_path: Path):
+    """The tracking model the estimates bag names on ``/mocap/model`` (None when it has none)."""
+    from isa_mocap_ros.bag import BagReader
+    from isa_mocap_ros.sequence import model_from_yaml
+    from msg_adapters import from_cdr
+
+    with BagReader(est_path) as bag:
+        if "/mocap/model" not in bag.topics:
+            return None
+        for m in bag.messages(["/mocap/model"]):
+            return model_from_yaml(from_cdr(m.data, m.type).data)[0]
+    return None
+
+
 def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary: dict,
                  wall_seconds: float) -> int:
     import cv2
@@ -122,9 +136,7 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
     from isa_mocap_ros.eval.report import plot_sequence
 
     model = make_model(args.model or 39)
-    from isa_mocap_ros.cli.evaluate import _published_model
-
-    published = _published_model(out / "estimates")   # the estimator's own description (/mocap/model)
+    published = published_model(out / "estimates")   # the estimator's own description (/mocap/model)
     if published is not None and published.dof == model.dof:
         model = published
     rec = read_estimates(out / "estimates", model)

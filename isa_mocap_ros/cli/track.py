@@ -321,7 +321,10 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     if collect is not None:
         collect.update(model=model, truth_model=seq.truth_model, estimates=dict(estimates), energies=dict(energies),
                        truth={f.index: f.truth for f in seq.frames[first:stop:stride] if f.truth is not None},
-                       init_frame=init_frame, stamps=stamp_of, step_seconds=dict(step_seconds))
+                       init_frame=init_frame, stamps=stamp_of, step_seconds=dict(step_seconds),
+                       truth_markers={f.index: f.truth_markers for f in seq.frames[first:stop:stride]
+                                      if f.truth_markers is not None},
+                       truth_marker_names=tuple(seq.truth_marker_names), body=seq.body_kind)
     summary: dict = {"bag": str(bag_path), "out": str(out), "optimizer": args.optimizer, "evals_per_frame": args.evals,
                      "stride": stride,
                      "optimizer_params": cfg.params(), "model_dof": model.dof, "seed": args.seed,
