@@ -40,7 +40,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", default="docs/results/mesh_baseline.json", metavar="FILE", help="where to write the results")
 
 
-def collect(*, frames: int = 30, seeds=(0, 1), compare_frames: int = 10, jobs: int = 2, out: Path) -> dict:
+def collect(*, frames: int = 30, seeds=(0, 1), compare_frames: int = 10, jobs: int = 2, out: Path,
+            quick: bool = False) -> dict:
+    """Both bodies through the reduced designs (``quick``: the benches' own ``--quick`` designs, a smoke test)."""
     from isa_mocap_ros.bench import robustness as br
     from isa_mocap_ros.bench.compare import run_design
     from isa_mocap_ros.eval.compare import make_design, summarize
@@ -48,12 +50,14 @@ def collect(*, frames: int = 30, seeds=(0, 1), compare_frames: int = 10, jobs: i
     t0 = time.perf_counter()
     res: dict = {"robustness": {}, "compare": {}}
     for body in BODIES:
-        d = br.make_design("default", seeds=tuple(seeds), body=body, frames=frames)
+        d = br.make_design("quick", body=body) if quick else \
+            br.make_design("default", seeds=tuple(seeds), body=body, frames=frames)
         res["robustness"][body] = br.collect(d, cache=out / "cache" / "robustness", out=out / f"robustness_{body}",
                                              jobs=jobs)
-        cd = make_design("default", body=body)
-        cd = replace(cd, algorithms=COMPARE_ALGORITHMS, models=(39,), budgets=(1500,), seeds=(0,),
-                     frames=compare_frames)
+        cd = make_design("quick" if quick else "default", body=body)
+        if not quick:
+            cd = replace(cd, algorithms=COMPARE_ALGORITHMS, models=(39,), budgets=(1500,), seeds=(0,),
+                         frames=compare_frames)
         recs = run_design(cd, out / f"compare_{body}", jobs=jobs, progress=False)
         s = summarize(recs)
         s["design"] = cd.to_dict()
@@ -61,7 +65,7 @@ def collect(*, frames: int = 30, seeds=(0, 1), compare_frames: int = 10, jobs: i
                                            "frames")} for r in recs]
         res["compare"][body] = s
     res["settings"] = {"frames": frames, "seeds": list(seeds), "compare_frames": compare_frames,
-                       "compare_algorithms": list(COMPARE_ALGORITHMS)}
+                       "compare_algorithms": list(COMPARE_ALGORITHMS), "quick": quick}
     res["seconds"] = round(time.perf_counter() - t0, 1)
     return res
 
@@ -69,11 +73,17 @@ def collect(*, frames: int = 30, seeds=(0, 1), compare_frames: int = 10, jobs: i
 def render_markdown(res: dict) -> str:
     """Side-by-side tables (mesh | capsules) of :func:`collect`'s output."""
     st = res["settings"]
-    L = ["Reduced runs (`isa-mocap bench mesh_baseline`, module docstring): robustness on the default sequences cut to "
-         f"{st['frames']} frames, tracker seeds {', '.join(map(str, st['seeds']))}; comparison of "
-         f"{', '.join(st['compare_algorithms'])} at 39 DOF / 1500 evaluations, seed 0, first {st['compare_frames']} "
-         "frames. Mesh: a skinned human (the average man) scored by its skeleton's joint centres; capsules: the "
-         "tracking model itself (the control). Today's tracker on meshes: the baseline part 2 starts from.", "",
+    if st.get("quick"):
+        desc = ("> **Smoke run** (the robustness and comparison benches' `--quick` designs, on both bodies): the "
+                "numbers say nothing about the tracker.")
+    else:
+        desc = ("Reduced runs (`isa-mocap bench mesh_baseline`, module docstring): robustness on the default sequences "
+                f"cut to {st['frames']} frames, tracker seeds {', '.join(map(str, st['seeds']))}; comparison of "
+                f"{', '.join(st['compare_algorithms'])} at 39 DOF / 1500 evaluations, seed 0, first "
+                f"{st['compare_frames']} frames. Mesh: a skinned human (the average man) scored by its skeleton's "
+                "joint centres (knee angles in 3-D); capsules: the tracking model itself (the control). Today's "
+                "tracker on meshes: the baseline part 2 starts from.")
+    L = [desc, "",
          "| condition | sequence | mesh knee RMSE | mesh mean joint error | capsules knee RMSE | "
          "capsules mean joint error |", "|---|---|---|---|---|---|"]
     rob = res["robustness"]

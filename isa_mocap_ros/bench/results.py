@@ -146,8 +146,7 @@ def _bench_robustness(quick: bool, ctx: dict) -> dict:
 def _bench_mesh_baseline(quick: bool, ctx: dict) -> dict:
     from isa_mocap_ros.bench import mesh_baseline as mb
 
-    return mb.collect(frames=4 if quick else 30, seeds=(0,) if quick else (0, 1), compare_frames=3 if quick else 10,
-                      jobs=ctx["jobs"], out=ctx["out"] / "mesh_baseline")
+    return mb.collect(jobs=ctx["jobs"], out=ctx["out"] / "mesh_baseline", quick=quick)
 
 
 def _bench_speed(quick: bool, ctx: dict) -> dict:
