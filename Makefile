@@ -10,14 +10,19 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export PYTHONUNBUFFERED := 1
 PYTEST_ARGS ?=
 
-.PHONY: venv test demo bench clean-venv
+.PHONY: venv models test demo bench clean-venv
 
-venv: $(STAMP)
+venv: $(STAMP) models
+
+# The BlazePose landmark model (vision/landmark_model.py): taken from the mediapipe wheel on PyPI into
+# ~/.cache/isa_mocap_ros/models (or $$ISA_MOCAP_MODEL_DIR); kept when present with the right digest.
+models: $(STAMP)
+	$(PY) -m isa_mocap_ros.vision.landmark_model
 
 $(STAMP): setup.py setup.cfg package.xml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m pip install --quiet -e '.[test,keypoints]'
 	@touch $(STAMP)
 
 test: venv
