@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import importlib
 
-BENCHES: list[str] = ["ackley", "adapters", "render", "energy", "compare", "robustness", "speed"]
+BENCHES: list[str] = ["ackley", "adapters", "render", "energy", "compare", "robustness", "speed", "keypoints"]
 
 
 def register(sub) -> None:
