@@ -21,7 +21,7 @@ def tree(folder: str) -> list[tuple[str, list[str]]]:
 
 
 # One console script per node, plus the ``isa-mocap`` CLI.
-NODES = ["player", "recorder", "camera", "segmentation", "prediction", "estimator"]
+NODES = ["player", "recorder", "camera", "segmentation", "prediction", "estimator", "keypoints"]
 
 setup(
     name=package_name,
