@@ -18,6 +18,14 @@ Two kinds of sequence (docs/keypoints.md):
 Reported per kind and per landmark: median and mean pixel error, the error relative to the crop side
 (%), and the fraction of left/right swaps (frames where the detected hips+knees+ankles fit the
 reference better with left and right exchanged).
+
+A third kind, ``track``, tracks capsule renders (``isa-mocap synth`` with exact masks, 4 views at
+320x240, 10 empty frames, ``--track-s`` seconds of each motion, bag seeds ``--seeds``) with
+``isa-mocap track``'s code and the automatic initialization, three ways: without the keypoint term, with
+it on the initialized frame only, and on that frame and every ``--every``-th frame (weight
+``--weight``). Scored per run: mean joint error (Eq. 20), frames tracked facing backwards (estimate's
+heading more than 90 degrees from the truth's), leg swaps (frames whose left/right knee and ankle fit
+the truth better exchanged), and the detection time per frame set that had keypoints.
 """
 from __future__ import annotations
 
@@ -48,12 +56,19 @@ _LEGS = ("hip", "knee", "ankle")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--kinds", default="real,synth", help="comma-separated: real, synth (default both)")
+    p.add_argument("--kinds", default="real,synth", help="comma-separated: real, synth, track (default real,synth)")
     p.add_argument("--step", type=int, default=5, help="every STEP-th frame (default 5)")
     p.add_argument("--data", default=str(_REAL), help="the Pose2Sim demo folder")
     p.add_argument("--width", type=int, default=640, help="synthetic image width (default 640)")
     p.add_argument("--height", type=int, default=480, help="synthetic image height (default 480)")
     p.add_argument("--synth-s", type=float, default=4.0, help="seconds of each synthetic motion (default 4)")
+    p.add_argument("--motions", default="walk,jog,walk_turns,wave,box,cmu",
+                   help="track kind: generated motions and/or 'cmu' (the CMU walk BVH, if present)")
+    p.add_argument("--seeds", default="0,1,2", help="track kind: bag seeds (default 0,1,2)")
+    p.add_argument("--track-s", type=float, default=3.0, help="track kind: seconds of each motion (default 3)")
+    p.add_argument("--weight", type=float, default=1.0, help="track kind: keypoint weight (default 1)")
+    p.add_argument("--every", type=int, default=5, help="track kind: every K-th frame (default 5)")
+    p.add_argument("--cache", default="out/bench_keypoints", help="track kind: bags and tracking output folder")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
 
 
@@ -205,6 +220,83 @@ def bench_synth(det: PoseLandmarker, width: int, height: int, step: int, seconds
     return out
 
 
+def _heading(x: np.ndarray) -> float:
+    from isa_mocap_ros.geometry import exp_so3
+    f = exp_so3(np.asarray(x[3:6], float)) @ [1.0, 0.0, 0.0]
+    return float(np.arctan2(f[1], f[0]))
+
+
+def _track_one(bag: Path, out: Path, *, weight: float, every: int) -> dict:
+    from isa_mocap_ros.cli.track import track_bag
+    from isa_mocap_ros.eval import marker_positions, shared_markers
+
+    ns = argparse.Namespace(
+        bag=str(bag), out=str(out), optimizer="h-isa", evals=1500, params=None, model=None, seed=0, frames=None,
+        start=0, use_masks=True, learn_frames=None, shape="truth", init="auto", predictor=None, prior=None,
+        prior_eta=0.0, energy="fast", overwrite=True, no_progress=True, keypoint_weight=weight, keypoint_every=every)
+    got: dict = {}
+    s = track_bag(ns, collect=got)
+    model, tm = got["model"], got["truth_model"]
+    idx = [k for k in sorted(got["estimates"]) if k in got["truth"]]
+    P = np.array([got["estimates"][k] for k in idx])
+    T = np.array([got["truth"][k] for k in idx])
+    back = sum(abs(np.angle(np.exp(1j * (_heading(p) - _heading(t))))) > np.pi / 2 for p, t in zip(P, T))
+    legs = [f"{side}_{j}" for side in ("left", "right") for j in ("knee", "ankle")]
+    names = [n for n in shared_markers(model, tm) if n in legs]
+    Pe, Pt = marker_positions(model, P, joints=names), marker_positions(tm, T, joints=names)
+    swap_idx = [names.index(n.replace("left", "RIGHT").replace("right", "left").replace("RIGHT", "right"))
+                for n in names]
+    straight = np.linalg.norm(Pe - Pt, axis=2).sum(axis=1)
+    swapped = np.linalg.norm(Pe[:, swap_idx] - Pt, axis=2).sum(axis=1)
+    return dict(mpjpe_mm=float(s["mpjpe_mm"]), frames=len(idx), backwards=int(back),
+                leg_swaps=int(np.sum(swapped < straight)), keypoint_frames=s["keypoint_frames"],
+                keypoint_ms_per_frame_set=s["keypoint_ms_per_frame_set"], fps=float(s["fps"]))
+
+
+def bench_track(args) -> dict:
+    from isa_mocap_ros.cli.synth import write_bag
+
+    cache = Path(args.cache)
+    cache.mkdir(parents=True, exist_ok=True)
+    bvh = _REAL.parents[1] / "mocap" / "cmu_131_01_walk.bvh"
+    motions = [m.strip() for m in args.motions.split(",") if m.strip()]
+    seeds = [int(v) for v in args.seeds.split(",") if v.strip()]
+    configs = {"off": (0.0, 0), "init": (args.weight, 0), f"every {args.every}": (args.weight, args.every)}
+    out: dict = {}
+    for motion in motions:
+        src = str(bvh) if motion == "cmu" else motion
+        if motion == "cmu" and not bvh.is_file():
+            print(f"bench keypoints: {bvh} not found; skipping cmu", file=sys.stderr)
+            continue
+        for seed in seeds:
+            bag = cache / f"{motion}_s{seed}"
+            if not (bag / "metadata.yaml").is_file():
+                write_bag(argparse.Namespace(
+                    motion=src, out=str(bag), views=None, width=None, height=None, fps=30.0, model=39,
+                    start_s=1.0 if motion == "cmu" else 0.0, duration_s=args.track_s, empty_frames=10, noise=0.0,
+                    occluders=0, rig=None, seed=seed, bvh_scale=None, masks=True, compression="zstd", chunk_mb=32.0,
+                    overwrite=True, no_progress=True))
+            for name, (w, k) in configs.items():
+                r = _track_one(bag, cache / f"{motion}_s{seed}_{name.replace(' ', '')}", weight=w, every=k)
+                out.setdefault(name, {})[f"{motion} s{seed}"] = r
+                print(f"  {motion} seed {seed} {name:8s} mpjpe {r['mpjpe_mm']:7.1f} mm  backwards {r['backwards']:3d}"
+                      f"/{r['frames']}  leg swaps {r['leg_swaps']:3d}  keypoint frames {r['keypoint_frames']:3d}"
+                      f"  {r['keypoint_ms_per_frame_set'] or 0:6.1f} ms/set", file=sys.stderr, flush=True)
+    return out
+
+
+def _print_track(res: dict) -> None:
+    print("\n== track (capsule renders, automatic initialization) ==")
+    print(f"{'config':10s} {'runs':>4s} {'mpjpe mm':>9s} {'runs backwards':>14s} {'backwards frames':>16s} "
+          f"{'leg swaps':>9s} {'ms/set (kp frames)':>18s}")
+    for name, runs in res.items():
+        r = list(runs.values())
+        ms = [x["keypoint_ms_per_frame_set"] for x in r if x["keypoint_ms_per_frame_set"]]
+        print(f"{name:10s} {len(r):4d} {np.mean([x['mpjpe_mm'] for x in r]):9.1f} "
+              f"{sum(x['backwards'] > 0 for x in r):14d} {sum(x['backwards'] for x in r):16d} "
+              f"{sum(x['leg_swaps'] for x in r):9d} {np.mean(ms) if ms else 0:18.1f}")
+
+
 def _print(kind: str, res: dict) -> None:
     print(f"\n== {kind} ==")
     print(f"{'sequence':18s} {'views':>5s} {'score':>6s} {'med px':>7s} {'mean px':>8s} {'med %box':>8s} "
@@ -221,13 +313,15 @@ def _print(kind: str, res: dict) -> None:
 
 def run(args: argparse.Namespace) -> int:
     kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
-    bad = [k for k in kinds if k not in ("real", "synth")]
+    bad = [k for k in kinds if k not in ("real", "synth", "track")]
     if bad or args.step < 1:
         print(f"isa-mocap bench keypoints: error: --kinds {bad} / --step {args.step}: expected real, synth and "
               "a step >= 1", file=sys.stderr)
         return 2
-    det = PoseLandmarker()
     results: dict = {}
+    if "track" in kinds:
+        results["track"] = bench_track(args)
+    det = PoseLandmarker() if {"real", "synth"} & set(kinds) else None
     if "real" in kinds:
         root = Path(args.data)
         if not (root / "balancing").is_dir():
@@ -242,5 +336,5 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(results, indent=1))
     else:
         for kind, res in results.items():
-            _print(kind, res)
+            _print_track(res) if kind == "track" else _print(kind, res)
     return 0
