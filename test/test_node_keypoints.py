@@ -1,5 +1,6 @@
 """Keypoint node as a real process: BlazePose landmarks of a rendered person on cam<i>/keypoints,
-every k-th frame, source headers, empty masks give empty polygons, bad masks are dropped."""
+every k-th frame, image and mask paired in either order, source headers, empty masks give empty
+polygons, bad masks are dropped."""
 from __future__ import annotations
 
 import numpy as np
@@ -62,9 +63,10 @@ def test_node_publishes_landmarks_every_k_frames(model_file, rosenv, spawn, tmp_
                 im.header = ma.make_header(stamp, f"cam{v}_optical_frame")
                 mk = ma.array_to_image(masks[v], "mono8")
                 mk.header = im.header
-                img_pubs[v].publish(im)
+                first, second = (mask_pubs, img_pubs) if f == 2 else (img_pubs, mask_pubs)   # either order pairs
+                first[v].publish(mk if f == 2 else im)
                 spin_until(ex, lambda: False, 0.05)
-                mask_pubs[v].publish(mk)
+                second[v].publish(im if f == 2 else mk)
             spin_until(ex, lambda: False, 0.05)
         assert spin_until(ex, lambda: all(len(g) >= 2 for g in got), 60), (got, proc.output())
         # an empty mask: "looked, nobody"; a mask of the wrong size: dropped with a log line

@@ -10,9 +10,9 @@ A node of its own, not a stage of the segmentation node: the landmark model cost
 its own process it neither delays the masks the estimator waits for nor shares their thread, and a
 network without it (or without the model file) runs as before.
 
-Per view ``i`` it keeps the latest few ``cam<i>/image_raw`` (sensor-data QoS) by stamp; when the
-``cam<i>/mask`` of the same stamp arrives (the segmentation node copies the image header) and the
-frame is one of every ``every_k_frames`` (counted per view from the first mask), it crops the square
+Per view ``i`` it pairs ``cam<i>/image_raw`` and ``cam<i>/mask`` (sensor-data QoS) by stamp (the
+segmentation node copies the image header; either may arrive first, the last 8 unpaired of each are
+kept); for a pair that is one of every ``every_k_frames`` (counted per view over pairs), it crops the square
 around the mask's foreground (:func:`~isa_mocap_ros.vision.landmarks.box_from_mask`), runs
 :class:`~isa_mocap_ros.vision.landmarks.PoseLandmarker` and publishes ``cam<i>/keypoints``
 (``geometry_msgs/PolygonStamped``, x=u, y=v, z=confidence, the image's header; an empty polygon when
@@ -42,7 +42,7 @@ from isa_mocap_ros.vision.landmarks import PoseLandmarker, box_from_mask
 __all__ = ["KeypointNode", "main"]
 
 ENCODINGS = ("rgb8", "bgr8")
-_KEEP_IMAGES = 8          # images kept per view while their mask is on its way
+_KEEP = 8                 # unpaired images (or masks) kept per view while the other is on its way
 
 
 class KeypointNode(Node):
@@ -65,68 +65,73 @@ class KeypointNode(Node):
             raise ValueError(str(exc)) from None
         self.problems = ProblemLog(self)
         self.images: list[OrderedDict[int, Image]] = [OrderedDict() for _ in range(self.n_views)]
+        self.masks: list[OrderedDict[int, Image]] = [OrderedDict() for _ in range(self.n_views)]
+        self.unpaired = [0] * self.n_views
         self.frames_seen = [0] * self.n_views
         self.published = [0] * self.n_views
         self.latency_s: deque[float] = deque(maxlen=1000)
         self.pubs = [self.create_publisher(PolygonStamped, f"cam{i}/keypoints", qos.RELIABLE,
                                            qos_overriding_options=QOS_OVERRIDES) for i in range(self.n_views)]
         for i in range(self.n_views):
-            self.create_subscription(Image, f"cam{i}/image_raw", self._image_cb(i), qos.SENSOR_DATA,
+            self.create_subscription(Image, f"cam{i}/image_raw", self._pair_cb(i, "image"), qos.SENSOR_DATA,
                                      qos_overriding_options=QOS_OVERRIDES)
-            self.create_subscription(Image, f"cam{i}/mask", self._mask_cb(i), qos.SENSOR_DATA,
+            self.create_subscription(Image, f"cam{i}/mask", self._pair_cb(i, "mask"), qos.SENSOR_DATA,
                                      qos_overriding_options=QOS_OVERRIDES)
         self.get_logger().info(f"keypoints: {self.n_views} views, every {self.every_k} frame(s), model "
                                f"{self.detector.model_path}")
 
-    def _image_cb(self, v: int):
-        store = self.images[v]
+    def _pair_cb(self, v: int, kind: str):
+        """Callback of ``cam<v>/image_raw`` (kind "image") or ``cam<v>/mask``: the second of the pair of
+        one stamp to arrive (either order) runs the detection; an unpaired message waits among the last
+        :data:`_KEEP` of its kind, then ages out (counted in :attr:`unpaired`)."""
+        mine = (self.images if kind == "image" else self.masks)[v]
+        other = (self.masks if kind == "image" else self.images)[v]
 
-        def cb(msg: Image) -> None:
-            store[ma.stamp_to_ns(msg.header)] = msg
-            while len(store) > _KEEP_IMAGES:
-                store.popitem(last=False)
-        return cb
-
-    def _mask_cb(self, v: int):
         def cb(msg: Image) -> None:
             stamp = ma.stamp_to_ns(msg.header)
-            image = self.images[v].pop(stamp, None)
-            if image is None:
-                self.problems.report(f"mask{v}:image", f"cam{v}/mask at {stamp} ns: no cam{v}/image_raw of that "
-                                     "stamp received; frame skipped")
+            partner = other.pop(stamp, None)
+            if partner is None:
+                mine[stamp] = msg
+                while len(mine) > _KEEP:
+                    mine.popitem(last=False)
+                    self.unpaired[v] += 1
                 return
-            k = self.frames_seen[v]
-            self.frames_seen[v] += 1
-            if k % self.every_k:
-                return
-            t0 = time.perf_counter()
-            try:
-                if image.encoding not in ENCODINGS:
-                    raise ma.AdapterError("Image.encoding", f"one of {', '.join(ENCODINGS)}", image.encoding)
-                img = ma.image_to_array(image)
-                mask = ma.image_to_array(msg)
-                if mask.shape[:2] != img.shape[:2]:
-                    raise ma.AdapterError("mask size", f"the image's {img.shape[1]}x{img.shape[0]}",
-                                          f"{mask.shape[1]}x{mask.shape[0]}")
-                box = box_from_mask(mask if mask.ndim == 2 else mask[..., 0], scale=self.box_scale)
-                out = ma.keypoints_to_polygon(None, None, image.header)
-                if box is not None:
-                    lm = self.detector.detect(img, box, bgr=image.encoding == "bgr8")
-                    if lm.score >= self.min_score:
-                        out = ma.keypoints_to_polygon(lm.uv, lm.confidence, image.header)
-            except (ma.AdapterError, VisionError) as exc:
-                self.problems.report(f"view{v}:{type(exc).__name__}", f"cam{v} frame at {stamp} ns dropped: {exc}")
-                return
-            self.published[v] += 1
-            self.pubs[v].publish(out)
-            self.latency_s.append(time.perf_counter() - t0)
+            image, mask = (msg, partner) if kind == "image" else (partner, msg)
+            self._detect(v, stamp, image, mask)
         return cb
+
+    def _detect(self, v: int, stamp: int, image: Image, mask_msg: Image) -> None:
+        k = self.frames_seen[v]
+        self.frames_seen[v] += 1
+        if k % self.every_k:
+            return
+        t0 = time.perf_counter()
+        try:
+            if image.encoding not in ENCODINGS:
+                raise ma.AdapterError("Image.encoding", f"one of {', '.join(ENCODINGS)}", image.encoding)
+            img = ma.image_to_array(image)
+            mask = ma.image_to_array(mask_msg)
+            if mask.shape[:2] != img.shape[:2]:
+                raise ma.AdapterError("mask size", f"the image's {img.shape[1]}x{img.shape[0]}",
+                                      f"{mask.shape[1]}x{mask.shape[0]}")
+            box = box_from_mask(mask if mask.ndim == 2 else mask[..., 0], scale=self.box_scale)
+            out = ma.keypoints_to_polygon(None, None, image.header)
+            if box is not None:
+                lm = self.detector.detect(img, box, bgr=image.encoding == "bgr8")
+                if lm.score >= self.min_score:
+                    out = ma.keypoints_to_polygon(lm.uv, lm.confidence, image.header)
+        except (ma.AdapterError, VisionError) as exc:
+            self.problems.report(f"view{v}:{type(exc).__name__}", f"cam{v} frame at {stamp} ns dropped: {exc}")
+            return
+        self.published[v] += 1
+        self.pubs[v].publish(out)
+        self.latency_s.append(time.perf_counter() - t0)
 
     def close(self) -> None:
         """Log what was published and the per-view detection time."""
         lat = np.array(self.latency_s) * 1e3
         text = (f"keypoints: {sum(self.published)} keypoint sets published {self.published}, "
-                f"{self.problems.total} frames dropped"
+                f"{self.problems.total} frames dropped, {sum(self.unpaired)} images/masks never paired"
                 + (f", per view {np.median(lat):.1f} ms median / {np.percentile(lat, 95):.1f} ms p95"
                    if lat.size else ""))
         if self.context.ok():
