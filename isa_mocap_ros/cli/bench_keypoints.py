@@ -63,7 +63,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--height", type=int, default=480, help="synthetic image height (default 480)")
     p.add_argument("--synth-s", type=float, default=4.0, help="seconds of each synthetic motion (default 4)")
     p.add_argument("--motions", default="walk,jog,walk_turns,wave,box,cmu",
-                   help="track kind: generated motions and/or 'cmu' (the CMU walk BVH, if present)")
+                   help="track kind: generated motions, 'cmu' (the CMU walk BVH, if present) and/or bag folders "
+                        "with masks and ground truth (e.g. bags/demo; tracked once, not per seed)")
     p.add_argument("--seeds", default="0,1,2", help="track kind: bag seeds (default 0,1,2)")
     p.add_argument("--track-s", type=float, default=3.0, help="track kind: seconds of each motion (default 3)")
     p.add_argument("--weight", type=float, default=1.0, help="track kind: keypoint weight (default 1)")
@@ -268,8 +269,9 @@ def bench_track(args) -> dict:
         if motion == "cmu" and not bvh.is_file():
             print(f"bench keypoints: {bvh} not found; skipping cmu", file=sys.stderr)
             continue
-        for seed in seeds:
-            bag = cache / f"{motion}_s{seed}"
+        given = Path(motion)
+        for seed in ([0] if (given / "metadata.yaml").is_file() else seeds):
+            bag = given if (given / "metadata.yaml").is_file() else cache / f"{motion}_s{seed}"
             if not (bag / "metadata.yaml").is_file():
                 write_bag(argparse.Namespace(
                     motion=src, out=str(bag), views=None, width=None, height=None, fps=30.0, model=39,
@@ -277,7 +279,7 @@ def bench_track(args) -> dict:
                     occluders=0, rig=None, seed=seed, bvh_scale=None, masks=True, compression="zstd", chunk_mb=32.0,
                     overwrite=True, no_progress=True))
             for name, (w, k) in configs.items():
-                r = _track_one(bag, cache / f"{motion}_s{seed}_{name.replace(' ', '')}", weight=w, every=k)
+                r = _track_one(bag, cache / f"{given.name}_s{seed}_{name.replace(' ', '')}", weight=w, every=k)
                 out.setdefault(name, {})[f"{motion} s{seed}"] = r
                 print(f"  {motion} seed {seed} {name:8s} mpjpe {r['mpjpe_mm']:7.1f} mm  backwards {r['backwards']:3d}"
                       f"/{r['frames']}  leg swaps {r['leg_swaps']:3d}  keypoint frames {r['keypoint_frames']:3d}"
