@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from conftest import SHARED
-from isa_mocap_ros.cli import bench
-from isa_mocap_ros.cli import bench_keypoints as bk
+from isa_mocap_ros.bench import BENCHES
+from isa_mocap_ros.bench import keypoints as bk
 
 REAL = SHARED / "data" / "real" / "pose2sim_demo"
 
@@ -23,7 +23,7 @@ def real():
 
 
 def test_registered():
-    assert "keypoints" in bench.BENCHES
+    assert "keypoints" in BENCHES
 
 
 def test_readers_project_the_peer_keypoints_into_every_view(real):

@@ -39,9 +39,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from isa_mocap_ros.resources import cmu_walk_bvh, shared_data_dir
 from isa_mocap_ros.vision.landmarks import LANDMARK_NAMES, PoseLandmarker, box_from_mask, box_from_points, upright_angle
 
-_REAL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real" / "pose2sim_demo"
+_REAL = shared_data_dir() / "real" / "pose2sim_demo"
 # Pose2Sim TRC keypoint -> BlazePose landmark
 _TRC_TO_LM = {"RShoulder": "right_shoulder", "LShoulder": "left_shoulder", "RElbow": "right_elbow",
               "LElbow": "left_elbow", "RWrist": "right_wrist", "LWrist": "left_wrist", "RHip": "right_hip",
@@ -69,6 +70,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--track-s", type=float, default=3.0, help="track kind: seconds of each motion (default 3)")
     p.add_argument("--weight", type=float, default=1.0, help="track kind: keypoint weight (default 1)")
     p.add_argument("--every", type=int, default=5, help="track kind: every K-th frame (default 5)")
+    p.add_argument("--configs", default="off,init,every", help="track kind: which of off, init, every to run")
     p.add_argument("--cache", default="out/bench_keypoints", help="track kind: bags and tracking output folder")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
 
@@ -195,7 +197,7 @@ def bench_synth(det: PoseLandmarker, width: int, height: int, step: int, seconds
 
     rig = default_rig(width=width, height=height)
     motions: list[tuple[str, str | Path]] = [(m, m) for m in ("walk", "jog", "wave", "box")]
-    bvh = _REAL.parents[1] / "mocap" / "cmu_131_01_walk.bvh"
+    bvh = cmu_walk_bvh()
     if bvh.is_file():
         motions.append(("cmu_131_01_walk", bvh))
     names = list(_JOINT_TO_LM.values())
@@ -259,10 +261,14 @@ def bench_track(args) -> dict:
 
     cache = Path(args.cache)
     cache.mkdir(parents=True, exist_ok=True)
-    bvh = _REAL.parents[1] / "mocap" / "cmu_131_01_walk.bvh"
+    bvh = cmu_walk_bvh()
     motions = [m.strip() for m in args.motions.split(",") if m.strip()]
     seeds = [int(v) for v in args.seeds.split(",") if v.strip()]
     configs = {"off": (0.0, 0), "init": (args.weight, 0), f"every {args.every}": (args.weight, args.every)}
+    wanted = [c.strip() for c in getattr(args, "configs", "off,init,every").split(",") if c.strip()]
+    configs = {k: v for k, v in configs.items() if k.split()[0] in wanted}
+    if args.weight != 1.0:
+        configs = {(f"{k} w{args.weight:g}" if v[0] > 0 else k): v for k, v in configs.items()}
     out: dict = {}
     for motion in motions:
         src = str(bvh) if motion == "cmu" else motion
@@ -279,7 +285,7 @@ def bench_track(args) -> dict:
                     occluders=0, rig=None, seed=seed, bvh_scale=None, masks=True, compression="zstd", chunk_mb=32.0,
                     overwrite=True, no_progress=True))
             for name, (w, k) in configs.items():
-                r = _track_one(bag, cache / f"{given.name}_s{seed}_{name.replace(' ', '')}", weight=w, every=k)
+                r = _track_one(bag, cache / f"{given.name}_s{seed}_{name.replace(' ', '_')}", weight=w, every=k)
                 out.setdefault(name, {})[f"{motion} s{seed}"] = r
                 print(f"  {motion} seed {seed} {name:8s} mpjpe {r['mpjpe_mm']:7.1f} mm  backwards {r['backwards']:3d}"
                       f"/{r['frames']}  leg swaps {r['leg_swaps']:3d}  keypoint frames {r['keypoint_frames']:3d}"
@@ -289,12 +295,12 @@ def bench_track(args) -> dict:
 
 def _print_track(res: dict) -> None:
     print("\n== track (capsule renders, automatic initialization) ==")
-    print(f"{'config':10s} {'runs':>4s} {'mpjpe mm':>9s} {'runs backwards':>14s} {'backwards frames':>16s} "
+    print(f"{'config':14s} {'runs':>4s} {'mpjpe mm':>9s} {'runs backwards':>14s} {'backwards frames':>16s} "
           f"{'leg swaps':>9s} {'ms/set (kp frames)':>18s}")
     for name, runs in res.items():
         r = list(runs.values())
         ms = [x["keypoint_ms_per_frame_set"] for x in r if x["keypoint_ms_per_frame_set"]]
-        print(f"{name:10s} {len(r):4d} {np.mean([x['mpjpe_mm'] for x in r]):9.1f} "
+        print(f"{name:14s} {len(r):4d} {np.mean([x['mpjpe_mm'] for x in r]):9.1f} "
               f"{sum(x['backwards'] > 0 for x in r):14d} {sum(x['backwards'] for x in r):16d} "
               f"{sum(x['leg_swaps'] for x in r):9d} {np.mean(ms) if ms else 0:18.1f}")
 
