@@ -51,7 +51,7 @@ class KeypointNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("keypoints", **kwargs)
         self.n_views = declare(self, "views", 4, "number of camera views (cam0 .. cam<views-1>)", lo=1, hi=64)
-        self.every_k = declare(self, "every_k_frames", 1, "detect on every k-th frame of each view (1 = all)",
+        self.every_k = declare(self, "every_k_frames", 4, "detect on every k-th frame of each view (1 = all)",
                                lo=1, hi=10000)
         self.min_score = declare(self, "min_score", 0.5, "pose presence score below which nobody is reported",
                                  lo=0.0, hi=1.0)
