@@ -26,6 +26,11 @@ it on the initialized frame only, and on that frame and every ``--every``-th fra
 ``--weight``). Scored per run: mean joint error (Eq. 20), frames tracked facing backwards (estimate's
 heading more than 90 degrees from the truth's), leg swaps (frames whose left/right knee and ankle fit
 the truth better exchanged), and the detection time per frame set that had keypoints.
+
+A fourth kind, ``init``, isolates the heading decision: every ``--init-every``-th frame of each motion
+and seed is rendered (320x240, 4 views) and handed to a fresh tracker as its first frame (the automatic
+initialization and the heading candidates' runs), without and with keypoints detected on those images;
+scored by the heading error of the result.
 """
 from __future__ import annotations
 
@@ -57,7 +62,7 @@ _LEGS = ("hip", "knee", "ankle")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--kinds", default="real,synth", help="comma-separated: real, synth, track (default real,synth)")
+    p.add_argument("--kinds", default="real,synth", help="comma-separated: real, synth, track, init (default real,synth)")
     p.add_argument("--step", type=int, default=5, help="every STEP-th frame (default 5)")
     p.add_argument("--data", default=str(_REAL), help="the Pose2Sim demo folder")
     p.add_argument("--width", type=int, default=640, help="synthetic image width (default 640)")
@@ -70,6 +75,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--track-s", type=float, default=3.0, help="track kind: seconds of each motion (default 3)")
     p.add_argument("--weight", type=float, default=1.0, help="track kind: keypoint weight (default 1)")
     p.add_argument("--every", type=int, default=5, help="track kind: every K-th frame (default 5)")
+    p.add_argument("--init-every", type=int, default=15, help="init kind: every K-th frame is a first frame")
     p.add_argument("--configs", default="off,init,every", help="track kind: which of off, init, every to run")
     p.add_argument("--cache", default="out/bench_keypoints", help="track kind: bags and tracking output folder")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
@@ -293,6 +299,57 @@ def bench_track(args) -> dict:
     return out
 
 
+def bench_init(args) -> dict:
+    """The heading decision of the automatic initialization, with and without keypoints: every
+    ``--init-every``-th frame of each motion and bag seed is a first frame (a fresh tracker's first
+    ``step``: grid, refinement, the heading candidates' runs); keypoints detected on the rendered
+    images, cropped around the exact masks."""
+    from isa_mocap_ros.body import make_model
+    from isa_mocap_ros.synth import SceneRenderer, make_clip
+    from isa_mocap_ros.tracking import Tracker, TrackerConfig
+    from isa_mocap_ros.vision import default_rig
+
+    det = PoseLandmarker()
+    rig = default_rig()
+    motions = [m.strip() for m in args.motions.split(",") if m.strip() and not Path(m.strip()).is_dir()]
+    seeds = [int(v) for v in args.seeds.split(",") if v.strip()]
+    rows = []
+    for motion in motions:
+        src = cmu_walk_bvh() if motion == "cmu" else motion
+        if motion == "cmu" and not Path(src).is_file():
+            continue
+        for seed in seeds:
+            clip = make_clip(src, dof=39, fps=30.0, duration_s=args.track_s, seed=seed,
+                             start_s=1.0 if motion == "cmu" else 0.0)
+            model = make_model(39, shape=dict(clip.model.shape))
+            renderer = SceneRenderer(clip.model, rig, seed=seed)
+            for f in range(0, clip.n_frames, args.init_every):
+                images, masks = renderer.render(clip.poses[f], f)
+                kp = []
+                for img, m in zip(images, masks):
+                    box = box_from_mask(m)
+                    kp.append(None if box is None else (lambda lm: (lm.uv, lm.confidence))(det.detect(img, box)))
+                truth = _heading(clip.poses[f])
+                row = {"motion": motion, "seed": seed, "frame": f}
+                for name, w in (("off", 0.0), ("keypoints", args.weight)):
+                    tr = Tracker(model, rig.cameras, TrackerConfig(seed=seed, keypoint_weight=w))
+                    r = tr.step(masks, f, keypoints=kp if w > 0 else None)
+                    row[name] = float(np.rad2deg(abs(np.angle(np.exp(1j * (_heading(r.x) - truth))))))
+                rows.append(row)
+                print(f"  init {motion} seed {seed} frame {f:3d}: heading error off {row['off']:6.1f} deg, "
+                      f"keypoints {row['keypoints']:6.1f} deg", file=sys.stderr, flush=True)
+    return {"rows": rows, "weight": args.weight}
+
+
+def _print_init(res: dict) -> None:
+    rows = res["rows"]
+    print(f"\n== init (heading of the automatically initialized frame; weight {res['weight']:g}) ==")
+    for name in ("off", "keypoints"):
+        e = np.array([r[name] for r in rows])
+        print(f"{name:10s} frames {len(e):3d}  facing backwards (> 90 deg) {int(np.sum(e > 90)):3d}  "
+              f"off by > 45 deg {int(np.sum(e > 45)):3d}  median {np.median(e):5.1f} deg")
+
+
 def _print_track(res: dict) -> None:
     print("\n== track (capsule renders, automatic initialization) ==")
     print(f"{'config':14s} {'runs':>4s} {'mpjpe mm':>9s} {'runs backwards':>14s} {'backwards frames':>16s} "
@@ -321,7 +378,7 @@ def _print(kind: str, res: dict) -> None:
 
 def run(args: argparse.Namespace) -> int:
     kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
-    bad = [k for k in kinds if k not in ("real", "synth", "track")]
+    bad = [k for k in kinds if k not in ("real", "synth", "track", "init")]
     if bad or args.step < 1:
         print(f"isa-mocap bench keypoints: error: --kinds {bad} / --step {args.step}: expected real, synth and "
               "a step >= 1", file=sys.stderr)
@@ -329,6 +386,8 @@ def run(args: argparse.Namespace) -> int:
     results: dict = {}
     if "track" in kinds:
         results["track"] = bench_track(args)
+    if "init" in kinds:
+        results["init"] = bench_init(args)
     det = PoseLandmarker() if {"real", "synth"} & set(kinds) else None
     if "real" in kinds:
         root = Path(args.data)
@@ -344,5 +403,5 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(results, indent=1))
     else:
         for kind, res in results.items():
-            _print_track(res) if kind == "track" else _print(kind, res)
+            {"track": _print_track, "init": _print_init}.get(kind, lambda r: _print(kind, r))(res)
     return 0
