@@ -93,3 +93,22 @@ def test_node_publishes_landmarks_every_k_frames(model_file, rosenv, spawn, tmp_
             assert conf.min() >= 0 and conf.max() <= 1 and np.median(conf[li]) > 0.5
     assert ma.polygon_to_keypoints(got[0][stamp]) is None
     assert stamp not in got[1]
+
+
+def test_run_starts_the_keypoint_node_only_when_asked_and_records_its_topic():
+    import argparse
+    from pathlib import Path
+
+    from isa_mocap_ros.cli.run import RECORDED, _network
+
+    def names(**kw):
+        ns = argparse.Namespace(lockstep=True, optimizer=None, evals=None, model=None, seed=None, helper_nice=0, **kw)
+        return {s.name: s for s in _network(ns, "p.yaml", Path("out"), 2, None)}
+
+    assert "keypoints" not in names() and "keypoints" not in names(keypoints=False)
+    spec = names(keypoints=True)["keypoints"]
+    params = dict(spec.params)
+    assert spec.exec == "keypoints_node" and params["views"] == "2"
+    # lockstep: image and mask subscriptions reliable, as the segmentation's and the estimator's
+    assert params["qos_overrides./mocap/cam1/mask.subscription.reliability"] == "reliable"
+    assert "/mocap/cam*/keypoints" in RECORDED
