@@ -165,7 +165,7 @@ class PoseLandmarker:
 
     Notes
     -----
-    Deterministic: the same image and box give the same landmarks. Not thread-safe (one interpreter).
+    Deterministic: the same image and region give the same landmarks. Not thread-safe (one interpreter).
     """
 
     def __init__(self, model_path: str | Path | None = None, *, num_threads: int = 1) -> None:
