@@ -91,3 +91,28 @@ def test_missing_or_altered_model_is_reported(tmp_path, monkeypatch):
     (tmp_path / lmm.MODEL_FILE).write_bytes(b"not a model")
     with pytest.raises(lmm.ModelUnavailable, match="SHA-256"):
         lmm.landmark_model_path()
+
+
+def test_fetch_keeps_a_present_model_and_reports_a_failed_download(tmp_path, monkeypatch):
+    """Idempotent: a file with the right digest is kept without calling pip; a failed pip download is
+    a ModelUnavailable naming the requirement (no network is touched: pip is replaced)."""
+    calls = []
+
+    def fake_run(cmd, **kw):
+        calls.append(cmd)
+        import subprocess
+        return subprocess.CompletedProcess(cmd, 1, stdout="", stderr="ERROR: No matching distribution found")
+
+    monkeypatch.setattr(lmm.subprocess, "run", fake_run)
+    monkeypatch.setenv("ISA_MOCAP_MODEL_DIR", str(tmp_path))
+    with pytest.raises(lmm.ModelUnavailable, match="mediapipe==0.10.21.*No matching distribution"):
+        lmm.fetch_landmark_model()
+    assert len(calls) == 1 and "--no-deps" in calls[0] and "download" in calls[0]
+    monkeypatch.delenv("ISA_MOCAP_MODEL_DIR")
+    try:
+        real = lmm.landmark_model_path()
+    except lmm.ModelUnavailable:
+        pytest.skip("landmark model not available (make models)")
+    monkeypatch.setenv("ISA_MOCAP_MODEL_DIR", str(tmp_path))
+    (tmp_path / lmm.MODEL_FILE).write_bytes(real.read_bytes())
+    assert lmm.fetch_landmark_model() == tmp_path / lmm.MODEL_FILE and len(calls) == 1
