@@ -47,6 +47,11 @@ class CameraNode(Node):
             # OpenCV's own multi-line open warnings; the source reports failures itself, once per retry
             cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
         self.source = open_source(self.config, self.rig, on_event=self._on_source_event)
+        adapted = getattr(self.source, "source", self.source)   # under DistortedSource
+        if hasattr(adapted, "rig"):     # video / images: the cameras of the adapted frames
+            self.rig = adapted.rig
+            for line in adapted.describe():
+                self.get_logger().info(f"camera: {line}")
         n = self.config.views
         self.frames = [f"{self.frame_id_prefix}cam{i}_optical_frame" for i in range(n)]
         self.intrinsics = [ma.Intrinsics(**cam.intrinsics_fields()) for cam in self.rig.cameras]
@@ -82,10 +87,13 @@ class CameraNode(Node):
         motion = d("motion", "walk", "source=synthetic: walk, jog, walk_turns, wave, box, or a BVH file")
         duration = d("motion_duration_s", 0.0, "seconds of motion (0 = whole BVH, 5 s generated)", lo=0.0, hi=1e6)
         dof = d("model_dof", 39, "source=synthetic: body model (18, 28 or 39 DOF)", lo=18, hi=39)
-        rig_file = d("rig_file", "", "rig/calibration YAML ('' = default rig, synthetic source only)")
+        rig_file = d("rig_file", "", "rig or calibration file: rig YAML, Pose2Sim/anipose TOML, Qualisys .qca.txt, "
+                     "OpenCV FileStorage, camera_info YAML ('' = default rig, synthetic source only)")
         views = d("views", 4, "number of views (the first cameras of the rig)", lo=1, hi=64)
         width = d("width", 320, "published image width (0 = the rig file's)", lo=0, hi=8192)
-        height = d("height", 240, "published image height (0 = the rig file's)", lo=0, hi=8192)
+        height = d("height", 240, "published image height (0 = the rig file's; video/images: 0 keeps the "
+                   "frames' aspect ratio at width)", lo=0, hi=8192)
+        fit = d("fit", "auto", "video/images of another size than the calibration: auto, scale, letterbox, crop")
         fps = d("fps", 30.0, "frame sets per second (timer rate; the synthetic motion's rate)", lo=0.1, hi=1000.0)
         seed = d("seed", 0, "seed of the synthetic motion, backgrounds and distortions", lo=0, hi=2**31 - 1)
         noise = d("noise", 0.0, "pixel-noise probability (ISA 13.4.2; 0 = off)", lo=0.0, hi=1.0)
@@ -97,7 +105,7 @@ class CameraNode(Node):
         return SourceConfig(source=source, devices=tuple(int(i) for i in devices), videos=tuple(videos),
                             image_globs=tuple(globs), motion=motion, motion_duration_s=duration, model_dof=dof,
                             rig_file=rig_file, views=views, width=width, height=height, fps=fps, seed=seed,
-                            noise=noise, occluders=occ, empty_frames=empty, loop=loop)
+                            noise=noise, occluders=occ, empty_frames=empty, loop=loop, fit=fit)
 
     def _on_source_event(self, ev: SourceEvent) -> None:
         if ev.kind in ("reconnected", "info"):
