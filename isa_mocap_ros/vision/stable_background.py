@@ -9,8 +9,9 @@ per pixel, the frames in which the background is visible:
    agree with it (the robust estimate of :mod:`.segmentation`); ``support`` = the share of frames
    agreeing. Where the person moves on, the background wins the vote.
 2. **Person region.** Pixels where the mode's support is below ``active_support`` changed during
-   the recording; the largest connected region of them (dilated by ``margin`` of the image width,
-   holes filled by its convex hull) is where the person is. A plain temporal mode or median keeps a
+   the recording; the largest connected region of them (dilated by ``margin`` of the image width),
+   joined by the still parts where a background image (step 3) differs from the mode and that touch
+   it, holes filled by the convex hull, is where the person is. A plain temporal mode or median keeps a
    body part that barely moves (the torso and standing leg of the Pose2Sim demo) as background.
 3. **Background images** (``plates``: the empty scene, e.g. calibration scene shots, possibly with
    other people or drawings in them). Their colours are matched to the video's (per-channel gain
@@ -101,18 +102,27 @@ def _agree(frames: np.ndarray, ref: np.ndarray, radius: float) -> np.ndarray:
     return np.stack([np.abs(f.astype(np.int16) - r).max(axis=-1) <= radius for f in frames])
 
 
-def _person_region(support: np.ndarray, active_support: float, margin: float) -> np.ndarray:
+def _person_region(support: np.ndarray, active_support: float, margin: float,
+                   differs: np.ndarray | None = None) -> np.ndarray:
+    """Convex hull of the largest dilated region of changing pixels, joined by the parts of ``differs``
+    (plate != mode: a still body part) that touch it."""
     H, W = support.shape
+    k3 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
     active = (support < active_support).astype(np.uint8) * 255
-    active = cv2.morphologyEx(active, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3)))
+    active = cv2.morphologyEx(active, cv2.MORPH_OPEN, k3)
     m = max(1, int(round(margin * W)))
     grown = cv2.dilate(active, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * m + 1, 2 * m + 1)))
     n, lab, stats, _ = cv2.connectedComponentsWithStats(grown, connectivity=8)
     region = np.zeros((H, W), np.uint8)
     if n <= 1:
         return region
-    big = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-    pts = cv2.findNonZero((lab == big).astype(np.uint8))
+    big = (lab == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))).astype(np.uint8)
+    if differs is not None:
+        d = cv2.morphologyEx(differs.astype(np.uint8) * 255, cv2.MORPH_OPEN, k3)
+        nd, dlab = cv2.connectedComponents(d, connectivity=8)
+        touching = np.unique(dlab[(big > 0) & (dlab > 0)])
+        big = (big > 0) | np.isin(dlab, touching[touching > 0])
+    pts = cv2.findNonZero(big.astype(np.uint8))
     cv2.fillConvexPoly(region, cv2.convexHull(pts), 255)
     return region
 
@@ -161,14 +171,20 @@ def estimate_background(frames: np.ndarray, *, plates: Sequence[np.ndarray] = ()
             raise VisionError(f"plates[{i}]: expected ({H}, {W}, 3) uint8 (the frames' size), received "
                               f"{getattr(p, 'dtype', type(p).__name__)} {getattr(p, 'shape', '')}")
     mode, support = _mode(frames, radius, max_samples)
-    region = _person_region(support, active_support, margin)
+    moving = _person_region(support, active_support, margin) > 0
+    matched = []
+    differs = np.zeros((H, W), bool)
+    for p in plates:
+        ok_out = (np.abs(p.astype(np.float32) - mode).max(axis=-1) <= radius) & ~moving
+        pc = _match_colours(p, mode, ok_out)
+        matched.append(pc)
+        differs |= (np.abs(pc - mode).max(axis=-1) > radius) & (support >= active_support)
+    region = _person_region(support, active_support, margin, differs if plates else None)
     inside = region > 0
     image = mode.copy()
     source = np.full((H, W), SOURCE_MODE, np.uint8)
     best_share = np.zeros((H, W))
-    for p in plates:
-        ok_out = (np.abs(p.astype(np.float32) - mode).max(axis=-1) <= radius) & ~inside
-        pc = _match_colours(p, mode, ok_out)
+    for pc in matched:
         ag = _agree(frames, pc, radius)
         share = ag.mean(axis=0)
         use_frames = inside & (share >= min_plate_agree) & (share > best_share)
