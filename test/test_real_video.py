@@ -250,3 +250,38 @@ def test_demo_import_writes_a_bag_the_network_reads(tmp_path, capsys):
     assert len(markers) == 3 and names[0] == "RHip" and len(names) == 21
     trc = read_trc(d / "reference" / "balancing_pose2sim.trc")
     np.testing.assert_allclose(markers[2], trc.points[2] @ TRC_TO_WORLD.T)
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(120)
+def test_camera_node_plays_the_demo_video_with_adapted_intrinsics(spawn, rosenv, tmp_path):
+    """The camera node as a real process on the letterboxed demo video (one view, 160 px wide, a TOML
+    calibration): camera_info carries the adapted intrinsics, the images the letterbox cut."""
+    from sensor_msgs.msg import CameraInfo, Image
+
+    import msg_adapters as ma
+    from isa_mocap_ros.nodes import qos
+    from rosnode import ros_node, spin_until
+
+    d = demo()
+    params = tmp_path / "p.yaml"
+    params.write_text(yaml.safe_dump({"/mocap/camera": {"ros__parameters": {
+        "source": "video", "videos": [str(d / "balancing" / "cam01.mp4")], "rig_file": str(TOML), "views": 1,
+        "width": 160, "height": 0, "fps": 10.0, "loop": True}}}))
+    cam = spawn("camera", "-m", "isa_mocap_ros.nodes.camera", "--ros-args", "-r", "__ns:=/mocap",
+                "--params-file", str(params))
+    assert cam.wait_for_output("camera: video source", 60), cam.output()
+    assert "letterbox" in cam.output()
+    infos, shapes = [], []
+    with ros_node(rosenv, "camera_test") as (node, ex):
+        node.create_subscription(CameraInfo, "/mocap/cam0/camera_info", infos.append, qos.RELIABLE)
+        node.create_subscription(Image, "/mocap/cam0/image_raw",
+                                 lambda m: shapes.append(ma.image_to_array(m).shape), qos.SENSOR_DATA)
+        assert spin_until(ex, lambda: len(infos) >= 3 and len(shapes) >= 3, 30), cam.output()
+    cap = cv2.VideoCapture(str(d / "balancing" / "cam01.mp4"))
+    ok, frame = cap.read()
+    cap.release()
+    want = frame_geometry(read_calibration(TOML).cameras[0], 1080, 1920, frame=frame).camera(160, 282)
+    np.testing.assert_allclose(ma.camera_info_to_intrinsics(infos[-1]).K, want.K)
+    assert shapes[-1] == (282, 160, 3)
+    assert cam.stop() == 0

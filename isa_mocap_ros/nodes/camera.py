@@ -11,6 +11,11 @@ camera info of one set carries the same ``header.stamp`` (the node clock when th
 ``cam<i>/extrinsics`` (``geometry_msgs/TransformStamped`` world -> ``cam<i>_optical_frame``, i.e.
 ``Camera.pose_in_world()``) is published once, latched (transient local, depth 1).
 
+Video files and image folders are adapted to the calibration (:class:`~isa_mocap_ros.vision.sources.
+AdaptedSource`): a frame of another size than the calibrated sensor (scaled, letterboxed, or with
+``fit:=crop`` a centred cut) gets the matching intrinsics on ``camera_info``, logged once per view;
+``rig_file`` may be any calibration format (:mod:`isa_mocap_ros.vision.calib_formats`).
+
 Faults: a view whose image is missing this time (device unplugged, unreadable file, another aspect
 ratio) is skipped for that set and reported (rate-limited); a failed device is reopened with
 back-off and "reconnected camera <i> (device <n>)" is logged. A video/image source without a rig
@@ -30,7 +35,7 @@ from sensor_msgs.msg import CameraInfo, Image
 import msg_adapters as ma
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, run_node
-from isa_mocap_ros.vision.sources import EndOfSource, SourceConfig, SourceEvent, open_source, resolve_rig
+from isa_mocap_ros.vision.sources import AdaptedSource, EndOfSource, SourceConfig, SourceEvent, open_source, resolve_rig
 
 __all__ = ["CameraNode", "main"]
 
@@ -47,8 +52,8 @@ class CameraNode(Node):
             # OpenCV's own multi-line open warnings; the source reports failures itself, once per retry
             cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
         self.source = open_source(self.config, self.rig, on_event=self._on_source_event)
-        adapted = getattr(self.source, "source", self.source)   # under DistortedSource
-        if hasattr(adapted, "rig"):     # video / images: the cameras of the adapted frames
+        adapted = self.source if isinstance(self.source, AdaptedSource) else getattr(self.source, "source", None)
+        if isinstance(adapted, AdaptedSource):     # video / images: the cameras of the adapted frames
             self.rig = adapted.rig
             for line in adapted.describe():
                 self.get_logger().info(f"camera: {line}")
