@@ -10,7 +10,7 @@ import pytest
 
 from conftest import SHARED
 from isa_mocap_ros.cli.main import main as cli
-from isa_mocap_ros.vision import Rig, VisionError, load_rig, save_rig
+from isa_mocap_ros.vision import Rig, VisionError, default_rig
 from isa_mocap_ros.vision.calib_formats import detect_format, read_calibration, write_calibration
 
 from test_vision_camera import random_camera
@@ -166,10 +166,15 @@ def test_bad_opencv_file_and_unknown_format(tmp_path):
         read_calibration(tmp_path / "c.dat")
 
 
-def test_load_rig_and_cli_accept_any_format(tmp_path, capsys):
+def test_rig_arguments_and_cli_accept_any_format(tmp_path, capsys):
+    from isa_mocap_ros.vision.sources import SourceConfig, resolve_rig
+
     rig = random_rig(5, n_dist=4)
     write_calibration(rig, tmp_path / "r.toml")
-    assert_same(Rig(load_rig(tmp_path / "r.toml").cameras, "r", None), rig, exact=False)
+    default = default_rig(n_views=2)        # the camera node's rig_file (synth's --rig reads it alike)
+    write_calibration(default, tmp_path / "d.qca.txt")
+    got = resolve_rig(SourceConfig(source="video", videos=("a", "b"), views=2, rig_file=str(tmp_path / "d.qca.txt")))
+    assert_same(Rig(got.cameras, default.name, None), default, exact=False)
     assert cli(["calibration", "import", str(tmp_path / "r.toml"), str(tmp_path / "r.yaml"), "--no-volume-check"]) == 0
     assert cli(["calibration", "export", str(tmp_path / "r.yaml"), str(tmp_path / "q.qca.txt")]) == 0
     assert cli(["calibration", "export", str(tmp_path / "q.qca.txt"), str(tmp_path / "{name}.yaml"),

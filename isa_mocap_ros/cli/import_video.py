@@ -177,7 +177,7 @@ def write_import(args) -> dict:
     from isa_mocap_ros.cli.synth import _camera_info, _canonical
     from isa_mocap_ros.eval.trc import TRC_TO_WORLD, read_trc
     from isa_mocap_ros.synth import T0_NS, stamp_ns
-    from isa_mocap_ros.vision import load_rig
+    from isa_mocap_ros.vision.calib_formats import read_calibration
     from isa_mocap_ros.vision.sources import AdaptedSource, EndOfSource
     from isa_mocap_ros.vision.stable_background import estimate_background
     from msg_adapters import array_to_image, rt_to_transform, to_cdr, type_name_of
@@ -195,7 +195,7 @@ def write_import(args) -> dict:
         raise ImportError_(f"--frames: expected an integer >= 1, received {args.frames}")
     if not Path(args.calibration).is_file():
         raise ImportError_(f"--calibration: {args.calibration} does not exist")
-    rig = load_rig(args.calibration)
+    rig = read_calibration(args.calibration)
     sensors = _select_cameras(rig, args.cameras, len(args.inputs))
     width = args.width if args.width is not None else (0 if args.max_side else 320)
 

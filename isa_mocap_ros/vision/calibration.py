@@ -276,16 +276,8 @@ class Rig:
 
 
 def load_rig(path: str | Path) -> Rig:
-    """Read a rig file (see the module docstring), or any calibration file of another tool.
-
-    Pose2Sim/anipose/caliscope TOML, Qualisys ``.qca.txt``, OpenCV FileStorage YAML/XML and ROS
-    ``camera_info`` YAML are recognised by :func:`~.calib_formats.detect_format` and read by
-    :func:`~.calib_formats.read_calibration` (default capture volume).
-    """
-    from .calib_formats import detect_format, read_calibration
-
-    if Path(path).is_file() and detect_format(path) != "rig":
-        return read_calibration(path)
+    """Read a rig file (see the module docstring). Calibration files of other tools:
+    :func:`~.calib_formats.read_calibration`, which reads these too."""
     d = _load_yaml(path)
     where = str(path)
     cams_d = _get(d, "cameras", where)

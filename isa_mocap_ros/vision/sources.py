@@ -42,7 +42,8 @@ from typing import Any, Callable, Protocol, Sequence, runtime_checkable
 import cv2
 import numpy as np
 
-from .calibration import Rig, default_rig, load_rig
+from .calib_formats import read_calibration
+from .calibration import Rig, default_rig
 from .distort import occluders as _occluders
 from .distort import pixel_noise as _pixel_noise
 from .errors import VisionError
@@ -788,7 +789,7 @@ def resolve_rig(cfg: SourceConfig) -> Rig:
     path = Path(cfg.rig_file)
     if not path.is_file():
         raise SourceError(f"rig_file: {cfg.rig_file!r} does not exist")
-    rig = load_rig(path)
+    rig = read_calibration(path)          # a rig YAML or any other tool's calibration file
     if len(rig) < cfg.views:
         raise SourceError(f"views: the rig file {cfg.rig_file!r} has {len(rig)} cameras, views={cfg.views}")
     rig = Rig(rig.cameras[:cfg.views], rig.name, rig.capture_volume)
