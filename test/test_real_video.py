@@ -285,3 +285,44 @@ def test_camera_node_plays_the_demo_video_with_adapted_intrinsics(spawn, rosenv,
     np.testing.assert_allclose(ma.camera_info_to_intrinsics(infos[-1]).K, want.K)
     assert shapes[-1] == (282, 160, 3)
     assert cam.stop() == 0
+
+
+def _board_views(board_img: np.ndarray, board_mm: tuple[float, float], K: np.ndarray, size, tmp_path, n=12):
+    """Images of a flat board seen by the pinhole ``K`` from ``n`` poses (a homography per pose)."""
+    h_px, w_px = board_img.shape[:2]
+    S = np.array([[board_mm[0] / w_px, 0, 0], [0, board_mm[1] / h_px, 0], [0, 0, 1]])   # board px -> mm
+    rng = np.random.default_rng(5)
+    paths = []
+    for k in range(n):
+        rvec = np.array([rng.uniform(-0.7, 0.7), rng.uniform(-0.7, 0.7), rng.uniform(-0.3, 0.3)])
+        R = cv2.Rodrigues(rvec)[0]
+        t = np.array([-board_mm[0] / 2, -board_mm[1] / 2, 0.0])
+        t = R @ t + np.array([rng.uniform(-40, 40), rng.uniform(-40, 40), rng.uniform(900, 1200)])
+        H = K @ np.column_stack([R[:, 0], R[:, 1], t]) @ S
+        img = cv2.warpPerspective(board_img, H, size, flags=cv2.INTER_AREA, borderValue=128)
+        paths.append(tmp_path / f"b{k}.png")
+        cv2.imwrite(str(paths[-1]), img)
+    return paths
+
+
+@pytest.mark.parametrize("kind", ["checkerboard", "charuco"])
+def test_board_intrinsics_recover_a_known_camera(tmp_path, kind):
+    """Boards rendered through a known pinhole (no distortion): the calibration finds its focal length."""
+    from isa_mocap_ros.vision.intrinsics import calibrate_intrinsics
+
+    K = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
+    sq = 40.0
+    if kind == "checkerboard":
+        cols, rows = 8, 6                                           # squares: 7x5 inner corners
+        img = np.kron((np.indices((rows, cols)).sum(axis=0) % 2) * 255, np.ones((50, 50))).astype(np.uint8)
+        img = np.pad(img, 50, constant_values=255)
+        mm = ((cols + 2) * sq, (rows + 2) * sq)
+        res = calibrate_intrinsics(_board_views(img, mm, K, (640, 480), tmp_path), board=(7, 5), square_mm=sq)
+    else:
+        d = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
+        cb = cv2.aruco.CharucoBoard((7, 5), sq, 0.75 * sq, d)
+        img = cb.generateImage((700, 500))
+        res = calibrate_intrinsics(_board_views(img, (7 * sq, 5 * sq), K, (640, 480), tmp_path), board=(7, 5),
+                                   square_mm=sq, charuco="DICT_4X4_50")
+    assert len(res.used) >= 5 and res.rms_px < 0.5
+    assert abs(res.camera.fx / 800 - 1) < 0.01 and abs(res.camera.fy / 800 - 1) < 0.01, res.camera.K
