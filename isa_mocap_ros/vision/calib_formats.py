@@ -37,6 +37,7 @@ field, e.g. ``Calib.toml: [cam01] matrix: expected 3x3 numbers, received [[1, 0]
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -258,13 +259,18 @@ def _read_toml(path: Path) -> list[Camera]:
     return cams
 
 
+def _toml_str(text: str) -> str:
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
 def _write_toml(rig: Rig) -> str:
     out = []
     for c in rig.cameras:
         K = c.K
         d = c.dist if c.dist.size else np.zeros(4)
-        out.append(f"[{c.name}]\n"
-                   f"name = \"{c.name}\"\n"
+        key = c.name if re.fullmatch(r"[A-Za-z0-9_-]+", c.name) else _toml_str(c.name)
+        out.append(f"[{key}]\n"
+                   f"name = {_toml_str(c.name)}\n"
                    f"size = [ {_f(c.width)}, {_f(c.height)}]\n"
                    "matrix = [ " + ", ".join("[ " + ", ".join(_f(v) for v in row) + "]" for row in K) + "]\n"
                    "distortions = [ " + ", ".join(_f(v) for v in d) + "]\n"
