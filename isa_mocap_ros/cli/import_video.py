@@ -74,7 +74,7 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-class ImportError_(ValueError):
+class ImportInputError(ValueError):
     """Bad input to ``isa-mocap import``."""
 
 
@@ -88,14 +88,14 @@ def _open_inputs(inputs):
         if p.is_dir():
             files = sorted(f for f in p.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES)
             if not files:
-                raise ImportError_(f"{s}: folder holds no image ({', '.join(IMAGE_SUFFIXES)})")
+                raise ImportInputError(f"{s}: folder holds no image ({', '.join(IMAGE_SUFFIXES)})")
             srcs.append(ImageFolderSource([str(p / ("*" + files[0].suffix))]))
         elif p.is_file():
             srcs.append(VideoFileSource([p]))
         elif globlib.glob(s):
             srcs.append(ImageFolderSource([s]))
         else:
-            raise ImportError_(f"{s}: no such video file, image folder or glob")
+            raise ImportInputError(f"{s}: no such video file, image folder or glob")
     return srcs
 
 
@@ -120,12 +120,12 @@ def _select_cameras(rig, names, n):
         have = {c.name: c for c in rig.cameras}
         missing = [w for w in want if w not in have]
         if missing:
-            raise ImportError_(f"--cameras: {missing} not in the calibration (cameras: {sorted(have)})")
+            raise ImportInputError(f"--cameras: {missing} not in the calibration (cameras: {sorted(have)})")
         cams = [have[w] for w in want]
     else:
         cams = list(rig.cameras[:n])
     if len(cams) != n:
-        raise ImportError_(f"inputs: {n} views given, the calibration has {len(cams)} cameras selected "
+        raise ImportInputError(f"inputs: {n} views given, the calibration has {len(cams)} cameras selected "
                            f"({[c.name for c in rig.cameras]}); give one input per camera or --cameras")
     return cams
 
@@ -138,13 +138,13 @@ def _read_plates(directory, sensors, geoms, sizes):
     d = Path(directory)
     files = sorted(f for f in d.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES) if d.is_dir() else []
     if len(files) != len(sensors):
-        raise ImportError_(f"--background {directory}: expected one image per view ({len(sensors)}), found "
+        raise ImportInputError(f"--background {directory}: expected one image per view ({len(sensors)}), found "
                            f"{len(files)}")
     plates = []
     for f, cam, g, size in zip(files, sensors, geoms, sizes):
         img = cv2.imread(str(f), cv2.IMREAD_COLOR)
         if img is None:
-            raise ImportError_(f"--background: OpenCV cannot read {f}")
+            raise ImportInputError(f"--background: OpenCV cannot read {f}")
         img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
         pg = frame_geometry(cam, img.shape[1], img.shape[0], fit="auto" if g.fit != "crop" else "crop", frame=img,
                             source=str(f))
@@ -190,11 +190,11 @@ def write_import(args) -> dict:
         raise FileExistsError(f"OUT: {out} exists; expected a new bag path (pass --overwrite to replace it)")
     for name in ("start", "background_frames"):
         if getattr(args, name) < 0:
-            raise ImportError_(f"--{name.replace('_', '-')}: expected an integer >= 0, received {getattr(args, name)}")
+            raise ImportInputError(f"--{name.replace('_', '-')}: expected an integer >= 0, received {getattr(args, name)}")
     if args.frames is not None and args.frames < 1:
-        raise ImportError_(f"--frames: expected an integer >= 1, received {args.frames}")
+        raise ImportInputError(f"--frames: expected an integer >= 1, received {args.frames}")
     if not Path(args.calibration).is_file():
-        raise ImportError_(f"--calibration: {args.calibration} does not exist")
+        raise ImportInputError(f"--calibration: {args.calibration} does not exist")
     rig = read_calibration(args.calibration)
     sensors = _select_cameras(rig, args.cameras, len(args.inputs))
     width = args.width if args.width is not None else (0 if args.max_side else 320)
@@ -210,7 +210,7 @@ def write_import(args) -> dict:
         rates = [getattr(s, "fps", [0.0])[0] for s in src.source.sources]
         fps = rates[0] if rates and rates[0] > 0 else 30.0
     if not fps > 0:
-        raise ImportError_(f"--fps: expected a rate > 0, received {fps}")
+        raise ImportInputError(f"--fps: expected a rate > 0, received {fps}")
     V = src.n_views
     cams = src.rig.cameras
 
@@ -241,7 +241,7 @@ def write_import(args) -> dict:
             n += 1
         src.close()
         if len(samples[0]) < 3:
-            raise ImportError_(f"inputs: {len(samples[0])} complete frame sets; the background needs at least 3 "
+            raise ImportInputError(f"inputs: {len(samples[0])} complete frame sets; the background needs at least 3 "
                                "(or --background-frames 0)")
         plates = (_read_plates(args.background, sensors, src.geometries, src.sizes) if args.background
                   else [[] for _ in range(V)])
@@ -252,7 +252,7 @@ def write_import(args) -> dict:
             est.append((e, e.frames(args.background_frames, stack)))
         src = open_adapted()
     elif args.background:
-        raise ImportError_("--background: needs --background-frames K > 0 (the background is written as frames)")
+        raise ImportInputError("--background: needs --background-frames K > 0 (the background is written as frames)")
 
     ref = None
     if args.reference:
@@ -313,7 +313,7 @@ def write_import(args) -> dict:
         bar.close()
     src.close()
     if written == 0:
-        raise ImportError_(f"inputs: no frame after --start {args.start}")
+        raise ImportInputError(f"inputs: no frame after --start {args.start}")
     seconds = time.perf_counter() - t_start
     if args.check_png:
         j = sorted(kept)[len(kept) // 2]
