@@ -382,7 +382,8 @@ def run(args: argparse.Namespace) -> int:
     if summary["reference_rows"]:
         print(f"import: reference markers for {summary['reference_frames']} frames ({summary['reference_rows']} "
               "rows in the TRC file)")
-        if summary["reference_frames"] != summary["frames"] or summary["reference_rows"] != summary["frames"]:
+        whole = args.frames is None and args.start == 0
+        if summary["reference_frames"] < summary["frames"] or (whole and summary["reference_rows"] != summary["frames"]):
             print("import: warning: the TRC file and the videos have different frame counts; row start + j is "
                   "taken for frame j", file=sys.stderr)
     return 0
