@@ -40,6 +40,7 @@ import cv2
 import numpy as np
 
 from .errors import VisionError
+from .robust_mode import _robust_background_numba
 
 __all__ = ["BackgroundEstimate", "estimate_background", "SOURCE_PLATE_FRAMES", "SOURCE_MODE", "SOURCE_PLATE"]
 
@@ -88,8 +89,6 @@ class BackgroundEstimate:
 
 
 def _mode(frames: np.ndarray, radius: float, max_samples: int) -> tuple[np.ndarray, np.ndarray]:
-    from .segmentation import _robust_background_numba
-
     N = frames.shape[0]
     pick = np.unique(np.linspace(0, N - 1, min(N, max_samples)).round().astype(int))
     mu, _, count = _robust_background_numba(np.ascontiguousarray(frames[pick]), float(radius))
