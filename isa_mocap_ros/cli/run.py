@@ -47,7 +47,7 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--params", default=None, help="parameter file (default: the package's config/pipeline.yaml)")
     p.add_argument("--learn-frames", type=int, default=None,
                    help="frames the segmentation learns the background from (default: the bag's frames before "
-                        "its first ground truth, else the parameter file's learn_frames)")
+                        "its first ground truth (joint states, else markers), else the parameter file's learn_frames)")
     p.add_argument("--overlay-frames", type=int, default=4,
                    help="overlay frames to save as PNG (drawn after the run from the recording)")
     p.add_argument("--helper-nice", type=int, default=5, choices=range(0, 20), metavar="0..19",
@@ -103,9 +103,10 @@ def _inspect(bag: Path) -> tuple[int, int | None]:
         n = sum(1 for t in r.topics if t.startswith("/mocap/cam") and t.endswith("/image_raw"))
         if n == 0:
             raise SystemExit(f"isa-mocap run: {bag} has no /mocap/cam<i>/image_raw topics")
-        gt = next((t for t in ("/mocap/ground_truth/joint_states", "/mocap/ground_truth/markers") if t in r.topics),
-                  None)
-        if gt is None:
+        gt = "/mocap/ground_truth/joint_states"
+        if gt not in r.topics:       # a mesh bag or an imported real recording may have markers only
+            gt = "/mocap/ground_truth/markers"
+        if gt not in r.topics:
             return n, None
         first_truth = next((ma.header_stamp_ns_from_cdr(m.data) for m in r.messages([gt])), None)
         stamps = {ma.header_stamp_ns_from_cdr(m.data) for m in r.messages(["/mocap/cam0/image_raw"])}
