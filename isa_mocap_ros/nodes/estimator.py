@@ -19,6 +19,7 @@ prediction of that frame.
 from __future__ import annotations
 
 import json
+import re
 import threading
 import time
 from collections import deque
@@ -54,6 +55,21 @@ def _camera_info_key(msg: CameraInfo) -> tuple | None:
                 bytes(memoryview(msg.r)), bytes(memoryview(msg.p)))
     except (TypeError, ValueError):
         return None
+
+
+#: the starts of the tracker's notes (``FrameResult.notes``) on what a normal run does: the empty masks of
+#: the frames before anyone is in view (the segmentation's background-learning frames), the automatic
+#: initialization, the heading check, stages that their budget share or the pose leaves out. Logged at
+#: INFO and counted apart from bad inputs; every other note is logged at WARN and counted as a problem.
+EXPECTED_NOTES = ("initialized automatically", "heading check", "initialization polish",
+                  "no usable view and no estimate yet", "contour stage: stopped", "limb stage: ")
+_EXPECTED_NOTE_PATTERNS = (re.compile(r"view \d+: empty mask \(nobody in view\)"),
+                           re.compile(r"(pelvis|torso|limb|refinement|contour) stage skipped"))
+
+
+def note_is_expected(note: str) -> bool:
+    """Whether a tracker note reports an expected event (:data:`EXPECTED_NOTES`) rather than a problem."""
+    return note.startswith(EXPECTED_NOTES) or any(p.match(note) for p in _EXPECTED_NOTE_PATTERNS)
 
 
 class EstimatorNode(Node):
@@ -367,6 +383,11 @@ class EstimatorNode(Node):
         the frame after the initialization: 63 instead of 25 ms), one or two more sets dropped in real
         time."""
         t0 = time.monotonic()
+        # said before the wait, so a first run is not a silent minute: numba compiles the kernels on their
+        # first call after an install (`make venv` does it ahead, `isa-mocap warmup`) and loads its cache after
+        self.get_logger().info("estimator: loading the compiled kernels (a few seconds from numba's cache; "
+                               "~1-2 min when they were never compiled since the install: run `isa-mocap warmup` "
+                               "once to do that ahead)")
         try:
             from isa_mocap_ros.body import capsule_endpoints as caps
             from isa_mocap_ros.tracking.tracker import make_tracker
@@ -444,7 +465,8 @@ class EstimatorNode(Node):
             except Exception as exc:  # noqa: BLE001 - a node must survive any one bad frame set
                 if self._stop.is_set() or not self.context.ok():
                     return  # shutting down: publishers are gone with the context
-                self.problems.report("error", f"frame set {frame_set.stamp_ns} failed: {type(exc).__name__}: {exc}")
+                self.problems.report("error", f"frame set {frame_set.stamp_ns} failed: {type(exc).__name__}: {exc}",
+                                     level="error")
                 try:
                     self._done(frame_set.stamp_ns)
                 except Exception:  # noqa: BLE001 - the context may have gone meanwhile
@@ -457,7 +479,7 @@ class EstimatorNode(Node):
                 missing = [v for v in range(self.n_views)
                            if self._intrinsics[v] is None or self._extrinsics[v] is None]
                 self.problems.report("calib", f"frame set {frame_set.stamp_ns} dropped: no camera_info/extrinsics "
-                                              f"yet for views {missing}")
+                                              f"yet for views {missing}", level="error")
                 self._done(frame_set.stamp_ns)
                 return
             from isa_mocap_ros.tracking.published import PublishedPredictor
@@ -493,7 +515,11 @@ class EstimatorNode(Node):
                 self._publish(frame_set.stamp_ns, result)
             self._published_any = True
         for note in result.notes:
-            self.problems.report(f"note:{note.split(':')[0]}", f"frame {frame_set.stamp_ns}: {note}")
+            kind = f"note:{note.split(':')[0].split('(')[0].strip()}"
+            if note_is_expected(note):   # what a normal run does: INFO, not a bad input
+                self.problems.event(kind, f"frame {frame_set.stamp_ns}: {note}")
+            else:
+                self.problems.report(kind, f"frame {frame_set.stamp_ns}: {note}")
         self.latencies_ms.append((time.monotonic() - t_ready) * 1e3)
         self._done(frame_set.stamp_ns)
         if self.overlay and self.frames_done % self.overlay_every == 0 and result.x is not None:
@@ -557,7 +583,7 @@ class EstimatorNode(Node):
             "views_used": getattr(r, "views_used", 0),
             "latency_ms_p50": p50, "latency_ms_p95": p95,
             "tracker_ms_p50": t50, "tracker_ms_p95": t95, "init_ms": self.init_ms,
-            "problems": json.dumps(self.problems.counts),
+            "problems": json.dumps(self.problems.counts), "events": json.dumps(self.problems.events),
         }
         st.level = DiagnosticStatus.OK if self.problems.total == 0 else DiagnosticStatus.WARN
         st.message = "tracking" if self.tracker is not None else "waiting for calibration and masks"
