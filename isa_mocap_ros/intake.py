@@ -67,7 +67,8 @@ class Accepted:
 @dataclass(frozen=True)
 class Rejected:
     """A rejected message: ``kind`` (a short key for counting: ``size``, ``frame_id``, ``stamp``,
-    ``encoding``, ``no_camera_info``, ``camera_info``) and a sentence a user can act on."""
+    ``encoding`` against the camera, ``pair`` for an image that disagrees with the camera_info of its
+    stamp, ``no_camera_info``, ``camera_info``) and a sentence a user can act on."""
 
     kind: str
     text: str
@@ -209,10 +210,10 @@ class ViewGate:
     def _pair(self, stamp_ns: int, image: Setting, payload: Any, info_setting: Setting,
               info: Any) -> tuple[list[Accepted], list[Rejected]]:
         if image.frame_id != info_setting.frame_id:
-            return [], [Rejected("frame_id", f"{self.name}: image of stamp {stamp_ns} dropped: frame_id "
+            return [], [Rejected("pair", f"{self.name}: image of stamp {stamp_ns} dropped: frame_id "
                                              f"{image.frame_id!r}, its camera_info's is {info_setting.frame_id!r}")]
         if (image.width, image.height) != (info_setting.width, info_setting.height):
-            return [], [Rejected("size", f"{self.name}: image of stamp {stamp_ns} dropped: size {image.width}x"
+            return [], [Rejected("pair", f"{self.name}: image of stamp {stamp_ns} dropped: size {image.width}x"
                                          f"{image.height}, its camera_info says {info_setting.width}x"
                                          f"{info_setting.height}")]
         first = self.setting is None

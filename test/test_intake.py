@@ -61,10 +61,10 @@ def test_a_camera_info_pair_that_disagrees_within_itself_is_rejected():
     g = gate()
     acc, rej = g.add_image(S, Setting("cam0_optical_frame", 7, 3, "bgr8"), "stray")
     acc, rej = g.add_info(S, INFO, "info")                   # same stamp, other size
-    assert acc == [] and rej[0].kind == "size" and "its camera_info says 320x240" in rej[0].text
+    assert acc == [] and rej[0].kind == "pair" and "its camera_info says 320x240" in rej[0].text
     g.add_info(S + P, Setting("other_frame", 320, 240), "info")
     acc, rej = g.add_image(S + P, CAM, "img")
-    assert acc == [] and rej[0].kind == "frame_id"
+    assert acc == [] and rej[0].kind == "pair" and "frame_id 'cam0_optical_frame', its camera_info's is" in rej[0].text
     assert g.setting is None
 
 
