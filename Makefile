@@ -18,6 +18,9 @@ $(STAMP): setup.py setup.cfg package.xml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test]'
+	@# compile the numba kernels now (numba's on-disk cache), not while the first run waits at "ready";
+	@# not fatal: without it they compile at first use
+	$(VENV)/bin/isa-mocap warmup || echo "make venv: warm-up failed; the kernels compile at first use instead"
 	@touch $(STAMP)
 
 test: venv

@@ -27,6 +27,7 @@ SUBCOMMANDS = [
     "synth",
     "track",
     "evaluate",
+    "warmup",
 ]
 
 
