@@ -31,17 +31,19 @@ image of the same stamp agree on (frame id and size; the image's encoding with i
   encoding) and camera infos are dropped at once.
 
 Every dropped message is counted (``close()`` prints the total) and logged, one rate-limited line
-per view and kind. ``use_camera_info: false`` is for a camera without camera_info: then the first
+per view and kind, and reported on ``/diagnostics`` at 1 Hz. ``use_camera_info: false`` is for a camera without camera_info: then the first
 image fixes the view's size and encoding, and a later change needs a restart of the node.
 """
 from __future__ import annotations
 
 import dataclasses
+import json
 import time
 from collections import deque
 
 import cv2
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, Image
@@ -139,6 +141,8 @@ class SegmentationNode(Node):
                                          qos_overriding_options=QOS_OVERRIDES)
         self.masks_published = [0] * self.n_views
         self._reported = [False] * self.n_views
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.RELIABLE)
+        self.create_timer(1.0, self._publish_diagnostics)
         self.latency_s: deque[float] = deque(maxlen=1000)
         self.get_logger().info(
             f"segmentation: {self.n_views} views, method {self.config.method}, "
@@ -225,6 +229,19 @@ class SegmentationNode(Node):
         self.masks_published[v] += 1      # before publish(): a Ctrl-C right after it must not lose the count
         pub.publish(out)
         self.latency_s.append(time.perf_counter() - t0)
+
+    def _publish_diagnostics(self) -> None:
+        """1 Hz: masks published, inputs dropped (per kind), views still learning, learning restarts."""
+        st = DiagnosticStatus(name="isa_mocap_ros: segmentation", hardware_id="segmentation")
+        values = {"masks_published": self.masks_published, "bad_inputs": self.problems.total,
+                  "problems": json.dumps(self.problems.counts), "learning_restarts": self.restarts,
+                  "views_learning": [v for v, seg in enumerate(self.segmenters) if seg.learning],
+                  "images_waiting_for_camera_info": [g.waiting() for g in self.gates]}
+        st.level = DiagnosticStatus.OK if self.problems.total == 0 else DiagnosticStatus.WARN
+        st.message = "segmenting" if any(self.masks_published) else "waiting for images and camera infos"
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+        self.pub_diag.publish(DiagnosticArray(header=ma.make_header(self.get_clock().now().nanoseconds),
+                                              status=[st]))
 
     def close(self) -> None:
         """Log the masks published and the per-image processing time."""
