@@ -124,3 +124,21 @@ def test_stamp_window():
     assert StampWindow(0).far(10**18) is None
     with pytest.raises(ValueError, match="depth"):
         ViewGate("cam0", max_gap_ns=1, depth=0)
+
+
+def test_expected_tracker_notes_are_events_not_problems():
+    from isa_mocap_ros.nodes.estimator import note_is_expected
+
+    for note in ("view 2: empty mask (nobody in view); skipped",
+                 "initialized automatically (4 heading candidates, 3 searched to the end)",
+                 "heading check started: a run heading the other way ended 0.05",
+                 "heading check decided: kept the initial heading (energy sums ...)",
+                 "no usable view and no estimate yet: nothing to track",
+                 "pelvis stage skipped: its share (12 evaluations) is below one generation"):
+        assert note_is_expected(note), note
+    for note in ("view 1: mask shape (7, 3), expected (240, 320); skipped",
+                 "no usable view: falling back to the last estimate",
+                 "optimizer failed: boom; falling back to the last estimate",
+                 "view 0: empty mask after the gate (all 12 foreground pixels farther than 40 px); skipped",
+                 "energy: 3 non-finite evaluations"):
+        assert not note_is_expected(note), note
