@@ -3,7 +3,7 @@ import json
 import math
 import re
 
-from isa_mocap_ros.cli import bench_results
+from isa_mocap_ros.bench import results as bench_results
 from isa_mocap_ros.cli.main import main
 
 

@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from isa_mocap_ros.cli import bench_robustness as br
+from isa_mocap_ros.bench import robustness as br
 from isa_mocap_ros.cli.main import main
 from isa_mocap_ros.tracking import TrackerConfig
 

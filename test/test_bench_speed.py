@@ -3,7 +3,7 @@ import json
 
 import numpy as np
 
-from isa_mocap_ros.cli import bench_speed
+from isa_mocap_ros.bench import speed as bench_speed
 from isa_mocap_ros.cli.main import main
 
 

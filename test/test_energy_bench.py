@@ -4,7 +4,8 @@ from __future__ import annotations
 import argparse
 import json
 
-from isa_mocap_ros.cli import bench, bench_energy
+from isa_mocap_ros.bench import energy as bench_energy
+from isa_mocap_ros.cli import bench
 from isa_mocap_ros.tracking.tracker import TrackerConfig
 
 

@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from isa_mocap_ros.cli import bench_ackley
+from isa_mocap_ros.bench import ackley as bench_ackley
 
 
 def test_bench_ackley_quick_json(capsys):

@@ -6,7 +6,7 @@ Thresholds: the worst best-energy measured over seeds 0-7 at the same budget, ti
 import numpy as np
 import pytest
 
-from isa_mocap_ros.cli.bench_ackley import ackley
+from isa_mocap_ros.bench.ackley import ackley
 from isa_mocap_ros.optim import make_optimizer, minimize
 
 

@@ -7,6 +7,9 @@ from isa_mocap_ros.optim._fast import pairwise_sum
 from isa_mocap_ros.optim.resampling import ess, normalise_log
 from isa_mocap_ros.optim.schedules import beta_for_ess
 from libm_probe import NUMPY_IS_LIBM
+from isa_mocap_ros.eval.peers import register_peers
+
+register_peers()  # the reference peers run through the same protocol
 
 
 def numpy_beta_for_ess(energies, target, beta_max=1e12, tol=1e-6):

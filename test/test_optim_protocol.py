@@ -4,6 +4,9 @@ import pytest
 
 from isa_mocap_ros.optim import (OPTIMIZERS, AnnealedParticleFilter, CmaEs, GenerationInfo, Isa,
                                  OptimError, Result, make_optimizer, minimize)
+from isa_mocap_ros.eval.peers import register_peers
+
+register_peers()  # the reference peers run through the same protocol
 
 FLAT = ["isa", "apf", "cmaes", "de", "pso"]
 ALL = list(OPTIMIZERS)

@@ -1,15 +1,15 @@
-"""``isa-mocap bench NAME``: benchmarks and paper reproductions.
+"""``isa-mocap bench NAME``: thin dispatch to the benchmarks in :mod:`isa_mocap_ros.bench`.
 
-Each benchmark is a module ``isa_mocap_ros.cli.bench_<name>`` exposing
-``add_arguments(parser)`` and ``run(args) -> int``; add its name to ``BENCHES``.
-``bench all`` runs every benchmark with its defaults and regenerates ``docs/RESULTS.md`` (what
-``make bench`` calls; :mod:`isa_mocap_ros.cli.bench_results`).
+Each benchmark is a module ``isa_mocap_ros.bench.<name>`` exposing ``add_arguments(parser)`` and
+``run(args) -> int``; its name is in :data:`isa_mocap_ros.bench.BENCHES`. ``bench all`` runs every
+benchmark with its defaults and regenerates ``docs/RESULTS.md`` (what ``make bench`` calls;
+:mod:`isa_mocap_ros.bench.results`).
 """
 from __future__ import annotations
 
 import importlib
 
-BENCHES: list[str] = ["ackley", "adapters", "render", "energy", "compare", "robustness", "speed"]
+from isa_mocap_ros.bench import BENCHES
 
 
 def register(sub) -> None:
@@ -17,12 +17,12 @@ def register(sub) -> None:
     bsub = p.add_subparsers(dest="bench", metavar="BENCH")
     bsub.required = True
     for name in BENCHES:
-        mod = importlib.import_module(f"isa_mocap_ros.cli.bench_{name}")
+        mod = importlib.import_module(f"isa_mocap_ros.bench.{name}")
         bp = bsub.add_parser(name, help=(mod.__doc__ or "").strip().splitlines()[0].replace("%", "%%"))
         mod.add_arguments(bp)
         bp.set_defaults(func=mod.run)
-    from isa_mocap_ros.cli import bench_results
+    from isa_mocap_ros.bench import results
 
     ap = bsub.add_parser("all", help="run every benchmark and regenerate docs/RESULTS.md (make bench)")
-    bench_results.add_arguments(ap)
-    ap.set_defaults(func=bench_results.run)
+    results.add_arguments(ap)
+    ap.set_defaults(func=results.run)

@@ -44,6 +44,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from isa_mocap_ros.eval.peers import register_peers
+
+    register_peers()  # the reference optimizers "pycma" and "scipy-de" are selectable too
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

@@ -32,6 +32,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from isa_mocap_ros.optim import inner_optimizer
+from isa_mocap_ros.resources import cmu_walk_bvh
 
 from .stats import StatsError, ranking_table
 
@@ -43,7 +44,8 @@ ALGORITHMS = ("isa", "h-isa", "apf", "psapf", "cmaes", "h-cmaes", "de", "h-de", 
 PEER_ALGORITHMS = ("pycma", "scipy-de")
 #: (holistic, hierarchical) pairs of the paper's §3.3 (PSAPF is the hierarchical APF)
 HIERARCHICAL_PAIRS = (("isa", "h-isa"), ("apf", "psapf"), ("cmaes", "h-cmaes"), ("de", "h-de"), ("pso", "h-pso"))
-CMU_WALK = Path("/work/shared/data/mocap/cmu_131_01_walk.bvh")
+#: the CMU walk in the shared data beside the checkout (or $ISA_MOCAP_SHARED); may be absent
+CMU_WALK = cmu_walk_bvh()
 
 
 @dataclass(frozen=True)
@@ -201,10 +203,11 @@ def run_cell(cell: dict, cache_path: Path | str) -> dict:
     ``frame_energies``.
     """
     from isa_mocap_ros.body import make_model
-    from isa_mocap_ros.eval import peers  # noqa: F401  (registers pycma / scipy-de)
+    from isa_mocap_ros.eval.peers import register_peers
     from isa_mocap_ros.eval.report import accuracy
     from isa_mocap_ros.tracking import Tracker, TrackerConfig
 
+    register_peers()
     t0 = time.perf_counter()
     spec, masks, truth, truth_model, shape, rig = _load_sequence(Path(cache_path))
     n = len(truth) if not cell.get("frames") else min(len(truth), int(cell["frames"]))

@@ -26,7 +26,8 @@ box, the same energy and prior), and every row handed to the energy is one count
 
 :func:`register_peers` adds both names to :data:`isa_mocap_ros.optim.OPTIMIZERS`, after which
 ``make_optimizer("pycma", ...)``, ``TrackerConfig(optimizer="scipy-de")`` and
-``make_tracker(..., optimizer="pycma")`` work (importing this module registers them).
+``make_tracker(..., optimizer="pycma")`` work. Nothing registers them on import: the CLI, the estimator
+node and the comparison call :func:`register_peers` (``optim`` never imports ``eval``).
 """
 from __future__ import annotations
 
@@ -204,5 +205,3 @@ def register_peers() -> None:
     for k, v in PEERS.items():
         OPTIMIZERS.setdefault(k, v)
 
-
-register_peers()

@@ -47,6 +47,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 import msg_adapters as ma
 from isa_mocap_ros.body import capsule_endpoints, joint_positions, make_model, pose_to_joint_state
 from isa_mocap_ros.body.hri import hri_joint_names, hri_urdf
+from isa_mocap_ros.eval.peers import register_peers
 from isa_mocap_ros.geometry import exp_so3
 from isa_mocap_ros.intake import Setting, StampWindow, ViewGate
 from isa_mocap_ros.nodes import qos
@@ -92,6 +93,7 @@ class EstimatorNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("estimator", **kwargs)
+        register_peers()  # the reference optimizers "pycma" and "scipy-de" are selectable too
         self.n_views = declare(self, "views", 4, "number of camera views", lo=1, hi=64)
         dof = declare(self, "model_dof", 39, "body model: 18, 28 or 39 DOF", lo=18, hi=39)
         shape = declare(self, "body_shape", "", "body-shape YAML file ('' = default shape)")

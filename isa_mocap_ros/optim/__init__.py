@@ -89,6 +89,3 @@ __all__ = [
     "Polynomial", "Logarithmic", "AdaptiveEss", "beta_for_ess", "make_schedule",
     "rotation_mean", "weighted_estimate", "dynamic_variance",
 ]
-
-# Reference implementations (pycma, scipy DE) register themselves as "pycma" and "scipy-de".
-from isa_mocap_ros.eval import peers as _peers  # noqa: E402,F401

@@ -34,6 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
+from isa_mocap_ros.bench._common import energy_sizes, json_of
+
 #: Run order of ``bench all``: the timed benches first, on a rested machine. After the 20 minutes of
 #: both cores at full load that ackley, compare and robustness take, the node network's real-time run
 #: in ``speed`` dropped 24 of 145 frame sets (tracker 31 ms a frame, p50) where the same bench alone
@@ -96,48 +98,33 @@ def git_commit() -> str:
 
 
 # ------------------------------------------------------------------ one bench each: data + markdown + figure
-def _json_of(mod, argv: list[str]) -> dict:
-    bp = argparse.ArgumentParser()
-    mod.add_arguments(bp)
-    buf = io.StringIO()
-    with contextlib.redirect_stdout(buf):
-        rc = mod.run(bp.parse_args(argv + ["--json"]))
-    if rc:
-        raise RuntimeError(f"{mod.__name__} {argv}: exit code {rc}")
-    text = buf.getvalue().strip()
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError:
-        return json.loads(text.splitlines()[-1])
-
-
 def _bench_ackley(quick: bool, ctx: dict) -> dict:
-    from isa_mocap_ros.cli import bench_ackley
+    from isa_mocap_ros.bench import ackley as bench_ackley
 
     runs = 5 if quick else 50
     return {"runs": runs, "rows": bench_ackley.collect(runs, 0, quick=quick, jobs=ctx.get("jobs", 2))}
 
 
 def _bench_adapters(quick: bool, ctx: dict) -> dict:
-    from isa_mocap_ros.cli import bench_adapters
+    from isa_mocap_ros.bench import adapters as bench_adapters
 
-    return {"rows": _json_of(bench_adapters, ["--number", "5", "--repeat", "2"] if quick else [])}
+    return {"rows": json_of(bench_adapters, ["--number", "5", "--repeat", "2"] if quick else [])}
 
 
 def _bench_render(quick: bool, ctx: dict) -> dict:
-    from isa_mocap_ros.cli import bench_render
+    from isa_mocap_ros.bench import render as bench_render
 
-    return _json_of(bench_render, ["--repeats", "3", "--particles", "100"] if quick else [])
+    return json_of(bench_render, ["--repeats", "3", "--particles", "100"] if quick else [])
 
 
 def _bench_energy(quick: bool, ctx: dict) -> dict:
-    from isa_mocap_ros.cli import bench_energy
+    from isa_mocap_ros.bench import energy as bench_energy
 
-    return _json_of(bench_energy, ["--quick"] if quick else [])
+    return json_of(bench_energy, ["--quick"] if quick else [])
 
 
 def _bench_compare(quick: bool, ctx: dict) -> dict:
-    from isa_mocap_ros.cli.bench_compare import collect
+    from isa_mocap_ros.bench.compare import collect
 
     summary, design, seconds = collect("quick" if quick else "default", ctx["out"] / "compare", jobs=ctx["jobs"],
                                        progress=ctx["progress"])
@@ -146,7 +133,7 @@ def _bench_compare(quick: bool, ctx: dict) -> dict:
 
 
 def _bench_robustness(quick: bool, ctx: dict) -> dict:
-    from isa_mocap_ros.cli import bench_robustness as br
+    from isa_mocap_ros.bench import robustness as br
 
     design = br.make_design("quick" if quick else "default")
     for n in design.notes:
@@ -156,7 +143,7 @@ def _bench_robustness(quick: bool, ctx: dict) -> dict:
 
 
 def _bench_speed(quick: bool, ctx: dict) -> dict:
-    from isa_mocap_ros.cli import bench_speed
+    from isa_mocap_ros.bench import speed as bench_speed
 
     bp = argparse.ArgumentParser()
     bench_speed.add_arguments(bp)
@@ -178,7 +165,7 @@ def md_ackley(d: dict) -> str:
     book = [r for r in d["rows"] if "selection_mean_steps" not in r]
     searched = [r for r in d["rows"] if "selection_mean_steps" in r]
     L = [f"{d['runs']} runs per row (paper: 50), 2-D Ackley on [-4, 4]², ≤ 999 steps; δ = 1e-3 (noisy: σ = 0.5, δ = 1e-2). "
-         "Protocol: `isa_mocap_ros/cli/bench_ackley.py`, [docs/optimizers.md](optimizers.md).", "",
+         "Protocol: `isa_mocap_ros/bench/ackley.py`, [docs/optimizers.md](optimizers.md).", "",
          "Readings of the dynamic variance scheme (13.16): its particles, *population* = the equation as printed, "
          "*selected* = the selected particles (the text's \"after resampling\"); what the book's c multiplies, "
          "*deviation* = the standard deviation (Fig. 13.13), *covariance* = the covariance as (13.16) prints it. "
@@ -232,23 +219,9 @@ def md_render(d: dict) -> str:
 def md_energy(d: dict) -> str:
     return "\n".join([
         f"{d['dof']} DOF, {d['views']} views 320×240, batch {d['batch']} (`isa-mocap bench energy`; the exact reference "
-        f"measured on {d['exact_batch']} poses){_energy_sizes(d)}.", "", "| energy | evaluations/s |", "|---|---|",
+        f"measured on {d['exact_batch']} poses){energy_sizes(d)}.", "", "| energy | evaluations/s |", "|---|---|",
         f"| fast (compiled kernel) | {d['fast_evals_per_s']:.0f} |", f"| exact (raster reference) | {d['exact_evals_per_s']:.0f} |",
         f"| ratio | {d['ratio']:.0f}× |"]) + "\n"
-
-
-def _energy_sizes(d: dict) -> str:
-    """The fast energy's sample sizes and threads, when ``bench energy`` reports them."""
-    parts = []
-    if d.get("n_template") is not None:
-        parts.append(f"{d['n_template']} model points")
-    if d.get("n_mask_points") is not None:
-        parts.append(f"{d['n_mask_points']} foreground points per view")
-    if d.get("downsample") is not None:
-        parts.append(f"downsample {d['downsample']}")
-    if d.get("threads") is not None:
-        parts.append(f"{d['threads']} threads")
-    return "; fast energy: " + ", ".join(parts) if parts else ""
 
 
 def md_compare(d: dict) -> str:
@@ -284,20 +257,20 @@ def md_findings(d: dict) -> str:
 
 
 def md_robustness(d: dict) -> str:
-    from isa_mocap_ros.cli.bench_robustness import render_markdown
+    from isa_mocap_ros.bench.robustness import render_markdown
 
-    return "Protocol: ISA §13.4.2, `isa_mocap_ros/cli/bench_robustness.py` (module docstring).\n\n" + render_markdown(d)
+    return "Protocol: ISA §13.4.2, `isa_mocap_ros/bench/robustness.py` (module docstring).\n\n" + render_markdown(d)
 
 
 def md_speed(d: dict) -> str:
-    from isa_mocap_ros.cli.bench_speed import render_markdown
+    from isa_mocap_ros.bench.speed import render_markdown
 
     return "Measured in one run, one part after the other (`isa-mocap bench speed`).\n\n" + render_markdown(d)
 
 
 def targets(data: dict) -> list[tuple[str, str, str]]:
     """``(target, measured, status)`` rows of issue #7's targets, from the measured numbers."""
-    from isa_mocap_ros.cli.bench_robustness import render_targets
+    from isa_mocap_ros.bench.robustness import render_targets
     from isa_mocap_ros.eval.compare import peer_targets
 
     rows = []
@@ -389,11 +362,11 @@ def figures(data: dict, fig_dir: Path) -> dict:
         from isa_mocap_ros.eval.compare import plot_summary
         out["compare"] = [plot_summary(data["compare"], fig_dir / "compare_error_vs_budget.png")]
     if "robustness" in data and data["robustness"].get("runs"):
-        from isa_mocap_ros.cli.bench_robustness import plot, plot_bars
+        from isa_mocap_ros.bench.robustness import plot, plot_bars
         out["robustness"] = [plot_bars(data["robustness"], fig_dir / "robustness_knee_rmse.png"),
                              plot(data["robustness"], fig_dir / "robustness_knees.png")]
     if "speed" in data:
-        from isa_mocap_ros.cli.bench_speed import plot
+        from isa_mocap_ros.bench.speed import plot
         out["speed"] = [plot(data["speed"], fig_dir / "speed_tracker_fps.png")]
     if "ackley" in data:
         out["ackley"] = [_plot_ackley(data["ackley"], fig_dir / "ackley_steps.png")]

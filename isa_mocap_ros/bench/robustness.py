@@ -27,7 +27,7 @@ Protocol (ISA §13.4.2, Figs. 13.15-13.17, with our tracker's best settings):
   sequences of those means (targets: on the per-sequence means).
 
 Designs: default — the CMU walk from 1 s (skipped with a message when
-``/work/shared/data/mocap/cmu_131_01_walk.bvh`` is absent) and the generated walk and jog, 4 s each
+``shared/data/mocap/cmu_131_01_walk.bvh`` beside the checkout is absent) and the generated walk and jog, 4 s each
 at 30 fps (120 scored frames), 4 views 320×240, seeds 0-7 (96 runs, tracked by ``--jobs`` 2
 worker processes: 6-8 min on this 2-core machine, depending on its other load; 8 seeds since session
 18: a run under noise or occluders is chaotic, one seed in three or four loses a knee for a few
@@ -49,7 +49,10 @@ from pathlib import Path
 
 import numpy as np
 
-CMU_WALK = Path("/work/shared/data/mocap/cmu_131_01_walk.bvh")
+from isa_mocap_ros.resources import cmu_walk_bvh
+
+#: the CMU walk in the shared data beside the checkout (or $ISA_MOCAP_SHARED); may be absent
+CMU_WALK = cmu_walk_bvh()
 EMPTY_FRAMES = 10
 
 #: (key, label, pixel-noise probability, occluders, the paper's knee RMSE in degrees)

@@ -50,10 +50,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def energy_speed(quick: bool) -> dict:
-    from isa_mocap_ros.cli import bench_energy
-    from isa_mocap_ros.cli.bench_results import _json_of
+    from isa_mocap_ros.bench import energy as bench_energy
+    from isa_mocap_ros.bench._common import json_of
 
-    return _json_of(bench_energy, ["--quick"] if quick else [])
+    return json_of(bench_energy, ["--quick"] if quick else [])
 
 
 def tracker_speed(bag: Path, *, frames: int, budgets=BUDGETS, optimizer: str = "h-isa", use_masks: bool = False,
@@ -159,12 +159,12 @@ def _f(v, fmt="{:.1f}"):
 
 
 def render_markdown(res: dict) -> str:
-    from isa_mocap_ros.cli.bench_results import _energy_sizes
+    from isa_mocap_ros.bench._common import energy_sizes
 
     e = res["energy"]
     L = ["#### Silhouette energy", "",
          f"{e['dof']} DOF, {e['views']} views, batch {e['batch']} (exact reference measured on {e['exact_batch']} poses"
-         f"{_energy_sizes(e)}).",
+         f"{energy_sizes(e)}).",
          "", "| energy | evaluations/s |", "|---|---|",
          f"| fast (compiled kernel) | {e['fast_evals_per_s']:.0f} |", f"| exact (raster reference) | {e['exact_evals_per_s']:.0f} |",
          f"| ratio | {e['ratio']:.0f}× |", ""]

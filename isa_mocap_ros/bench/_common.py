@@ -1,0 +1,37 @@
+"""Helpers every benchmark module shares (no benchmark imports another one's private helpers)."""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+
+
+def json_of(mod, argv: list[str]) -> dict:
+    """Run bench module ``mod`` with ``argv + ["--json"]`` and return the JSON it printed."""
+    bp = argparse.ArgumentParser()
+    mod.add_arguments(bp)
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        rc = mod.run(bp.parse_args(argv + ["--json"]))
+    if rc:
+        raise RuntimeError(f"{mod.__name__} {argv}: exit code {rc}")
+    text = buf.getvalue().strip()
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return json.loads(text.splitlines()[-1])
+
+
+def energy_sizes(d: dict) -> str:
+    """The fast energy's sample sizes and threads, when ``bench energy`` reports them."""
+    parts = []
+    if d.get("n_template") is not None:
+        parts.append(f"{d['n_template']} model points")
+    if d.get("n_mask_points") is not None:
+        parts.append(f"{d['n_mask_points']} foreground points per view")
+    if d.get("downsample") is not None:
+        parts.append(f"downsample {d['downsample']}")
+    if d.get("threads") is not None:
+        parts.append(f"{d['threads']} threads")
+    return "; fast energy: " + ", ".join(parts) if parts else ""
