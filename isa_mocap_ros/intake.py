@@ -27,7 +27,8 @@ the view (frame id, width, height, encoding) from the last such pair:
 With ``need_info=False`` (a camera without ``camera_info``) the first image fixes the setting and
 every later one must agree with it (no pairs: a size change then needs a restart of the node).
 
-:class:`StampWindow` is the stamp check on its own (the estimator applies it to predictions).
+:class:`StampWindow` is the stamp check on its own (the estimator applies it to predictions);
+:class:`StreamJumps` follows a stream that may restart (the prediction node's estimates).
 """
 from __future__ import annotations
 
@@ -35,7 +36,7 @@ from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["Setting", "Accepted", "Rejected", "StampWindow", "ViewGate"]
+__all__ = ["Setting", "Accepted", "Rejected", "StampWindow", "ViewGate", "StreamJumps"]
 
 
 @dataclass(frozen=True)
@@ -230,3 +231,38 @@ class ViewGate:
             self.info = info
         self.window.accept(stamp_ns)
         return [Accepted(stamp_ns, payload, self.info, first=first, changed=changed)]
+
+
+class StreamJumps:
+    """One stream's stamps when the stream may restart (a replayed bag, a camera paused): a stamp that
+    continues the stream (newer than the last, by at most ``ahead_ns``) is taken; one older by at most
+    ``back_ns`` is out of order (dropped); any other is *far*: it is dropped, but remembered, and the next
+    stamp that continues *it* restarts the stream there. So one stray message far in time neither resets
+    nor derails the stream, and a real restart costs its first message.
+
+    :meth:`decide` returns ``("take" | "restart" | "drop", why)``; ``ahead_ns <= 0``: no limit ahead.
+    """
+
+    def __init__(self, *, back_ns: int, ahead_ns: int) -> None:
+        self.back_ns = int(back_ns)
+        self.ahead_ns = int(ahead_ns)
+        self.last_ns: int | None = None
+        self._candidate: int | None = None
+
+    def _continues(self, ref: int, stamp_ns: int) -> bool:
+        return stamp_ns > ref and (self.ahead_ns <= 0 or stamp_ns - ref <= self.ahead_ns)
+
+    def decide(self, stamp_ns: int) -> tuple[str, str | None]:
+        if self.last_ns is None or self._continues(self.last_ns, stamp_ns):
+            self.last_ns, self._candidate = stamp_ns, None
+            return "take", None
+        d_s = (stamp_ns - self.last_ns) / 1e9
+        if -self.back_ns <= stamp_ns - self.last_ns <= 0:
+            return "drop", (f"stamp {stamp_ns} is not newer than the last one's {self.last_ns} "
+                            f"(out of order by {-d_s * 1e3:.1f} ms)")
+        if self._candidate is not None and self._continues(self._candidate, stamp_ns):
+            self.last_ns, self._candidate = stamp_ns, None
+            return "restart", f"the stream restarted {d_s:+.3f} s from its last stamp"
+        self._candidate = stamp_ns
+        return "drop", (f"stamp {stamp_ns} is {d_s:+.3f} s from the stream (last {self.last_ns}); taken as a "
+                        f"restart only if the next one follows it")

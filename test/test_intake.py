@@ -142,3 +142,19 @@ def test_expected_tracker_notes_are_events_not_problems():
                  "view 0: empty mask after the gate (all 12 foreground pixels farther than 40 px); skipped",
                  "energy: 3 non-finite evaluations"):
         assert not note_is_expected(note), note
+
+
+def test_stream_jumps_one_stray_stamp_changes_nothing_a_real_restart_is_followed():
+    from isa_mocap_ros.intake import StreamJumps
+
+    j = StreamJumps(back_ns=10**9, ahead_ns=5 * 10**9)
+    assert j.decide(S) == ("take", None) and j.decide(S + P)[0] == "take"
+    assert "out of order" in j.decide(S)[1]                         # older, within back_ns
+    for stray in (S + 3600 * 10**9, S - 3600 * 10**9, 7):           # far, alone: dropped, the stream goes on
+        assert j.decide(stray)[0] == "drop"
+        assert j.decide(j.last_ns + P)[0] == "take"
+    start = S - 100 * 10**9                                         # a replayed bag: two stamps in sequence
+    assert j.decide(start)[0] == "drop"
+    kind, why = j.decide(start + P)
+    assert kind == "restart" and "restarted" in why and j.last_ns == start + P
+    assert j.decide(start + 2 * P)[0] == "take"
