@@ -335,6 +335,10 @@ class EstimatorNode(Node):
                 if parent != self.world_frame:
                     raise ma.AdapterError("TransformStamped.header.frame_id", f"the world frame {self.world_frame!r}",
                                           parent)
+                known = self.gates[v].setting
+                if known is not None and known.frame_id and msg.child_frame_id != known.frame_id:
+                    raise ma.AdapterError("TransformStamped.child_frame_id", f"the frame of cam{v}'s camera "
+                                          f"{known.frame_id!r}", msg.child_frame_id)
                 rt = ma.transform_to_rt(msg)
                 store = self._extrinsics[v]
                 if msg.child_frame_id not in store and len(store) >= MAX_CAMERA_FRAMES:
