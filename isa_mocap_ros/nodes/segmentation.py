@@ -163,10 +163,17 @@ class SegmentationNode(Node):
                 seg.apply(img)
 
     def _info_cb(self, v: int):
+        last = [None, None]  # key and intrinsics of the last good camera info: a camera sends the same one every frame
+
         def cb(msg: CameraInfo) -> None:
             try:
                 stamp = ma.stamp_to_ns(msg.header)
-                intr = ma.camera_info_to_intrinsics(msg)
+                key = ma.camera_info_key(msg)
+                if key is not None and key == last[0]:
+                    intr = last[1]
+                else:
+                    intr = ma.camera_info_to_intrinsics(msg)
+                    last[:] = key, intr
             except ma.AdapterError as exc:
                 self.problems.report(f"info{v}:{exc.field}", f"cam{v}/camera_info dropped: {exc}")
                 return
