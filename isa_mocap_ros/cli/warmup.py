@@ -1,6 +1,6 @@
 """``isa-mocap warmup``: compile the numba kernels ahead, so the first run does not wait for them.
 
-numba compiles a kernel on its first call after an install (about 1-2 minutes for the estimator's on
+numba compiles a kernel on its first call after an install (1.5-4 minutes for the estimator's on
 2 cores) and keeps the machine code in its on-disk cache; later processes load it in seconds. This
 command starts the segmentation and estimator nodes once with the parameter file (each runs its
 warm-up: the segmentation's background kernels, the estimator's tracker on a tiny synthetic frame
@@ -36,7 +36,7 @@ def warmup(args: argparse.Namespace) -> int:
     env = ros_env()
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "OFF"   # the nodes see no other node, on any domain
     t0 = time.monotonic()
-    print("warmup: compiling the numba kernels of the segmentation and estimator nodes (~1-2 min the first "
+    print("warmup: compiling the numba kernels of the segmentation and estimator nodes (1.5-4 min the first "
           "time after an install, seconds once cached)", flush=True)
     procs, ready = {}, {name: threading.Event() for name in READY}
     bindir = os.path.dirname(sys.executable)

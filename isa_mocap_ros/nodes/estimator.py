@@ -455,7 +455,7 @@ class EstimatorNode(Node):
         # said before the wait, so a first run is not a silent minute: numba compiles the kernels on their
         # first call after an install (`make venv` does it ahead, `isa-mocap warmup`) and loads its cache after
         self.get_logger().info("estimator: loading the compiled kernels (a few seconds from numba's cache; "
-                               "~1-2 min when they were never compiled since the install: run `isa-mocap warmup` "
+                               "1.5-4 min when they were never compiled since the install: run `isa-mocap warmup` "
                                "once to do that ahead)")
         try:
             from isa_mocap_ros.body import capsule_endpoints as caps
