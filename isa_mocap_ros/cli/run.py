@@ -25,7 +25,7 @@ from isa_mocap_ros.rosenv import ros_env
 NS = "/mocap"
 RECORDED = ["/mocap/joint_states", "/mocap/estimator/done", "/mocap/root_pose", "/mocap/prediction/joint_states",
             "/diagnostics", "/mocap/cam*/overlay", "/mocap/cam*/mask", "/mocap/cam0/image_raw", "/mocap/markers",
-            "/humans/bodies/*/joint_states", "/humans/bodies/*/urdf"]
+            "/humans/bodies/*/joint_states", "/humans/bodies/*/urdf", "/mocap/cam*/keypoints"]
 
 
 def register(sub) -> None:
@@ -54,6 +54,9 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
                    help="niceness added to every process but the estimator's (player, segmentation, prediction, "
                         "recorder; default 5, 0 = off): on a small machine the tracker's threads then lose "
                         "less time to the helpers (docs/nodes.md)")
+    p.add_argument("--keypoints", action="store_true",
+                   help="also run the keypoint node (BlazePose landmarks on cam<i>/keypoints, recorded; its "
+                        "every_k_frames from the parameter file; docs/keypoints.md)")
     p.add_argument("--quiet", action="store_true", help="do not echo node output")
 
 
@@ -80,7 +83,14 @@ def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
                 for v in range(n_views) for t in ("mask", "camera_info")]
     common = dict(namespace=NS, params_files=(params,))
     nice = getattr(args, "helper_nice", 0)
-    return [
+    kp = []
+    if getattr(args, "keypoints", False):
+        kp_params = [("views", str(n_views))]
+        if args.lockstep:
+            kp_params += [(f"qos_overrides.{NS}/cam{v}/{t}.subscription.reliability", "reliable")
+                          for v in range(n_views) for t in ("image_raw", "mask")]
+        kp = [NodeSpec(exec="keypoints_node", name="keypoints", params=tuple(kp_params), nice=nice, **common)]
+    return kp + [
         NodeSpec(exec="segmentation_node", name="segmentation", params=tuple(seg), nice=nice, **common),
         NodeSpec(exec="prediction_node", name="prediction", nice=nice, **common),
         NodeSpec(exec="estimator_node", name="estimator", params=tuple(est), **common),

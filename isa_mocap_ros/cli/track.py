@@ -82,6 +82,12 @@ def register(sub) -> None:
                    help="comma-separated order of the hierarchy's partitions (default: the tracker's, root,left_arm,"
                         "right_arm,torso,left_leg,right_leg; the paper's: root,torso,left_arm,right_arm,left_leg,"
                         "right_leg)")
+    p.add_argument("--keypoint-weight", type=float, default=0.0, metavar="W",
+                   help="weight of the learned-keypoint term (BlazePose landmarks on the images, cropped around "
+                        "the mask; docs/keypoints.md); 0 = off (default)")
+    p.add_argument("--keypoint-every", type=int, default=0, metavar="K",
+                   help="with --keypoint-weight: detect keypoints on the automatically initialized frame and on "
+                        "every K-th tracked frame (0 = the initialized frame only; default 0)")
     p.add_argument("--overwrite", action="store_true", help="replace DIR/estimates if it exists")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -187,7 +193,20 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     with BagReader(bag_path) as probe:
         has_mask_topics = any(t.endswith("/mask") and t.startswith(f"{TOPIC}/cam") for t in probe.topics)
     use_masks = bool(args.use_masks and has_mask_topics)
-    seq = read_sequence(bag_path, want_images=not use_masks, want_masks=use_masks)
+    kp_weight = float(getattr(args, "keypoint_weight", 0.0) or 0.0)
+    kp_every = int(getattr(args, "keypoint_every", 0) or 0)
+    if not np.isfinite(kp_weight) or kp_weight < 0 or kp_every < 0:
+        raise ValueError(f"--keypoint-weight / --keypoint-every: expected numbers >= 0, received {kp_weight}, "
+                         f"{kp_every}")
+    detector = None
+    if kp_weight > 0:
+        from isa_mocap_ros.vision.landmark_model import ModelUnavailable
+        from isa_mocap_ros.vision.landmarks import PoseLandmarker, box_from_mask
+        try:
+            detector = PoseLandmarker()
+        except ModelUnavailable as exc:
+            raise ValueError(f"--keypoint-weight: {exc}") from None
+    seq = read_sequence(bag_path, want_images=not use_masks or detector is not None, want_masks=use_masks)
     if not seq.frames:
         raise ValueError(f"BAG: expected frames with images{' or masks' if use_masks else ''}, received none")
     dof = args.model or (seq.truth_model.dof if seq.truth_model is not None else 39)
@@ -226,7 +245,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         from isa_mocap_ros.energy.prior import ParzenPrior
         prior = ParzenPrior.load(args.prior)
     cfg_kw = dict(optimizer=args.optimizer, evals_per_frame=args.evals, optimizer_params=params, seed=args.seed,
-                  energy_method=args.energy, prior_eta=args.prior_eta)
+                  energy_method=args.energy, prior_eta=args.prior_eta, keypoint_weight=kp_weight)
     if args.predictor:
         cfg_kw["predictor"] = args.predictor
     if getattr(args, "gate_margin_px", None) is not None:
@@ -260,6 +279,22 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     results = []
     n_fell_back = 0
     t_track = 0.0
+    kp_seconds: list[float] = []        # detection time per frame set with keypoints
+
+    def keypoints_of(fr, masks):
+        t0 = time.perf_counter()
+        out = []
+        for img, m in zip(fr.images, masks):
+            box = None if img is None or m is None else box_from_mask(m)
+            if box is None or img.ndim != 3:
+                out.append(None)
+                continue
+            lm = detector.detect(img, box)           # bag images are rgb8 (camera node, synth)
+            out.append((lm.uv, lm.confidence))
+        if any(o is not None for o in out):          # frames without foreground cost nothing
+            kp_seconds.append(time.perf_counter() - t0)
+            return out
+        return None
     with BagWriter(est_path, overwrite=args.overwrite) as bag:
         bag.add_topic(f"{TOPIC}/joint_states", "sensor_msgs/msg/JointState", qos=[QOS_DEFAULT])
         bar = tqdm(total=stop - first, unit="frame", desc="track", file=sys.stderr, disable=not show)
@@ -283,7 +318,11 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                 r = None
                 x = tracker.last_estimate
             else:
-                r = tracker.step(masks, int(fr.stamp_ns), frames_elapsed=stride)
+                kp = None
+                if detector is not None and (not tracker.initialized
+                                             or (kp_every > 0 and ((fr.index - first) // stride) % kp_every == 0)):
+                    kp = keypoints_of(fr, masks)
+                r = tracker.step(masks, int(fr.stamp_ns), frames_elapsed=stride, keypoints=kp)
                 x = r.x
             dt = time.perf_counter() - t0
             t_track += dt
@@ -318,6 +357,9 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                      "init_confirm_frames": cfg.init_confirm_frames,
                      "init_confirm_share": cfg.init_confirm_share,
                      "partition_order": list(cfg.partition_order),
+                     "keypoint_weight": kp_weight, "keypoint_every": kp_every,
+                     "keypoint_frames": len(kp_seconds),
+                     "keypoint_ms_per_frame_set": float(np.mean(kp_seconds) * 1e3) if kp_seconds else None,
                      "masks": "recorded" if use_masks else f"segmented (learned from {learn} frames)",
                      "frames_tracked": n_tracked, "frames_estimated": len(estimates), "frames_fell_back": n_fell_back,
                      "fps": n_tracked / t_track if t_track > 0 else float("nan"),

@@ -523,6 +523,16 @@ class TrackerConfig:
         3.71 → 3.38°, 35 occluders 2.95 → 2.09°, with the energy's template cut at the image border;
         the CMU walk, seen whole by every view, unchanged bit for bit; ``docs/tracking.md``, "Views at
         the image border").
+    keypoint_weight : float
+        Weight of the keypoint term (:class:`~isa_mocap_ros.energy.KeypointEnergy`, learned 2-D
+        landmarks to joints through Plücker lines, ISA 13.30-13.31) added to the data term on the frames
+        whose keypoints the caller passes (``step(..., keypoints=)``, ``initialize(..., keypoints=)``);
+        0 (default) = off. The term lies in [0, 1) like the silhouette energy. While it is active the
+        search runs through the optimizer protocol (not the compiled h-isa path), so it costs time on
+        those frames: callers pass keypoints on the automatically initialized frame and every k-th
+        frame (``docs/keypoints.md``).
+    keypoint_sigma_m : float
+        Scale of the keypoint term's Geman-McClure loss, metres (> 0; default 0.1).
     max_frames_ahead : float
         After frames the tracker did not see (``step``'s ``frames_elapsed`` > 1, or frames that
         fell back), its own prediction looks that many periods ahead, but at most this many
@@ -591,6 +601,8 @@ class TrackerConfig:
     hull_keep_px: int = 3
     hull_pad_m: float = 0.35
     view_weights: bool = True
+    keypoint_weight: float = 0.0
+    keypoint_sigma_m: float = 0.1
     max_frames_ahead: float = 5.0
 
     def __post_init__(self) -> None:
@@ -615,6 +627,8 @@ class TrackerConfig:
             raise TrackerError(f"predictor: expected one of {', '.join(PREDICTORS)}, received {self.predictor!r}")
         _check_number("predictor_order", self.predictor_order, lo=1, integer=True)
         _check_number("max_frames_ahead", self.max_frames_ahead, lo=1.0)
+        _check_number("keypoint_weight", self.keypoint_weight, lo=0.0)
+        _check_number("keypoint_sigma_m", self.keypoint_sigma_m, lo=0.0, strict=True)
         for name in ("root_velocity_gain", "joint_velocity_gain"):
             _check_number(name, getattr(self, name), lo=0.0)
         _check_number("prior_eta", self.prior_eta, lo=0.0)
@@ -856,6 +870,8 @@ class Tracker:
         # h-isa on the fast energy runs compiled per partition (tracking/_fast_search.py, the same
         # numbers as the optimizer protocol); False: always through the protocol (tests compare both)
         self._compiled_search = True
+        # the keypoint term of the frame being tracked (config.keypoint_weight; set by step/initialize)
+        self._keypoint_term = None
 
     # ------------------------------------------------------------------ state
     @property
@@ -913,13 +929,24 @@ class Tracker:
     def _prior_active(self) -> bool:
         return self.prior is not None and self.config.prior_eta > 0
 
-    def total_energy(self, X) -> np.ndarray:
-        """Data term plus the prior ``−η ln p`` (13.33) of poses ``(n, D)`` under the current masks."""
-        X = np.atleast_2d(np.asarray(X, dtype=float))
-        E = np.asarray(self.energy(X), dtype=float)
+    def _python_terms(self) -> bool:
+        """Whether a term beside the silhouette energy is active (prior, keypoints): the search then
+        runs through the optimizer protocol on :meth:`total_energy`, not the compiled path."""
+        return self._prior_active() or self._keypoint_term is not None
+
+    def _add_terms(self, X: np.ndarray, E: np.ndarray) -> np.ndarray:
+        """``E`` plus the prior ``−η ln p`` (13.33) and the frame's weighted keypoint term, if active."""
         if self.prior is not None and self.config.prior_eta > 0:
             E = E + self.prior.energy(X, eta=self.config.prior_eta)
+        if self._keypoint_term is not None:
+            E = E + self.config.keypoint_weight * self._keypoint_term(X)
         return E
+
+    def total_energy(self, X) -> np.ndarray:
+        """Data term plus the prior ``−η ln p`` (13.33) and the frame's keypoint term (if any) of poses
+        ``(n, D)`` under the current masks."""
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        return self._add_terms(X, np.asarray(self.energy(X), dtype=float))
 
     def restricted_energy(self, x_base, coords):
         """:meth:`total_energy` for poses equal to ``x_base`` outside ``coords``, the same values: the
@@ -932,10 +959,7 @@ class Tracker:
 
         def total(X):
             X = np.atleast_2d(np.asarray(X, dtype=float))
-            E = np.asarray(data(X), dtype=float)
-            if self.prior is not None and self.config.prior_eta > 0:
-                E = E + self.prior.energy(X, eta=self.config.prior_eta)
-            return E
+            return self._add_terms(X, np.asarray(data(X), dtype=float))
         return total
 
     # ------------------------------------------------------------------ masks
@@ -1009,7 +1033,8 @@ class Tracker:
         return int(used) if used is not None else sum(m is not None for m in masks)
 
     # ------------------------------------------------------------------ initialization
-    def initialize(self, masks: Sequence | None = None, pose=None, *, frame_index: int = 0):
+    def initialize(self, masks: Sequence | None = None, pose=None, *, frame_index: int = 0,
+                   keypoints: Sequence | None = None):
         """Set the first estimate: ``pose`` if given, else automatically from ``masks``.
 
         Parameters
@@ -1018,6 +1043,9 @@ class Tracker:
         pose : (D,) array_like, optional
         frame_index : int
             Frame key of the initialization's random stream.
+        keypoints : sequence of (uv, confidence) or None, optional
+            As for :meth:`step`: with ``config.keypoint_weight > 0`` the grid and refinement also
+            score the keypoint term.
 
         Returns
         -------
@@ -1049,12 +1077,15 @@ class Tracker:
         if self._set_masks(usable, notes, frame_index) == 0:
             raise TrackerError(f"masks: expected foreground in at least one view, received none ({'; '.join(notes)})")
         cfg = self.config
+        self._keypoint_term = self._keypoint_energy(keypoints)[0]
         try:
             res = initial_pose(self.model, self.cameras, usable, self._init_energy_fn(usable, frame_index),
                                rng=frame_rng(cfg.seed, frame_index, 1), n_yaw=cfg.init_yaw_steps,
                                refine_evals=cfg.init_refine_evals)
         except InitError as exc:
             raise TrackerError(f"masks: automatic initialization failed: {exc}") from None
+        finally:
+            self._keypoint_term = None
         self._accept(res.x)
         self._heading_views = res.views_used
         return res
@@ -1071,10 +1102,7 @@ class Tracker:
 
         def fn(X):
             X = np.atleast_2d(np.asarray(X, dtype=float))
-            E = np.asarray(self._init_energy(X), dtype=float)
-            if self.prior is not None and self.config.prior_eta > 0:
-                E = E + self.prior.energy(X, eta=self.config.prior_eta)
-            return E
+            return self._add_terms(X, np.asarray(self._init_energy(X), dtype=float))
         return fn
 
     def _accept(self, x: np.ndarray) -> None:
@@ -1248,7 +1276,7 @@ class Tracker:
 
         opt, budget, stage_shares, (lo, hi, spread, base) = self._search(pred, rng, spread_scale, notes, stages)
         share, torso, limbs, refine, contour = stage_shares
-        if self._compiled_search and _fast_search.supported(opt, self.energy, self._prior_active()):
+        if self._compiled_search and _fast_search.supported(opt, self.energy, self._python_terms()):
             res = _fast_search.run_hisa(opt, self.energy, budget)      # the same numbers, compiled per partition
         else:
             res = minimize(opt, _TotalEnergy(self), max_evals=budget)
@@ -1297,7 +1325,7 @@ class Tracker:
                 rng = frame_rng(cfg.seed, frame_index) if j == 0 else frame_rng(cfg.seed, frame_index, 3, j)
             opt, budget, _, _ = self._search(pred, rng, cfg.init_spread_scale, notes if j == 0 else None,
                                              stages=False)
-            if self._compiled_search and _fast_search.supported(opt, self.energy, self._prior_active()):
+            if self._compiled_search and _fast_search.supported(opt, self.energy, self._python_terms()):
                 # compiled h-isa, paused after its first partition (the same numbers as below)
                 runs.append((j, _fast_search.HisaRun(opt, self.energy, budget), pred, None))
                 continue
@@ -1769,8 +1797,44 @@ class Tracker:
         self._rival = rival
         self._confirm = [0, 0.0, 0.0]
 
+    def _keypoint_energy(self, keypoints) -> tuple[Any, str | None]:
+        """The frame's :class:`~isa_mocap_ros.energy.KeypointEnergy` (or None) and a note on it."""
+        if keypoints is None or self.config.keypoint_weight <= 0:
+            return None, None
+        from isa_mocap_ros.energy import KeypointEnergy
+        try:
+            term = KeypointEnergy(self.model, self.cameras, keypoints, sigma_m=self.config.keypoint_sigma_m)
+        except ValueError as exc:
+            return None, f"keypoints ignored: {exc}"
+        if term.n_correspondences == 0:
+            return None, "keypoints: none usable (no detection above the confidence floor)"
+        return term, (f"keypoints: {term.n_correspondences} in {len(set(term.views.tolist()))} views, "
+                      f"weight {self.config.keypoint_weight:g}")
+
     def step(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1,
-             contour_stage: bool = True) -> FrameResult:
+             contour_stage: bool = True, keypoints: Sequence | None = None) -> FrameResult:
+        """Track one frame (see the module docstring). Never raises on bad masks, predictions or keypoints.
+
+        ``keypoints``: per camera ``(uv (33, 2), confidence (33,))`` BlazePose landmarks or None; with
+        ``config.keypoint_weight > 0`` they add the keypoint term to this frame's energy (also for the
+        heading check's rival, so both hypotheses are scored alike). See :meth:`_step_frame`.
+        """
+        term, note = self._keypoint_energy(keypoints)
+        rival = self._rival
+        self._keypoint_term = term
+        if rival is not None:
+            rival._keypoint_term = term
+        try:
+            res = self._step_frame(masks, frame_index, prediction=prediction, frames_elapsed=frames_elapsed,
+                                   contour_stage=contour_stage)
+        finally:
+            self._keypoint_term = None
+            if rival is not None:
+                rival._keypoint_term = None
+        return res if note is None else dataclasses.replace(res, notes=res.notes + (note,))
+
+    def _step_frame(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1,
+                    contour_stage: bool = True) -> FrameResult:
         """Track one frame (see the module docstring). Never raises on bad masks or predictions.
 
         Parameters
