@@ -27,6 +27,8 @@ SUBCOMMANDS = [
     "synth",
     "track",
     "evaluate",
+    "calibration",
+    "import_video",
     "warmup",
 ]
 

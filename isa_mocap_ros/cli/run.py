@@ -47,7 +47,7 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--params", default=None, help="parameter file (default: the package's config/pipeline.yaml)")
     p.add_argument("--learn-frames", type=int, default=None,
                    help="frames the segmentation learns the background from (default: the bag's frames before "
-                        "its first ground truth, else the parameter file's learn_frames)")
+                        "its first ground truth (joint states, else markers), else the parameter file's learn_frames)")
     p.add_argument("--overlay-frames", type=int, default=4,
                    help="overlay frames to save as PNG (drawn after the run from the recording)")
     p.add_argument("--helper-nice", type=int, default=5, choices=range(0, 20), metavar="0..19",
@@ -108,6 +108,8 @@ def _inspect(bag: Path) -> tuple[int, int | None]:
         if n == 0:
             raise SystemExit(f"isa-mocap run: {bag} has no /mocap/cam<i>/image_raw topics")
         gt = "/mocap/ground_truth/joint_states"
+        if gt not in r.topics:       # an imported real recording has reference markers only
+            gt = "/mocap/ground_truth/markers"
         if gt not in r.topics:
             return n, None
         first_truth = next((ma.header_stamp_ns_from_cdr(m.data) for m in r.messages([gt])), None)

@@ -51,7 +51,8 @@ def register(sub) -> None:
     p.add_argument("--noise", type=float, default=0.0, metavar="P", help="pixel-noise probability (ISA §13.4.2)")
     p.add_argument("--occluders", type=int, default=0, metavar="K", help="occluding rectangles per image")
     p.add_argument("--rig", default=None, metavar="FILE",
-                   help="camera rig YAML (default config/rigs/default_4cam.yaml)")
+                   help="camera rig YAML or any calibration file: Pose2Sim/anipose TOML, Qualisys .qca.txt, OpenCV "
+                        "FileStorage, camera_info (default config/rigs/default_4cam.yaml)")
     p.add_argument("--seed", type=int, default=0, help="seed of motion, backgrounds and distortions (default 0)")
     p.add_argument("--bvh-scale", type=float, default=None, metavar="M", help="metres per BVH unit (default: detect)")
     p.add_argument("--masks", action="store_true", help="also write the exact silhouettes on /mocap/cam<i>/mask")
@@ -70,7 +71,8 @@ def _fail(msg: str) -> int:
 
 
 def _rig(args):
-    from isa_mocap_ros.vision import default_rig, load_rig
+    from isa_mocap_ros.vision import default_rig
+    from isa_mocap_ros.vision.calib_formats import read_calibration
     from isa_mocap_ros.vision.calibration import Rig
 
     if args.views is not None and args.views < 1:
@@ -82,8 +84,8 @@ def _rig(args):
     if args.rig is None:
         return default_rig(n_views=args.views or 4, width=args.width or 320, height=args.height or 240)
     if not Path(args.rig).is_file():
-        raise ValueError(f"--rig: expected a rig YAML file, received {args.rig!r} (no such file)")
-    rig = load_rig(args.rig)
+        raise ValueError(f"--rig: expected a rig YAML file or another calibration file, received {args.rig!r} (no such file)")
+    rig = read_calibration(args.rig)
     if args.views is not None:
         if args.views > len(rig):
             raise ValueError(f"--views: expected at most the {len(rig)} cameras of {args.rig}, received {args.views}")

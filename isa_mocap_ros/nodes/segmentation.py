@@ -92,6 +92,8 @@ _PARAMS = {
                       0.0, 50.0),
     "field_coupling": ("robust mode, vote=field: coupling of a pixel to its 8 neighbours", 0.0, 10.0),
     "field_iterations": ("robust mode, vote=field: mean-field iterations", 0, 1000),
+    "learn_from": ("colour: frames (the learning frames show the empty scene) or stable (the person may be in "
+                   "them: per pixel the frames where the background shows, plus the clean plate)", None, None),
 }
 
 
@@ -146,7 +148,9 @@ class SegmentationNode(Node):
         self.latency_s: deque[float] = deque(maxlen=1000)
         self.get_logger().info(
             f"segmentation: {self.n_views} views, method {self.config.method}, "
-            + ("clean plates" if any(plates) else f"learning from the first {self.config.learn_frames} frames"))
+            + (f"learning from the first {self.config.learn_frames} frames where the background shows"
+               + (" and clean plates" if any(plates) else "") if self.config.learn_from == "stable" else
+               "clean plates" if any(plates) else f"learning from the first {self.config.learn_frames} frames"))
 
     def _warm_up(self) -> None:
         """Run the compiled kernels once on a tiny image, so the first real frame is not slow.
