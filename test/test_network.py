@@ -41,11 +41,12 @@ def _run(out: Path, rosenv: dict) -> dict:
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
+    from conftest import next_domain
     from isa_mocap_ros.rosenv import ros_env
     base = tmp_path_factory.mktemp("network")
     summaries = []
     for k in range(2):
-        env = ros_env(60 + k + (hash(str(base)) % 20))
+        env = ros_env(next_domain())
         summaries.append(_run(base / f"run{k}", env))
     track = base / "track"
     res = subprocess.run(CLI + ["track", str(FIXTURE), "--out", str(track), "--shape", "default", *SETTINGS],
