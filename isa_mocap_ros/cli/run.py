@@ -75,8 +75,12 @@ def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
     if args.lockstep:
         # Deterministic runs must not lose a frame: make the image and mask subscriptions reliable
         # (they are best effort, qos_profile_sensor_data, by default).
-        seg += [(f"qos_overrides.{NS}/cam{v}/image_raw.subscription.reliability", "reliable") for v in range(n_views)]
-        est += [(f"qos_overrides.{NS}/cam{v}/mask.subscription.reliability", "reliable") for v in range(n_views)]
+        # The camera infos too: the nodes take nothing from a view before a camera_info and an image (mask) of
+        # one stamp agree on its camera (isa_mocap_ros.intake), so a lost first camera_info would stall a view.
+        seg += [(f"qos_overrides.{NS}/cam{v}/{t}.subscription.reliability", "reliable")
+                for v in range(n_views) for t in ("image_raw", "camera_info")]
+        est += [(f"qos_overrides.{NS}/cam{v}/{t}.subscription.reliability", "reliable")
+                for v in range(n_views) for t in ("mask", "camera_info")]
     common = dict(namespace=NS, params_files=(params,))
     nice = getattr(args, "helper_nice", 0)
     kp = []

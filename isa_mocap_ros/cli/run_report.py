@@ -127,6 +127,22 @@ def published_model(est_path: Path):
     return None
 
 
+def summary_rows(summary: dict) -> list[tuple[str, object]]:
+    """The printed table's rows: accuracy rows only when the bag had ground truth to score against,
+    else one row saying so plainly."""
+    if summary.get("ground_truth"):
+        acc = [("frames (with ground truth)", summary.get("frames")),
+               ("mean joint error (mm)", summary.get("mpjpe_mm")),
+               ("max frame error (mm)", summary.get("max_frame_error_mm")),
+               ("knee RMSE (deg)", summary.get("knee_rmse_deg"))]
+    else:
+        acc = [("accuracy", summary.get("accuracy", "no ground truth"))]
+    return acc + [("frames estimated", summary.get("frames_estimated")), ("frames/s", summary["fps"]),
+                  ("latency p50 / p95 (ms)", (summary["latency_ms_p50"], summary["latency_ms_p95"])),
+                  ("dropped frame sets", summary["dropped_frames"]), ("bad inputs", summary.get("bad_inputs")),
+                  ("optimizer", summary["optimizer"]), ("evaluations per frame", summary["evals_per_frame"])]
+
+
 def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary: dict,
                  wall_seconds: float) -> int:
     import cv2
@@ -195,8 +211,12 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
             truth = {f.stamp_ns: f.truth for f in seq.frames if f.truth is not None}
             plot_sequence(out / "knees_and_error.png", model, P, seq.truth_model,
                           np.array([truth[s] for s in stamps]), times_s=t, title=title)
+        summary["ground_truth"] = True
     else:
-        summary["frames"] = len(poses)
+        # no accuracy figures at all (not "frames 135" beside "mean joint error None")
+        summary["ground_truth"] = False
+        summary["accuracy"] = ("no ground truth in the bag" if not (seq.has_truth or seq.has_marker_truth)
+                               else "no estimate on a frame with ground truth")
     ov = rec["overlays"]
     if ov and args.overlay_frames > 0:  # the estimator published overlays (publish_overlay in --params)
         stamps_ov = sorted({s for s, _, _ in ov})
@@ -210,13 +230,8 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
     elif poses and args.overlay_frames > 0:
         write_overlays(out / "overlays", model, seq, poses, read_masks(out / "estimates"), args.overlay_frames)
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    rows = [("frames (with ground truth)", summary.get("frames")), ("mean joint error (mm)", summary.get("mpjpe_mm")),
-            ("max frame error (mm)", summary.get("max_frame_error_mm")), ("knee RMSE (deg)", summary.get("knee_rmse_deg")),
-            ("frames/s", summary["fps"]), ("latency p50 / p95 (ms)", (summary["latency_ms_p50"], summary["latency_ms_p95"])),
-            ("dropped frame sets", summary["dropped_frames"]), ("optimizer", summary["optimizer"]),
-            ("evaluations per frame", summary["evals_per_frame"])]
     print(f"\nrun summary ({summary['mode']}):")
-    for k, v in rows:
+    for k, v in summary_rows(summary):
         if isinstance(v, float):
             v = f"{v:.2f}"
         elif isinstance(v, tuple):
