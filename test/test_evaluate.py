@@ -15,7 +15,7 @@ FIXTURE = ROOT / "bags" / "fixture"
 @pytest.fixture(scope="module")
 def tracked(tmp_path_factory):
     out = tmp_path_factory.mktemp("evaluate") / "track"
-    assert main(["track", str(FIXTURE), "--out", str(out), "--evals", "200", "--use-masks", "--no-progress"]) == 0
+    assert main(["track", str(FIXTURE), "--out", str(out), "--evals", "200", "--use-masks", "--no-progress", "--shape", "truth"]) == 0
     return out
 
 

@@ -191,7 +191,7 @@ def test_track_scores_a_markers_only_bag_and_the_result_describes_itself(tmp_pat
             truth[m.log_time_ns] = np.array([(p.position.x, p.position.y, p.position.z) for p in msg.poses])
     out = tmp_path / "tr"
     assert main(["track", str(only), "--out", str(out), "--frames", "3", "--evals", "300", "--use-masks",
-                 "--no-progress", "--init", "auto"]) == 0
+                 "--no-progress", "--init", "auto", "--shape", "default"]) == 0
     s = json.loads((out / "summary.json").read_text())
     assert s["scored_by"] == "markers" and s["frames"] == 3
     with BagReader(out / "estimates") as bag:

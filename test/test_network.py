@@ -33,7 +33,7 @@ def _joint_states(bag: Path) -> dict[int, np.ndarray]:
 
 
 def _run(out: Path, rosenv: dict) -> dict:
-    res = subprocess.run(CLI + ["run", str(FIXTURE), "--lockstep", "--out", str(out), "--quiet", *SETTINGS],
+    res = subprocess.run(CLI + ["run", str(FIXTURE), "--lockstep", "--out", str(out), "--quiet", "--shape", "default", *SETTINGS],
                          env=rosenv, capture_output=True, text=True, timeout=400)
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
     return json.loads((out / "summary.json").read_text())

@@ -44,7 +44,7 @@ def test_a_fuzzer_on_every_input_topic_changes_no_estimate(spawn, rosenv, tmp_pa
     fuzzer = spawn("fuzzer", str(HERE / "fuzzer.py"), "4", "30", "0")
     assert fuzzer.wait_for_output("sent ", 30), fuzzer.output()
     run = subprocess.run(CLI + ["run", str(FIXTURE), "--lockstep", "--out", str(tmp_path / "run"), "--quiet",
-                                *SETTINGS], env=rosenv, capture_output=True, text=True, timeout=400)
+                                "--shape", "default", *SETTINGS], env=rosenv, capture_output=True, text=True, timeout=400)
     fuzzer.stop(signal.SIGINT)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
     total = next(ln for ln in fuzzer.output().splitlines() if ln.startswith("total "))

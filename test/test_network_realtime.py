@@ -47,7 +47,7 @@ def replay_rate(tmp_path: Path, env: dict, bag: Path) -> float:
     the track in 2 runs of 6 (56-130 mm; at the commit before, 88 mm in 3 of 3). So the bag is replayed
     at ``min(1, fps / REFERENCE_FPS)``, with ``fps`` measured here with `isa-mocap track`."""
     out = tmp_path / "speed"
-    res = subprocess.run(CLI + ["track", str(bag), "--out", str(out), "--seed", "0", "--no-progress"],
+    res = subprocess.run(CLI + ["track", str(bag), "--out", str(out), "--seed", "0", "--no-progress", "--shape", "truth"],
                          env=env, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
     fps = json.loads((out / "summary.json").read_text())["fps"]
@@ -64,7 +64,7 @@ def test_real_time_run_mends_a_backwards_first_heading(tmp_path, rosenv, capsule
     assert "init_polish: true" in text
     params.write_text(text.replace("init_polish: true", "init_polish: false"))
     rate = replay_rate(tmp_path, rosenv, capsule_demo)
-    res = subprocess.run(CLI + ["run", str(capsule_demo), "--out", str(out), "--seed", "0",
+    res = subprocess.run(CLI + ["run", str(capsule_demo), "--out", str(out), "--seed", "0", "--shape", "default",
                                 "--params", str(params), "--rate", f"{rate:.3f}"],
                          env=rosenv, capture_output=True, text=True, timeout=500)
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]

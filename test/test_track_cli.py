@@ -21,7 +21,7 @@ def test_track_fixture_writes_estimates_and_summary(tmp_path, capsys, masks):
 
     out = tmp_path / "out"
     argv = ["track", str(FIXTURE), "--out", str(out), "--evals", "300", "--frames", "5", "--seed", "1",
-            "--no-progress", "--init", "truth"]
+            "--no-progress", "--init", "truth", "--shape", "truth"]
     if masks:
         argv.append("--use-masks")
     assert main(argv) == 0
@@ -47,7 +47,7 @@ def test_track_fixture_writes_estimates_and_summary(tmp_path, capsys, masks):
 def test_track_stride_tracks_every_kth_frame(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["track", str(FIXTURE), "--out", str(out), "--evals", "300", "--frames", "7", "--stride", "3",
-                 "--no-progress", "--init", "truth", "--use-masks"]) == 0
+                 "--no-progress", "--init", "truth", "--shape", "truth", "--use-masks"]) == 0
     s = json.loads((out / "summary.json").read_text())
     assert s["stride"] == 3 and s["frames_tracked"] == 3 and s["frames"] == 3       # frames k, k + 3, k + 6
     d = np.diff(s["frame_stamps_ns"])
@@ -61,11 +61,11 @@ def test_track_partition_order(tmp_path, capsys):
     paper = "root,torso,left_arm,right_arm,left_leg,right_leg"
     out = tmp_path / "out"
     assert main(["track", str(FIXTURE), "--out", str(out), "--evals", "300", "--frames", "3", "--no-progress",
-                 "--init", "truth", "--use-masks", "--partition-order", paper]) == 0
+                 "--init", "truth", "--shape", "truth", "--use-masks", "--partition-order", paper]) == 0
     s = json.loads((out / "summary.json").read_text())
     assert s["partition_order"] == paper.split(",") and s["frames"] == 3
     capsys.readouterr()
-    assert main(["track", str(FIXTURE), "--out", str(tmp_path / "o2"), "--partition-order", "root,torso"]) == 2
+    assert main(["track", str(FIXTURE), "--out", str(tmp_path / "o2"), "--partition-order", "root,torso", "--shape", "default"]) == 2
     assert "partition_order: expected every partition of model" in capsys.readouterr().err
 
 
@@ -73,10 +73,10 @@ def test_track_partition_order(tmp_path, capsys):
 def test_track_init_confirm_share(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["track", str(FIXTURE), "--out", str(out), "--evals", "300", "--frames", "2", "--no-progress",
-                 "--init", "truth", "--use-masks", "--init-confirm-share", "0.5"]) == 0
+                 "--init", "truth", "--shape", "truth", "--use-masks", "--init-confirm-share", "0.5"]) == 0
     assert json.loads((out / "summary.json").read_text())["init_confirm_share"] == 0.5
     capsys.readouterr()
-    assert main(["track", str(FIXTURE), "--out", str(tmp_path / "o2"), "--init-confirm-share", "1.5"]) == 2
+    assert main(["track", str(FIXTURE), "--out", str(tmp_path / "o2"), "--init-confirm-share", "1.5", "--shape", "default"]) == 2
     assert "init_confirm_share: expected a share in (0, 1], received 1.5" in capsys.readouterr().err
 
 

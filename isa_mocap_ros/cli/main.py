@@ -28,6 +28,7 @@ SUBCOMMANDS = [
     "track",
     "evaluate",
     "calibration",
+    "calibrate",
     "import_video",
     "warmup",
 ]

@@ -57,12 +57,18 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--keypoints", action="store_true",
                    help="also run the keypoint node (BlazePose landmarks on cam<i>/keypoints, recorded; its "
                         "every_k_frames from the parameter file; docs/keypoints.md)")
+    p.add_argument("--shape", default="auto", metavar="auto|default|truth|FILE",
+                   help="body shape the estimator tracks with: 'auto' (default) calibrates it from the bag's first "
+                        "frames before the replay (as isa-mocap calibrate; written to DIR/body.yaml); 'default' = "
+                        "config/body/default.yaml; FILE = a body-shape YAML; 'truth' = the bag's ground-truth "
+                        "model's (a diagnostic only)")
     p.add_argument("--quiet", action="store_true", help="do not echo node output")
 
 
 def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
-             learn_frames: int | None) -> list[NodeSpec]:
-    est = [("views", str(n_views)), ("lockstep", "true" if args.lockstep else "false"), ("wait_for_inputs_s", "60.0"),
+             learn_frames: int | None, body_shape: str | None = None) -> list[NodeSpec]:
+    est = [*([("body_shape", body_shape)] if body_shape else []),
+           ("views", str(n_views)), ("lockstep", "true" if args.lockstep else "false"), ("wait_for_inputs_s", "60.0"),
            # lockstep: wait for every view (a partial set would make results depend on machine load)
            *([("view_timeout_s", "0.0")] if args.lockstep else [])]
     # No publish_overlay: the overlay PNGs are drawn after the run from the recording (run_report), so
@@ -117,6 +123,48 @@ def _inspect(bag: Path) -> tuple[int, int | None]:
     return n, (sum(1 for s in stamps if s < first_truth) or None) if first_truth is not None else None
 
 
+def _body_shape(args: argparse.Namespace, bag: Path, out: Path, learn: int | None) -> str | None:
+    """The estimator's ``body_shape`` file for ``--shape`` (None = its default shape): ``auto`` calibrates
+    the shape from the bag's first frames (the images, segmented as the segmentation node does) into
+    ``DIR/body.yaml`` before the replay; ``truth`` writes the bag's ground-truth shape (diagnostic)."""
+    shape = getattr(args, "shape", "auto") or "auto"
+    if shape == "default":
+        return None
+    if shape not in ("auto", "truth"):
+        from isa_mocap_ros.body import BodyError, load_shape
+        try:
+            load_shape(shape)
+        except BodyError as exc:
+            raise ValueError(f"--shape: expected auto, default, truth or a body-shape YAML file ({exc})") from None
+        return str(Path(shape).resolve())
+    from isa_mocap_ros.body import save_shape
+    from isa_mocap_ros.cli.track import read_sequence
+
+    seq = read_sequence(bag, want_images=True, want_masks=False)
+    path = out / "body.yaml"
+    if shape == "truth":
+        if seq.truth_model is None:
+            raise ValueError("--shape truth: expected a ground-truth model in the bag, received none")
+        save_shape(dict(seq.truth_model.shape), path)
+        return str(path.resolve())
+    from isa_mocap_ros.cli.calibrate import calibrate_sequence
+    from isa_mocap_ros.tracking.shape_calibration import ShapeCalibrationError
+
+    n_learn = learn or 10
+    calib = argparse.Namespace(seed=args.seed or 0)
+    try:
+        res, report = calibrate_sequence(seq, calib, dof=args.model or 39, use_masks=False, learn=n_learn,
+                                         first=n_learn, progress=lambda line: print(f"run: {line}", flush=True))
+    except ShapeCalibrationError as exc:
+        raise ValueError(f"--shape auto: {exc}; pass --shape default or a body-shape FILE") from None
+    shape_dict = dict(res.shape)
+    shape_dict["name"] = f"calibrated:{bag.name}"
+    save_shape(shape_dict, path)
+    (out / "shape_calibration.json").write_text(json.dumps(report, indent=2) + "\n")
+    print(f"run: calibrated body shape -> {path}", flush=True)
+    return str(path.resolve())
+
+
 def _tail(path: Path, n: int = 25) -> None:
     try:
         lines = path.read_text(errors="replace").splitlines()[-n:]
@@ -146,7 +194,12 @@ def run(args: argparse.Namespace) -> int:
         if not args.quiet and ("[launch]" in line or "WARN" in line or "ERROR" in line or "estimator:" in line):
             print(line, flush=True)
 
-    specs = _network(args, params, out, n_views, learn)
+    try:
+        body_shape = _body_shape(args, bag, out, learn)
+    except ValueError as exc:
+        print(f"isa-mocap run: error: {exc}", file=sys.stderr)
+        return 2
+    specs = _network(args, params, out, n_views, learn, body_shape)
     sup = Supervisor(specs, env=env, out=on_line)
     runner = threading.Thread(target=sup.run, daemon=True)
     print(f"run: {bag} ({n_views} views) -> {out}; ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}", flush=True)

@@ -20,6 +20,7 @@ marker joints both models share (by name). Exit codes: 0 done, 2 bad input, 130 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -54,9 +55,11 @@ def register(sub) -> None:
     p.add_argument("--learn-frames", type=int, default=None, metavar="K",
                    help="frames the segmenter learns the background from (default: the bag's empty frames, "
                         "else 10)")
-    p.add_argument("--shape", choices=("truth", "default"), default="truth",
-                   help="body shape of the tracking model: the bag's ground-truth model's (default; a calibrated "
-                        "subject) or config/body/default.yaml")
+    p.add_argument("--shape", default="auto", metavar="auto|default|truth|FILE",
+                   help="body shape of the tracking model: 'auto' (default) calibrates it from the silhouettes of "
+                        "the first frames (isa-mocap calibrate); 'default' = config/body/default.yaml; FILE = a "
+                        "body-shape YAML (e.g. written by isa-mocap calibrate); 'truth' = the bag's ground-truth "
+                        "model's (a diagnostic only)")
     p.add_argument("--init", choices=("auto", "truth"), default="auto",
                    help="first pose: automatic from the masks (default) or the ground truth")
     p.add_argument("--predictor", choices=("ar", "constant_pose", "constant_velocity"), default=None)
@@ -90,6 +93,9 @@ def register(sub) -> None:
                         "every K-th tracked frame (0 = the initialized frame only; default 0)")
     p.add_argument("--overwrite", action="store_true", help="replace DIR/estimates if it exists")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    from isa_mocap_ros.cli.calibrate import add_calibration_arguments
+
+    add_calibration_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -213,11 +219,20 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     if not seq.frames:
         raise ValueError(f"BAG: expected frames with images{' or masks' if use_masks else ''}, received none")
     dof = args.model or (seq.truth_model.dof if seq.truth_model is not None else 39)
-    if seq.truth_model is not None and args.shape == "truth":
-        # the subject's body shape is taken as calibrated (as the papers' subject-specific models)
+    shape_arg = getattr(args, "shape", "auto")
+    if shape_arg == "truth":
+        if seq.truth_model is None:
+            raise ValueError("--shape truth: expected a ground-truth model in the bag, received none")
+        # diagnostic only: the subject's true shape, as the papers' subject-specific models
         model = make_model(dof, shape=dict(seq.truth_model.shape))
+    elif shape_arg in ("default", "auto"):
+        model = make_model(dof)          # auto: replaced by the calibrated shape below
     else:
-        model = make_model(dof)
+        from isa_mocap_ros.body import BodyError
+        try:
+            model = make_model(dof, shape=Path(shape_arg))
+        except BodyError as exc:
+            raise ValueError(f"--shape: expected auto, default, truth or a body-shape YAML file ({exc})") from None
     notes = list(seq.notes)
     if args.use_masks and not has_mask_topics:
         notes.append("--use-masks: the bag has no mask topics; segmenting the images")
@@ -264,6 +279,19 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     if getattr(args, "partition_order", None) is not None:
         cfg_kw["partition_order"] = tuple(v.strip() for v in args.partition_order.split(",") if v.strip())
     cfg = TrackerConfig(**cfg_kw)
+    calibration = None
+    if shape_arg == "auto":
+        from isa_mocap_ros.cli.calibrate import calibrate_sequence
+        from isa_mocap_ros.tracking.shape_calibration import ShapeCalibrationError
+
+        try:
+            res, calibration = calibrate_sequence(
+                seq, args, dof=dof, use_masks=use_masks, learn=learn, first=first,
+                tracker_config=dataclasses.replace(cfg, prior_eta=0.0, keypoint_weight=0.0),
+                progress=None if args.no_progress else (lambda line: print(line, file=sys.stderr, flush=True)))
+        except ShapeCalibrationError as exc:
+            raise ValueError(f"--shape auto: {exc}; pass --shape default or a body-shape FILE") from None
+        model = make_model(dof, shape=res.shape)
     tracker = Tracker(model, seq.cameras, cfg, prior=prior)
     # as the node network: the prediction travels as JointState (roll/pitch/yaw root) and the
     # frame key is the stamp in ns, so `isa-mocap track` reproduces the estimator node's numbers
@@ -365,7 +393,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                                       if f.truth_markers is not None},
                        truth_marker_names=tuple(seq.truth_marker_names), body=seq.body_kind)
     summary: dict = {"bag": str(bag_path), "out": str(out), "optimizer": args.optimizer, "evals_per_frame": args.evals,
-                     "stride": stride,
+                     "stride": stride, "shape": shape_arg,
                      "optimizer_params": cfg.params(), "model_dof": model.dof, "seed": args.seed,
                      "gate_margin_px": cfg.gate_margin_px, "hull_filter": cfg.hull_filter,
                      "view_weights": cfg.view_weights,
@@ -387,6 +415,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                                         else round(energies[k], 6) for k in sorted(estimates)],
                      "notes": notes + sorted({n for r in results for n in r.notes
                                               if not n.startswith("initialized")})[:20]}
+    if calibration is not None:
+        summary["shape_calibration"] = calibration
     inits = [n for r in results for n in r.notes if n.startswith("initialized")]
     if inits:
         summary["init"] = inits[0]

@@ -1,0 +1,149 @@
+"""``isa-mocap calibrate BAG --out body.yaml``: the subject's body shape from the images of a bag.
+
+Segments the bag's images (or takes its recorded masks with ``--use-masks``) as ``isa-mocap track``
+does, runs :func:`isa_mocap_ros.tracking.shape_calibration.calibrate_shape` on the first frames the
+person is in view, and writes the body-shape YAML (the format of ``config/body/default.yaml``) that
+``track``/``run --shape FILE`` and the estimator's ``body_shape`` parameter read. With ground-truth
+joint centres in the bag (``/mocap/ground_truth/markers``) it also reports the calibrated bone lengths
+against them (the bag's truth is read for that report only, never for the fit). Exit codes: 0 done,
+2 bad input.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def register(sub) -> None:
+    p = sub.add_parser("calibrate", help="estimate the subject's body shape from a bag's images -> body YAML",
+                       description="Fit segment lengths and capsule radii (left/right symmetric) to the silhouettes "
+                                   "of the first frames of BAG; write a body-shape YAML for track/run --shape FILE.")
+    p.add_argument("bag", metavar="BAG", help="rosbag2 directory or .mcap file")
+    p.add_argument("--out", required=True, metavar="YAML", help="body-shape file to write")
+    add_calibration_arguments(p)
+    p.add_argument("--model", type=int, choices=(18, 28, 39), default=39, help="tracking model DOF (default 39)")
+    p.add_argument("--seed", type=int, default=0, help="seed of every random stream (default 0)")
+    p.add_argument("--start", type=int, default=0, metavar="K",
+                   help="first frame (default: the first after the background learning)")
+    p.add_argument("--use-masks", action="store_true", help="use /mocap/cam<i>/mask when the bag has it")
+    p.add_argument("--learn-frames", type=int, default=None, metavar="K",
+                   help="frames the segmenter learns the background from (default: the bag's empty frames, else 10)")
+    p.add_argument("--report", default=None, metavar="JSON", help="also write the factors, energies and (with "
+                                                                  "ground truth) bone-length errors here")
+    p.add_argument("--overwrite", action="store_true", help="replace YAML if it exists")
+    p.set_defaults(func=run)
+
+
+def add_calibration_arguments(p: argparse.ArgumentParser) -> None:
+    """The calibration's own options (shared by ``calibrate``, ``track``)."""
+    p.add_argument("--calib-frames", type=int, default=None, metavar="N",
+                   help="shape calibration: first frames tracked to calibrate on (default 30)")
+    p.add_argument("--calib-rounds", type=int, default=None, metavar="N",
+                   help="shape calibration: pose/shape alternations (default 4)")
+    p.add_argument("--calib-evals", type=int, default=None, metavar="N",
+                   help="shape calibration: shape-fit evaluations per round (default 1500)")
+
+
+def calibration_config(args, seed: int):
+    from isa_mocap_ros.tracking.shape_calibration import ShapeCalibrationConfig
+
+    kw = {"seed": seed}
+    for opt, key in (("calib_frames", "window_frames"), ("calib_rounds", "rounds"), ("calib_evals", "shape_evals")):
+        v = getattr(args, opt, None)
+        if v is not None:
+            kw[key] = v
+    return ShapeCalibrationConfig(**kw)
+
+
+def calibration_frames(seq, *, use_masks: bool, learn: int, first: int, n: int) -> list:
+    """``(stamp, masks)`` of ``n`` frames from ``first``: the recorded masks or fresh segmenters' (learning
+    the background from the first ``learn`` frames, as ``track`` does)."""
+    from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig
+
+    out = []
+    segs = None if use_masks else [BackgroundSegmenter(SegmentationConfig(learn_frames=learn)) for _ in seq.cameras]
+    for fr in seq.frames[:first + n]:
+        masks = list(fr.masks) if use_masks else [None if img is None else s.apply(img)
+                                                   for s, img in zip(segs, fr.images)]
+        if fr.index >= first:
+            out.append((int(fr.stamp_ns), masks))
+    return out
+
+
+def calibrate_sequence(seq, args, *, dof: int, use_masks: bool, learn: int, first: int, tracker_config=None,
+                       progress=None):
+    """Run the calibration on a read sequence; returns (result, report dict)."""
+    from isa_mocap_ros.body import make_model
+    from isa_mocap_ros.tracking.shape_calibration import (bone_errors, bone_lengths, calibrate_shape,
+                                                          marker_bone_lengths)
+
+    cfg = calibration_config(args, args.seed)
+    frames = calibration_frames(seq, use_masks=use_masks, learn=learn, first=first, n=cfg.window_frames)
+    res = calibrate_shape(dof, seq.cameras, frames, tracker_config=tracker_config, config=cfg, progress=progress)
+    model = make_model(dof, shape=res.shape)
+    report = {"params": {k: round(v, 4) for k, v in res.params.items()},
+              "energy_default_shape": round(res.energy_default, 5), "energy": round(res.energy, 5),
+              "frames": len(res.frame_keys), "window_frames": cfg.window_frames, "rounds": list(res.rounds),
+              "notes": list(res.notes), "bones_m": {k: round(v, 4) for k, v in bone_lengths(model).items()}}
+    marks = [f.truth_markers for f in seq.frames if f.truth_markers is not None]
+    if marks:
+        # evaluation only: the truth never enters the fit
+        truth = marker_bone_lengths(seq.truth_marker_names, np.array(marks))
+        report["truth_bones_m"] = {k: round(v, 4) for k, v in truth.items()}
+        report["bone_error"] = bone_errors(bone_lengths(model), truth)
+        report["bone_error_default_shape"] = bone_errors(bone_lengths(make_model(dof)), truth)
+    return res, report
+
+
+def run(args: argparse.Namespace) -> int:
+    from isa_mocap_ros.body import save_shape
+    from isa_mocap_ros.cli.track import read_sequence
+    from isa_mocap_ros.bag import BagReader
+    from isa_mocap_ros.tracking.shape_calibration import ShapeCalibrationError
+
+    def fail(msg):
+        print(f"isa-mocap calibrate: error: {msg}", file=sys.stderr)
+        return 2
+
+    bag = Path(args.bag)
+    out = Path(args.out)
+    if not bag.exists():
+        return fail(f"BAG: expected a rosbag2 directory or .mcap file, received {args.bag!r} (no such path)")
+    if out.exists() and not args.overwrite:
+        return fail(f"--out: {out} exists; pass --overwrite to replace it")
+    try:
+        with BagReader(bag) as probe:
+            has_masks = any(t.startswith("/mocap/cam") and t.endswith("/mask") for t in probe.topics)
+        use_masks = bool(args.use_masks and has_masks)
+        seq = read_sequence(bag, want_images=not use_masks, want_masks=use_masks)
+        if not seq.frames:
+            return fail("BAG: expected frames with images, received none")
+        learn = 0 if use_masks else (args.learn_frames if args.learn_frames is not None else (seq.empty_frames or 10))
+        if not use_masks and learn < 1:
+            return fail(f"--learn-frames: expected an integer >= 1, received {learn}")
+        first = max(args.start, learn)
+        if first >= len(seq.frames):
+            return fail(f"--start: expected a frame before the bag's end ({len(seq.frames)} frames), received {first}")
+        res, report = calibrate_sequence(seq, args, dof=args.model, use_masks=use_masks, learn=learn, first=first,
+                                         progress=lambda s: print(s, file=sys.stderr, flush=True))
+    except (ValueError, ShapeCalibrationError) as exc:
+        return fail(str(exc))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    shape = dict(res.shape)
+    shape["name"] = f"calibrated:{bag.name}"
+    save_shape(shape, out)
+    report.update(bag=str(bag), out=str(out))
+    if args.report:
+        Path(args.report).write_text(json.dumps(report, indent=2) + "\n")
+    print(f"calibrate: silhouette energy {report['energy_default_shape']:.4f} (default shape) -> "
+          f"{report['energy']:.4f} over {report['frames']} frames; factors "
+          + ", ".join(f"{k} {v:.3f}" for k, v in report["params"].items()))
+    if "bone_error" in report:
+        print(f"calibrate: mean bone-length error against the bag's joint centres {report['bone_error']['mean_mm']:.1f} mm "
+              f"(default shape {report['bone_error_default_shape']['mean_mm']:.1f} mm)")
+    print(f"calibrate: wrote {out}")
+    return 0

@@ -1,0 +1,398 @@
+"""Body shape calibrated from the silhouettes of the first frames (no ground-truth shape needed).
+
+The papers track with a subject-specific model measured beforehand (EA-vs-PF §3.1, ISA §13.4.2); a
+user of this package has only the images. :func:`calibrate_shape` estimates the segment lengths and
+capsule radii (left/right symmetric) from the foreground masks of a few frames by alternating, with
+the project's own silhouette energy (EA-vs-PF Eq. 4-5), tracker and CMA-ES (§4.2.1):
+
+1. **poses with the shape fixed**: round 0 tracks the first ``window_frames`` frames with the
+   :class:`~.tracker.Tracker` from its automatic initialization, starting from ``base_shape`` (the
+   default ~1.75 m body); later rounds re-fit each calibration frame with one tracker step from the
+   previous round's pose (the prediction) under the new shape;
+2. **the shape with the joint angles fixed**: CMA-ES over :data:`SHAPE_PARAMS` (log factors on the
+   base shape) and a change of each frame's root height (a taller body stands higher), minimising the
+   mean silhouette energy over the ``n_frames`` calibration frames (plus a weak pull of the log
+   factors towards 0, which only decides directions the images leave flat).
+
+The shape is a few numbers, not free lengths: an overall scale, length factors of thigh, shin,
+upper arm, forearm, trunk and neck/head, hip and shoulder widths, and radius factors of trunk, arms
+and legs; both sides share them.
+
+:func:`bone_lengths` and :func:`marker_bone_lengths` measure the same bones (distances between named
+joint centres: thigh = hip-knee, shin = knee-ankle, upper arm = shoulder-elbow, forearm =
+elbow-wrist, hip and shoulder widths, pelvis-neck, neck-head) on a model (rest pose) and on
+ground-truth markers (median over frames), so a calibrated model is compared like with like with a
+mesh skeleton's joint centres. See ``docs/shape_calibration.md``.
+"""
+from __future__ import annotations
+
+import copy
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+__all__ = ["SHAPE_PARAMS", "BONES", "ShapeCalibrationConfig", "ShapeCalibrationResult", "ShapeCalibrationError",
+           "shape_from_params", "bone_lengths", "marker_bone_lengths", "bone_errors", "calibrate_shape"]
+
+#: shape parameters: (name, lower, upper) bounds of the factor on the base shape
+SHAPE_PARAMS: tuple[tuple[str, float, float], ...] = (
+    ("scale", 0.8, 1.2),             # every offset and radius (stature)
+    ("thigh", 0.7, 1.35),            # hip -> knee, on top of the scale
+    ("shin", 0.7, 1.35),             # knee -> ankle
+    ("upper_arm", 0.7, 1.35),        # shoulder -> elbow
+    ("forearm", 0.7, 1.35),          # elbow -> wrist -> hand (a straight arm shows only their sum)
+    ("trunk", 0.6, 1.35),            # pelvis -> lower spine -> upper spine -> neck, shoulder height
+    ("neck_head", 0.6, 1.4),         # neck -> head centre -> head top
+    ("hip_width", 0.7, 1.4),         # pelvis -> hip lateral offset
+    ("shoulder_width", 0.7, 1.35),   # chest -> shoulder lateral offset
+    ("r_trunk", 0.6, 1.7),           # radii of pelvis, abdomen, torso, chest
+    ("r_arms", 0.6, 1.7),            # radii of upper arms, forearms, hands
+    ("r_legs", 0.6, 1.7),            # radii of thighs, shins, feet
+)
+_LENGTH_OF = {"knee": "thigh", "ankle": "shin", "elbow": "upper_arm", "wrist": "forearm", "hand": "forearm",
+              "spine_lower": "trunk", "spine_upper": "trunk", "neck": "trunk", "head": "neck_head",
+              "head_top": "neck_head"}
+_R_TRUNK = ("pelvis", "abdomen", "torso", "chest")
+_R_ARMS = ("upper_arm", "forearm", "hand")
+_R_LEGS = ("thigh", "shin", "foot")
+
+#: bones compared with the truth: (name, joint a, joint b); left/right pairs both listed
+BONES: tuple[tuple[str, str, str], ...] = tuple(
+    [(f"{s}_{b}", f"{s}_{a}", f"{s}_{c}") for s in ("left", "right")
+     for b, a, c in (("thigh", "hip", "knee"), ("shin", "knee", "ankle"),
+                     ("upper_arm", "shoulder", "elbow"), ("forearm", "elbow", "wrist"))]
+    + [("hip_width", "left_hip", "right_hip"), ("shoulder_width", "left_shoulder", "right_shoulder"),
+       ("pelvis_neck", "pelvis", "neck"), ("neck_head", "neck", "head")])
+
+
+class ShapeCalibrationError(ValueError):
+    """The calibration cannot run (no usable frames, no automatic initialization, bad settings)."""
+
+
+@dataclass(frozen=True)
+class ShapeCalibrationConfig:
+    """Settings of :func:`calibrate_shape` (one line per setting: unit and why)."""
+
+    window_frames: int = 30         # first frames tracked in round 0 (1 s at 30 fps: varied leg poses)
+    n_frames: int = 6               # calibration frames, spread evenly over the window
+    rounds: int = 4                 # pose/shape alternations (the poses improve with the shape)
+    pose_steps: int = 3             # tracker steps per calibration frame in each later round's pose fit
+    shape_evals: int = 1500         # CMA-ES evaluations (shapes x all calibration frames) per round
+    n_model_points: int = 600       # silhouette sample sizes of the shape fit (finer than tracking's:
+    n_mask_points: int = 600        # the fit compares shapes that differ by a few pixels)
+    translation_m: float = 0.15     # bound of each frame's root height change in the shape fit
+    angle_rad: float = 0.3          # bound of each frame's change of the coupled joint angles in the shape fit
+    coupled_dofs: tuple = ()        # joint angles also free in the shape fit (measured: more dimensions than
+                                    # the shape fit's budget can search; off)
+    retrack: bool = True            # later rounds re-track the whole window with the new shape first
+    regularization: float = 2e-3    # weight of sum(log factor^2): decides only flat directions
+    seed: int = 0                   # all random streams derive from it
+
+    def __post_init__(self):
+        for name in ("window_frames", "n_frames", "rounds", "pose_steps", "shape_evals", "n_model_points", "n_mask_points"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ShapeCalibrationError(f"{name}: expected an integer >= 1, received {v!r}")
+        if not (np.isfinite(self.translation_m) and self.translation_m > 0):
+            raise ShapeCalibrationError(f"translation_m: expected a number > 0, received {self.translation_m!r}")
+        if not (np.isfinite(self.regularization) and self.regularization >= 0):
+            raise ShapeCalibrationError(f"regularization: expected a number >= 0, received {self.regularization!r}")
+
+
+@dataclass(frozen=True)
+class ShapeCalibrationResult:
+    """What :func:`calibrate_shape` found.
+
+    ``shape`` (a body-shape mapping, :func:`~isa_mocap_ros.body.save_shape` writes it), ``params``
+    (factor per :data:`SHAPE_PARAMS` name), ``frame_keys`` (the calibration frames), ``poses``
+    ((K, D) their poses under the calibrated shape), ``energy_default`` / ``energy`` (mean silhouette
+    energy of the calibration frames with the base shape after round 0, and at the end), ``rounds``
+    (per round: params and energy), ``notes``.
+    """
+
+    shape: dict
+    params: dict
+    frame_keys: tuple
+    poses: np.ndarray
+    energy_default: float
+    energy: float
+    rounds: tuple = ()
+    notes: tuple = field(default=())
+
+
+def shape_from_params(base: Mapping, factors: Mapping[str, float] | Sequence[float], *, name: str = "calibrated") -> dict:
+    """The body shape ``base`` scaled by the factors of :data:`SHAPE_PARAMS` (a mapping by name or a
+    sequence in that order; missing names = 1). Left/right symmetric: every right-side entry is the
+    mirror of the left one."""
+    from isa_mocap_ros.body.model import _complete_shape
+
+    if not isinstance(factors, Mapping):
+        f = np.asarray(factors, dtype=float)
+        if f.shape != (len(SHAPE_PARAMS),):
+            raise ShapeCalibrationError(f"factors: expected {len(SHAPE_PARAMS)} numbers, received shape {f.shape}")
+        factors = {n: float(v) for (n, _, _), v in zip(SHAPE_PARAMS, f)}
+    unknown = set(factors) - {n for n, _, _ in SHAPE_PARAMS}
+    if unknown:
+        raise ShapeCalibrationError(f"factors: unknown names {sorted(unknown)} (expected "
+                                    f"{', '.join(n for n, _, _ in SHAPE_PARAMS)})")
+    g = {n: float(factors.get(n, 1.0)) for n, _, _ in SHAPE_PARAMS}
+    if not all(np.isfinite(v) and v > 0 for v in g.values()):
+        raise ShapeCalibrationError(f"factors: expected positive finite numbers, received {g}")
+    shp = _complete_shape(copy.deepcopy(dict(base)), source="base shape")
+    offsets, radii = {}, {}
+    for j, o in shp["offsets"].items():
+        if j.startswith("right_"):
+            continue
+        o = np.array(o, dtype=float) * g["scale"]
+        part = j[5:] if j.startswith("left_") else j
+        if part in _LENGTH_OF:
+            o *= g[_LENGTH_OF[part]]
+        elif part == "hip":
+            o[1] *= g["hip_width"]
+        elif part == "shoulder":
+            o[1] *= g["shoulder_width"]
+            o[2] *= g["trunk"]
+        offsets[j] = o
+    for c, r in shp["radii"].items():
+        if c.startswith("right_"):
+            continue
+        part = c[5:] if c.startswith("left_") else c
+        k = g["scale"]
+        if part in _R_TRUNK:
+            k *= g["r_trunk"]
+        elif part in _R_ARMS:
+            k *= g["r_arms"]
+        elif part in _R_LEGS:
+            k *= g["r_legs"]
+        radii[c] = np.array(r, dtype=float) * k
+    return _complete_shape({"name": name, "offsets": offsets, "radii": radii}, source=name)
+
+
+def bone_lengths(model) -> dict[str, float]:
+    """Lengths (metres) of :data:`BONES` on ``model`` in its rest pose (those whose joints it has)."""
+    from isa_mocap_ros.body import joint_positions
+
+    P = joint_positions(model, model.rest_pose()[None, :])[0]
+    idx = {n: i for i, n in enumerate(model.joint_names)}
+    return {b: float(np.linalg.norm(P[idx[a]] - P[idx[c]])) for b, a, c in BONES if a in idx and c in idx}
+
+
+def marker_bone_lengths(names: Sequence[str], markers) -> dict[str, float]:
+    """Lengths (metres) of :data:`BONES` from named joint centres ``markers (F, M, 3)``: per bone the
+    median over the frames of the distance between its two markers (a mesh skeleton's joint
+    centres move slightly against each other as the skin is posed; the median is robust to that)."""
+    T = np.asarray(markers, dtype=float)
+    if T.ndim != 3 or T.shape[1] != len(names) or T.shape[2] != 3:
+        raise ShapeCalibrationError(f"markers: expected shape (F, {len(names)}, 3), received {T.shape}")
+    idx = {n: i for i, n in enumerate(names)}
+    out = {}
+    for b, a, c in BONES:
+        if a in idx and c in idx:
+            d = np.linalg.norm(T[:, idx[a]] - T[:, idx[c]], axis=1)
+            d = d[np.isfinite(d)]
+            if d.size:
+                out[b] = float(np.median(d))
+    return out
+
+
+def bone_errors(estimated: Mapping[str, float], truth: Mapping[str, float]) -> dict:
+    """Per-bone absolute error (mm) over the bones both have, and their mean (``mean_mm``)."""
+    common = [b for b, _, _ in BONES if b in estimated and b in truth]
+    per = {b: round(1e3 * abs(estimated[b] - truth[b]), 1) for b in common}
+    return {"per_bone_mm": per, "mean_mm": float(np.mean(list(per.values()))) if per else float("nan")}
+
+
+class _ShapeEnergy:
+    """Mean silhouette energy over the calibration frames of a batch of shape vectors ``Z (n, P+3K)``:
+    log factors (``P``) and changes of the pose coordinates ``coords`` (root height, the coupled joint
+    angles) of each frame, on the poses ``X (K, D)`` otherwise fixed."""
+
+    def __init__(self, dof, base, cameras, masks, X, cfg: ShapeCalibrationConfig, rng_seed, coords=(2,)):
+        self.dof, self.base, self.cameras, self.masks = dof, base, cameras, masks
+        self.X = np.asarray(X, dtype=float)
+        self.coords = np.asarray(coords, dtype=int)
+        self.cfg = cfg
+        self.seed = rng_seed
+        self.n_evals = 0
+
+    def params(self, z) -> np.ndarray:
+        return np.exp(np.asarray(z[:len(SHAPE_PARAMS)], dtype=float))
+
+    def model(self, z):
+        from isa_mocap_ros.body import make_model
+
+        return make_model(self.dof, shape=shape_from_params(self.base, self.params(z)))
+
+    def poses(self, z) -> np.ndarray:
+        P = len(SHAPE_PARAMS)
+        X = self.X.copy()
+        X[:, self.coords] += np.asarray(z[P:], dtype=float).reshape(len(X), len(self.coords))
+        return X
+
+    def frame_energy(self, model, k: int, x) -> float:
+        """Silhouette energy of pose ``x`` of model ``model`` on calibration frame ``k``."""
+        from isa_mocap_ros.energy import SilhouetteEnergy
+
+        f = SilhouetteEnergy(model, self.cameras, self.masks[k], n_model_points=self.cfg.n_model_points,
+                             n_mask_points=self.cfg.n_mask_points, rng=np.random.default_rng(self.seed))
+        return float(f(np.asarray(x, dtype=float)[None, :])[0])
+
+    def one(self, z) -> float:
+        from isa_mocap_ros.energy import SilhouetteEnergy
+
+        model = self.model(z)
+        # the same generator state for every shape: common random numbers between the candidates
+        f = SilhouetteEnergy(model, self.cameras, None, n_model_points=self.cfg.n_model_points,
+                             n_mask_points=self.cfg.n_mask_points, rng=np.random.default_rng(self.seed))
+        X = self.poses(z)
+        e = 0.0
+        for k, masks in enumerate(self.masks):
+            f.set_masks(masks)
+            e += float(f(X[k][None, :])[0])
+        logf = np.asarray(z[:len(SHAPE_PARAMS)], dtype=float)
+        return e / len(self.masks) + self.cfg.regularization * float(logf @ logf)
+
+    def __call__(self, Z) -> np.ndarray:
+        Z = np.atleast_2d(np.asarray(Z, dtype=float))
+        self.n_evals += len(Z)
+        return np.array([self.one(z) if np.all(np.isfinite(z)) else np.inf for z in Z])
+
+
+def _tracker(model, cameras, tracker_config):
+    from .tracker import Tracker
+
+    return Tracker(model, cameras, tracker_config)
+
+
+def calibrate_shape(dof: int, cameras: Sequence, frames: Sequence[tuple[int, Sequence]], *, tracker_config=None,
+                    config: ShapeCalibrationConfig = ShapeCalibrationConfig(), base_shape=None,
+                    progress=None) -> ShapeCalibrationResult:
+    """Estimate the subject's body shape from the masks of the first frames.
+
+    Parameters
+    ----------
+    dof : {18, 28, 39}
+        Tracking model.
+    cameras : sequence of Camera
+    frames : sequence of (frame key, masks)
+        Consecutive frames from the first the person is in view, masks one per camera (None for a
+        missing view); the first ``config.window_frames`` are used.
+    tracker_config : TrackerConfig, optional
+        Settings of the pose fits (default ``TrackerConfig(seed=config.seed)``).
+    config : ShapeCalibrationConfig
+    base_shape : mapping or path, optional
+        Start and reference of the factors (default ``config/body/default.yaml``).
+    progress : callable(str), optional
+        Called with one line per round.
+
+    Raises
+    ------
+    ShapeCalibrationError
+        No frames, or the tracker cannot initialize from the first frame's masks.
+    """
+    from isa_mocap_ros.body import default_shape, load_shape, make_model
+    from isa_mocap_ros.optim import CmaEs, minimize
+
+    from .tracker import TrackerConfig, TrackerError, frame_rng
+
+    if not isinstance(config, ShapeCalibrationConfig):
+        raise ShapeCalibrationError(f"config: expected a ShapeCalibrationConfig, received {type(config).__name__}")
+    frames = list(frames)[:config.window_frames]
+    if not frames:
+        raise ShapeCalibrationError("frames: expected at least one frame with masks, received none")
+    base = default_shape() if base_shape is None else (
+        load_shape(base_shape) if not isinstance(base_shape, Mapping) else dict(base_shape))
+    tcfg = tracker_config if tracker_config is not None else TrackerConfig(seed=config.seed)
+    say = progress or (lambda s: None)
+    notes: list[str] = []
+
+    # round 0 poses: track the window with the base shape from the automatic initialization
+    model = make_model(dof, shape=shape_from_params(base, {}))
+    tr = _tracker(model, cameras, tcfg)
+    poses: dict[int, np.ndarray] = {}
+    energies: dict[int, float] = {}
+    for key, masks in frames:
+        r = tr.step(masks, int(key))
+        if r.x is not None and np.isfinite(r.energy):
+            poses[int(key)], energies[int(key)] = np.asarray(r.x, dtype=float), float(r.energy)
+    if not poses:
+        raise ShapeCalibrationError("frames: the tracker found no person in the calibration frames (no usable "
+                                    "foreground); start the calibration where the person is in view")
+    keys = sorted(poses)
+    pick = np.unique(np.round(np.linspace(0, len(keys) - 1, min(config.n_frames, len(keys)))).astype(int))
+    cal_keys = [keys[i] for i in pick]
+    masks_of = {int(k): m for k, m in frames}
+    cal_masks = [masks_of[k] for k in cal_keys]
+    X = np.array([poses[k] for k in cal_keys])
+    P = len(SHAPE_PARAMS)
+    m0 = make_model(dof)
+    coupled = [m0.dof_names.index(n) for n in config.coupled_dofs if n in m0.dof_names]
+    coords = [2] + coupled                       # root height, then the coupled joint angles
+    step = np.array([config.translation_m] + [config.angle_rad] * len(coupled))
+    n_pose = len(X) * len(coords)
+    lo = np.concatenate([np.log([b for _, b, _ in SHAPE_PARAMS]), -np.tile(step, len(X))])
+    hi = np.concatenate([np.log([b for _, _, b in SHAPE_PARAMS]), np.tile(step, len(X))])
+    spread = np.concatenate([0.25 * (hi[:P] - lo[:P]), 0.3 * np.tile(step, len(X))])
+    logf = np.zeros(P)
+    history = []
+    best = None
+    e_default = None
+    energy_seed = [config.seed, 33, 1]
+    for rnd in range(config.rounds):
+        if rnd > 0:
+            model = make_model(dof, shape=shape_from_params(base, np.exp(logf)))
+            if config.retrack:
+                # poses with the shape fixed, 1: the window tracked again from the automatic initialization
+                # (a calibration frame keeps its last pose when that fits the new shape better)
+                tr = _tracker(model, cameras, tcfg)
+                judge = _ShapeEnergy(dof, base, cameras, cal_masks, X, config, energy_seed).frame_energy
+                for key, masks in frames:
+                    r = tr.step(masks, int(key))
+                    if int(key) in cal_keys and r.x is not None and np.all(np.isfinite(r.x)):
+                        i = cal_keys.index(int(key))
+                        if judge(model, i, r.x) < judge(model, i, X[i]):
+                            X[i] = r.x
+            # 2: tracker steps on each calibration frame from its last pose
+            tr = _tracker(model, cameras, tcfg)
+            for i, (k, masks) in enumerate(zip(cal_keys, cal_masks)):
+                try:
+                    tr.initialize(pose=X[i])
+                except TrackerError as exc:
+                    raise ShapeCalibrationError(f"pose fit of frame {k}: {exc}") from None
+                for j in range(config.pose_steps):
+                    # the frame key picks the random stream: one per (frame, round, step)
+                    r = tr.step(masks, int(k) + 7919 * (rnd * config.pose_steps + j + 1), prediction=X[i])
+                    if r.x is not None and np.all(np.isfinite(r.x)):
+                        X[i] = r.x
+        fe = _ShapeEnergy(dof, base, cameras, cal_masks, X, config, energy_seed, coords)
+        z0 = np.concatenate([logf, np.zeros(n_pose)])
+        e0 = float(fe(z0[None, :])[0])
+        if e_default is None:
+            e_default = float(fe(np.zeros_like(z0)[None, :])[0])
+        opt = CmaEs(z0, spread * (0.6 ** rnd), bounds=(lo, hi), rng=frame_rng(config.seed, rnd, 33))
+        res = minimize(opt, fe, max_evals=config.shape_evals)
+        if res.energy < e0:
+            z = np.clip(res.x, lo, hi)
+            logf = z[:P]
+            X = np.clip(fe.poses(z), m0.lower, m0.upper)
+        else:
+            notes.append(f"round {rnd}: the shape fit found nothing better than {e0:.4f}")
+        e_now = float(min(res.energy, e0))
+        if best is None or e_now < best[0]:
+            best = (e_now, logf.copy(), X.copy())
+        history.append({"round": rnd, "energy": round(e_now, 5),
+                        "params": {n: round(float(v), 4) for (n, _, _), v in zip(SHAPE_PARAMS, np.exp(logf))}})
+        say(f"shape calibration round {rnd + 1}/{config.rounds}: energy {e0:.4f} -> {e_now:.4f}, "
+            + ", ".join(f"{n} {v:.3f}" for n, v in history[-1]["params"].items()))
+    # the round with the lowest energy (a re-tracked window can come back worse)
+    e_final, logf, X = best
+    factors = {n: float(v) for (n, _, _), v in zip(SHAPE_PARAMS, np.exp(logf))}
+    shape = shape_from_params(base, factors)
+    at_bound = [n for (n, lo_, hi_), v in zip(SHAPE_PARAMS, np.exp(logf)) if v <= lo_ * 1.005 or v >= hi_ / 1.005]
+    if at_bound:
+        notes.append(f"factors at their bounds: {', '.join(at_bound)}")
+    return ShapeCalibrationResult(shape=shape, params=factors, frame_keys=tuple(cal_keys), poses=X,
+                                  energy_default=float(e_default), energy=float(e_final), rounds=tuple(history),
+                                  notes=tuple(notes))

@@ -1,0 +1,191 @@
+"""Body shape calibrated from the silhouettes (tracking/shape_calibration.py, cli/calibrate.py; issue 33)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from isa_mocap_ros.body import capsule_endpoints, default_shape, load_shape, make_model
+from isa_mocap_ros.cli.main import main
+from isa_mocap_ros.tracking.shape_calibration import (SHAPE_PARAMS, ShapeCalibrationConfig, ShapeCalibrationError,
+                                                      bone_errors, bone_lengths, calibrate_shape,
+                                                      marker_bone_lengths, shape_from_params)
+
+LIMBS = ("left_thigh", "left_shin", "left_upper_arm", "left_forearm")
+
+
+def test_shape_from_params_identity_symmetry_and_bad_input():
+    base = default_shape()
+    same = shape_from_params(base, {})
+    for j, o in base["offsets"].items():
+        assert np.allclose(same["offsets"][j], o)
+    for c, r in base["radii"].items():
+        assert np.allclose(same["radii"][c], r)
+    s = shape_from_params(base, {"thigh": 1.1, "r_legs": 1.3, "hip_width": 0.8})
+    assert np.allclose(s["offsets"]["left_knee"], 1.1 * base["offsets"]["left_knee"])
+    assert np.allclose(s["offsets"]["right_knee"], s["offsets"]["left_knee"])          # symmetric
+    assert np.allclose(s["offsets"]["right_hip"], s["offsets"]["left_hip"] * [1, -1, 1])
+    assert np.isclose(s["offsets"]["left_hip"][1], 0.8 * base["offsets"]["left_hip"][1])
+    assert np.allclose(s["radii"]["right_thigh"], 1.3 * base["radii"]["left_thigh"])
+    b = bone_lengths(make_model(39, shape=s))
+    assert np.isclose(b["left_thigh"], 1.1 * bone_lengths(make_model(39))["left_thigh"])
+    with pytest.raises(ShapeCalibrationError, match="unknown names"):
+        shape_from_params(base, {"tail": 1.0})
+    with pytest.raises(ShapeCalibrationError, match="positive finite"):
+        shape_from_params(base, {"scale": -1.0})
+    with pytest.raises(ShapeCalibrationError, match=f"expected {len(SHAPE_PARAMS)} numbers"):
+        shape_from_params(base, [1.0, 2.0])
+    with pytest.raises(ShapeCalibrationError, match="window_frames: expected an integer >= 1"):
+        ShapeCalibrationConfig(window_frames=0)
+
+
+def test_marker_bone_lengths_are_the_median_distance_and_errors_compare_by_name():
+    names = ["left_hip", "left_knee", "left_ankle"]
+    T = np.zeros((3, 3, 3))
+    T[:, 1, 2] = [-0.40, -0.42, -0.44]
+    T[:, 2, 2] = T[:, 1, 2] - 0.40
+    got = marker_bone_lengths(names, T)
+    assert got == pytest.approx({"left_thigh": 0.42, "left_shin": 0.40})
+    err = bone_errors({"left_thigh": 0.43, "left_shin": 0.40, "right_thigh": 1.0}, got)
+    assert err["per_bone_mm"] == {"left_thigh": 10.0, "left_shin": 0.0} and err["mean_mm"] == pytest.approx(5.0)
+    with pytest.raises(ShapeCalibrationError, match=r"markers: expected shape \(F, 3, 3\)"):
+        marker_bone_lengths(names, np.zeros((2, 4, 3)))
+
+
+def _rendered_frames(model, n, seed=0):
+    """Exact masks of ``model`` walking (the project's motion generator) in the default rig."""
+    from isa_mocap_ros.body.motion import generate_motion
+    from isa_mocap_ros.vision import default_rig, render_mask
+
+    rig = default_rig()
+    X = generate_motion("walk", model, duration_s=n / 15.0, fps=15.0, rng=np.random.default_rng(seed))[:n]
+    frames = []
+    for k, x in enumerate(X):
+        E = capsule_endpoints(model, x[None, :])[0]
+        frames.append((k, [render_mask(c, E, model.capsule_radii) for c in rig]))
+    return list(rig), frames
+
+
+@pytest.mark.timeout(300)
+def test_calibration_recovers_a_known_capsule_shape():
+    # exact renders of a subject unlike the default shape: taller, long shins, short upper arms, heavier legs
+    truth = {"scale": 1.07, "thigh": 0.95, "shin": 1.08, "upper_arm": 0.92, "forearm": 1.0,
+             "hip_width": 1.15, "r_legs": 1.25, "r_trunk": 1.1}
+    model = make_model(39, shape=shape_from_params(default_shape(), truth))
+    cams, frames = _rendered_frames(model, 8)
+    cfg = ShapeCalibrationConfig(window_frames=8, n_frames=4, rounds=3, pose_steps=2, shape_evals=1500, seed=0)
+    res = calibrate_shape(39, cams, frames, config=cfg)
+    want = bone_lengths(model)
+    before = bone_errors(bone_lengths(make_model(39)), want)
+    after = bone_errors(bone_lengths(make_model(39, shape=res.shape)), want)
+    limbs = np.mean([after["per_bone_mm"][b] for b in LIMBS])
+    assert res.energy < 0.5 * res.energy_default
+    assert after["mean_mm"] < 0.6 * before["mean_mm"], (after, before)      # measured 13.1 vs 25.5 mm
+    assert limbs < 20.0, after                                              # measured 13.9 mm
+    assert abs(res.params["scale"] - truth["scale"]) < 0.03, res.params
+
+
+def test_calibration_is_deterministic():
+    model = make_model(39, shape=shape_from_params(default_shape(), {"scale": 0.95}))
+    cams, frames = _rendered_frames(model, 3)
+    cfg = ShapeCalibrationConfig(window_frames=3, n_frames=2, rounds=2, pose_steps=1, shape_evals=40, seed=4)
+    a, b = calibrate_shape(39, cams, frames, config=cfg), calibrate_shape(39, cams, frames, config=cfg)
+    assert a.params == b.params and np.array_equal(a.poses, b.poses) and a.frame_keys == b.frame_keys == (0, 2)
+
+
+def test_calibration_needs_a_person():
+    from isa_mocap_ros.vision import default_rig
+
+    rig = list(default_rig())
+    empty = [(k, [np.zeros((c.height, c.width), np.uint8) for c in rig]) for k in range(3)]
+    with pytest.raises(ShapeCalibrationError, match="found no person"):
+        calibrate_shape(39, rig, empty, config=ShapeCalibrationConfig(window_frames=3, rounds=1, shape_evals=10))
+    with pytest.raises(ShapeCalibrationError, match="at least one frame"):
+        calibrate_shape(39, rig, [])
+
+
+REPO = Path(__file__).resolve().parents[1]
+FIXTURE = REPO / "bags" / "fixture"
+QUICK = ["--calib-frames", "5", "--calib-rounds", "1", "--calib-evals", "40"]
+
+
+@pytest.mark.skipif(not FIXTURE.is_dir(), reason="bags/fixture not present")
+def test_calibrate_cli_writes_a_shape_that_track_uses(tmp_path, capsys):
+    from isa_mocap_ros.bag import BagReader
+    from isa_mocap_ros.sequence import model_from_yaml
+    from msg_adapters import from_cdr
+
+    body = tmp_path / "body.yaml"
+    assert main(["calibrate", str(FIXTURE), "--out", str(body), "--use-masks", "--report", str(tmp_path / "r.json"),
+                 *QUICK]) == 0
+    assert "mean bone-length error" in capsys.readouterr().out
+    shape = load_shape(body)
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert set(rep["params"]) == {n for n, _, _ in SHAPE_PARAMS} and rep["energy"] <= rep["energy_default_shape"]
+    assert rep["bone_error"]["mean_mm"] >= 0 and rep["bones_m"] == pytest.approx(
+        bone_lengths(make_model(39, shape=shape)), abs=1e-3)
+    # an existing file needs --overwrite
+    assert main(["calibrate", str(FIXTURE), "--out", str(body), *QUICK]) == 2
+    assert "pass --overwrite" in capsys.readouterr().err
+    # track --shape FILE tracks with it and publishes it in its estimates
+    out = tmp_path / "tr"
+    assert main(["track", str(FIXTURE), "--out", str(out), "--frames", "2", "--evals", "200", "--use-masks",
+                 "--no-progress", "--shape", str(body)]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["shape"] == str(body) and "shape_calibration" not in s
+    with BagReader(out / "estimates") as bag:
+        model = model_from_yaml(from_cdr(*next((m.data, m.type) for m in bag.messages(["/mocap/model"]))).data)[0]
+    for j, o in shape["offsets"].items():
+        assert np.allclose(model.shape["offsets"][j], o, atol=1e-6)
+    capsys.readouterr()
+    assert main(["track", str(FIXTURE), "--out", str(tmp_path / "t2"), "--shape", str(tmp_path / "nope.yaml")]) == 2
+    assert "--shape: expected auto, default, truth or a body-shape YAML file" in capsys.readouterr().err
+
+
+class _NoShape:
+    """A ground-truth model whose shape must not be read (delegates everything else)."""
+
+    def __init__(self, model):
+        self._model = model
+
+    def __getattr__(self, name):
+        if name == "shape":
+            raise AssertionError("the default path read the ground-truth body shape")
+        return getattr(self._model, name)
+
+
+@pytest.mark.skipif(not FIXTURE.is_dir(), reason="bags/fixture not present")
+def test_track_default_path_reads_no_ground_truth_shape(tmp_path, monkeypatch):
+    import dataclasses
+
+    import isa_mocap_ros.cli.track as track
+    import isa_mocap_ros.eval.report as report
+
+    real = track.read_sequence
+
+    def guarded(*a, **kw):
+        seq = real(*a, **kw)
+        assert seq.truth_model is not None
+        return dataclasses.replace(seq, truth_model=_NoShape(seq.truth_model))
+
+    monkeypatch.setattr(track, "read_sequence", guarded)
+    monkeypatch.setattr(report, "score", lambda *a, **kw: None)     # scoring may read the truth; tracking not
+    out = tmp_path / "tr"
+    assert main(["track", str(FIXTURE), "--out", str(out), "--frames", "2", "--evals", "200", "--use-masks",
+                 "--no-progress", *QUICK]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["shape"] == "auto" and set(s["shape_calibration"]["params"]) == {n for n, _, _ in SHAPE_PARAMS}
+    # the guard works: the diagnostic --shape truth does read it
+    with pytest.raises(AssertionError, match="read the ground-truth body shape"):
+        main(["track", str(FIXTURE), "--out", str(tmp_path / "t2"), "--frames", "1", "--evals", "100",
+              "--use-masks", "--no-progress", "--shape", "truth"])
+
+
+def test_run_and_track_default_to_the_calibrated_shape():
+    from isa_mocap_ros.cli.main import build_parser
+
+    p = build_parser()
+    assert p.parse_args(["track", "B", "--out", "o"]).shape == "auto"
+    assert p.parse_args(["run", "B"]).shape == "auto"
