@@ -189,3 +189,22 @@ def test_run_and_track_default_to_the_calibrated_shape():
     p = build_parser()
     assert p.parse_args(["track", "B", "--out", "o"]).shape == "auto"
     assert p.parse_args(["run", "B"]).shape == "auto"
+
+
+@pytest.mark.skipif(not FIXTURE.is_dir(), reason="bags/fixture not present")
+def test_run_shape_option_gives_the_estimator_a_body_file(tmp_path):
+    from isa_mocap_ros.cli.main import build_parser
+    from isa_mocap_ros.cli.run import _body_shape, _network
+
+    p = build_parser()
+    args = p.parse_args(["run", str(FIXTURE), "--out", str(tmp_path), *QUICK])
+    path = _body_shape(args, FIXTURE, tmp_path, 3)
+    assert path == str((tmp_path / "body.yaml").resolve()) and load_shape(path)["name"] == "calibrated:fixture"
+    assert json.loads((tmp_path / "shape_calibration.json").read_text())["frames"] >= 1
+    est = next(s for s in _network(args, "p.yaml", tmp_path, 4, 3, path) if s.name == "estimator")
+    assert ("body_shape", path) in est.params
+    assert _body_shape(p.parse_args(["run", "--shape", "default"]), FIXTURE, tmp_path, 3) is None
+    truth = _body_shape(p.parse_args(["run", "--shape", "truth"]), FIXTURE, tmp_path, 3)
+    assert load_shape(truth)["offsets"].keys() == default_shape()["offsets"].keys()
+    with pytest.raises(ValueError, match="--shape: expected auto, default, truth or a body-shape YAML"):
+        _body_shape(p.parse_args(["run", "--shape", str(tmp_path / "nope.yaml")]), FIXTURE, tmp_path, 3)

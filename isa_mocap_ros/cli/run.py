@@ -63,6 +63,9 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
                         "config/body/default.yaml; FILE = a body-shape YAML; 'truth' = the bag's ground-truth "
                         "model's (a diagnostic only)")
     p.add_argument("--quiet", action="store_true", help="do not echo node output")
+    from isa_mocap_ros.cli.shape_options import add_calibration_arguments
+
+    add_calibration_arguments(p)
 
 
 def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
@@ -147,11 +150,12 @@ def _body_shape(args: argparse.Namespace, bag: Path, out: Path, learn: int | Non
             raise ValueError("--shape truth: expected a ground-truth model in the bag, received none")
         save_shape(dict(seq.truth_model.shape), path)
         return str(path.resolve())
-    from isa_mocap_ros.cli.calibrate import calibrate_sequence
+    from isa_mocap_ros.cli.shape_options import calibrate_sequence
     from isa_mocap_ros.tracking.shape_calibration import ShapeCalibrationError
 
     n_learn = learn or 10
-    calib = argparse.Namespace(seed=args.seed or 0)
+    calib = argparse.Namespace(seed=args.seed or 0, **{k: getattr(args, k, None)
+                                                        for k in ("calib_frames", "calib_rounds", "calib_evals")})
     try:
         res, report = calibrate_sequence(seq, calib, dof=args.model or 39, use_masks=False, learn=n_learn,
                                          first=n_learn, progress=lambda line: print(f"run: {line}", flush=True))

@@ -93,7 +93,7 @@ def register(sub) -> None:
                         "every K-th tracked frame (0 = the initialized frame only; default 0)")
     p.add_argument("--overwrite", action="store_true", help="replace DIR/estimates if it exists")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    from isa_mocap_ros.cli.calibrate import add_calibration_arguments
+    from isa_mocap_ros.cli.shape_options import add_calibration_arguments
 
     add_calibration_arguments(p)
     p.set_defaults(func=run)
@@ -281,7 +281,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     cfg = TrackerConfig(**cfg_kw)
     calibration = None
     if shape_arg == "auto":
-        from isa_mocap_ros.cli.calibrate import calibrate_sequence
+        from isa_mocap_ros.cli.shape_options import calibrate_sequence
         from isa_mocap_ros.tracking.shape_calibration import ShapeCalibrationError
 
         try:
