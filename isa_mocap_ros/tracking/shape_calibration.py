@@ -27,7 +27,6 @@ mesh skeleton's joint centres. See ``docs/shape_calibration.md``.
 from __future__ import annotations
 
 import copy
-import dataclasses
 from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
