@@ -63,7 +63,6 @@ automatically and then tracks from that pose.
 from __future__ import annotations
 
 import collections
-import contextlib
 import dataclasses
 import math
 import time
@@ -740,6 +739,16 @@ class FrameResult:
     initialized: bool = False
 
 
+@dataclass(frozen=True)
+class FrameBudget:
+    """What one hypothesis may spend on a frame: ``evals`` evaluations (``evals_per_frame``, or a heading
+    check's :meth:`Tracker.confirm_evals`) and whether the contour stage runs (``step(contour_stage=)``).
+    Every stage sizes its share from it; the configuration is never changed mid-step."""
+
+    evals: int
+    contour: bool = True
+
+
 def _make_predictor(config: TrackerConfig):
     if config.predictor == "ar":
         return ArPredictor(order=config.predictor_order)
@@ -1179,8 +1188,8 @@ class Tracker:
         hi[tight] = lo[tight] + 1e-6
         return lo, hi, spread
 
-    def _search(self, pred: np.ndarray, rng: np.random.Generator, spread_scale: float = 1.0, notes=None,
-                stages: bool = True):
+    def _search(self, pred: np.ndarray, rng: np.random.Generator, budget: FrameBudget, spread_scale: float = 1.0,
+                notes=None, stages: bool = True):
         """The frame's optimizer around ``pred`` (not yet run), its share of the budget, the stages
         ``(pelvis share or None, limb stage's limbs, refinement share or None)`` and the search box
         ``(lo, hi, spread, spread without the motion term)`` (see :meth:`_optimize`)."""
@@ -1210,12 +1219,12 @@ class Tracker:
             params["initial_population"] = P
         opt = make_optimizer(cfg.optimizer, x0, spread, rng=rng, bounds=(lo, hi),
                              rotation_blocks=self.model.rotation_blocks, **params)
-        share = self._pelvis_share(notes) if stages else None
-        torso = self._torso_share(notes) if stages else None
-        limbs = self._limb_stage(notes, x0) if stages else ([], [], 0)
-        refine = self._refine_share(notes) if stages else None
-        contour = self._contour_share(notes) if stages else None
-        budget = cfg.evals_per_frame - (share or 0) - (torso or 0) - self._limb_share(len(limbs[0]), limbs[2]) \
+        share = self._pelvis_share(notes, budget) if stages else None
+        torso = self._torso_share(notes, budget) if stages else None
+        limbs = self._limb_stage(notes, x0, budget) if stages else ([], [], 0)
+        refine = self._refine_share(notes, budget) if stages else None
+        contour = self._contour_share(notes, budget) if stages else None
+        budget = budget.evals - (share or 0) - (torso or 0) - self._limb_share(len(limbs[0]), limbs[2]) \
             - (refine or 0) - (contour or 0)
         if torso is not None:
             # the torso stage never starves the main search: two generations per partition stay
@@ -1231,8 +1240,8 @@ class Tracker:
             budget = _whole_generations(budget, opt.generation_size)     # (hierarchical: its split does this)
         return opt, budget, (share, torso, limbs, refine, contour), (lo, hi, spread, base)
 
-    def _optimize(self, pred: np.ndarray, rng: np.random.Generator, spread_scale: float = 1.0, notes=None,
-                  stages: bool = True):
+    def _optimize(self, pred: np.ndarray, rng: np.random.Generator, budget: FrameBudget, spread_scale: float = 1.0,
+                  notes=None, stages: bool = True):
         """One optimizer run of the frame budget around ``pred`` (raises the optimizer's errors), then
         the pelvis stage (``config.pelvis_fraction`` of the budget), the torso stage
         (``config.torso_fraction``), the limb stage (``config.limb_proposals``) and the refinement
@@ -1246,7 +1255,8 @@ class Tracker:
         polish (``config.init_polish``) then searches the winner with every stage."""
         from isa_mocap_ros.optim import minimize
 
-        opt, budget, stage_shares, (lo, hi, spread, base) = self._search(pred, rng, spread_scale, notes, stages)
+        opt, budget, stage_shares, (lo, hi, spread, base) = self._search(pred, rng, budget, spread_scale, notes,
+                                                                         stages)
         share, torso, limbs, refine, contour = stage_shares
         if self._compiled_search and _fast_search.supported(opt, self.energy, self._prior_active()):
             res = _fast_search.run_hisa(opt, self.energy, budget)      # the same numbers, compiled per partition
@@ -1283,7 +1293,8 @@ class Tracker:
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         return res
 
-    def _initial_runs(self, starts: list, frame_index: int, notes: list[str], stream: tuple = ()) -> tuple[list, int]:
+    def _initial_runs(self, starts: list, frame_index: int, notes: list[str], budget: FrameBudget,
+                      stream: tuple = ()) -> tuple[list, int]:
         """The automatically initialized frame's search from every start (heading candidate), pruned
         to ``config.init_keep`` runs at the checkpoint (see :class:`TrackerConfig`): the list of
         ``(start index, result, start)`` of the runs that ended, and the evaluations of all runs.
@@ -1295,17 +1306,17 @@ class Tracker:
                 rng = frame_rng(cfg.seed, frame_index, *stream, j)
             else:
                 rng = frame_rng(cfg.seed, frame_index) if j == 0 else frame_rng(cfg.seed, frame_index, 3, j)
-            opt, budget, _, _ = self._search(pred, rng, cfg.init_spread_scale, notes if j == 0 else None,
-                                             stages=False)
+            opt, evals, _, _ = self._search(pred, rng, budget, cfg.init_spread_scale, notes if j == 0 else None,
+                                            stages=False)
             if self._compiled_search and _fast_search.supported(opt, self.energy, self._prior_active()):
                 # compiled h-isa, paused after its first partition (the same numbers as below)
-                runs.append((j, _fast_search.HisaRun(opt, self.energy, budget), pred, None))
+                runs.append((j, _fast_search.HisaRun(opt, self.energy, evals), pred, None))
                 continue
             # bind + iterate + result() is minimize(), split at the checkpoint: the end of the first
             # partition (hierarchical optimizers, whose shares bind() sets) or a sixth of the budget
-            opt.bind(_TotalEnergy(self), max_evals=budget)
+            opt.bind(_TotalEnergy(self), max_evals=evals)
             shares = getattr(opt, "shares", None)
-            runs.append((j, opt, pred, shares[0] if shares else budget // 6))
+            runs.append((j, opt, pred, shares[0] if shares else evals // 6))
         n_pruned = 0
         if 0 < cfg.init_keep < len(runs):
             for _, opt, _, checkpoint in runs:
@@ -1335,16 +1346,16 @@ class Tracker:
         n = self.config.limb_proposals if n is None else n
         return (n + len(self.config.limb_extrapolations)) * n_limbs + 2 if n_limbs else 0
 
-    def _limb_proposals(self, n_limbs: int) -> int:
+    def _limb_proposals(self, n_limbs: int, budget: FrameBudget) -> int:
         """Proposals per limb for ``n_limbs`` limbs: ``limb_proposals``, or as many as fit in a tenth
         of the frame budget."""
         if not n_limbs:
             return 0
         cfg = self.config
         return max(0, min(cfg.limb_proposals,
-                          (cfg.evals_per_frame // 10 - 2) // n_limbs - len(cfg.limb_extrapolations)))
+                          (budget.evals // 10 - 2) // n_limbs - len(cfg.limb_extrapolations)))
 
-    def _limb_stage(self, notes, pred=None) -> tuple[list[str], list[str], int]:
+    def _limb_stage(self, notes, pred, budget: FrameBudget) -> tuple[list[str], list[str], int]:
         """The limb stage this frame: ``(limbs, those with hinge proposals only, proposals per limb)``,
         no limb when off, none in the model, or fewer than :data:`MIN_LIMB_PROPOSALS` fit in a tenth of
         the budget. The limbs are ``limb_proposal_limbs``, then any other limb whose hinge is folded in
@@ -1355,10 +1366,10 @@ class Tracker:
         limbs = [name for name in cfg.limb_proposal_limbs if name in have]
         if cfg.limb_proposals <= 0:
             return [], [], 0
-        if limbs and self._limb_proposals(len(limbs)) < min(MIN_LIMB_PROPOSALS, cfg.limb_proposals):
+        if limbs and self._limb_proposals(len(limbs), budget) < min(MIN_LIMB_PROPOSALS, cfg.limb_proposals):
             if notes is not None:
                 notes.append(f"limb stage skipped: fewer than {min(MIN_LIMB_PROPOSALS, cfg.limb_proposals)} "
-                             f"proposals per limb fit in a tenth of the frame budget ({cfg.evals_per_frame}; "
+                             f"proposals per limb fit in a tenth of the frame budget ({budget.evals}; "
                              f"{len(limbs)} limbs)")
             return [], [], 0
         folded = set()
@@ -1369,14 +1380,14 @@ class Tracker:
                     continue
                 if limb.name in limbs:
                     folded.add(limb.name)
-                elif 10 * self._limb_share(len(limbs) + 1) <= cfg.evals_per_frame:   # joins while it fits
+                elif 10 * self._limb_share(len(limbs) + 1) <= budget.evals:   # joins while it fits
                     limbs.append(limb.name)
                     folded.add(limb.name)
                     if notes is not None:
                         notes.append(f"limb stage: {limb.name} folded in the prediction "
                                      f"({np.rad2deg(float(pred[limb.hinge_dof])):.0f} deg), proposals for it too")
         hinge = [name for name in limbs if name in cfg.limb_hinge_limbs and name not in folded]
-        return limbs, hinge, self._limb_proposals(len(limbs))
+        return limbs, hinge, self._limb_proposals(len(limbs), budget)
 
     def _flat_algorithm(self) -> tuple[str, dict]:
         """The configured algorithm's flat form (``h-isa`` → ``isa``, ``psapf`` → ``apf``) and its parameters."""
@@ -1401,14 +1412,14 @@ class Tracker:
                                                        **params).generation_size
         return self._flat_generations[d]
 
-    def _pelvis_share(self, notes) -> int | None:
+    def _pelvis_share(self, notes, budget: FrameBudget) -> int | None:
         """Evaluations of the pelvis stage, or None (off, no root children, or below one generation + 1)."""
         cfg = self.config
         if cfg.pelvis_fraction <= 0 or self._pelvis is None:
             return None
         if not (self._pelvis_reaim.ops if cfg.pelvis_move == "reaim" else self._pelvis.children):
             return None
-        share = int(cfg.evals_per_frame * cfg.pelvis_fraction)
+        share = int(budget.evals * cfg.pelvis_fraction)
         n = self._flat_generation(6)
         if share - 1 < n:       # one evaluation is kept for the final pose
             if notes is not None:
@@ -1417,7 +1428,7 @@ class Tracker:
             return None
         return share
 
-    def _torso_share(self, notes) -> int | None:
+    def _torso_share(self, notes, budget: FrameBudget) -> int | None:
         """Evaluations of the torso stage, or None (off, a flat algorithm, no torso partition, or below one
         generation + 2)."""
         from isa_mocap_ros.optim import inner_optimizer
@@ -1425,7 +1436,7 @@ class Tracker:
         cfg = self.config
         if cfg.torso_fraction <= 0 or self._torso is None or inner_optimizer(cfg.optimizer) is None:
             return None
-        share = int(cfg.evals_per_frame * cfg.torso_fraction)
+        share = int(budget.evals * cfg.torso_fraction)
         n = self._flat_generation(self._torso.coords.size)
         if share - 2 < n:       # the start's and the result's energies
             if notes is not None:
@@ -1434,7 +1445,7 @@ class Tracker:
             return None
         return share
 
-    def _refine_share(self, notes) -> int | None:
+    def _refine_share(self, notes, budget: FrameBudget) -> int | None:
         """Evaluations of the refinement stage, or None (off, a flat algorithm, no partition of
         ``refine_partitions`` in the model, or below ``REFINE_MIN_GENERATIONS`` generations + 2)."""
         from isa_mocap_ros.optim import inner_optimizer
@@ -1442,7 +1453,7 @@ class Tracker:
         cfg = self.config
         if cfg.refine_fraction <= 0 or inner_optimizer(cfg.optimizer) is None or not self._refine_coords.size:
             return None
-        share = int(cfg.evals_per_frame * cfg.refine_fraction)
+        share = int(budget.evals * cfg.refine_fraction)
         n = self._flat_generation(self._refine_coords.size)
         if share < REFINE_MIN_GENERATIONS * n + 2:    # + the start's and the result's energies
             if notes is not None:
@@ -1456,20 +1467,20 @@ class Tracker:
         """The contour stage's extra iterations on ``contour_extra_partitions`` (0 without such partitions)."""
         return self.config.contour_extra_iterations if self._contour_extra_coords.size else 0
 
-    def _contour_share(self, notes) -> int | None:
+    def _contour_share(self, notes, budget: FrameBudget) -> int | None:
         """Evaluations charged for the contour stage (``contour_iterations`` × (D + 1), plus
         ``contour_extra_iterations`` × (k + 1) for the k coordinates of ``contour_extra_partitions``,
         + 2 for the energies of the pose before and after), or None (off, or above a quarter of the
-        frame budget)."""
+        frame budget, or no contour stage this frame)."""
         cfg = self.config
-        if cfg.contour_iterations <= 0:
+        if cfg.contour_iterations <= 0 or not budget.contour:
             return None
         share = cfg.contour_iterations * (self.model.dof + 1) \
             + self._contour_extra() * (self._contour_extra_coords.size + 1) + 2
-        if 4 * share > cfg.evals_per_frame:
+        if 4 * share > budget.evals:
             if notes is not None:
                 notes.append(f"contour stage skipped: its share ({share} evaluations) is above a quarter of the "
-                             f"frame budget ({cfg.evals_per_frame})")
+                             f"frame budget ({budget.evals})")
             return None
         return share
 
@@ -1718,12 +1729,12 @@ class Tracker:
             x[idx] = nearest_rotvec(x[idx], np.zeros(3))
         return x, float(energy)
 
-    def _polish(self, x: np.ndarray, energy: float, frame_index: int, stream: int, notes):
+    def _polish(self, x: np.ndarray, energy: float, frame_index: int, stream: int, notes, budget: FrameBudget):
         """``config.init_polish``'s search of the initialized frame's pose ``x`` (energy ``energy``) as a tracked
         frame, every stage, stream ``[seed, frame, stream]``: ``(result or None if the optimizer refused, the
         lower-energy pose of the two, its energy)``; a refusal is noted in ``notes`` (when given)."""
         try:
-            res = self._optimize(x, frame_rng(self.config.seed, frame_index, stream), notes=notes)
+            res = self._optimize(x, frame_rng(self.config.seed, frame_index, stream), budget, notes=notes)
         except ValueError as exc:
             if notes is not None:
                 notes.append(f"initialization polish failed: {exc}")
@@ -1797,8 +1808,8 @@ class Tracker:
         # a frame of the heading check (consecutive frames only, see below) shares the budget
         evals = self.confirm_evals() if rival is not None and frames_elapsed == 1 else self.config.evals_per_frame
         self._contour_now = bool(contour_stage)
-        with self._budget(evals, contour=self._contour_now):
-            res = self._step(masks, frame_index, prediction=prediction, frames_elapsed=frames_elapsed)
+        res = self._step(masks, frame_index, FrameBudget(evals, self._contour_now), prediction=prediction,
+                         frames_elapsed=frames_elapsed)
         if self._own_prediction_frames > 0:
             self._own_prediction_frames -= 1
         if res.initialized:
@@ -1891,7 +1902,7 @@ class Tracker:
         else:
             head = f"heading re-check: {res.views_used} views see the person ({before} when the heading was checked)"
         try:
-            runs, n = self._initial_runs(list(starts), frame_index, None, stream=(5,))
+            runs, n = self._initial_runs(list(starts), frame_index, None, FrameBudget(cfg.evals_per_frame), stream=(5,))
         except ValueError as exc:
             return dataclasses.replace(res, time_s=time.perf_counter() - t0,
                                        notes=res.notes + (f"{head}; its search failed ({exc}); kept this heading",))
@@ -1914,28 +1925,14 @@ class Tracker:
         cfg = self.config
         return max(int(cfg.evals_per_frame * cfg.init_confirm_share), min(CONFIRM_MIN_EVALS, cfg.evals_per_frame))
 
-    @contextlib.contextmanager
-    def _budget(self, evals: int, *, contour: bool = True):
-        """Within the block, every stage of :meth:`_step` sizes its share from ``evals`` evaluations
-        per frame instead of ``config.evals_per_frame`` (and, ``contour`` False, runs without the
-        contour stage)."""
-        cfg = self.config
-        if evals != cfg.evals_per_frame or (not contour and cfg.contour_iterations):
-            self.config = dataclasses.replace(cfg, evals_per_frame=evals,
-                                              contour_iterations=cfg.contour_iterations if contour else 0)
-        try:
-            yield
-        finally:
-            self.config = cfg
-
     def _confirm_heading(self, res: FrameResult, masks, frame_index: int, frames_elapsed: float,
                          t0: float) -> FrameResult:
         """One frame of the heading check: step the rival on the same masks, add both energies, decide
         (see ``TrackerConfig.init_confirm_frames``); the frame's result (the rival's when it wins)."""
         cfg = self.config
         rival = self._rival
-        with rival._budget(self.confirm_evals(), contour=self._contour_now):
-            other = rival._step(masks, frame_index, prediction=None, frames_elapsed=frames_elapsed)
+        other = rival._step(masks, frame_index, FrameBudget(self.confirm_evals(), self._contour_now), prediction=None,
+                            frames_elapsed=frames_elapsed)
         n_evals = res.n_evals + other.n_evals
         if res.fell_back and other.fell_back:       # nothing to compare this frame
             return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0)
@@ -1990,7 +1987,8 @@ class Tracker:
             f"heading check decided: switched to the other heading ({sums}); the frames before were estimated facing "
             "the wrong way",))
 
-    def _step(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1) -> FrameResult:
+    def _step(self, masks: Sequence, frame_index: int, budget: FrameBudget, *, prediction=None,
+              frames_elapsed: float = 1) -> FrameResult:
         """:meth:`step` for one hypothesis (without the heading check's rival)."""
         t0 = time.perf_counter()
         if isinstance(frame_index, bool) or not isinstance(frame_index, (int, np.integer)) or frame_index < 0:
@@ -2045,9 +2043,9 @@ class Tracker:
         # runs part-way) and keeps the lowest energy
         try:
             if initialized:
-                runs, n = self._initial_runs(starts, frame_index, notes)
+                runs, n = self._initial_runs(starts, frame_index, notes, budget)
             else:
-                res = self._optimize(starts[0], frame_rng(cfg.seed, frame_index), notes=notes)
+                res = self._optimize(starts[0], frame_rng(cfg.seed, frame_index), budget, notes=notes)
                 runs, n = [(0, res, starts[0])], res.n_evals
         except ValueError as exc:
             # a configuration the optimizer rejects (budget below one generation, bad parameter):
@@ -2071,7 +2069,7 @@ class Tracker:
             self._rival_start = self._pick_rival(runs, res, x, energy)
         if initialized and cfg.init_polish:
             # config.init_polish: the winner searched once more as a tracked frame (all stages), from itself
-            res2, x2, e2 = self._polish(x, energy, frame_index, 6, notes)
+            res2, x2, e2 = self._polish(x, energy, frame_index, 6, notes, budget)
             if res2 is not None:
                 n_evals += res2.n_evals
                 if e2 < energy:
@@ -2079,7 +2077,7 @@ class Tracker:
             if self._rival_start is not None:
                 # the heading check's rival polished alike: the heading that fits better after it wins (the
                 # check still tracks both)
-                res_r, xr, er = self._polish(*self._rival_start[:2], frame_index, 7, None)
+                res_r, xr, er = self._polish(*self._rival_start[:2], frame_index, 7, None, budget)
                 if res_r is not None:
                     n_evals += res_r.n_evals
                 if er < energy:
