@@ -7,6 +7,8 @@ import pytest
 from isa_mocap_ros.body import capsule_endpoints, make_model
 from isa_mocap_ros.body.motion import generate_motion
 from isa_mocap_ros.tracking import Tracker, TrackerConfig, TrackerError
+from isa_mocap_ros.tracking import plan
+from isa_mocap_ros.tracking.plan import FrameBudget
 from isa_mocap_ros.tracking.tracker import frame_rng
 from isa_mocap_ros.vision import default_rig, render_mask
 
@@ -79,7 +81,7 @@ def test_off_flat_algorithms_skip_note_and_models():
         tr.refine(walk[0], evals=100, rng=frame_rng(0, 0))
     low = make_model(18)           # no torso or arms: no stage, and refine says why
     tr = Tracker(low, cams, TrackerConfig(seed=1, refine_fraction=0.1))
-    assert tr._refine_share(None, FrameBudget(tr.config.evals_per_frame)) is None
+    assert plan.refine_share(tr, None, FrameBudget(tr.config.evals_per_frame)) is None
     with pytest.raises(TrackerError, match="none of refine_partitions"):
         tr.refine(low.rest_pose(), evals=100, rng=frame_rng(0, 0))
 

@@ -6,6 +6,7 @@ from isa_mocap_ros.body import capsule_endpoints, make_model
 from isa_mocap_ros.body.motion import generate_motion
 from isa_mocap_ros.eval import frame_errors_mm, marker_positions
 from isa_mocap_ros.tracking import FrameResult, Tracker, TrackerConfig, TrackerError, make_tracker
+from isa_mocap_ros.tracking import first_frame, heading
 from isa_mocap_ros.tracking.contour import ContourFitInfo
 from isa_mocap_ros.vision import default_rig, render_mask
 
@@ -152,16 +153,16 @@ def _heading_runs(scene, monkeypatch, *, wrong_first: bool, external=None, **cfg
 
     model, cams, walk, masks = scene
     if wrong_first:
-        orig = T.Tracker._initial_runs
+        orig = first_frame.initial_runs
         yaw = _yaw_of(walk[0][3:6])
 
-        def runs(self, starts, frame_index, notes, stream=()):
-            out, n = orig(self, starts, frame_index, notes, stream)
+        def runs(tr, starts, frame_index, notes, budget, stream=()):
+            out, n = orig(tr, starts, frame_index, notes, budget, stream)
             if stream:                                  # the heading re-check's runs are left alone
                 return out, n
             return [(j, dataclasses.replace(r, energy=1.4 * r.energy, best_energy=1.4 * r.best_energy)
                      if abs(_wrap(_yaw_of(r.x[3:6]) - yaw)) < np.pi / 2 else r, p) for j, r, p in out], n
-        monkeypatch.setattr(T.Tracker, "_initial_runs", runs)
+        monkeypatch.setattr(first_frame, "initial_runs", runs)
     # init_confirm_ratio 1.5: here the right and the wrong heading end 29 % apart on the first frame
     tr = Tracker(model, cams, TrackerConfig(**{"seed": 0, "init_confirm_ratio": 1.5, **cfg}))
     out = [tr.step(masks[0], 0)]
@@ -239,7 +240,7 @@ def test_an_undecided_heading_check_is_rechecked_once(scene320_long, monkeypatch
     later, from standing poses heading the other way."""
     from isa_mocap_ros.tracking import tracker as T
 
-    monkeypatch.setattr(T, "UNDECIDED_RECHECK_FRAMES", 2)
+    monkeypatch.setattr(heading, "UNDECIDED_RECHECK_FRAMES", 2)
     _, on, _ = _heading_runs(scene320_long, monkeypatch, wrong_first=False, init_confirm_margin=10.0)
     notes = [(k, n) for k, r in enumerate(on) for n in r.notes if n.startswith("heading")]
     assert notes[0][0] == 0 and notes[0][1].startswith("heading check started")
@@ -268,7 +269,7 @@ def test_travel_cue_rechecks_a_track_that_moves_backwards(scene320_two_views, mo
     from isa_mocap_ros.tracking import tracker as T
 
     def runs(**cfg):
-        monkeypatch.setattr(T.Tracker, "_pick_rival", lambda self, *a, **k: None)   # no check after the first frame
+        monkeypatch.setattr(first_frame, "pick_rival", lambda tr, *a, **k: None)   # no check after the first frame
         # the contour stage off: with it the backwards track fits the two views so closely that the re-check
         # can keep it on its energies (seen with the test workers' thread count; session 16)
         return _heading_runs(scene320_two_views, monkeypatch, wrong_first=True, init_confirm_frames=2,
@@ -317,16 +318,16 @@ def test_travel_reads_the_root_motion(scene320_two_views):
         tr._accept(x)
     direction, dist, span = tr.travel()
     assert span == T.TRAVEL_FRAMES and dist == pytest.approx(np.hypot(*(walk[T.TRAVEL_FRAMES][:2] - walk[0][:2])))
-    assert tr._off_travel(direction, walk[T.TRAVEL_FRAMES]) < 20.0            # the generated walk moves forwards
+    assert heading.off_travel(direction, walk[T.TRAVEL_FRAMES]) < 20.0            # the generated walk moves forwards
     assert tr.travel(min_periods=T.TRAVEL_FRAMES + 1) is None
-    assert tr._travel_recheck_due() is None                                   # forwards: no re-check
+    assert heading.travel_recheck_due(tr) is None                                   # forwards: no re-check
     assert not tr.heading_recheck_pending([None] * len(cams))
     from isa_mocap_ros.geometry.so3 import exp_so3, log_so3, rot_z
 
     turned = tr._last.copy()
     turned[3:6] = log_so3(rot_z(np.pi) @ exp_so3(turned[3:6]))              # heading the other way
     tr._last = turned
-    assert tr._travel_recheck_due()[0] > 160.0
+    assert heading.travel_recheck_due(tr)[0] > 160.0
     assert tr.heading_recheck_pending([None] * len(cams))                    # the estimator holds the frames after
     tr.reset()
     assert tr.travel() is None

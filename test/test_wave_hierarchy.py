@@ -11,6 +11,7 @@ from isa_mocap_ros.body import make_model
 from isa_mocap_ros.eval.metrics import frame_errors_mm, marker_positions
 from isa_mocap_ros.optim import Hierarchical
 from isa_mocap_ros.tracking import Tracker, TrackerConfig, TrackerError
+from isa_mocap_ros.tracking.plan import FrameBudget
 from isa_mocap_ros.tracking.tracker import frame_rng
 from isa_mocap_ros.vision import default_rig
 
@@ -75,7 +76,7 @@ def test_the_hierarchy_follows_partition_order():
         model = make_model(dof)
         cfg = TrackerConfig() if order is None else TrackerConfig(partition_order=order)
         tr = Tracker(model, cams, cfg)
-        opt = tr._search(model.rest_pose(), frame_rng(0, 0), stages=False)[0]
+        opt = tr._search(model.rest_pose(), frame_rng(0, 0), FrameBudget(tr.config.evals_per_frame), stages=False)[0]
         assert isinstance(opt, Hierarchical)
         assert [p.tolist() for p in opt.partitions] == [list(model.partitions[k]) for k in expect]
 

@@ -21,7 +21,7 @@ TIMING = {"fps", "seconds", "out", "frames_per_s", "wall_s", "elapsed_s", "evals
 
 def _strip(v):
     if isinstance(v, dict):
-        return {k: _strip(x) for k, x in v.items() if k not in TIMING and not k.endswith(("_s", "_ms", "per_s"))}
+        return {k: _strip(x) for k, x in v.items() if k not in TIMING and not k.endswith(("_s", "_ms", "per_s", "seconds"))}
     if isinstance(v, list):
         return [_strip(x) for x in v]
     return v
