@@ -619,6 +619,9 @@ class Tracker:
             if cfg.hull_filter:
                 # the visual-hull filter (config.hull_filter): foreground the other views do not confirm
                 usable = frame_masks.hull(self, usable, gated_pred, notes)
+            # the filtered masks from here on: the contour stage fits what the energy scores, and a later
+            # re-centring starts from the person's foreground (the prediction above re-centred on the raw ones)
+            self._masks_now = usable
         weights = None
         if cfg.view_weights and self._last is not None and any(m is not None for m in usable):
             if gated_pred is None:
@@ -700,7 +703,6 @@ class Tracker:
         if res.n_nonfinite:
             notes.append(f"energy: {res.n_nonfinite} non-finite evaluations")
         spread_out = res.history[-1].spread if res.history else float("nan")
-        self._masks_now = usable         # after the gate: the person's foreground, for a later re-centring
         self._accept(x)
         self.frames += 1
         return FrameResult(x=x, energy=float(energy), n_evals=int(n_evals), spread=float(spread_out),
