@@ -102,7 +102,7 @@ def hull(tr, usable: list, pred: np.ndarray, notes: list[str]) -> list:
                                                margin_px=cfg.hull_keep_px)):
         keep[v] = s
     g = hull_filter(usable, tr.cameras, pose_box(tr.model, pred, cfg.hull_pad_m),
-                    dilate_px=cfg.hull_dilate_px, misses=cfg.hull_misses, keep=keep)
+                    dilate_px=cfg.hull_dilate_px, keep=keep)
     return _noted(g, notes, "the hull filter", lambda total: "no foreground pixel confirmed by the other views")
 
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from . import first_frame, frame_masks
 from .plan import FrameBudget
-from .config import (CONFIRM_MIN_EVALS, UNDECIDED_RECHECK_FRAMES, TRAVEL_FRAMES, TRAVEL_MIN_M_PER_FRAME,
+from .config import (UNDECIDED_RECHECK_FRAMES, TRAVEL_FRAMES, TRAVEL_MIN_M_PER_FRAME,
                      TRAVEL_BACKWARDS_DEG, TRAVEL_RECHECK_FRAMES, FrameResult)
 
 
@@ -140,20 +140,13 @@ def recheck_heading(tr, res: FrameResult, frame_index: int, frames_elapsed: floa
                                notes=res.notes + (note,))
 
 
-def confirm_evals(tr) -> int:
-    """Evaluations of each hypothesis on a frame of the heading check (``config.init_confirm_share``
-    of the frame budget, at least ``min(CONFIRM_MIN_EVALS, evals_per_frame)``)."""
-    cfg = tr.config
-    return max(int(cfg.evals_per_frame * cfg.init_confirm_share), min(CONFIRM_MIN_EVALS, cfg.evals_per_frame))
-
-
 def confirm_heading(tr, res: FrameResult, masks, frame_index: int, frames_elapsed: float,
                      t0: float) -> FrameResult:
     """One frame of the heading check: step the rival on the same masks, add both energies, decide
     (see ``TrackerConfig.init_confirm_frames``); the frame's result (the rival's when it wins)."""
     cfg = tr.config
     rival = tr._rival
-    other = rival._step(masks, frame_index, FrameBudget(confirm_evals(tr), tr._contour_now), prediction=None,
+    other = rival._step(masks, frame_index, FrameBudget(tr.config.evals_per_frame, tr._contour_now), prediction=None,
                         frames_elapsed=frames_elapsed)
     n_evals = res.n_evals + other.n_evals
     if res.fell_back and other.fell_back:       # nothing to compare this frame

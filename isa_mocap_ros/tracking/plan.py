@@ -2,7 +2,7 @@
 
 :class:`FrameBudget` is what one hypothesis may spend on a frame (the frame budget, or a heading check's
 share; with or without the contour stage); the functions below size each stage's share from it (the
-pelvis, torso, limb, refinement and contour stages, ``docs/tracking.md``) and note a skipped stage.
+pelvis, torso, limb and contour stages, ``docs/tracking.md``) and note a skipped stage.
 They read the tracker's configuration and moves, never change them.
 """
 from __future__ import annotations
@@ -11,13 +11,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import MIN_LIMB_PROPOSALS, REFINE_MIN_GENERATIONS
+from .config import MIN_LIMB_PROPOSALS
 
 
 @dataclass(frozen=True)
 class FrameBudget:
     """What one hypothesis may spend on a frame: ``evals`` evaluations (``evals_per_frame``, or a heading
-    check's :meth:`Tracker.confirm_evals`) and whether the contour stage runs (``step(contour_stage=)``).
+    hypothesis of a heading check alike) and whether the contour stage runs (``step(contour_stage=)``).
     Every stage sizes its share from it; the configuration is never changed mid-step."""
 
     evals: int
@@ -91,12 +91,12 @@ def flat_algorithm(tr) -> tuple[str, dict]:
 
 def flat_generation(tr, d: int) -> int:
     """Rows of a generation of the configured algorithm's flat form on ``d`` coordinates (the
-    pelvis and refinement stages' searches; it depends on the algorithm, its parameters and ``d``
+    pelvis and torso stages' searches; it depends on the algorithm, its parameters and ``d``
     only, so it is computed once per ``d``)."""
     from isa_mocap_ros.optim import make_optimizer
 
     if d not in tr._flat_generations:
-        name, params = flat_algorithm(tr, )
+        name, params = flat_algorithm(tr)
         tr._flat_generations[d] = make_optimizer(name, np.zeros(d), np.ones(d), rng=np.random.default_rng(0),
                                                    **params).generation_size
     return tr._flat_generations[d]
@@ -105,16 +105,14 @@ def flat_generation(tr, d: int) -> int:
 def pelvis_share(tr, notes, budget: FrameBudget) -> int | None:
     """Evaluations of the pelvis stage, or None (off, no root children, or below one generation + 1)."""
     cfg = tr.config
-    if cfg.pelvis_fraction <= 0 or tr._pelvis is None:
-        return None
-    if not (tr._pelvis_reaim.ops if cfg.pelvis_move == "reaim" else tr._pelvis.children):
+    if cfg.pelvis_fraction <= 0 or tr._pelvis_reaim is None or not tr._pelvis_reaim.ops:
         return None
     share = int(budget.evals * cfg.pelvis_fraction)
     n = flat_generation(tr, 6)
     if share - 1 < n:       # one evaluation is kept for the final pose
         if notes is not None:
             notes.append(f"pelvis stage skipped: its share ({share} evaluations) is below one generation "
-                         f"of {flat_algorithm(tr, )[0]} ({n}) + 1")
+                         f"of {flat_algorithm(tr)[0]} ({n}) + 1")
         return None
     return share
 
@@ -132,26 +130,7 @@ def torso_share(tr, notes, budget: FrameBudget) -> int | None:
     if share - 2 < n:       # the start's and the result's energies
         if notes is not None:
             notes.append(f"torso stage skipped: its share ({share} evaluations) is below one generation "
-                         f"of {flat_algorithm(tr, )[0]} ({n}) + 2")
-        return None
-    return share
-
-
-def refine_share(tr, notes, budget: FrameBudget) -> int | None:
-    """Evaluations of the refinement stage, or None (off, a flat algorithm, no partition of
-    ``refine_partitions`` in the model, or below ``REFINE_MIN_GENERATIONS`` generations + 2)."""
-    from isa_mocap_ros.optim import inner_optimizer
-
-    cfg = tr.config
-    if cfg.refine_fraction <= 0 or inner_optimizer(cfg.optimizer) is None or not tr._refine_coords.size:
-        return None
-    share = int(budget.evals * cfg.refine_fraction)
-    n = flat_generation(tr, tr._refine_coords.size)
-    if share < REFINE_MIN_GENERATIONS * n + 2:    # + the start's and the result's energies
-        if notes is not None:
-            notes.append(f"refinement stage skipped: its share ({share} evaluations) is below "
-                         f"{REFINE_MIN_GENERATIONS} generations of {flat_algorithm(tr, )[0]} "
-                         f"({REFINE_MIN_GENERATIONS} x {n}) + 2")
+                         f"of {flat_algorithm(tr)[0]} ({n}) + 2")
         return None
     return share
 
@@ -170,7 +149,7 @@ def contour_share(tr, notes, budget: FrameBudget) -> int | None:
     if cfg.contour_iterations <= 0 or not budget.contour:
         return None
     share = cfg.contour_iterations * (tr.model.dof + 1) \
-        + contour_extra(tr, ) * (tr._contour_extra_coords.size + 1) + 2
+        + contour_extra(tr) * (tr._contour_extra_coords.size + 1) + 2
     if 4 * share > budget.evals:
         if notes is not None:
             notes.append(f"contour stage skipped: its share ({share} evaluations) is above a quarter of the "

@@ -1,6 +1,6 @@
 """The frame's stage searches after the main search (``docs/tracking.md``): the pelvis stage
-(:func:`refit_pelvis`), the torso stage (:func:`refit_torso`), the limb stage (:func:`propose_limbs`),
-the refinement stage (:func:`refine`) and the contour stage (:func:`fit_contours`). Each takes the
+(:func:`refit_pelvis`), the torso stage (:func:`refit_torso`), the limb stage (:func:`propose_limbs`)
+and the contour stage (:func:`fit_contours`). Each takes the
 tracker (its model, moves, energies) and a pose, and returns the pose it found with its energy and the
 evaluations it spent.
 """
@@ -12,7 +12,7 @@ import numpy as np
 
 from . import _fast_search, plan
 from .contour import ContourFitInfo
-from .config import CONTOUR_KEEP_TOLERANCE, PELVIS_SPREAD_SCALE, TrackerError, _whole_generations
+from .config import CONTOUR_KEEP_TOLERANCE, TrackerError, _whole_generations
 
 
 def fit_contours(tr, x, *, iterations: int | None = None, extra_iterations: int | None = None):
@@ -28,7 +28,7 @@ def fit_contours(tr, x, *, iterations: int | None = None, extra_iterations: int 
     if tr._masks_now is None:
         raise TrackerError("fit_contours: no masks yet (call step first)")
     iterations = tr.config.contour_iterations if iterations is None else iterations
-    extra = plan.contour_extra(tr, ) if extra_iterations is None else extra_iterations
+    extra = plan.contour_extra(tr) if extra_iterations is None else extra_iterations
     x = np.asarray(x, dtype=np.float64)
     tr._contour.set_masks(tr._masks_now)
     y, info = tr._contour.fit(x, iterations=iterations)
@@ -43,93 +43,34 @@ def fit_contours(tr, x, *, iterations: int | None = None, extra_iterations: int 
     return (y, e_y, n, info) if e_y < e_x + CONTOUR_KEEP_TOLERANCE * abs(e_x) else (x, e_x, n, info)
 
 
-def refine(tr, x, *, evals: int, rng: np.random.Generator, energy: float | None = None, bounds=None,
-           spread=None) -> tuple[np.ndarray, float, int, bool]:
-    """The refinement stage on pose ``x`` under the current masks: the configured hierarchical
-    algorithm's flat form (``h-isa`` → ``isa`` with the same parameters, ``psapf`` → ``apf``) over
-    the coordinates of ``config.refine_partitions`` as one block, the rest of ``x`` held, its first
-    generation ``x`` and draws around it; its estimate replaces those coordinates when it lowers
-    the energy.
-
-    ``energy`` is ``x``'s energy if known (else one evaluation computes it); the search gets whole
-    generations of the rest of ``evals`` but one, which gives the final pose's energy, so the stage
-    spends at most ``evals`` (less by under a generation). ``bounds``/``spread`` default to
-    :meth:`search_box` around ``x``. Returns ``(pose, its energy, evaluations, replaced)``.
-    """
-    from isa_mocap_ros.optim import inner_optimizer, make_optimizer, minimize
-
-    cfg, m, c = tr.config, tr.model, tr._refine_coords
-    if inner_optimizer(cfg.optimizer) is None:
-        raise TrackerError(f"refine: the optimizer {cfg.optimizer!r} is not hierarchical")
-    if not c.size:
-        raise TrackerError(f"refine: none of refine_partitions {list(cfg.refine_partitions)} is a partition of "
-                           f"model {m.name} ({', '.join(m.partitions)})")
-    x = np.clip(np.asarray(x, dtype=float), m.lower, m.upper)
-    if bounds is None or spread is None:
-        box = tr.search_box(x)
-        bounds = box[:2] if bounds is None else bounds
-        spread = box[2] if spread is None else spread
-    spread = np.asarray(spread, dtype=float)
-    used = 0
-    if energy is None:
-        energy, used = float(tr.total_energy(x[None, :])[0]), 1
-    # x is a particle of the first generation (a limb proposal may lie outside the frame's box)
-    lo, hi = np.minimum(bounds[0], x), np.maximum(bounds[1], x)
-    name, params = plan.flat_algorithm(tr, )
-    data = tr.restricted_energy(x, c) or tr.total_energy
-    blocks = tuple(tuple(int(np.searchsorted(c, i)) for i in b) for b in m.rotation_blocks if set(b) <= set(c))
-
-    def energy_of(Xc):            # poses equal to x outside c
-        X = np.repeat(x[None, :], len(Xc), axis=0)
-        X[:, c] = Xc
-        return data(X)
-    # first generation: the pose so far and draws around it (as the main search of a flat algorithm)
-    n = plan.flat_generation(tr, c.size)
-    P = np.clip(x[c] + rng.standard_normal((n, c.size)) * spread[c], lo[c], hi[c])
-    P[0] = x[c]
-    opt = make_optimizer(name, x[c], spread[c], rng=rng, bounds=(lo[c], hi[c]), initial_population=P,
-                         rotation_blocks=blocks, **params)
-    r = minimize(opt, energy_of, max_evals=_whole_generations(int(evals) - used - 1, n))
-    y = x.copy()
-    y[c] = np.clip(r.x, m.lower[c], m.upper[c])
-    ey = float(tr.total_energy(y[None, :])[0])
-    used += r.n_evals + 1
-    if ey < energy:
-        return y, ey, used, True
-    return x, float(energy), used, False
-
-
 def refit_pelvis(tr, x, *, evals: int, rng: np.random.Generator, optimizer: str | None = None,
                  params: Mapping | None = None, bounds=None, spread=None) -> tuple[np.ndarray, float, int]:
     """Re-fit the 6 root DOF of pose ``x`` under the current masks with the limbs below the root
-    kept in place: ``config.pelvis_move`` ``"reaim"`` (:class:`~.reaim.ReaimMove`: thighs swung
-    about the knees, the lower spine about the chest) or ``"world"`` (:class:`~.pelvis.PelvisMove`:
-    the root's child joints keep their world rotations); returns ``(pose, its energy, evaluations)``.
+    kept in place (:class:`~.reaim.ReaimMove`: the thighs swung about the knees, the lower spine about
+    the chest); returns ``(pose, its energy, evaluations)``.
 
     Whole generations of ``evals - 1`` evaluations go to the search (``optimizer``: a flat algorithm
     name, default the configured one's flat form, with ``params``), one to the final pose's energy;
     the count spent is returned. ``bounds`` and
-    ``spread`` default to :meth:`search_box` around ``x``; the spreads are scaled by
-    ``PELVIS_SPREAD_SCALE[config.pelvis_move]``.
+    ``spread`` default to :meth:`search_box` around ``x``.
     """
     from isa_mocap_ros.optim import make_optimizer, minimize
 
     m = tr.model
-    if tr._pelvis is None:
+    if tr._pelvis_reaim is None:
         raise TrackerError(f"refit_pelvis: model {m.name} has no root partition")
     x = np.asarray(x, dtype=float)
     lo, hi = bounds if bounds is not None else tr.search_box(x)[:2]
     spread = tr.search_box(x)[2] if spread is None else np.asarray(spread, dtype=float)
     if optimizer is None:
-        optimizer, params = plan.flat_algorithm(tr, )
+        optimizer, params = plan.flat_algorithm(tr)
     x1 = np.clip(x, lo, hi)
-    kind = tr.config.pelvis_move
-    move = (tr._pelvis_reaim if kind == "reaim" else tr._pelvis).around(x1)
+    move = tr._pelvis_reaim.around(x1)
 
     def energy(roots):
         return tr.total_energy(np.clip(move(roots), m.lower, m.upper))
 
-    opt = make_optimizer(optimizer, x1[:6], spread[:6] * PELVIS_SPREAD_SCALE[kind], rng=rng,
+    opt = make_optimizer(optimizer, x1[:6], np.array(spread[:6]), rng=rng,
                          bounds=(lo[:6], hi[:6]), rotation_blocks=((3, 4, 5),), **dict(params or {}))
     evals_search = _whole_generations(int(evals) - 1, opt.generation_size)
     if tr._compiled_search and _fast_search.supported_flat(opt):
@@ -177,7 +118,7 @@ def refit_torso(tr, x, *, evals: int, rng: np.random.Generator, energy: float | 
     def energy_of(C):
         return data(np.clip(move(C), m.lower, m.upper))
 
-    name, params = plan.flat_algorithm(tr, )
+    name, params = plan.flat_algorithm(tr)
     opt = make_optimizer(name, x[c], spread, rng=rng, bounds=(lo, hi), **params)
     evals_search = _whole_generations(int(evals) - used - 1, opt.generation_size)
     if tr._compiled_search and _fast_search.supported_flat(opt):

@@ -31,9 +31,8 @@ One call of :meth:`Tracker.step` per frame set:
    (:meth:`Tracker.refit_torso`) re-fits the spine and neck with the upper arms swung about the
    elbows, the **limb stage** (:meth:`Tracker.propose_limbs`) tries twist-and-hinge proposals for
    the arms (and a folded leg), knee proposals for the legs and, for every limb, its angles carried
-   further along their motion, and keeps any that lowers the energy, then the optional
-   **refinement stage** (:meth:`Tracker.refine`, hierarchical algorithms, off by default) searches
-   the torso and both arms together with the algorithm's flat form. None runs on the automatically
+   further along their motion, and keeps any that lowers the energy, then the **contour stage**
+   (:meth:`Tracker.fit_contours`) fits the pose to the mask contours. None runs on the automatically
    initialized frame. Every search runs **whole generations** (a hierarchical one splits its share
    into whole generations per partition, ``whole_generations``): fewer than one generation of a
    search's share stays unspent rather than end on a truncated generation of a few rows, whose
@@ -79,7 +78,6 @@ from .gate import visible_shares
 from .init import InitError, initial_pose, root_from_masks
 from .limbs import LimbMove
 from .objective import TotalEnergy
-from .pelvis import PelvisMove
 from .plan import FrameBudget
 from .predict import (ArPredictor, ConstantPosePredictor, ConstantVelocityPredictor, PredictionError, frame_periods,
                       frames_kwargs)
@@ -172,7 +170,6 @@ class Tracker:
         self._elapsed = 0.0        # frame periods since the last estimate (step's frames_elapsed, summed)
         self._masks_last: list | None = None   # usable masks of the last estimate's frame (re-centring)
         self._masks_now: list | None = None    # usable masks of the frame being tracked
-        self._pelvis = PelvisMove(model) if "root" in model.partitions else None
         self._pelvis_reaim = ReaimMove(model, [0]) if "root" in model.partitions else None
         # the torso stage's move: the joints of the torso partition (e.g. spine and neck), the arms re-aimed
         torso_joints = sorted({int(model.dof_joint[d]) for d in model.partitions.get("torso", ())})
@@ -181,7 +178,6 @@ class Tracker:
         self._limbs = LimbMove(model)
         self._contour = ContourFit(model, self.cameras, n_points=config.contour_points,
                                    max_px=config.contour_max_px)
-        self._refine_coords = _partition_coords(model, config.refine_partitions)
         self._contour_extra_coords = _partition_coords(model, config.contour_extra_partitions)
         missing = [k for k in model.partitions if k not in config.partition_order]
         if missing:
@@ -389,7 +385,7 @@ class Tracker:
     def _search(self, pred: np.ndarray, rng: np.random.Generator, budget: FrameBudget, spread_scale: float = 1.0,
                 notes=None, stages: bool = True):
         """The frame's optimizer around ``pred`` (not yet run), its share of the budget, the stages
-        ``(pelvis share or None, limb stage's limbs, refinement share or None)`` and the search box
+        ``(pelvis, torso, limb stage, contour shares; None or empty = skipped)`` and the search box
         ``(lo, hi, spread, spread without the motion term)`` (see :meth:`_optimize`)."""
         from isa_mocap_ros.optim import inner_optimizer, make_optimizer
 
@@ -420,10 +416,9 @@ class Tracker:
         share = plan.pelvis_share(self, notes, budget) if stages else None
         torso = plan.torso_share(self, notes, budget) if stages else None
         limbs = plan.limb_stage(self, notes, x0, budget) if stages else ([], [], 0)
-        refine = plan.refine_share(self, notes, budget) if stages else None
         contour = plan.contour_share(self, notes, budget) if stages else None
         budget = budget.evals - (share or 0) - (torso or 0) - plan.limb_share(self, len(limbs[0]), limbs[2]) \
-            - (refine or 0) - (contour or 0)
+            - (contour or 0)
         if torso is not None:
             # the torso stage never starves the main search: two generations per partition stay
             need = 2 * (sum(plan.flat_generation(self, len(p)) for p in self._partitions)
@@ -436,14 +431,14 @@ class Tracker:
                 torso = None
         if inner_optimizer(cfg.optimizer) is None:
             budget = _whole_generations(budget, opt.generation_size)     # (hierarchical: its split does this)
-        return opt, budget, (share, torso, limbs, refine, contour), (lo, hi, spread, base)
+        return opt, budget, (share, torso, limbs, contour), (lo, hi, spread, base)
 
     def _optimize(self, pred: np.ndarray, rng: np.random.Generator, budget: FrameBudget, spread_scale: float = 1.0,
                   notes=None, stages: bool = True):
         """One optimizer run of the frame budget around ``pred`` (raises the optimizer's errors), then
         the pelvis stage (``config.pelvis_fraction`` of the budget), the torso stage
-        (``config.torso_fraction``), the limb stage (``config.limb_proposals``) and the refinement
-        stage (``config.refine_fraction``), each also given what the searches before it left unspent
+        (``config.torso_fraction``), the limb stage (``config.limb_proposals``) and the contour stage
+        (``config.contour_iterations``), each also given what the searches before it left unspent
         (they run whole generations; the limb stage takes the rest as more proposals, so a frame
         leaves fewer evaluations unspent than it has limbs in the stage);
         ``spread_scale`` multiplies the initial spreads (the first frame starts from a rough pose);
@@ -455,7 +450,7 @@ class Tracker:
 
         opt, budget, stage_shares, (lo, hi, spread, base) = self._search(pred, rng, budget, spread_scale, notes,
                                                                          stages)
-        share, torso, limbs, refine, contour = stage_shares
+        share, torso, limbs, contour = stage_shares
         if self._compiled_search and _fast_search.supported(opt, self.energy, self._prior_active()):
             res = _fast_search.run_hisa(opt, self.energy, budget)      # the same numbers, compiled per partition
         else:
@@ -474,15 +469,10 @@ class Tracker:
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         limbs, hinge, n_limb = limbs
         if limbs:
-            extra = 0 if refine is not None else spare // len(limbs)       # more proposals with the rest
+            extra = spare // len(limbs)       # more proposals with the rest
             x, e, n, _ = self.propose_limbs(res.x, n=n_limb + extra, rng=rng, limbs=limbs, hinge_only=hinge,
                                             last=self._last)
             spare -= extra * len(limbs)
-            res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
-        if refine is not None:
-            exact = share is not None or torso is not None or bool(limbs)   # else res.energy may be a particle's
-            x, e, n, _ = self.refine(res.x, evals=refine + spare, rng=rng, energy=res.energy if exact else None,
-                                     bounds=(lo, hi), spread=base)
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         if contour is not None:
             x, e, n, info = self.fit_contours(res.x)
@@ -495,11 +485,6 @@ class Tracker:
     def fit_contours(self, x, *, iterations: int | None=None, extra_iterations: int | None=None):
         """See :func:`.stages.fit_contours`."""
         return stages.fit_contours(self, x, iterations=iterations, extra_iterations=extra_iterations)
-
-
-    def refine(self, x, *, evals: int, rng: np.random.Generator, energy: float | None=None, bounds=None, spread=None) -> tuple[np.ndarray, float, int, bool]:
-        """See :func:`.stages.refine`."""
-        return stages.refine(self, x, evals=evals, rng=rng, energy=energy, bounds=bounds, spread=spread)
 
 
     def refit_pelvis(self, x, *, evals: int, rng: np.random.Generator, optimizer: str | None=None, params: Mapping | None=None, bounds=None, spread=None) -> tuple[np.ndarray, float, int]:
@@ -557,9 +542,8 @@ class Tracker:
         t0 = time.perf_counter()
         rival = self._rival
         # a frame of the heading check (consecutive frames only, see below) shares the budget
-        evals = self.confirm_evals() if rival is not None and frames_elapsed == 1 else self.config.evals_per_frame
         self._contour_now = bool(contour_stage)
-        res = self._step(masks, frame_index, FrameBudget(evals, self._contour_now), prediction=prediction,
+        res = self._step(masks, frame_index, FrameBudget(self.config.evals_per_frame, self._contour_now), prediction=prediction,
                          frames_elapsed=frames_elapsed)
         if self._own_prediction_frames > 0:
             self._own_prediction_frames -= 1
@@ -590,10 +574,6 @@ class Tracker:
         """See :func:`.heading.travel`."""
         return heading.travel(self, min_periods)
 
-
-    def confirm_evals(self) -> int:
-        """See :func:`.heading.confirm_evals`."""
-        return heading.confirm_evals(self)
 
 
     def _step(self, masks: Sequence, frame_index: int, budget: FrameBudget, *, prediction=None,
