@@ -1,7 +1,7 @@
 """The hierarchy's partition order (``TrackerConfig.partition_order``). With EA-vs-PF §3.3's order (root,
 torso, then the limbs) the torso partition fits the spine and neck with the arms held at their
 prediction; an arm the prediction left behind drags them after it. Fitting the arms before the torso
-avoids it (generated wave, 6 seeds: 52.4 → 18.3 mm mean joint error, measured with the since deleted
+avoids it (generated wave, 6 seeds: 44.9 → 17.2 mm mean joint error, measured with the since deleted
 refinement stage; docs/history/tracker_config.md, docs/decisions/)."""
 import pytest
 
