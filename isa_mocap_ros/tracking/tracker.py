@@ -1,63 +1,15 @@
-"""The per-frame tracker: prediction → optimizer on the energy → estimate (+ diagnostics).
+"""The per-frame tracker: prediction → mask filters → optimizer on the energy → stages → estimate.
 
 Sources: yeguas_ea_vs_pf_mocap §3 (energy Eq. 4-5 over the V views, §3.3 hierarchy, search radius
-0.5 rad around the prediction for every joint, budgets in evaluations per frame), gall_isa_introduction
-§13.4.2 (prediction 13.28, prior 13.32-13.33: total energy ``E = E_data − η ln p(x)``).
+0.5 rad around the prediction, budgets in evaluations per frame), gall_isa_introduction §13.4.2
+(prediction 13.28, prior 13.32-13.33: ``E = E_data − η ln p(x)``, contours 13.30-13.31).
 
-One call of :meth:`Tracker.step` per frame set:
-
-1. **Masks.** Views whose mask is missing (None), of the wrong size for its camera, or empty are
-   skipped (a note says which and why). No usable view: the frame *falls back* to the last
-   estimate (``fell_back=True``, no evaluation, the predictor is not updated, so a gap does not
-   teach it a zero velocity). With ``gate_margin_px`` > 0 and an estimate, the prediction (step 2)
-   comes first and each usable mask keeps only the foreground components touching the predicted
-   silhouette grown by that margin (:mod:`.gate`; a view left empty is skipped).
-2. **Prediction.** An external prediction (``prediction=``, e.g. from the prediction node) if it is
-   finite and of length D, else the tracker's own predictor (``"ar"``: 13.28 of order
-   ``predictor_order``; ``"constant_pose"``; ``"constant_velocity"``). A non-finite prediction is
-   replaced by the last estimate (note). It is then clipped into the model's limits.
-3. **Search box.** ``bounds = prediction ± radius``, clipped to the model limits, with radius
-   ``search_radius_rad`` for every joint angle (EA-vs-PF §5: 0.5 rad),
-   ``root_translation_radius_m`` for the root position and ``root_rotation_radius_rad`` for each
-   rotation-vector component. The optimizer starts around the prediction with standard deviation
-   ``joint_spread_rad`` (joints), ``root_translation_spread_m``, ``root_rotation_spread_rad``.
-4. **Optimizer.** :func:`~isa_mocap_ros.optim.make_optimizer` by name with ``optimizer_params``
-   (defaults per optimizer in :data:`DEFAULT_PARAMS`), hierarchical ones (``h-*``, ``psapf``) over
-   ``model.partitions`` in the order ``partition_order`` (default root, left arm, right arm, torso,
-   left leg, right leg: the arms before the torso, unlike §3.3's root, torso, limbs);
-   at most ``evals_per_frame`` evaluations (:func:`~isa_mocap_ros.optim.minimize`), of which
-   the stages below take their shares: the **pelvis stage** (:meth:`Tracker.refit_pelvis`)
-   re-fits the root with the limbs below it kept in place (:mod:`.reaim`), the **torso stage**
-   (:meth:`Tracker.refit_torso`) re-fits the spine and neck with the upper arms swung about the
-   elbows, the **limb stage** (:meth:`Tracker.propose_limbs`) tries twist-and-hinge proposals for
-   the arms (and a folded leg), knee proposals for the legs and, for every limb, its angles carried
-   further along their motion, and keeps any that lowers the energy, then the **contour stage**
-   (:meth:`Tracker.fit_contours`) fits the pose to the mask contours. None runs on the automatically
-   initialized frame. Every search runs **whole generations** (a hierarchical one splits its share
-   into whole generations per partition, ``whole_generations``): fewer than one generation of a
-   search's share stays unspent rather than end on a truncated generation of a few rows, whose
-   weighted mean (ISA, APF) is that of a few random particles (``docs/tracking.md``, "Whole
-   generations").
-5. **Estimate.** ``estimate="optimizer"``: the algorithm's own estimate (ISA/APF weighted mean,
-   CMA-ES mean, DE/PSO best); ``"best"``: the best evaluated particle. Then the predictor is updated.
-
-**Gaps.** ``step(..., frames_elapsed=g)`` says ``g`` frame periods passed since the previous call's
-frame (default 1; the estimator node counts them from the stamps when it could not keep up, and
-``isa-mocap track --stride`` tracks every g-th frame). The tracker's own prediction then looks
-``g`` periods ahead (summed over frames that fell back), and the predictor learns the motion per
-period (:mod:`.predict`, "Gaps"); an external prediction is taken as made for this frame. With
-consecutive frames nothing changes, bit for bit.
-
-**Random streams.** Frame ``k`` (``frame_index``; the estimator node passes the stamp in ns, any
-non-negative integer works) draws everything from ``numpy.random.default_rng([seed, k])``
-(a ``SeedSequence`` of the pair), so a frame's result depends only on the seed, the frame key,
-its masks and the tracker's state (predictor history), never on timing: same seed and inputs ⇒
-identical estimates. The first frame's automatic initialization uses
-``default_rng([seed, k, 1])``.
-
-**First frame.** :meth:`Tracker.initialize` with ``pose=`` (given) or ``masks=`` (automatic,
-:mod:`.init`); if neither was called, the first ``step`` with usable masks initializes itself
-automatically and then tracks from that pose.
+:meth:`Tracker.step` tells one frame's story: masks checked (:mod:`.frame_masks`), the prediction
+(:mod:`.frame_prediction`), the mask gate and hull filter, the budget plan (:mod:`.plan`), the main
+search, the stages (:mod:`.stages`), the estimate; the first frame (:mod:`.first_frame`) and the
+heading check (:mod:`.heading`) have their own modules. Frame ``k`` draws everything from
+``default_rng([seed, k, ...])``: same seed and inputs ⇒ identical estimates. Bad masks or predictions
+are notes in :class:`FrameResult`, never exceptions. Reference: ``docs/tracking.md``.
 """
 from __future__ import annotations
 
@@ -70,12 +22,12 @@ import numpy as np
 
 from isa_mocap_ros.geometry import nearest_rotvec
 
-from . import _fast_search, first_frame, frame_masks, heading, plan, stages
+from . import _fast_search, first_frame, frame_masks, frame_prediction, heading, plan, stages
 from .config import (DEFAULT_PARAMS, PREDICTORS, TRAVEL_FRAMES, FrameResult, TrackerConfig, TrackerError,
                      _partition_coords, _whole_generations, frame_rng)
 from .contour import ContourFit
 from .gate import visible_shares
-from .init import InitError, initial_pose, root_from_masks
+from .init import InitError, initial_pose
 from .limbs import LimbMove
 from .objective import TotalEnergy
 from .plan import FrameBudget
@@ -290,80 +242,6 @@ class Tracker:
         self._masks_now = None
 
     # ------------------------------------------------------------------ one frame
-    def _prediction(self, external, notes: list[str]) -> np.ndarray:
-        """The (damped) prediction: ``external`` (e.g. the prediction node's) or the tracker's own.
-
-        Both are damped the same way towards the last estimate (``root/joint_velocity_gain``), so the
-        node network (prediction from the prediction node) and ``isa-mocap track`` (own predictor,
-        same conversions) give identical numbers.
-        """
-        D = self.model.dof
-        p = None
-        if external is not None and self._own_prediction_frames > 0:
-            notes.append("prediction: the external one follows the estimates from before the heading check's "
-                         "switch; using the tracker's own")
-            external = None
-        if external is not None:
-            try:
-                p = np.asarray(external, dtype=float)
-            except (TypeError, ValueError):
-                p = None
-            if p is None or p.shape != (D,):
-                notes.append(f"prediction: expected shape ({D},), received "
-                             f"{None if p is None else p.shape}; using the tracker's own")
-                p = None
-            elif not np.all(np.isfinite(p)):
-                notes.append("prediction: non-finite values; using the tracker's own")
-                p = None
-        if p is None:
-            try:
-                ahead = min(self._elapsed or 1, self.config.max_frames_ahead)
-                p = np.asarray(self.predictor.predict(**frames_kwargs(ahead)), dtype=float)
-            except ValueError as exc:      # PredictionError: empty history (cannot happen once initialized)
-                notes.append(f"prediction: {exc}; using the last estimate")
-                return self._last.copy()
-            if p.shape != (D,) or not np.all(np.isfinite(p)):
-                notes.append("prediction: non-finite values; using the last estimate")
-                return self._last.copy()
-        cfg = self.config
-        for blk in self.model.rotation_blocks:
-            # a prediction that went through a JointState (roll/pitch/yaw) has |r| <= pi: near a
-            # half turn it can lie on the other side of pi from the last estimate (demo, frame 127:
-            # 174° vs -179° gave -72° after damping, and the track was lost)
-            idx = list(blk)
-            p = p.copy() if p is external else p
-            p[idx] = nearest_rotvec(p[idx], self._last[idx])
-        gain = np.full(D, cfg.joint_velocity_gain)
-        gain[:6] = cfg.root_velocity_gain
-        out = self._last + gain * (p - self._last)        # damped extrapolation
-        if self._elapsed > cfg.max_frames_ahead or (self._elapsed > 1 and self._motion_unknown()):
-            self._recentre(out, notes)
-        return out
-
-    def _motion_unknown(self) -> bool:
-        """True when the predictor holds a single estimate (no motion to extrapolate: the frame after
-        the first, e.g. in real time after the sets that came during the initialization were dropped)."""
-        n = getattr(self.predictor, "n_estimates", None)
-        return n is not None and int(n) < 2
-
-    def _recentre(self, pred: np.ndarray, notes: list[str]) -> None:
-        """After more frames than ``max_frames_ahead`` unseen — or after any gap when the predictor holds
-        a single estimate (the first estimate's frame: no motion to extrapolate) — move the predicted
-        root position (x, y) by how far the foreground moved: the triangulated mask centroid
-        (:func:`.init.root_from_masks`) of this frame minus that of the last estimate's frame.
-        Extrapolating the last motion over such a gap says little (in real time the automatic
-        initialization alone takes 4-10 frame periods, and a person walking moves 0.2-0.5 m
-        meanwhile), the foreground says where the body is."""
-        if self._masks_last is None or self._masks_now is None:
-            return
-        try:
-            c_last = root_from_masks(self.model, self.cameras, self._masks_last)[0]
-            c_now = root_from_masks(self.model, self.cameras, self._masks_now)[0]
-        except InitError:
-            return
-        pred[:2] = self._last[:2] + (c_now[:2] - c_last[:2])
-        notes.append(f"prediction: {self._elapsed:g} frame periods since the last estimate; root moved with the "
-                     f"foreground by {1e3 * float(np.hypot(*(c_now[:2] - c_last[:2]))):.0f} mm")
 
     def search_box(self, center) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Bounds ``(lo, hi)`` and initial spreads ``(D,)`` around a (clipped) prediction."""
@@ -575,7 +453,6 @@ class Tracker:
         return heading.travel(self, min_periods)
 
 
-
     def _step(self, masks: Sequence, frame_index: int, budget: FrameBudget, *, prediction=None,
               frames_elapsed: float = 1) -> FrameResult:
         """:meth:`step` for one hypothesis (without the heading check's rival)."""
@@ -592,7 +469,7 @@ class Tracker:
         gated_pred = None
         if (cfg.gate_margin_px > 0 or cfg.hull_filter) and self._last is not None \
                 and any(m is not None for m in usable):
-            gated_pred = self._prediction(prediction, notes)
+            gated_pred = frame_prediction.predict(self, prediction, notes)
             if cfg.gate_margin_px > 0:
                 # the mask gate (config.gate_margin_px): foreground far from the predicted silhouette is dropped
                 usable = frame_masks.gate(self, usable, gated_pred, notes)
@@ -605,7 +482,7 @@ class Tracker:
         weights = None
         if cfg.view_weights and self._last is not None and any(m is not None for m in usable):
             if gated_pred is None:
-                gated_pred = self._prediction(prediction, notes)
+                gated_pred = frame_prediction.predict(self, prediction, notes)
             # Eq. 5's view weights (config.view_weights): the share of the predicted body each view sees
             weights = visible_shares(self.model, self.cameras, gated_pred)
         views = frame_masks.set_masks(self, usable, notes, frame_index, weights)
@@ -630,7 +507,7 @@ class Tracker:
             initialized = True
             starts = [c[0] for c in res0.candidates] or [res0.x]
         else:
-            starts = [gated_pred if gated_pred is not None else self._prediction(prediction, notes)]
+            starts = [gated_pred if gated_pred is not None else frame_prediction.predict(self, prediction, notes)]
         # the first frame optimizes from every initialization candidate (pruned to config.init_keep
         # runs part-way) and keeps the lowest energy
         try:
