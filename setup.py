@@ -21,7 +21,7 @@ def tree(folder: str) -> list[tuple[str, list[str]]]:
 
 
 # One console script per node, plus the ``isa-mocap`` CLI.
-NODES = ["player", "recorder", "camera", "segmentation", "prediction", "estimator"]
+NODES = ["player", "recorder", "camera", "segmentation", "prediction", "estimator", "keypoints"]
 
 setup(
     name=package_name,
@@ -51,6 +51,8 @@ setup(
         "ros-jazzy-rmw-fastrtps-cpp>=8.4,<9",
     ],
     extras_require={
+        # 2-D keypoints (vision/landmarks.py): the LiteRT interpreter for the BlazePose model file.
+        "keypoints": ["ai-edge-litert>=1.2"],
         "test": ["pytest>=8", "pytest-timeout>=2.3", "pytest-xdist>=3.5", "hypothesis>=6.100", "cma>=4"],
     },
     zip_safe=True,

@@ -19,7 +19,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-__all__ = ["SequenceError", "Frame", "Sequence", "SequenceBuilder", "view_of_topic", "model_from_yaml"]
+__all__ = ["SequenceError", "Frame", "Sequence", "SequenceBuilder", "view_of_topic", "model_from_yaml",
+           "model_to_yaml"]
 
 _TOPIC = re.compile(r"^/?(?:.*/)?cam(\d+)/(image_raw|camera_info|extrinsics|mask)$")
 
@@ -58,6 +59,36 @@ def model_from_yaml(text: str):
     return model, data
 
 
+def model_to_yaml(model, *, role: str = "estimator", **extra) -> str:
+    """A body model as the YAML of ``/mocap/ground_truth/model`` (``format``, ``model``: name, dof,
+    dof_names, marker_joints, shape; ``root``): what the estimator publishes latched on
+    ``/mocap/model`` and ``isa-mocap track`` writes into its estimates bag, so a recorded result
+    names the model (and the shape) its joint states belong to. ``model_from_yaml`` reads it back.
+    ``extra`` entries are added at the top level (plain values)."""
+    def plain(v):
+        if isinstance(v, np.ndarray):
+            return [plain(x) for x in v.tolist()]
+        if isinstance(v, (np.floating, float)):
+            return round(float(v), 9)
+        if isinstance(v, np.integer):
+            return int(v)
+        if isinstance(v, dict) or hasattr(v, "items"):
+            return {str(k): plain(x) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [plain(x) for x in v]
+        return v
+
+    data = {"format": 1, "role": role,
+            "model": {"name": model.name, "dof": model.dof, "dof_names": list(model.dof_names),
+                      "marker_joints": [model.joint_names[j] for j in model.markers],
+                      "shape": plain({"name": model.shape["name"], "offsets": dict(model.shape["offsets"]),
+                                      "radii": dict(model.shape["radii"])})},
+            "root": ("root_tx, root_ty, root_tz: pelvis position in world (m); root_rx, root_ry, root_rz: roll, "
+                     "pitch, yaw (rad) with R = Rz(yaw) Ry(pitch) Rx(roll) (isa_mocap_ros.body.joint_state_to_pose)")}
+    data.update(plain(extra))
+    return yaml.safe_dump(data, sort_keys=False, width=120)
+
+
 @dataclass(frozen=True, eq=False)
 class Frame:
     """One frame set: what every view recorded at one stamp.
@@ -73,6 +104,9 @@ class Frame:
         Per view (recorded masks only).
     truth : (D,) ndarray or None
         Ground-truth pose vector (of :attr:`Sequence.truth_model`).
+    truth_markers : (M, 3) ndarray or None
+        Ground-truth joint centres (``/mocap/ground_truth/markers``), named by
+        :attr:`Sequence.truth_marker_names`.
     """
 
     index: int
@@ -80,6 +114,7 @@ class Frame:
     images: tuple
     masks: tuple
     truth: np.ndarray | None = None
+    truth_markers: np.ndarray | None = None
 
     @property
     def has_images(self) -> bool:
@@ -106,6 +141,8 @@ class Sequence:
         The parsed YAML (empty without one).
     notes : tuple of str
         What was dropped or filled in.
+    truth_marker_names : tuple of str
+        Names of the ground-truth markers in order (the model YAML's ``model.marker_joints``).
     """
 
     cameras: tuple
@@ -113,6 +150,18 @@ class Sequence:
     truth_model: Any = None
     truth_info: dict = field(default_factory=dict)
     notes: tuple = ()
+    truth_marker_names: tuple = ()
+
+    @property
+    def has_marker_truth(self) -> bool:
+        """Named ground-truth joint centres on some frame (scoring needs no ground-truth model then)."""
+        return bool(self.truth_marker_names) and any(f.truth_markers is not None for f in self.frames)
+
+    @property
+    def body_kind(self) -> str:
+        """``"mesh"`` or ``"capsules"`` (the model YAML's ``body.kind``; capsules when absent)."""
+        b = self.truth_info.get("body") if isinstance(self.truth_info, dict) else None
+        return str(b.get("kind", "capsules")) if isinstance(b, dict) else "capsules"
 
     @property
     def n_views(self) -> int:
@@ -148,6 +197,7 @@ class SequenceBuilder:
         self._images: dict[int, dict[int, np.ndarray]] = {}
         self._masks: dict[int, dict[int, np.ndarray]] = {}
         self._truth: dict[int, tuple[list, np.ndarray]] = {}
+        self._truth_markers: dict[int, np.ndarray] = {}
         self._model_text: str | None = None
         self._notes: list[str] = []
 
@@ -191,6 +241,11 @@ class SequenceBuilder:
     def add_truth(self, stamp_ns: int, names, positions) -> None:
         """Ground-truth JointState (names, positions; root as x, y, z, roll, pitch, yaw)."""
         self._truth[self._stamp(stamp_ns)] = (list(names), np.asarray(positions, float))
+
+    def add_truth_markers(self, stamp_ns: int, positions) -> None:
+        """Ground-truth joint centres ``(M, 3)`` (a ``/mocap/ground_truth/markers`` PoseArray)."""
+        P = np.asarray(positions, float).reshape(-1, 3)
+        self._truth_markers[self._stamp(stamp_ns)] = P
 
     def set_model_yaml(self, text: str) -> None:
         """The ``/mocap/ground_truth/model`` String."""
@@ -240,12 +295,24 @@ class SequenceBuilder:
                 else:
                     truth = self._truth_pose(truth_model, names, q, s)
             frames.append(Frame(k, s, tuple(self._images.get(v, {}).get(s) for v in range(V)),
-                                tuple(self._masks.get(v, {}).get(s) for v in range(V)), truth))
+                                tuple(self._masks.get(v, {}).get(s) for v in range(V)), truth,
+                                self._truth_markers.get(s)))
         for v in range(V):
             n = len(self._images.get(v, {})) + len(self._masks.get(v, {}))
             if n == 0:
                 notes.append(f"view {v}: no images or masks")
-        return Sequence(cams, tuple(frames), truth_model, info, tuple(notes))
+        mnames: tuple = ()
+        if self._truth_markers:
+            m = info.get("model") if isinstance(info, dict) else None
+            names = m.get("marker_joints") if isinstance(m, dict) else None
+            sizes = {len(p) for p in self._truth_markers.values()}
+            if not isinstance(names, list) or sizes != {len(names)}:
+                notes.append("ground-truth markers without names matching them in the model description "
+                             f"(model.marker_joints): ignored")
+                frames = [Frame(f.index, f.stamp_ns, f.images, f.masks, f.truth, None) for f in frames]
+            else:
+                mnames = tuple(str(n) for n in names)
+        return Sequence(cams, tuple(frames), truth_model, info, tuple(notes), mnames)
 
     @staticmethod
     def _truth_pose(model, names, q, stamp) -> np.ndarray:

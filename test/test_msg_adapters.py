@@ -662,3 +662,22 @@ def test_joint_names_with_nul_rejected():
         ma.arrays_to_joint_state(["", "\x00"], [0.0, 1.0])
     with pytest.raises(ma.AdapterError, match="without NUL"):
         ma.joint_state_to_arrays(JointState(name=["a\x00b"], position=[0.0]))
+
+
+def test_camera_info_key_tells_equal_camera_infos_apart_from_changed_ones():
+    import numpy as np
+
+    import msg_adapters as ma
+
+    intr = ma.Intrinsics(K=np.array([[300.0, 0, 160], [0, 300.0, 120], [0, 0, 1]]), D=np.zeros(5),
+                         P=np.array([[300.0, 0, 160, 0], [0, 300.0, 120, 0], [0, 0, 1, 0]]), R=np.eye(3),
+                         width=320, height=240)
+    a = ma.intrinsics_to_camera_info(intr, stamp_ns=1, frame_id="cam0_optical_frame")
+    b = ma.intrinsics_to_camera_info(intr, stamp_ns=2, frame_id="cam0_optical_frame")   # another stamp only
+    assert ma.camera_info_key(a) == ma.camera_info_key(b) is not None
+    b.k[0] = 301.0
+    assert ma.camera_info_key(a) != ma.camera_info_key(b)
+    b = ma.intrinsics_to_camera_info(intr, stamp_ns=2)
+    b.width = 640
+    assert ma.camera_info_key(a) != ma.camera_info_key(b)
+    assert ma.camera_info_key(object()) is None

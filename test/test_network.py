@@ -41,11 +41,12 @@ def _run(out: Path, rosenv: dict) -> dict:
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
+    from conftest import next_domain
     from isa_mocap_ros.rosenv import ros_env
     base = tmp_path_factory.mktemp("network")
     summaries = []
     for k in range(2):
-        env = ros_env(60 + k + (hash(str(base)) % 20))
+        env = ros_env(next_domain())
         summaries.append(_run(base / f"run{k}", env))
     track = base / "track"
     res = subprocess.run(CLI + ["track", str(FIXTURE), "--out", str(track), "--shape", "default", *SETTINGS],
@@ -71,6 +72,14 @@ def test_run_processes_every_frame_set_and_writes_the_summary(runs):
     assert 0 < s0["tracker_ms_p50"] <= s0["tracker_ms_p95"]   # Tracker.step per tracked set, from /diagnostics
     assert s0["init_ms"] > 0                   # the automatic initialization's set, from /diagnostics
     assert np.isfinite(s0["mpjpe_mm"]) and (base / "run0" / "knees_and_error.png").stat().st_size > 1000
+    assert s0["ground_truth"] is True
+    # the empty masks of the background-learning frames, the initialization, the heading check: expected
+    # events (INFO), not bad inputs
+    assert s0["bad_inputs"] == 0, s0
+    log = (base / "run0" / "nodes.log").read_text()
+    assert "initialized automatically" in log and "[ERROR]" not in log
+    # a clean shutdown prints no error (the recorder logged after the context was shut down)
+    assert "Failed to publish log message" not in log and "Traceback" not in log
     assert list((base / "run0" / "overlays").glob("*.png"))
 
 

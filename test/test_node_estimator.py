@@ -51,3 +51,77 @@ def test_estimator_survives_bad_input_and_keeps_estimating(spawn, rosenv, tmp_pa
     assert n_js == n_person, (n_js, n_person)                       # an estimate for every person frame
     est.stop(signal.SIGINT)
     assert est.popen.returncode == 0, est.output()[-2000:]
+
+
+def test_a_camera_that_changes_resolution_restarts_the_tracker_with_the_new_cameras(spawn, rosenv, tmp_path):
+    """The fixture's masks and camera infos, then the same frames again at twice the size (masks upsampled,
+    K scaled) with later stamps: the estimator takes the new cameras (camera_info and mask of one stamp agree),
+    restarts its tracker, and estimates the new frames; lone masks of the old size are dropped."""
+    import numpy as np
+    from geometry_msgs.msg import TransformStamped
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from sensor_msgs.msg import CameraInfo, Image, JointState
+    from std_msgs.msg import Header
+
+    import msg_adapters as ma
+
+    frames: dict[int, dict] = {}
+    latched = {}
+    with BagReader(FIXTURE) as r:
+        for m in r.messages():
+            msg = ma.from_cdr(m.data, m.type)
+            if m.topic.endswith("/extrinsics"):
+                latched[m.topic] = msg
+            elif m.topic.endswith(("/mask", "/camera_info")):
+                frames.setdefault(ma.stamp_to_ns(msg.header), {})[m.topic] = msg
+    stamps = sorted(frames)
+    shift = stamps[-1] - stamps[0] + 10**9          # the second pass: one second after the first
+
+    def doubled(msg, stamp):
+        if isinstance(msg, Image):
+            big = np.kron(ma.image_to_array(msg), np.ones((2, 2), np.uint8))
+            return ma.array_to_image(big, "mono8", stamp_ns=stamp, frame_id=msg.header.frame_id)
+        intr = ma.camera_info_to_intrinsics(msg)
+        S = np.diag([2.0, 2.0, 1.0])
+        big = ma.Intrinsics(K=S @ intr.K, D=intr.D, P=S @ intr.P, R=intr.R, width=2 * intr.width,
+                            height=2 * intr.height, distortion_model=intr.distortion_model)
+        return ma.intrinsics_to_camera_info(big, stamp_ns=stamp, frame_id=msg.header.frame_id)
+
+    est = spawn("estimator", "-m", "isa_mocap_ros.nodes.estimator", "--ros-args", "-r", "__ns:=/mocap",
+                "--params-file", str(CONFIG), "-p", "evals:=200", "-p", "optimizer:=isa", "-p", "use_prediction:=false")
+    assert est.wait_for_output("estimator: ready", 120), est.output()
+    with ros_node(rosenv, "resize_test") as (node, ex):
+        pubs = {t: node.create_publisher(Image if t.endswith("mask") else CameraInfo, t, 10)
+                for t in sorted({t for f in frames.values() for t in f})}
+        qos_latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        ext = [node.create_publisher(TransformStamped, t, qos_latched) for t in latched]
+        for p, msg in zip(ext, latched.values()):
+            p.publish(msg)
+        done, estimates = set(), set()
+        node.create_subscription(Header, "/mocap/estimator/done", lambda h: done.add(ma.stamp_to_ns(h)), 10)
+        node.create_subscription(JointState, "/mocap/joint_states",
+                                 lambda m: estimates.add(ma.stamp_to_ns(m.header)), 10)
+        assert spin_until(ex, lambda: all(p.get_subscription_count() > 0 for p in pubs.values()), 30)
+        time.sleep(1.0)
+        for k, s in enumerate(stamps + [s + shift for s in stamps]):
+            second = k >= len(stamps)
+            for topic, msg in sorted(frames[s - shift if second else s].items()):
+                pubs[topic].publish(doubled(msg, s) if second else msg)
+            if second and k == len(stamps) + 5:          # a stray mask of the old size: dropped
+                stray = frames[stamps[5]]["/mocap/cam1/mask"]
+                pubs["/mocap/cam1/mask"].publish(ma.array_to_image(ma.image_to_array(stray), "mono8", stamp_ns=s + 7,
+                                                                   frame_id="cam1_optical_frame"))
+            assert spin_until(ex, lambda: s in done, 20), (k, est.output()[-3000:])
+        spin_until(ex, lambda: False, 0.5)
+    log = est.output()
+    assert "cam0: the camera changed (160x120 mono8 in 'cam0_optical_frame' -> 320x240 mono8 in " \
+           "'cam0_optical_frame'" in log, log[-3000:]
+    assert "tracker restarted" in log, log[-3000:]
+    assert "size 160x120, the camera's is 320x240" in log, log[-3000:]
+    second = {s + shift for s in stamps}
+    with BagReader(FIXTURE) as r:
+        n_person = r.topics["/mocap/ground_truth/joint_states"].message_count
+    assert len(estimates - second) == n_person and len(estimates & second) == n_person, sorted(estimates)
+    assert "Traceback" not in log
+    est.stop(signal.SIGINT)
+    assert est.popen.returncode == 0, est.output()[-2000:]

@@ -128,16 +128,25 @@ def test_nan_out_of_order_and_wrong_names_are_dropped_and_good_estimates_still_p
         h.send(short, expect=False)                                   # a reference joint missing
         pred = h.send(js(3))                                          # history untouched by the bad ones
         np.testing.assert_allclose(np.array(pred.position), Q[4], rtol=0, atol=1e-9)
-        # a jump back of more than restart_after_s: a replayed sequence, history cleared
-        restart = h.send(js(0, stamp=T0 - 5 * 10**9))
-        np.testing.assert_allclose(np.array(restart.position), Q[0], rtol=0, atol=1e-12)
+        # stray estimates far in time (an hour ahead, a replayed stamp alone): dropped, the history goes on
+        h.send(js(0, stamp=T0 + 3600 * 10**9), expect=False)
+        h.send(js(0, stamp=T0 - 5 * 10**9), expect=False)
+        pred = h.send(js(4))
+        np.testing.assert_allclose(np.array(pred.position), Q[5], rtol=0, atol=1e-9)
+        # a jump back of more than restart_after_s that the next estimate continues: a replayed sequence,
+        # history cleared (its first estimate is the jump's witness, not predicted from)
+        h.send(js(0, stamp=T0 - 5 * 10**9), expect=False)
+        restart = h.send(js(1, stamp=T0 - 5 * 10**9 + PERIOD_NS))
+        np.testing.assert_allclose(np.array(restart.position), Q[1], rtol=0, atol=1e-12)
     assert proc.popen.poll() is None, proc.output()
     assert proc.stop() == 0
     out = proc.output()
     dropped = [ln for ln in out.splitlines() if "joint_states dropped" in ln]
-    assert len(dropped) == 3, out   # NaN, out of order (twice: one line), missing joint
+    # NaN, out of order (twice: one line), missing joint, far stamps (three: one line)
+    assert len(dropped) == 4, out
     assert f"JointState.position of joint {names[9]!r}: expected a finite number, received nan" in dropped[0]
-    assert "is not newer than the last estimate's" in dropped[1] and "out of order by 40.0 ms" in dropped[1]
+    assert "is not newer than the last one's" in dropped[1] and "out of order by 40.0 ms" in dropped[1]
     assert f"to contain joint {names[-1]!r}" in dropped[2]
-    assert "a new sequence; history cleared" in out
-    assert "5 predictions published, 4 estimates dropped, 1 restarts" in out
+    assert "+3599.880 s from the stream" in dropped[3] and "a restart only if the next one follows it" in dropped[3]
+    assert "the stream restarted" in out and "a new sequence; history cleared" in out
+    assert "6 predictions published, 7 estimates dropped, 1 restarts" in out

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import yaml
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CameraInfo, Image
 
 import msg_adapters as ma
 from isa_mocap_ros.nodes import qos
@@ -24,12 +24,27 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
     return float((a & b).sum() / max(1, (a | b).sum()))
 
 
+def info_for(msg: Image, **changes) -> CameraInfo:
+    """The camera_info a driver sends with ``msg``: same header, same size (``changes`` override)."""
+    w, h = changes.pop("width", msg.width), changes.pop("height", msg.height)
+    intr = ma.Intrinsics(K=np.array([[300.0, 0, w / 2], [0, 300.0, h / 2], [0, 0, 1]]), D=np.zeros(5),
+                         P=np.array([[300.0, 0, w / 2, 0], [0, 300.0, h / 2, 0], [0, 0, 1, 0]]), R=np.eye(3),
+                         width=w, height=h)
+    info = ma.intrinsics_to_camera_info(intr, stamp_ns=ma.stamp_to_ns(msg.header),
+                                        frame_id=changes.pop("frame_id", msg.header.frame_id))
+    assert not changes
+    return info
+
+
 class Harness:
-    """Publishes images on cam<v>/image_raw, collects cam<v>/mask by stamp."""
+    """Publishes images (each with its camera_info, as a driver does) on cam<v>/image_raw and
+    cam<v>/camera_info, collects cam<v>/mask by stamp."""
 
     def __init__(self, node, ex, views: int):
         self.node, self.ex = node, ex
         self.pubs = [node.create_publisher(Image, f"/mocap/cam{v}/image_raw", qos.RELIABLE) for v in range(views)]
+        self.info_pubs = [node.create_publisher(CameraInfo, f"/mocap/cam{v}/camera_info", qos.RELIABLE)
+                          for v in range(views)]
         self.masks: list[dict[int, Image]] = [{} for _ in range(views)]
         for v in range(views):
             node.create_subscription(Image, f"/mocap/cam{v}/mask",
@@ -37,17 +52,21 @@ class Harness:
                                      qos.RELIABLE)
 
     def connected(self) -> bool:
-        return all(p.get_subscription_count() > 0 for p in self.pubs) and all(
+        return all(p.get_subscription_count() > 0 for p in self.pubs + self.info_pubs) and all(
             self.node.count_publishers(f"/mocap/cam{v}/mask") > 0 for v in range(len(self.pubs)))
 
-    def send(self, v: int, msg: Image, *, wait_for: int | None = None, tries: int = 3) -> bool:
-        """Publish; with ``wait_for`` (a stamp) spin until its mask arrived.
+    def send(self, v: int, msg: Image, *, wait_for: int | None = None, tries: int = 3,
+             info: CameraInfo | bool = True) -> bool:
+        """Publish the image and its camera_info (``info=False``: the image alone, a stray message);
+        with ``wait_for`` (a stamp) spin until its mask arrived.
 
         The node subscribes best effort (sensor-data QoS): an image lost on a loaded machine is sent
         again (a duplicate seen by the node only repeats a frame of the same scene).
         """
         for _ in range(tries if wait_for is not None else 1):
             self.pubs[v].publish(msg)
+            if info is not False:
+                self.info_pubs[v].publish(info_for(msg) if info is True else info)
             if wait_for is None:
                 return spin_until(self.ex, lambda: False, 0.02)
             if spin_until(self.ex, lambda: wait_for in self.masks[v], 4.0):
@@ -120,7 +139,7 @@ def test_masks_match_the_synthetic_person_with_the_source_header(spawn, rosenv, 
 def test_bad_images_are_dropped_with_one_line_each_and_good_ones_still_segmented(spawn, rosenv, tmp_path):
     seg = _start(spawn, tmp_path)
     src = _source(0.5)
-    stamp = [2_000_000_000]
+    stamp = [5_000_000_000_000]
 
     def next_stamp():
         stamp[0] += 33_333_333
@@ -129,44 +148,98 @@ def test_bad_images_are_dropped_with_one_line_each_and_good_ones_still_segmented
     with ros_node(rosenv, "seg_test") as (node, ex):
         h = Harness(node, ex, 2)
         assert spin_until(ex, h.connected, 20)
+        # the issue's stray message, before anything else: a valid 7x3 bgr8 image (no camera_info of its stamp)
+        tiny = ma.array_to_image(np.full((3, 7, 3), 90, np.uint8), "bgr8", stamp_ns=next_stamp(),
+                                 frame_id="cam0_optical_frame")
+        h.send(0, tiny, info=False)
         for _ in range(LEARN + 2):
             images = src.read()
             s = next_stamp()
             for v in range(2):
-                assert h.send(v, ma.array_to_image(images[v], "rgb8", stamp_ns=s), wait_for=s)
+                msg = ma.array_to_image(images[v], "rgb8", stamp_ns=s, frame_id=f"cam{v}_optical_frame")
+                assert h.send(v, msg, wait_for=s), seg.output()
         good = src.read()
         truth = src.last_masks[0]
+
+        def image(arr=good[0], enc="rgb8", ns=None, frame="cam0_optical_frame"):
+            return ma.array_to_image(arr, enc, stamp_ns=next_stamp() if ns is None else ns, frame_id=frame)
+
         # 1. data shorter than height * step
-        bad = ma.array_to_image(good[0], "rgb8", stamp_ns=next_stamp())
+        bad = image()
         bad.data = bad.data[:-W * 3]
         h.send(0, bad)
         # 2. an encoding the node does not segment
-        rgba = np.dstack([good[0], np.full((H, W), 255, np.uint8)])
-        h.send(0, ma.array_to_image(rgba, "rgba8", stamp_ns=next_stamp()))
-        # 3. another size than the background was learnt at
-        h.send(0, ma.array_to_image(good[0][: H // 2, : W // 2].copy(), "rgb8", stamp_ns=next_stamp()))
+        h.send(0, image(np.dstack([good[0], np.full((H, W), 255, np.uint8)]), "rgba8"))
+        # 3. another size than the camera's, alone or with a camera_info of the camera's size
+        h.send(0, image(good[0][: H // 2, : W // 2].copy()), info=False)
+        small = image(good[0][: H // 2, : W // 2].copy())
+        h.send(0, small, info=info_for(small, width=W, height=H))
         # 4. an encoding string nobody knows
-        odd = ma.array_to_image(good[0], "rgb8", stamp_ns=next_stamp())
+        odd = image()
         odd.encoding = "yuv422_yuy2_weird"
         h.send(0, odd)
-        # the next good image of that view is segmented as before
+        # 5. another frame id; 6. a stamp an hour back (no camera_info of their stamps)
+        h.send(0, image(frame="cam1_optical_frame"), info=False)
+        h.send(0, image(ns=stamp[0] - 3600 * 10**9), info=False)
+        # 7. another encoding of the right size, alone
+        h.send(0, image(good[0][:, :, ::-1].copy(), "bgr8"), info=False)
+        # the next good image of that view is segmented as before (and rejects the stray ones waiting)
         s = next_stamp()
-        assert h.send(0, ma.array_to_image(good[0], "rgb8", stamp_ns=s), wait_for=s), seg.output()
+        assert h.send(0, image(ns=s), wait_for=s), seg.output()
         assert iou(ma.image_to_array(h.masks[0][s]), truth) >= 0.9
         # view 1 was never disturbed
         s1 = next_stamp()
-        assert h.send(1, ma.array_to_image(good[1], "rgb8", stamp_ns=s1), wait_for=s1)
+        assert h.send(1, image(good[1], ns=s1, frame="cam1_optical_frame"), wait_for=s1)
     assert seg.popen.poll() is None, seg.output()
-    assert len(h.masks[0]) == LEARN + 2 + 1  # none of the 4 bad images gave a mask
+    assert len(h.masks[0]) == LEARN + 2 + 1  # none of the bad images gave a mask
     out = seg.output()
-    lines = [ln for ln in out.splitlines() if "cam0/image_raw dropped" in ln]
-    # one line per problem kind (the two bad encodings are one kind, rate-limited to one line in 5 s)
-    assert len(lines) == 3, out
-    assert "Image.data: expected height * step" in lines[0]
-    assert "Image.encoding: expected one of rgb8, bgr8, mono8, received 'rgba8'" in lines[1]
-    assert "expected shape (240, 320, 3)" in lines[2] and "(120, 160, 3)" in lines[2]
+    lines = [ln for ln in out.splitlines() if "dropped" in ln and "cam0" in ln]
+    text = "\n".join(lines)
+    assert "Image.data: expected height * step" in text, out
+    assert "Image.encoding: expected one of rgb8, bgr8, mono8, received 'rgba8'" in text, out
+    assert "size 160x120, its camera_info says 320x240" in text, out
+    assert "frame_id 'cam1_optical_frame', the camera's is 'cam0_optical_frame'" in text, out
+    assert "s from the stream" in text, out
+    assert "encoding 'bgr8', the camera's is 'rgb8'" in text, out
+    assert "size 7x3" in text, out            # the stray first image: rejected, never learnt
+    assert "WARN" in lines[0], out
     assert seg.stop() == 0
-    assert "4 images dropped" in seg.output()
+    # one line per kind (rate-limited): the second image of the wrong size is counted, not logged
+    assert "9 images dropped" in seg.output(), seg.output()
+
+
+def test_a_real_resolution_change_restarts_the_learning_with_one_line(spawn, rosenv, tmp_path):
+    seg = _start(spawn, tmp_path)
+    src = _source(0.5)
+    big_src = SyntheticSource(default_rig(n_views=2, width=2 * W, height=2 * H), "walk", fps=30, model_dof=18,
+                              seed=2, empty_frames=LEARN, duration_s=0.5, loop=False)
+    with ros_node(rosenv, "seg_test") as (node, ex):
+        h = Harness(node, ex, 2)
+        assert spin_until(ex, h.connected, 20)
+        s = 4_000_000_000
+        for k in range(LEARN + 3):
+            s += 33_333_333
+            msg = ma.array_to_image(src.read()[0], "rgb8", stamp_ns=s, frame_id="cam0_optical_frame")
+            assert h.send(0, msg, wait_for=s)
+        assert ma.image_to_array(h.masks[0][s]).any()          # learnt at 320x240, the person segmented
+        n_big = LEARN + 3
+        for k in range(n_big):
+            s += 33_333_333
+            msg = ma.array_to_image(big_src.read()[0], "rgb8", stamp_ns=s, frame_id="cam0_optical_frame")
+            assert h.send(0, msg, wait_for=s), seg.output()
+            got = ma.image_to_array(h.masks[0][s])
+            assert got.shape == (2 * H, 2 * W)
+            if k < LEARN:
+                assert not got.any()                           # learning again, at the new size
+        truth = big_src.last_masks[0]
+        assert iou(got, truth) >= 0.9
+    out = seg.output()
+    lines = [ln for ln in out.splitlines() if "the camera changed" in ln]
+    assert len(lines) == 1, out
+    assert "320x240 rgb8 in 'cam0_optical_frame' -> 640x480 rgb8 in 'cam0_optical_frame'" in lines[0]
+    assert "background learning restarts" in lines[0]
+    assert seg.stop() == 0
+    assert "0 images dropped" in seg.output() and "learning restarted [1, 0]" in seg.output()
 
 
 def test_pixel_noise_switches_the_node_to_the_robust_mode(spawn, rosenv, tmp_path):

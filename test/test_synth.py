@@ -32,7 +32,8 @@ def all_messages(path) -> list[tuple[str, int, bytes]]:
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("synth") / "tiny"
-    assert synth("walk", out, *TINY, "--masks", "--seed", "5") == 0
+    # the capsule body: these tests check the capsule path exactly (mesh bodies: test_mesh_bodies.py)
+    assert synth("walk", out, *TINY, "--masks", "--seed", "5", "--body", "capsules") == 0
     return out
 
 
@@ -132,10 +133,10 @@ def test_masks_equal_render_of_ground_truth(tiny):
 
 def test_byte_identical_and_seed_dependent(tiny, tmp_path):
     again = tmp_path / "again"
-    assert synth("walk", again, *TINY, "--masks", "--seed", "5") == 0
+    assert synth("walk", again, *TINY, "--masks", "--seed", "5", "--body", "capsules") == 0
     assert all_messages(again) == all_messages(tiny)
     other = tmp_path / "other"
-    assert synth("walk", other, *TINY, "--masks", "--seed", "6") == 0
+    assert synth("walk", other, *TINY, "--masks", "--seed", "6", "--body", "capsules") == 0
     a = {(t, s): d for t, s, d in all_messages(tiny)}
     b = {(t, s): d for t, s, d in all_messages(other)}
     assert a.keys() == b.keys()
@@ -252,9 +253,11 @@ def test_shipped_bags(tmp_path):
     assert all(counts[f"/mocap/cam{i}/image_raw"] == 145 for i in range(4))
     assert counts["/mocap/ground_truth/joint_states"] == 135 and desc["motion"]["name"] == "walk_turns"
     assert desc["model"]["dof"] == 39 and desc["sequence"]["empty_frames"] == 10
+    assert desc["body"]["kind"] == "mesh" and desc["body"]["subject"]["name"] == "average_man"
+    assert counts["/mocap/ground_truth/markers"] == 135
     again = tmp_path / "fixture"
     assert synth("walk", again, "--views", "4", "--width", "160", "--height", "120", "--duration-s", "0.4",
-                 "--empty-frames", "3", "--masks", "--seed", "0", "--no-progress") == 0
+                 "--empty-frames", "3", "--masks", "--seed", "0", "--no-progress", "--body", "capsules") == 0
     a, b = all_messages(BAGS / "fixture"), all_messages(again)
     assert [(t, s) for t, s, _ in a] == [(t, s) for t, s, _ in b]
     for (topic, _, da), (_, _, db) in zip(a, b):

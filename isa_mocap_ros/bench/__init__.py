@@ -2,11 +2,12 @@
 
 One module per benchmark, each exposing ``add_arguments(parser)`` and ``run(args) -> int``:
 ``ackley`` (ISA §13.4.1), ``adapters``, ``render``, ``energy``, ``compare`` (EA-vs-PF §5.2-5.4),
-``robustness`` (ISA §13.4.2), ``speed``; ``results`` runs them all and writes ``docs/RESULTS.md``.
+``robustness`` (ISA §13.4.2), ``speed``, ``keypoints`` (the 2-D landmark detector, tracking with the keypoint term); ``results`` runs them all and writes ``docs/RESULTS.md``.
 They sit apart from the core (which never imports them) and may import the CLI's offline
 tracking/synthesis code (``cli.track.track_bag``, ``cli.synth.write_bag``).
 """
 from __future__ import annotations
 
 #: benchmark names, each a module of this package (``isa-mocap bench NAME``)
-BENCHES: list[str] = ["ackley", "adapters", "render", "energy", "compare", "robustness", "speed"]
+BENCHES: list[str] = ["ackley", "adapters", "render", "energy", "compare", "robustness", "speed", "keypoints",
+                      "mesh_baseline"]

@@ -1,7 +1,9 @@
 """Optimizer comparison (EA-vs-PF §5.2-5.4): algorithms × models × budgets × seeds × sequences, Friedman/Holm.
 
 ``isa-mocap bench compare [--quick | --full] [--json] [--jobs N] [--resume DIR] [--out DIR]
-[--write-results FILE]``. The designs are :func:`isa_mocap_ros.eval.compare.make_design`'s (see
+[--write-results FILE] [--body mesh|capsules] [--seeds N] [--frames N]``. ``--body mesh`` (default):
+every sequence shows a skinned human mesh, scored by its skeleton's joint centres; ``capsules`` the
+tracking model's own capsules (a control). The designs are :func:`isa_mocap_ros.eval.compare.make_design`'s (see
 ``docs/evaluation.md``): sequences are synthesized once into ``OUT/cache``, the cells run offline
 (no ROS) in a process pool with a progress bar, every finished cell is appended to
 ``OUT/cells.jsonl`` (``--resume OUT`` skips the cells already there), and the summary (mean error per
@@ -34,6 +36,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--algorithms", default=None, metavar="A,B", help="restrict the design to these algorithms")
     p.add_argument("--write-results", default=None, metavar="FILE", help="write the Markdown tables to FILE")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--body", choices=("mesh", "capsules"), default="mesh",
+                   help="mesh (default): skinned human sequences; capsules: the tracking model's own (control)")
+    p.add_argument("--seeds", type=int, default=None, metavar="N", help="use the first N seeds of the design")
+    p.add_argument("--frames", type=int, default=None, metavar="N", help="track only the first N frames of each sequence")
 
 
 def _init_worker() -> None:
@@ -157,7 +163,9 @@ def results_markdown(summary: dict, design, *, command: str, seconds: float) -> 
     head += [f"- command: `{command}`", f"- machine: {_machine()}",
              f"- design: {design.name} — algorithms {', '.join(design.algorithms)}; models {list(design.models)}; "
              f"budgets {list(design.budgets)}; seeds {len(design.seeds)}; sequences "
-             f"{', '.join(s.name for s in design.sequences)}",
+             f"{', '.join(s.name for s in design.sequences)}; body "
+             f"{design.sequences[0].body if design.sequences else '?'}"
+             + (f"; first {design.frames} frames" if design.frames else ""),
              f"- wall time: {seconds:.0f} s; records: {summary['records']}; frames that fell back: "
              f"{summary['fell_back_frames']}", "- protocol: see [docs/evaluation.md](evaluation.md)", ""]
     for n in design.notes:
@@ -172,7 +180,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"isa-mocap bench compare: error: --jobs: expected an integer >= 1, received {args.jobs}", file=sys.stderr)
         return 2
     kind = "quick" if args.quick else "full" if args.full else "default"
-    design = make_design(kind)
+    design = make_design(kind, body=getattr(args, "body", "mesh"))
+    from dataclasses import replace
+    if getattr(args, "seeds", None):
+        design = replace(design, seeds=design.seeds[:args.seeds])
+    if getattr(args, "frames", None):
+        design = replace(design, frames=int(args.frames))
     if args.algorithms:
         want = [a.strip() for a in args.algorithms.split(",") if a.strip()]
         from dataclasses import replace

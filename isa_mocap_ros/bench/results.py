@@ -1,7 +1,8 @@
 """``isa-mocap bench all``: run every benchmark and regenerate the results page (``docs/RESULTS.md``).
 
 ``isa-mocap bench all [--quick] [--results PATH] [--out DIR] [--jobs N] [--only A,B]``. Runs, in
-order, ackley, adapters, render, energy, compare, robustness and speed with their default designs
+order, ackley, adapters, render, energy, compare, robustness, speed and mesh_baseline (mesh bodies vs
+capsules, reduced) with their default designs (compare and robustness on mesh bodies since issue 32)
 (``--quick``: their ``--quick`` variants), then writes
 
 * ``PATH`` (default ``docs/RESULTS.md`` of the source checkout): every bench's tables, the figures,
@@ -40,7 +41,7 @@ from isa_mocap_ros.bench._common import energy_sizes, json_of
 #: both cores at full load that ackley, compare and robustness take, the node network's real-time run
 #: in ``speed`` dropped 24 of 145 frame sets (tracker 31 ms a frame, p50) where the same bench alone
 #: a minute later dropped 6 (22.7 ms; session 12, docs/evaluation.md).
-ORDER = ("energy", "speed", "adapters", "render", "ackley", "compare", "robustness")
+ORDER = ("energy", "speed", "adapters", "render", "ackley", "compare", "robustness", "mesh_baseline")
 _SRC_ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -142,6 +143,12 @@ def _bench_robustness(quick: bool, ctx: dict) -> dict:
                       progress=ctx["progress"])
 
 
+def _bench_mesh_baseline(quick: bool, ctx: dict) -> dict:
+    from isa_mocap_ros.bench import mesh_baseline as mb
+
+    return mb.collect(jobs=ctx["jobs"], out=ctx["out"] / "mesh_baseline", quick=quick)
+
+
 def _bench_speed(quick: bool, ctx: dict) -> dict:
     from isa_mocap_ros.bench import speed as bench_speed
 
@@ -151,7 +158,8 @@ def _bench_speed(quick: bool, ctx: dict) -> dict:
 
 
 RUNNERS = {"ackley": _bench_ackley, "adapters": _bench_adapters, "render": _bench_render, "energy": _bench_energy,
-           "compare": _bench_compare, "robustness": _bench_robustness, "speed": _bench_speed}
+           "compare": _bench_compare, "robustness": _bench_robustness, "speed": _bench_speed,
+           "mesh_baseline": _bench_mesh_baseline}
 
 
 # ------------------------------------------------------------------ markdown sections
@@ -262,6 +270,12 @@ def md_robustness(d: dict) -> str:
     return "Protocol: ISA §13.4.2, `isa_mocap_ros/bench/robustness.py` (module docstring).\n\n" + render_markdown(d)
 
 
+def md_mesh_baseline(d: dict) -> str:
+    from isa_mocap_ros.bench.mesh_baseline import render_markdown
+
+    return render_markdown(d)
+
+
 def md_speed(d: dict) -> str:
     from isa_mocap_ros.bench.speed import render_markdown
 
@@ -348,6 +362,7 @@ def headlines(data: dict) -> list[str]:
 SECTIONS = (("ackley", "Ackley function (ISA §13.4.1, Tables 13.1-13.2)", md_ackley),
             ("compare", "Optimizer comparison (EA-vs-PF §5.2-5.4, with pycma and scipy-DE)", md_compare),
             ("robustness", "Robustness: noise and occlusions (ISA §13.4.2)", md_robustness),
+            ("mesh_baseline", "Mesh bodies vs capsules (issue 32's baseline)", md_mesh_baseline),
             ("speed", "Speed: energy, tracker, node network", md_speed),
             ("energy", "Silhouette energy speed", md_energy),
             ("render", "Renderer speed", md_render),

@@ -1,7 +1,12 @@
 """Robustness (ISA §13.4.2): clean, 50 % / 70 % pixel noise, 35 occluders; knee RMSE beside the paper.
 
 ``isa-mocap bench robustness [--quick] [--json] [--cache DIR] [--out DIR] [--init truth|auto] [--seeds 0,1,2]
-[--gate-margin-px PX] [--jobs N]``.
+[--gate-margin-px PX] [--jobs N] [--body mesh|capsules] [--frames N]``.
+
+``--body mesh`` (default): the sequences show a skinned human mesh (the average man, 1.78 m;
+:mod:`isa_mocap_ros.body.mesh`) and are scored by the mesh skeleton's joint centres (knee angles
+measured in 3-D between thigh and shank); ``--body capsules`` renders the tracking model itself (a
+control: the model then matches the images exactly) and scores against the ground-truth poses.
 
 Protocol (ISA §13.4.2, Figs. 13.15-13.17, with our tracker's best settings):
 
@@ -75,11 +80,14 @@ class RobustSequence:
     width: int = 320
     height: int = 240
     seed: int = 0
+    #: ``mesh`` (a skinned human, the average man) or ``capsules`` (the tracking model itself: a control)
+    body: str = "mesh"
 
     def bag_name(self, cond: str) -> str:
         m = Path(self.motion).stem if self.motion.endswith(".bvh") else self.motion
         return (f"{self.name}_{m}_{cond}_{self.duration_s:g}s_{self.fps:g}fps_from{self.start_s:g}_"
-                f"{self.width}x{self.height}_v{self.views}_e{EMPTY_FRAMES}_s{self.seed}")
+                f"{self.width}x{self.height}_v{self.views}_e{EMPTY_FRAMES}_s{self.seed}"
+                + ("_mesh" if self.body == "mesh" else ""))
 
 
 @dataclass(frozen=True)
@@ -96,6 +104,8 @@ class RobustDesign:
     seeds: tuple = (0,)
     #: the tracker's mask gate (``TrackerConfig.gate_margin_px``); None = the tracker's default
     gate_margin_px: int | None = None
+    #: what the sequences show: ``mesh`` (default) or ``capsules`` (the control)
+    body: str = "mesh"
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -108,8 +118,11 @@ DEFAULT_SEEDS = (0, 1, 2, 3, 4, 5, 6, 7)
 
 def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK, init: str = "truth",
                 optimizer: str = "h-isa", evals: int | None = None, seeds: tuple | None = None,
-                gate_margin_px: int | None = None) -> RobustDesign:
-    """``"quick"`` or ``"default"`` (see the module docstring); ``seeds`` default (0,) quick, 0-7 default."""
+                gate_margin_px: int | None = None, body: str = "mesh", frames: int | None = None) -> RobustDesign:
+    """``"quick"`` or ``"default"`` (see the module docstring); ``seeds`` default (0,) quick, 0-7 default;
+    ``body`` mesh or capsules; ``frames`` shortens the default design's sequences to that many frames."""
+    if body not in ("mesh", "capsules"):
+        raise ValueError(f"body: expected 'mesh' or 'capsules', received {body!r}")
     if seeds is not None:
         seeds = tuple(int(x) for x in seeds)
         if not seeds or any(x < 0 for x in seeds) or len(set(seeds)) != len(seeds):
@@ -118,21 +131,24 @@ def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK
                                        or gate_margin_px < 0):
         raise ValueError(f"gate_margin_px: expected an integer >= 0 or None, received {gate_margin_px!r}")
     if kind == "quick":
-        seqs = (RobustSequence("walk", "walk", duration_s=6 / 30, views=4, width=160, height=120),)
+        seqs = (RobustSequence("walk", "walk", duration_s=6 / 30, views=4, width=160, height=120, body=body),)
         seeds = seeds or (0,)
         return RobustDesign("quick", seqs, tuple(c[0] for c in CONDITIONS), optimizer, evals or 300, seeds[0], init,
-                            seeds=seeds, gate_margin_px=gate_margin_px)
+                            seeds=seeds, gate_margin_px=gate_margin_px, body=body)
     if kind != "default":
         raise ValueError(f"kind: expected 'quick' or 'default', received {kind!r}")
     seqs, notes = [], []
+    dur = 4.0 if frames is None else int(frames) / 30.0
     if cmu_path is not None and Path(cmu_path).is_file():
-        seqs.append(RobustSequence("cmu_walk", str(cmu_path), start_s=1.0))
+        seqs.append(RobustSequence("cmu_walk", str(cmu_path), start_s=1.0, duration_s=dur, body=body))
     else:
         notes.append(f"CMU walk skipped: {cmu_path} not found")
-    seqs += [RobustSequence("walk", "walk"), RobustSequence("jog", "jog")]
+    seqs += [RobustSequence("walk", "walk", duration_s=dur, body=body),
+             RobustSequence("jog", "jog", duration_s=dur, body=body)]
     seeds = seeds or DEFAULT_SEEDS
-    return RobustDesign("default", tuple(seqs), tuple(c[0] for c in CONDITIONS), optimizer, evals or 1500, seeds[0],
-                        init, tuple(notes), seeds=seeds, gate_margin_px=gate_margin_px)
+    return RobustDesign("default" if frames is None else f"default, {int(frames)} frames", tuple(seqs),
+                        tuple(c[0] for c in CONDITIONS), optimizer, evals or 1500, seeds[0],
+                        init, tuple(notes), seeds=seeds, gate_margin_px=gate_margin_px, body=body)
 
 
 def _cond(key: str):
@@ -154,7 +170,7 @@ def prepare_bag(seq: RobustSequence, cond: str, cache: Path) -> Path:
         motion=seq.motion, out=str(tmp), views=seq.views, width=seq.width, height=seq.height, fps=seq.fps, model=39,
         start_s=seq.start_s, duration_s=seq.duration_s, empty_frames=EMPTY_FRAMES, noise=noise, occluders=occl,
         rig=None, seed=seq.seed, bvh_scale=None, masks=False, compression="zstd", chunk_mb=32.0, overwrite=True,
-        no_progress=True))
+        no_progress=True, body=seq.body, subject="average_man", skirt=False))
     shutil.rmtree(path, ignore_errors=True)
     tmp.rename(path)
     return path
@@ -177,16 +193,36 @@ def track_condition(bag: Path, out: Path, design: RobustDesign, seed: int | None
     s = track_bag(ns, collect=got)
     seconds = time.perf_counter() - t0
     model, tm = got["model"], got["truth_model"]
-    idx = [k for k in sorted(got["estimates"]) if k in got["truth"] and k != got["init_frame"]]
+    mesh = got.get("body") == "mesh" and got.get("truth_markers")
+    truth = got["truth_markers"] if mesh else got["truth"]
+    idx = [k for k in sorted(got["estimates"]) if k in truth and k != got["init_frame"]]
     if not idx:
         raise ValueError(f"{bag}: no scored frame (no estimate at a ground-truth frame)")
     P = np.array([got["estimates"][k] for k in idx])
-    T = np.array([got["truth"][k] for k in idx])
-    acc = accuracy(model, P, tm, T)
     t = [(got["stamps"][k] - got["stamps"][idx[0]]) / 1e9 for k in idx]
-    knees_e = np.degrees(P[:, model.knee_dofs])
-    knees_t = np.degrees(T[:, tm.knee_dofs])
-    ke = knee_errors_deg(P, T, model, true_model=tm)
+    if mesh:    # by the mesh skeleton's joint centres, knee angles in 3-D
+        from isa_mocap_ros.eval import marker_positions, score_markers
+        from isa_mocap_ros.eval.metrics import knee_flexion_from_points
+
+        names = list(got["truth_marker_names"])
+        TM = np.array([truth[k] for k in idx])
+        acc = score_markers(model, P, names, TM)
+        acc["frame_errors_mm"] = [round(float(e), 2) for e in acc["frame_errors_mm"]]
+        legs = [f"{s}_{j}" for s in ("left", "right") for j in ("hip", "knee", "ankle")]
+        Pe = marker_positions(model, P, joints=legs)
+        knees_e = np.degrees(np.stack([knee_flexion_from_points(*(Pe[:, legs.index(f"{s}_{j}")]
+                                                                  for j in ("hip", "knee", "ankle")))
+                                       for s in ("left", "right")], axis=1))
+        knees_t = np.degrees(np.stack([knee_flexion_from_points(*(TM[:, names.index(f"{s}_{j}")]
+                                                                  for j in ("hip", "knee", "ankle")))
+                                       for s in ("left", "right")], axis=1))
+        ke = knees_e - knees_t
+    else:
+        T = np.array([truth[k] for k in idx])
+        acc = accuracy(model, P, tm, T)
+        knees_e = np.degrees(P[:, model.knee_dofs])
+        knees_t = np.degrees(T[:, tm.knee_dofs])
+        ke = knee_errors_deg(P, T, model, true_model=tm)
     return {"seed": int(s["seed"]), "gate_margin_px": s.get("gate_margin_px"),
             "frames": acc["frames"], "mpjpe_mm": acc["mpjpe_mm"], "max_frame_error_mm": acc["max_frame_error_mm"],
             "knee_rmse_deg": acc["knee_rmse_deg"], "fps": s["fps"], "frames_fell_back": s["frames_fell_back"],
@@ -327,7 +363,7 @@ def render_markdown(res: dict) -> str:
     gate_s = "" if gate is None else ("; mask gate off" if gate == 0 else f"; mask gate {gate} px")
     L = [f"Design `{d['name']}`: {d['optimizer']}, {d['evals']} evaluations per frame, init {d['init']}, "
          + (f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {', '.join(map(str, seeds))} (mean, min-max)")
-         + f"{gate_s}; sequences "
+         + f"{gate_s}; body {d.get('body', 'capsules')}; sequences "
          + ", ".join(f"{s['name']} ({round(s['duration_s'] * s['fps'])} frames, {s['views']} views "
                      f"{s['width']}×{s['height']})" for s in d["sequences"]) + f"; wall time {res['seconds']:.0f} s.", ""]
     for n in d.get("notes", []):
@@ -443,12 +479,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--gate-margin-px", type=int, default=None, metavar="PX",
                    help="the tracker's mask gate (0 = off; default: the tracker's default)")
     p.add_argument("--jobs", type=int, default=2, metavar="N", help="worker processes tracking the runs (default 2)")
+    p.add_argument("--body", choices=("mesh", "capsules"), default="mesh",
+                   help="mesh (default): a skinned human (the average man); capsules: the tracking model (control)")
+    p.add_argument("--frames", type=int, default=None, metavar="N",
+                   help="shorten the default design's sequences to N frames (reduced runs)")
 
 
 def collect_from_args(args: argparse.Namespace) -> dict:
     seeds = None if args.seeds is None else tuple(int(x) for x in str(args.seeds).split(",") if x.strip())
     design = make_design("quick" if args.quick else "default", init=args.init, optimizer=args.optimizer,
-                         evals=args.evals, seeds=seeds, gate_margin_px=args.gate_margin_px)
+                         evals=args.evals, seeds=seeds, gate_margin_px=args.gate_margin_px,
+                         body=getattr(args, "body", "mesh"), frames=getattr(args, "frames", None))
     for n in design.notes:
         print(f"bench robustness: {n}", file=sys.stderr)
     tmp = None

@@ -116,37 +116,58 @@ def evaluate(args) -> dict:
     with BagReader(truth_path) as probe:        # frames are built from images or masks: read the cheaper
         has_masks = any(x.startswith("/mocap/cam") and x.endswith("/mask") for x in probe.topics)
     seq = read_sequence(truth_path, want_images=not has_masks, want_masks=has_masks)
-    if not seq.has_truth or seq.truth_model is None:
+    if not (seq.has_truth and seq.truth_model is not None) and not seq.has_marker_truth:
         raise ValueError(f"--truth: expected ground truth (/mocap/ground_truth/*) in {truth_path}, received none")
     tm = seq.truth_model
-    dof = args.model or summary.get("model_dof") or tm.dof
-    shape = args.shape
-    if shape == "auto":
-        shape = "truth" if ("masks" in summary or not summary) else "default"
-    model = make_model(int(dof), shape=dict(tm.shape)) if shape == "truth" else make_model(int(dof))
+    from isa_mocap_ros.cli.run_report import published_model
+
+    published = published_model(est_path)
+    if published is not None and args.model is None and args.shape == "auto":
+        model, shape = published, "published by the tracker (/mocap/model)"
+    else:
+        dof = args.model or summary.get("model_dof") or (tm.dof if tm is not None else 39)
+        shape = args.shape
+        if shape == "auto":
+            shape = "truth" if (("masks" in summary or not summary) and tm is not None) else "default"
+        if shape == "truth" and tm is None:
+            raise ValueError("--shape truth: expected a ground-truth model in the bag, received none")
+        model = make_model(int(dof), shape=dict(tm.shape)) if shape == "truth" else make_model(int(dof))
     rec = read_estimates(est_path, model)
     poses = rec["poses"]
-    truth = {f.stamp_ns: f.truth for f in seq.frames if f.truth is not None}
-    stamps = sorted(s for s in poses if s in truth)
-    if not stamps:
+    from isa_mocap_ros.eval.report import plot_marker_score, score
+
+    acc = score(model, seq, poses)
+    if acc is None:
+        n_truth = sum(1 for f in seq.frames if f.truth is not None or f.truth_markers is not None)
         raise ValueError(f"RESULT: expected estimates at ground-truth stamps, received {len(poses)} estimates and "
-                         f"{len(truth)} ground-truth frames with no stamp in common")
+                         f"{n_truth} ground-truth frames with no stamp in common")
+    stamps = acc.pop("stamps")
     P = np.array([poses[s] for s in stamps])
-    T = np.array([truth[s] for s in stamps])
     t = (np.array(stamps) - stamps[0]) / 1e9
-    acc = accuracy(model, P, tm, T)
-    names = shared_markers(model, tm)
-    je = joint_errors_mm(marker_positions(model, P, joints=names), marker_positions(tm, T, joints=names))
-    angles = dict(per_joint_angle_rmse_deg(P, T, model, true_model=tm))
-    knees = [k for k in ("left_knee_y", "right_knee_y") if k in angles]
-    angles = {**{k: angles[k] for k in knees}, **{k: v for k, v in angles.items() if k not in knees}}
+    by_markers = acc["scored_by"] == "markers"
+    if by_markers:
+        fm = {f.stamp_ns: f.truth_markers for f in seq.frames}
+        TM = np.array([fm[s] for s in stamps])
+        angles = {}
+        n_truth = sum(1 for f in seq.frames if f.truth_markers is not None)
+    else:
+        truth = {f.stamp_ns: f.truth for f in seq.frames if f.truth is not None}
+        T = np.array([truth[s] for s in stamps])
+        names = shared_markers(model, tm)
+        je = joint_errors_mm(marker_positions(model, P, joints=names), marker_positions(tm, T, joints=names))
+        acc["per_marker_mm"] = {n: float(v) for n, v in zip(names, je.mean(axis=0))}
+        angles = dict(per_joint_angle_rmse_deg(P, T, model, true_model=tm))
+        knees = [k for k in ("left_knee_y", "right_knee_y") if k in angles]
+        angles = {**{k: angles[k] for k in knees}, **{k: v for k, v in angles.items() if k not in knees}}
+        n_truth = len(truth)
     ev = {"result": str(args.result), "estimates": str(est_path), "truth": str(truth_path),
           "optimizer": summary.get("optimizer"), "evals_per_frame": summary.get("evals_per_frame"),
-          "model_dof": model.dof, "shape": shape,
+          "model_dof": model.dof, "shape": shape, "scored_by": acc["scored_by"],
           "sequence": {k: acc[k] for k in ("frames", "mpjpe_mm", "median_frame_error_mm", "max_frame_error_mm",
                                            "knee_rmse_deg")},
-          "estimates_total": len(poses), "frames_without_estimate": len(truth) - len(stamps),
-          "per_marker_mm": {n: float(v) for n, v in zip(names, je.mean(axis=0))},
+          "worst_frame_stamp_ns": acc["worst_frame_stamp_ns"],
+          "estimates_total": len(poses), "frames_without_estimate": n_truth - len(stamps),
+          "per_marker_mm": acc["per_marker_mm"],
           "per_dof_rmse_deg": angles,
           "per_frame": [{"stamp_ns": int(s), "t_s": round(float(ti), 4), "error_mm": e}
                         for s, ti, e in zip(stamps, t, acc["frame_errors_mm"])]}
@@ -178,8 +199,13 @@ def evaluate(args) -> dict:
     plots = []
     if not args.no_plots:
         title = f"{summary.get('optimizer', '')} {summary.get('evals_per_frame', '')} evals/frame, {model.dof} DOF"
-        plots.append(str(plot_sequence(out / "knees_and_error.png", model, P, tm, T, times_s=t, title=title.strip())))
-        if energies is not None:
+        if by_markers:
+            plots.append(str(plot_marker_score(out / "knees_and_error.png", model, P, list(seq.truth_marker_names),
+                                               TM, times_s=t, title=title.strip())))
+        else:
+            plots.append(str(plot_sequence(out / "knees_and_error.png", model, P, tm, T, times_s=t,
+                                           title=title.strip())))
+        if energies is not None and not by_markers:
             from isa_mocap_ros.eval import knee_errors_deg
             ke = np.abs(knee_errors_deg(P, T, model, true_model=tm))
             plots.append(str(_plot_energy(out / "energy_and_error.png", energies, t,

@@ -27,6 +27,9 @@ SUBCOMMANDS = [
     "synth",
     "track",
     "evaluate",
+    "calibration",
+    "import_video",
+    "warmup",
 ]
 
 

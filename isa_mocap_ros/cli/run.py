@@ -23,9 +23,9 @@ from isa_mocap_ros.resources import default_bag, resource_dir
 from isa_mocap_ros.rosenv import ros_env
 
 NS = "/mocap"
-RECORDED = ["/mocap/joint_states", "/mocap/estimator/done", "/mocap/root_pose", "/mocap/prediction/joint_states",
+RECORDED = ["/mocap/joint_states", "/mocap/model", "/mocap/estimator/done", "/mocap/root_pose", "/mocap/prediction/joint_states",
             "/diagnostics", "/mocap/cam*/overlay", "/mocap/cam*/mask", "/mocap/cam0/image_raw", "/mocap/markers",
-            "/humans/bodies/*/joint_states", "/humans/bodies/*/urdf"]
+            "/humans/bodies/*/joint_states", "/humans/bodies/*/urdf", "/mocap/cam*/keypoints"]
 
 
 def register(sub) -> None:
@@ -47,13 +47,16 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--params", default=None, help="parameter file (default: the package's config/pipeline.yaml)")
     p.add_argument("--learn-frames", type=int, default=None,
                    help="frames the segmentation learns the background from (default: the bag's frames before "
-                        "its first ground truth, else the parameter file's learn_frames)")
+                        "its first ground truth (joint states, else markers), else the parameter file's learn_frames)")
     p.add_argument("--overlay-frames", type=int, default=4,
                    help="overlay frames to save as PNG (drawn after the run from the recording)")
     p.add_argument("--helper-nice", type=int, default=5, choices=range(0, 20), metavar="0..19",
                    help="niceness added to every process but the estimator's (player, segmentation, prediction, "
                         "recorder; default 5, 0 = off): on a small machine the tracker's threads then lose "
                         "less time to the helpers (docs/nodes.md)")
+    p.add_argument("--keypoints", action="store_true",
+                   help="also run the keypoint node (BlazePose landmarks on cam<i>/keypoints, recorded; its "
+                        "every_k_frames from the parameter file; docs/keypoints.md)")
     p.add_argument("--quiet", action="store_true", help="do not echo node output")
 
 
@@ -72,11 +75,22 @@ def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
     if args.lockstep:
         # Deterministic runs must not lose a frame: make the image and mask subscriptions reliable
         # (they are best effort, qos_profile_sensor_data, by default).
-        seg += [(f"qos_overrides.{NS}/cam{v}/image_raw.subscription.reliability", "reliable") for v in range(n_views)]
-        est += [(f"qos_overrides.{NS}/cam{v}/mask.subscription.reliability", "reliable") for v in range(n_views)]
+        # The camera infos too: the nodes take nothing from a view before a camera_info and an image (mask) of
+        # one stamp agree on its camera (isa_mocap_ros.intake), so a lost first camera_info would stall a view.
+        seg += [(f"qos_overrides.{NS}/cam{v}/{t}.subscription.reliability", "reliable")
+                for v in range(n_views) for t in ("image_raw", "camera_info")]
+        est += [(f"qos_overrides.{NS}/cam{v}/{t}.subscription.reliability", "reliable")
+                for v in range(n_views) for t in ("mask", "camera_info")]
     common = dict(namespace=NS, params_files=(params,))
     nice = getattr(args, "helper_nice", 0)
-    return [
+    kp = []
+    if getattr(args, "keypoints", False):
+        kp_params = [("views", str(n_views))]
+        if args.lockstep:
+            kp_params += [(f"qos_overrides.{NS}/cam{v}/{t}.subscription.reliability", "reliable")
+                          for v in range(n_views) for t in ("image_raw", "mask")]
+        kp = [NodeSpec(exec="keypoints_node", name="keypoints", params=tuple(kp_params), nice=nice, **common)]
+    return kp + [
         NodeSpec(exec="segmentation_node", name="segmentation", params=tuple(seg), nice=nice, **common),
         NodeSpec(exec="prediction_node", name="prediction", nice=nice, **common),
         NodeSpec(exec="estimator_node", name="estimator", params=tuple(est), **common),
@@ -94,6 +108,8 @@ def _inspect(bag: Path) -> tuple[int, int | None]:
         if n == 0:
             raise SystemExit(f"isa-mocap run: {bag} has no /mocap/cam<i>/image_raw topics")
         gt = "/mocap/ground_truth/joint_states"
+        if gt not in r.topics:       # a mesh bag or an imported real recording may have markers only
+            gt = "/mocap/ground_truth/markers"
         if gt not in r.topics:
             return n, None
         first_truth = next((ma.header_stamp_ns_from_cdr(m.data) for m in r.messages([gt])), None)

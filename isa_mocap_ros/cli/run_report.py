@@ -113,15 +113,48 @@ def _first_gap(estimated: list[int], played: list[int]) -> int:
     return 0
 
 
+def published_model(est_path: Path):
+    """The tracking model the estimates bag names on ``/mocap/model`` (None when it has none)."""
+    from isa_mocap_ros.bag import BagReader
+    from isa_mocap_ros.sequence import model_from_yaml
+    from msg_adapters import from_cdr
+
+    with BagReader(est_path) as bag:
+        if "/mocap/model" not in bag.topics:
+            return None
+        for m in bag.messages(["/mocap/model"]):
+            return model_from_yaml(from_cdr(m.data, m.type).data)[0]
+    return None
+
+
+def summary_rows(summary: dict) -> list[tuple[str, object]]:
+    """The printed table's rows: accuracy rows only when the bag had ground truth to score against,
+    else one row saying so plainly."""
+    if summary.get("ground_truth"):
+        acc = [("frames (with ground truth)", summary.get("frames")),
+               ("mean joint error (mm)", summary.get("mpjpe_mm")),
+               ("max frame error (mm)", summary.get("max_frame_error_mm")),
+               ("knee RMSE (deg)", summary.get("knee_rmse_deg"))]
+    else:
+        acc = [("accuracy", summary.get("accuracy", "no ground truth"))]
+    return acc + [("frames estimated", summary.get("frames_estimated")), ("frames/s", summary["fps"]),
+                  ("latency p50 / p95 (ms)", (summary["latency_ms_p50"], summary["latency_ms_p95"])),
+                  ("dropped frame sets", summary["dropped_frames"]), ("bad inputs", summary.get("bad_inputs")),
+                  ("optimizer", summary["optimizer"]), ("evaluations per frame", summary["evals_per_frame"])]
+
+
 def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary: dict,
                  wall_seconds: float) -> int:
     import cv2
 
     from isa_mocap_ros.body import make_model
     from isa_mocap_ros.cli.track import read_sequence
-    from isa_mocap_ros.eval.report import accuracy, plot_sequence
+    from isa_mocap_ros.eval.report import plot_sequence
 
     model = make_model(args.model or 39)
+    published = published_model(out / "estimates")   # the estimator's own description (/mocap/model)
+    if published is not None and published.dof == model.dof:
+        model = published
     rec = read_estimates(out / "estimates", model)
     poses = rec["poses"]
     lat = np.array(rec["latencies_ms"], dtype=float)
@@ -161,18 +194,29 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
     est = sorted(poses)
     summary["dropped_while_initializing"] = (_first_gap(est, [f.stamp_ns for f in seq.frames])
                                              if len(est) >= 2 else None)
-    stamps = [f.stamp_ns for f in seq.frames if f.truth is not None and f.stamp_ns in poses]
-    if seq.has_truth and stamps:
-        truth = {f.stamp_ns: f.truth for f in seq.frames if f.truth is not None}
-        P = np.array([poses[s] for s in stamps])
-        T = np.array([truth[s] for s in stamps])
-        acc = accuracy(model, P, seq.truth_model, T)
+    from isa_mocap_ros.eval.report import plot_marker_score, score
+
+    acc = score(model, seq, poses)
+    if acc is not None:
+        stamps = acc.pop("stamps")
         summary.update(acc)
+        P = np.array([poses[s] for s in stamps])
         t = (np.array(stamps) - stamps[0]) / 1e9
-        plot_sequence(out / "knees_and_error.png", model, P, seq.truth_model, T, times_s=t,
-                      title=f"{summary['optimizer']}, {summary['evals_per_frame']} evals/frame, {model.dof} DOF")
+        title = f"{summary['optimizer']}, {summary['evals_per_frame']} evals/frame, {model.dof} DOF"
+        if acc["scored_by"] == "markers":
+            fm = {f.stamp_ns: f.truth_markers for f in seq.frames}
+            plot_marker_score(out / "knees_and_error.png", model, P, list(seq.truth_marker_names),
+                              np.array([fm[s] for s in stamps]), times_s=t, title=title)
+        else:
+            truth = {f.stamp_ns: f.truth for f in seq.frames if f.truth is not None}
+            plot_sequence(out / "knees_and_error.png", model, P, seq.truth_model,
+                          np.array([truth[s] for s in stamps]), times_s=t, title=title)
+        summary["ground_truth"] = True
     else:
-        summary["frames"] = len(poses)
+        # no accuracy figures at all (not "frames 135" beside "mean joint error None")
+        summary["ground_truth"] = False
+        summary["accuracy"] = ("no ground truth in the bag" if not (seq.has_truth or seq.has_marker_truth)
+                               else "no estimate on a frame with ground truth")
     ov = rec["overlays"]
     if ov and args.overlay_frames > 0:  # the estimator published overlays (publish_overlay in --params)
         stamps_ov = sorted({s for s, _, _ in ov})
@@ -186,13 +230,8 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
     elif poses and args.overlay_frames > 0:
         write_overlays(out / "overlays", model, seq, poses, read_masks(out / "estimates"), args.overlay_frames)
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    rows = [("frames (with ground truth)", summary.get("frames")), ("mean joint error (mm)", summary.get("mpjpe_mm")),
-            ("max frame error (mm)", summary.get("max_frame_error_mm")), ("knee RMSE (deg)", summary.get("knee_rmse_deg")),
-            ("frames/s", summary["fps"]), ("latency p50 / p95 (ms)", (summary["latency_ms_p50"], summary["latency_ms_p95"])),
-            ("dropped frame sets", summary["dropped_frames"]), ("optimizer", summary["optimizer"]),
-            ("evaluations per frame", summary["evals_per_frame"])]
     print(f"\nrun summary ({summary['mode']}):")
-    for k, v in rows:
+    for k, v in summary_rows(summary):
         if isinstance(v, float):
             v = f"{v:.2f}"
         elif isinstance(v, tuple):

@@ -1,6 +1,8 @@
 """``isa-mocap synth MOTION OUT``: render a motion into a multi-view rosbag2 MCAP bag with ground truth.
 
-MOTION is a generated motion name (walk, jog, walk_turns, wave, box) or a BVH file. The pure work
+MOTION is a generated motion name (walk, jog, walk_turns, wave, box) or a BVH file. ``--body mesh``
+(default) renders a skinned MakeHuman human mesh (``--subject``); ``--body capsules`` the tracking
+model's capsules. The pure work
 (motion, rendering, stamps) is :mod:`isa_mocap_ros.synth`; this module converts to ROS messages
 (:mod:`msg_adapters`) and writes the bag (:class:`isa_mocap_ros.bag.BagWriter`).
 
@@ -13,8 +15,9 @@ Topics (``i`` = view index; see ``docs/synthetic_sequences.md``):
 * ``/mocap/cam<i>/mask`` ``sensor_msgs/msg/Image`` mono8 0/255 exact silhouette (``--masks`` only)
 * ``/mocap/ground_truth/joint_states`` ``sensor_msgs/msg/JointState`` (``model.dof_names``; root
   as x, y, z, roll, pitch, yaw), body frames only
-* ``/mocap/ground_truth/markers`` ``geometry_msgs/msg/PoseArray`` in ``world``: one pose per
-  ``model.markers`` joint (position = joint centre, orientation = joint frame), body frames only
+* ``/mocap/ground_truth/markers`` ``geometry_msgs/msg/PoseArray`` in ``world``: one pose per joint named
+  in the model YAML's ``model.marker_joints``, in that order (position = joint centre; orientation =
+  the joint frame for capsule bodies, identity for mesh bodies), body frames only
 * ``/mocap/ground_truth/model`` ``std_msgs/msg/String`` YAML (model, shape, motion, seed), latched
 
 Every message of frame ``k`` has ``header.stamp`` = log time = ``T0_NS + round(k * 1e9 / fps)``.
@@ -51,9 +54,18 @@ def register(sub) -> None:
     p.add_argument("--noise", type=float, default=0.0, metavar="P", help="pixel-noise probability (ISA §13.4.2)")
     p.add_argument("--occluders", type=int, default=0, metavar="K", help="occluding rectangles per image")
     p.add_argument("--rig", default=None, metavar="FILE",
-                   help="camera rig YAML (default config/rigs/default_4cam.yaml)")
+                   help="camera rig YAML or any calibration file: Pose2Sim/anipose TOML, Qualisys .qca.txt, OpenCV "
+                        "FileStorage, camera_info (default config/rigs/default_4cam.yaml)")
     p.add_argument("--seed", type=int, default=0, help="seed of motion, backgrounds and distortions (default 0)")
     p.add_argument("--bvh-scale", type=float, default=None, metavar="M", help="metres per BVH unit (default: detect)")
+    p.add_argument("--body", choices=("mesh", "capsules"), default="mesh",
+                   help="mesh (default): a skinned MakeHuman human mesh; capsules: the tracking model's own "
+                        "capsules (a control)")
+    p.add_argument("--subject", default="average_man",
+                   choices=("slim_woman", "average_man", "heavy_man", "random"),
+                   help="mesh subject: slim_woman (1.60 m), average_man (1.78 m, default), heavy_man (1.88 m), "
+                        "random (drawn from --seed)")
+    p.add_argument("--skirt", action="store_true", help="mesh subject wears MakeHuman's (CC0) helper skirt")
     p.add_argument("--masks", action="store_true", help="also write the exact silhouettes on /mocap/cam<i>/mask")
     p.add_argument("--compression", choices=("zstd", "lz4", "none"), default="zstd", help="MCAP chunk compression")
     p.add_argument("--chunk-mb", type=float, default=32.0, metavar="MB",
@@ -70,7 +82,8 @@ def _fail(msg: str) -> int:
 
 
 def _rig(args):
-    from isa_mocap_ros.vision import default_rig, load_rig
+    from isa_mocap_ros.vision import default_rig
+    from isa_mocap_ros.vision.calib_formats import read_calibration
     from isa_mocap_ros.vision.calibration import Rig
 
     if args.views is not None and args.views < 1:
@@ -82,8 +95,8 @@ def _rig(args):
     if args.rig is None:
         return default_rig(n_views=args.views or 4, width=args.width or 320, height=args.height or 240)
     if not Path(args.rig).is_file():
-        raise ValueError(f"--rig: expected a rig YAML file, received {args.rig!r} (no such file)")
-    rig = load_rig(args.rig)
+        raise ValueError(f"--rig: expected a rig YAML file or another calibration file, received {args.rig!r} (no such file)")
+    rig = read_calibration(args.rig)
     if args.views is not None:
         if args.views > len(rig):
             raise ValueError(f"--views: expected at most the {len(rig)} cameras of {args.rig}, received {args.views}")
@@ -149,7 +162,7 @@ def write_bag(args) -> dict:
 
     from isa_mocap_ros.bag import QOS_DEFAULT, QOS_LATCHED, BagWriter
     from isa_mocap_ros.body import pose_to_joint_state
-    from isa_mocap_ros.synth import T0_NS, SceneRenderer, make_clip, model_yaml, synthesize
+    from isa_mocap_ros.synth import T0_NS, make_clip, make_renderer, model_yaml, synthesize
     from msg_adapters import array_to_image, arrays_to_joint_state, rt_to_transform, to_cdr, type_name_of
 
     def cdr(msg) -> bytes:
@@ -163,8 +176,9 @@ def write_bag(args) -> dict:
     rig = _rig(args)
     show = not args.no_progress
     clip = make_clip(args.motion, dof=args.model, fps=args.fps, start_s=args.start_s, duration_s=args.duration_s,
-                     seed=args.seed, bvh_scale=args.bvh_scale)
-    renderer = SceneRenderer(clip.model, rig, seed=args.seed, noise=args.noise, occluders=args.occluders)
+                     seed=args.seed, bvh_scale=args.bvh_scale, body=getattr(args, "body", "mesh"),
+                     subject=getattr(args, "subject", "average_man"), skirt=getattr(args, "skirt", False))
+    renderer = make_renderer(clip, rig, seed=args.seed, noise=args.noise, occluders=args.occluders)
     V = len(rig)
     frames_total = args.empty_frames + clip.n_frames
     names = list(clip.model.dof_names)
@@ -216,6 +230,8 @@ def write_bag(args) -> dict:
     return {"bag": str(out), "frames": frames_total, "empty_frames": args.empty_frames, "views": V,
             "size": f"{rig.cameras[0].width}x{rig.cameras[0].height}", "fps": clip.fps, "model": clip.model.name,
             "motion": clip.name if clip.source == "generated" else clip.source, "seconds": seconds,
+            "body": clip.body if clip.mesh is None else f"mesh ({clip.mesh.subject.name}, "
+                                                          f"{clip.mesh.subject.stature_m:.2f} m)",
             "frames_per_s": frames_total / seconds if seconds > 0 else float("inf"), "bytes": size,
             "frames_without_body": {f"cam{i}": int(n) for i, n in enumerate(unseen) if n},
             "params": clip.params}
@@ -227,7 +243,8 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, FileExistsError) as exc:   # SynthError, BodyError, VisionError, BagError, AdapterError
         return _fail(str(exc))
     print(f"synth: wrote {summary['bag']}: {summary['frames']} frames ({summary['empty_frames']} empty) x "
-          f"{summary['views']} views at {summary['size']}, {summary['fps']:g} fps, {summary['model']}, motion "
+          f"{summary['views']} views at {summary['size']}, {summary['fps']:g} fps, body {summary['body']}, "
+          f"{summary['model']}, motion "
           f"{summary['motion']}; {summary['bytes'] / 1e6:.2f} MB in {summary['seconds']:.1f} s "
           f"({summary['frames_per_s']:.1f} frames/s)")
     if "retarget_mean_mm" in summary["params"]:

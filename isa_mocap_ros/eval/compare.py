@@ -62,11 +62,14 @@ class SequenceSpec:
     height: int = 120
     views: int = 4
     seed: int = 0
+    #: ``mesh`` (a skinned human, the average man; scored by its skeleton's joint centres) or
+    #: ``capsules`` (the tracking model itself, a control; scored against the ground-truth poses)
+    body: str = "mesh"
 
     def cache_name(self) -> str:
         m = Path(self.motion).stem if self.motion.endswith(".bvh") else self.motion
         return (f"{self.name}_{m}_{self.duration_s:.4g}s_{self.fps:g}fps_from{self.start_s:g}_{self.width}x{self.height}"
-                f"_v{self.views}_s{self.seed}.npz")
+                f"_v{self.views}_s{self.seed}" + ("_mesh" if self.body == "mesh" else "") + ".npz")
 
 
 @dataclass(frozen=True)
@@ -100,7 +103,7 @@ class Design:
         return d
 
 
-def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK) -> Design:
+def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK, body: str = "mesh") -> Design:
     """The three designs of ``isa-mocap bench compare``.
 
     * ``"quick"``: 2 algorithms (isa, pycma), 39 DOF, 200 evaluations, 1 seed, the generated walk for
@@ -110,11 +113,15 @@ def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK
       jog, wave, box) of 31 frames at 30 fps (30 scored) in 4 views of 128 × 96 (11 frames until
       session 12: too short, see docs/evaluation.md).
     * ``"full"``: as default with 30 seeds and 2 s at 30 fps (60 frames) in 4 views of 320 × 240.
+
+    ``body``: what every sequence shows (``mesh`` default, ``capsules`` the control).
     """
+    if body not in ("mesh", "capsules"):
+        raise ValueError(f"body: expected 'mesh' or 'capsules', received {body!r}")
     notes = []
     gen = ("walk", "jog", "wave", "box")
     if kind == "quick":
-        seqs = (SequenceSpec("walk", "walk", duration_s=0.14, fps=30.0, width=96, height=72, views=2),)
+        seqs = (SequenceSpec("walk", "walk", duration_s=0.14, fps=30.0, width=96, height=72, views=2, body=body),)
         return Design("quick", ("isa", "pycma"), (39,), (200,), (0,), seqs, None, ())
     if kind == "default":
         dur, fps, w, h, seeds = 31 / 30, 30.0, 128, 96, (0, 1, 2)
@@ -124,10 +131,11 @@ def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK
         raise ValueError(f"kind: expected 'quick', 'default' or 'full', received {kind!r}")
     seqs = []
     if cmu_path is not None and Path(cmu_path).is_file():
-        seqs.append(SequenceSpec("cmu_walk", str(cmu_path), duration_s=dur, fps=fps, start_s=1.0, width=w, height=h))
+        seqs.append(SequenceSpec("cmu_walk", str(cmu_path), duration_s=dur, fps=fps, start_s=1.0, width=w, height=h,
+                                 body=body))
     else:
         notes.append(f"CMU walk skipped: {cmu_path} not found")
-    seqs += [SequenceSpec(g, g, duration_s=dur, fps=fps, width=w, height=h) for g in gen]
+    seqs += [SequenceSpec(g, g, duration_s=dur, fps=fps, width=w, height=h, body=body) for g in gen]
     return Design(kind, ALGORITHMS + PEER_ALGORITHMS, (28, 39), (500, 1500, 3000), seeds, tuple(seqs), None,
                   tuple(notes))
 
@@ -145,7 +153,7 @@ def label(alg: str, dof: int, budget: int) -> str:
 def prepare_sequence(spec: SequenceSpec, cache_dir: Path | str) -> Path:
     """Synthesize ``spec`` once into ``cache_dir`` (an ``.npz``: packed masks, truth poses, truth model
     shape, rig size); return its path (an existing file is reused)."""
-    from isa_mocap_ros.synth import SceneRenderer, _plain, make_clip
+    from isa_mocap_ros.synth import SceneRenderer, _plain, make_clip, make_renderer, marker_names
     from isa_mocap_ros.vision import default_rig, render_mask
 
     cache_dir = Path(cache_dir)
@@ -154,19 +162,30 @@ def prepare_sequence(spec: SequenceSpec, cache_dir: Path | str) -> Path:
     if path.is_file():
         return path
     clip = make_clip(spec.motion, dof=39, fps=spec.fps, start_s=spec.start_s, duration_s=spec.duration_s,
-                     seed=spec.seed)
+                     seed=spec.seed, body=spec.body)
     rig = default_rig(n_views=spec.views, width=spec.width, height=spec.height)
-    renderer = SceneRenderer(clip.model, rig, seed=spec.seed)
     masks = np.zeros((clip.n_frames, spec.views, spec.height, spec.width), dtype=bool)
-    for k, pose in enumerate(clip.poses):
-        E = renderer.endpoints(pose)
-        for v, cam in enumerate(rig.cameras):
-            masks[k, v] = render_mask(cam, E, clip.model.capsule_radii) > 0
+    extra = {}
+    if clip.mesh is not None:
+        renderer = make_renderer(clip, rig, seed=spec.seed)
+        markers = np.zeros((clip.n_frames, len(marker_names(clip)), 3))
+        for k in range(clip.n_frames):
+            for v, m in enumerate(renderer.reference_masks(k)):
+                masks[k, v] = m > 0
+            markers[k] = renderer.posed(k)[1]
+        extra = {"markers": markers, "marker_names": json.dumps(marker_names(clip))}
+    else:
+        renderer = SceneRenderer(clip.model, rig, seed=spec.seed)
+        for k, pose in enumerate(clip.poses):
+            E = renderer.endpoints(pose)
+            for v, cam in enumerate(rig.cameras):
+                masks[k, v] = render_mask(cam, E, clip.model.capsule_radii) > 0
     shape = _plain({"name": clip.model.shape["name"], "offsets": dict(clip.model.shape["offsets"]),
                     "radii": dict(clip.model.shape["radii"])})
     tmp = path.with_suffix(".tmp.npz")
     np.savez_compressed(tmp, masks=np.packbits(masks, axis=-1), truth=np.asarray(clip.poses, dtype=float),
-                        shape=json.dumps(shape), spec=json.dumps(asdict(spec)), width=spec.width, fps=spec.fps)
+                        shape=json.dumps(shape), spec=json.dumps(asdict(spec)), width=spec.width, fps=spec.fps,
+                        **extra)
     tmp.replace(path)
     return path
 
@@ -181,7 +200,10 @@ def _load_sequence(path: Path):
     shape = json.loads(str(z["shape"]))
     truth_model = make_model(39, shape=shape)
     rig = default_rig(n_views=spec.views, width=spec.width, height=spec.height)
-    return spec, masks, np.asarray(z["truth"]), truth_model, shape, rig
+    markers = None
+    if "markers" in z.files:
+        markers = (json.loads(str(z["marker_names"])), np.asarray(z["markers"]))
+    return spec, masks, np.asarray(z["truth"]), truth_model, shape, rig, markers
 
 
 def _project(x_from: np.ndarray, model_from, model_to) -> np.ndarray:
@@ -209,7 +231,7 @@ def run_cell(cell: dict, cache_path: Path | str) -> dict:
 
     register_peers()
     t0 = time.perf_counter()
-    spec, masks, truth, truth_model, shape, rig = _load_sequence(Path(cache_path))
+    spec, masks, truth, truth_model, shape, rig, markers = _load_sequence(Path(cache_path))
     n = len(truth) if not cell.get("frames") else min(len(truth), int(cell["frames"]))
     if n < 2:
         raise ValueError(f"cell {cell_key(cell)}: expected >= 2 frames, received {n}")
@@ -225,7 +247,13 @@ def run_cell(cell: dict, cache_path: Path | str) -> dict:
         energies.append(float(r.energy))
         evals.append(int(r.n_evals))
         fell += int(r.fell_back)
-    acc = accuracy(model, np.array(est), truth_model, truth[1:n])
+    if markers is not None:     # a mesh body: by the mesh skeleton's joint centres (knees in 3-D)
+        from isa_mocap_ros.eval import score_markers
+
+        acc = score_markers(model, np.array(est), markers[0], markers[1][1:n])
+        acc["frame_errors_mm"] = [round(float(e), 2) for e in acc["frame_errors_mm"]]
+    else:
+        acc = accuracy(model, np.array(est), truth_model, truth[1:n])
     return {**cell, "key": cell_key(cell), "mpjpe_mm": acc["mpjpe_mm"], "knee_rmse_deg": acc["knee_rmse_deg"],
             "max_frame_error_mm": acc["max_frame_error_mm"], "frames": acc["frames"], "fell_back": fell,
             "evals_per_frame": float(np.mean(evals)), "max_evals_frame": int(max(evals)),

@@ -22,7 +22,7 @@ import numpy as np
 
 __all__ = ["MetricsError", "joint_errors_mm", "frame_errors_mm", "mpjpe_mm", "max_frame_error_mm",
            "knee_rmse_deg", "knee_errors_deg", "per_joint_angle_rmse_deg", "angle_difference",
-           "shared_markers", "marker_positions"]
+           "shared_markers", "marker_positions", "score_markers", "knee_flexion_from_points"]
 
 
 class MetricsError(ValueError):
@@ -208,3 +208,65 @@ def marker_positions(model, poses, *, joints=None) -> np.ndarray:
             raise MetricsError(f"joints: expected joints of model {model.name!r}, received unknown {n!r}")
         idx.append(model.joint_names.index(n))
     return joint_positions(model, X)[:, idx]
+
+
+def knee_flexion_from_points(hip, knee, ankle) -> np.ndarray:
+    """Knee flexion (radians) from 3-D joint centres ``(..., 3)``: the angle between the thigh
+    ``knee - hip`` and the shank ``ankle - knee`` (0 = straight leg)."""
+    a = np.asarray(knee, float) - np.asarray(hip, float)
+    b = np.asarray(ankle, float) - np.asarray(knee, float)
+    c = np.sum(a * b, axis=-1) / np.maximum(np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1), 1e-12)
+    return np.arccos(np.clip(c, -1.0, 1.0))
+
+
+def score_markers(model, poses, truth_names, truth_markers) -> dict:
+    """Accuracy of pose estimates against ground-truth joint centres matched BY NAME.
+
+    Needs no ground-truth model: the estimate's joint centres come from ``model`` (the tracking
+    model, with the shape it tracked with) by forward kinematics; every ground-truth marker whose
+    name is one of ``model``'s marker joints is compared (Eq. 20 per frame, then the mean). Knee
+    angles are measured in 3-D on both sides (:func:`knee_flexion_from_points`: thigh vs shank).
+
+    Parameters
+    ----------
+    model : BodyModel
+    poses : (F, D) array_like
+        Estimates.
+    truth_names : sequence of str
+        Names of the ground-truth markers (the bag's ``model.marker_joints``).
+    truth_markers : (F, M, 3) array_like
+        Ground-truth joint centres, metres, in ``truth_names`` order.
+
+    Returns
+    -------
+    dict
+        ``frames``, ``mpjpe_mm``, ``median_frame_error_mm``, ``max_frame_error_mm``,
+        ``worst_frame`` (index into the F frames), ``knee_rmse_deg`` (NaN without hips, knees and
+        ankles on both sides), ``markers`` (names compared), ``frame_errors_mm`` (F,),
+        ``per_marker_mm`` (name -> mean), ``knee_errors_deg`` ((F, 2) estimate - truth, left/right).
+    """
+    X = _poses("poses", poses, model.dof)
+    T = _points("truth_markers", truth_markers)
+    names = list(truth_names)
+    if T.ndim != 3 or T.shape[0] != X.shape[0] or T.shape[1] != len(names):
+        raise MetricsError(f"truth_markers: expected shape ({X.shape[0]}, {len(names)}, 3), received {T.shape}")
+    mine = [model.joint_names[j] for j in model.markers]
+    shared = [n for n in mine if n in names]
+    if not shared:
+        raise MetricsError(f"truth_names: expected some of the model's markers {mine}, received {names}")
+    Pe = marker_positions(model, X, joints=shared)
+    Pt = T[:, [names.index(n) for n in shared]]
+    je = joint_errors_mm(Pe, Pt)
+    fe = je.mean(axis=1)
+    out = {"frames": int(X.shape[0]), "mpjpe_mm": float(fe.mean()), "median_frame_error_mm": float(np.median(fe)),
+           "max_frame_error_mm": float(fe.max()), "worst_frame": int(np.argmax(fe)), "markers": shared,
+           "frame_errors_mm": fe, "per_marker_mm": {n: float(v) for n, v in zip(shared, je.mean(axis=0))},
+           "knee_rmse_deg": float("nan"), "knee_errors_deg": None}
+    sides = [s for s in ("left", "right") if all(f"{s}_{j}" in shared for j in ("hip", "knee", "ankle"))]
+    if sides:
+        def ang(P, s):
+            return knee_flexion_from_points(*(P[:, shared.index(f"{s}_{j}")] for j in ("hip", "knee", "ankle")))
+        ke = np.stack([np.rad2deg(ang(Pe, s) - ang(Pt, s)) for s in sides], axis=1)
+        out["knee_rmse_deg"] = float(np.sqrt(np.mean(ke ** 2)))
+        out["knee_errors_deg"] = ke
+    return out

@@ -57,3 +57,85 @@ def plot_sequence(path: Path, model, poses: np.ndarray, truth_model, truth_poses
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
+
+
+def score(model, seq, poses_by_stamp: dict) -> dict | None:
+    """Accuracy of estimates (stamp -> pose of ``model``) against a sequence's ground truth.
+
+    By name against the ground-truth joint centres (:func:`.metrics.score_markers`, no
+    ground-truth model needed) when the sequence has named markers and either no ground-truth
+    joint states or a mesh body (whose joint centres are the mesh skeleton's, not a model's);
+    otherwise against the ground-truth poses through the ground-truth model (:func:`accuracy`).
+    None without ground truth at an estimated stamp.
+
+    Returns
+    -------
+    dict
+        :func:`accuracy`'s keys plus ``scored_by`` (``"markers"`` or ``"joint_states"``),
+        ``stamps`` (the scored stamps) and ``worst_frame_stamp_ns``.
+    """
+    from .metrics import score_markers
+
+    use_markers = seq.has_marker_truth and (not seq.has_truth or seq.body_kind == "mesh")
+    if use_markers:
+        stamps = [f.stamp_ns for f in seq.frames if f.truth_markers is not None and f.stamp_ns in poses_by_stamp]
+        if not stamps:
+            return None
+        by = {f.stamp_ns: f.truth_markers for f in seq.frames}
+        P = np.array([poses_by_stamp[s] for s in stamps])
+        sc = score_markers(model, P, seq.truth_marker_names, np.array([by[s] for s in stamps]))
+        out = {k: sc[k] for k in ("frames", "mpjpe_mm", "max_frame_error_mm", "median_frame_error_mm",
+                                  "knee_rmse_deg", "markers")}
+        out["frame_errors_mm"] = [round(float(e), 2) for e in sc["frame_errors_mm"]]
+        out["per_marker_mm"] = sc["per_marker_mm"]
+        out.update(scored_by="markers", stamps=stamps, worst_frame_stamp_ns=int(stamps[sc["worst_frame"]]))
+        return out
+    if not seq.has_truth:
+        return None
+    stamps = [f.stamp_ns for f in seq.frames if f.truth is not None and f.stamp_ns in poses_by_stamp]
+    if not stamps:
+        return None
+    by = {f.stamp_ns: f.truth for f in seq.frames}
+    out = accuracy(model, np.array([poses_by_stamp[s] for s in stamps]), seq.truth_model,
+                   np.array([by[s] for s in stamps]))
+    out.update(scored_by="joint_states", stamps=stamps,
+               worst_frame_stamp_ns=int(stamps[int(np.argmax(out["frame_errors_mm"]))]))
+    return out
+
+
+def plot_marker_score(path: Path, model, poses: np.ndarray, truth_names, truth_markers: np.ndarray, *,
+                      times_s: np.ndarray, title: str = "") -> Path:
+    """PNG: knee flexion measured in 3-D (estimate vs ground-truth joint centres) and the per-frame
+    joint error over time (:func:`.metrics.score_markers`)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .metrics import knee_flexion_from_points, score_markers
+
+    sc = score_markers(model, poses, truth_names, truth_markers)
+    names = list(truth_names)
+    Pe = marker_positions(model, poses, joints=[n for n in names if n in model.joint_names])
+    en = [n for n in names if n in model.joint_names]
+    fig, ax = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
+    for i, side in enumerate(("left", "right")):
+        js = [f"{side}_{j}" for j in ("hip", "knee", "ankle")]
+        if all(j in names for j in js) and all(j in en for j in js):
+            kt = np.degrees(knee_flexion_from_points(*(truth_markers[:, names.index(j)] for j in js)))
+            ke = np.degrees(knee_flexion_from_points(*(Pe[:, en.index(j)] for j in js)))
+            ax[i].plot(times_s, kt, "k-", lw=2, label="ground truth (3-D)")
+            ax[i].plot(times_s, ke, "r--", lw=1.5, label="estimate")
+            ax[i].legend(loc="upper right", fontsize=8)
+        ax[i].set_ylabel(f"{side} knee (deg)")
+    fe = sc["frame_errors_mm"]
+    ax[2].plot(times_s, fe, "b-")
+    ax[2].set_ylabel("mean joint error (mm)")
+    ax[2].set_xlabel("time (s)")
+    ax[2].set_title(f"Eq. 20 per frame (by marker name): mean {fe.mean():.1f} mm, max {fe.max():.1f} mm", fontsize=9)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path

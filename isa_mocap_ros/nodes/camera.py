@@ -11,6 +11,11 @@ camera info of one set carries the same ``header.stamp`` (the node clock when th
 ``cam<i>/extrinsics`` (``geometry_msgs/TransformStamped`` world -> ``cam<i>_optical_frame``, i.e.
 ``Camera.pose_in_world()``) is published once, latched (transient local, depth 1).
 
+Video files and image folders are adapted to the calibration (:class:`~isa_mocap_ros.vision.sources.
+AdaptedSource`): a frame of another size than the calibrated sensor (scaled, letterboxed, or with
+``fit:=crop`` a centred cut) gets the matching intrinsics on ``camera_info``, logged once per view;
+``rig_file`` may be any calibration format (:mod:`isa_mocap_ros.vision.calib_formats`).
+
 Faults: a view whose image is missing this time (device unplugged, unreadable file, another aspect
 ratio) is skipped for that set and reported (rate-limited); a failed device is reopened with
 back-off and "reconnected camera <i> (device <n>)" is logged. A video/image source without a rig
@@ -30,7 +35,7 @@ from sensor_msgs.msg import CameraInfo, Image
 import msg_adapters as ma
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, run_node
-from isa_mocap_ros.vision.sources import EndOfSource, SourceConfig, SourceEvent, open_source, resolve_rig
+from isa_mocap_ros.vision.sources import AdaptedSource, EndOfSource, SourceConfig, SourceEvent, open_source, resolve_rig
 
 __all__ = ["CameraNode", "main"]
 
@@ -47,6 +52,11 @@ class CameraNode(Node):
             # OpenCV's own multi-line open warnings; the source reports failures itself, once per retry
             cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
         self.source = open_source(self.config, self.rig, on_event=self._on_source_event)
+        adapted = self.source if isinstance(self.source, AdaptedSource) else getattr(self.source, "source", None)
+        if isinstance(adapted, AdaptedSource):     # video / images: the cameras of the adapted frames
+            self.rig = adapted.rig
+            for line in adapted.describe():
+                self.get_logger().info(f"camera: {line}")
         n = self.config.views
         self.frames = [f"{self.frame_id_prefix}cam{i}_optical_frame" for i in range(n)]
         self.intrinsics = [ma.Intrinsics(**cam.intrinsics_fields()) for cam in self.rig.cameras]
@@ -82,10 +92,13 @@ class CameraNode(Node):
         motion = d("motion", "walk", "source=synthetic: walk, jog, walk_turns, wave, box, or a BVH file")
         duration = d("motion_duration_s", 0.0, "seconds of motion (0 = whole BVH, 5 s generated)", lo=0.0, hi=1e6)
         dof = d("model_dof", 39, "source=synthetic: body model (18, 28 or 39 DOF)", lo=18, hi=39)
-        rig_file = d("rig_file", "", "rig/calibration YAML ('' = default rig, synthetic source only)")
+        rig_file = d("rig_file", "", "rig or calibration file: rig YAML, Pose2Sim/anipose TOML, Qualisys .qca.txt, "
+                     "OpenCV FileStorage, camera_info YAML ('' = default rig, synthetic source only)")
         views = d("views", 4, "number of views (the first cameras of the rig)", lo=1, hi=64)
         width = d("width", 320, "published image width (0 = the rig file's)", lo=0, hi=8192)
-        height = d("height", 240, "published image height (0 = the rig file's)", lo=0, hi=8192)
+        height = d("height", 240, "published image height (0 = the rig file's; video/images: 0 keeps the "
+                   "frames' aspect ratio at width)", lo=0, hi=8192)
+        fit = d("fit", "auto", "video/images of another size than the calibration: auto, scale, letterbox, crop")
         fps = d("fps", 30.0, "frame sets per second (timer rate; the synthetic motion's rate)", lo=0.1, hi=1000.0)
         seed = d("seed", 0, "seed of the synthetic motion, backgrounds and distortions", lo=0, hi=2**31 - 1)
         noise = d("noise", 0.0, "pixel-noise probability (ISA 13.4.2; 0 = off)", lo=0.0, hi=1.0)
@@ -97,7 +110,7 @@ class CameraNode(Node):
         return SourceConfig(source=source, devices=tuple(int(i) for i in devices), videos=tuple(videos),
                             image_globs=tuple(globs), motion=motion, motion_duration_s=duration, model_dof=dof,
                             rig_file=rig_file, views=views, width=width, height=height, fps=fps, seed=seed,
-                            noise=noise, occluders=occ, empty_frames=empty, loop=loop)
+                            noise=noise, occluders=occ, empty_frames=empty, loop=loop, fit=fit)
 
     def _on_source_event(self, ev: SourceEvent) -> None:
         if ev.kind in ("reconnected", "info"):

@@ -72,10 +72,14 @@ def declare(node: Node, name: str, default: Any, description: str, *, lo: float 
 
 
 class ProblemLog:
-    """Rate-limited "dropped bad input" logging with per-kind counters.
+    """Rate-limited logging of a node's input problems and expected events, with per-kind counters.
 
     ``report(kind, text)`` logs ``text`` at most once every ``period_s`` per ``kind`` (the first time
-    always) and counts every occurrence; ``counts`` feeds the node's diagnostics.
+    always) and counts every occurrence in ``counts`` (the node's ``bad_inputs`` diagnostics): WARN for
+    a rejected input (it needs attention), ``level="error"`` for data lost (a frame set that could not be
+    tracked). ``event(kind, text)`` is the same at INFO for what a normal run does (the empty masks of
+    the background-learning frames, the automatic initialization, the heading check), counted apart in
+    ``events`` and never as a bad input.
     """
 
     def __init__(self, node: Node, *, period_s: float = 5.0) -> None:
@@ -83,18 +87,44 @@ class ProblemLog:
         self._period_s = period_s
         self._last: dict[str, float] = {}
         self.counts: dict[str, int] = {}
+        self.events: dict[str, int] = {}
 
-    def report(self, kind: str, text: str) -> None:
-        self.counts[kind] = self.counts.get(kind, 0) + 1
+    def _due(self, kind: str) -> bool:
         now = time.monotonic()
         if now - self._last.get(kind, -1e18) >= self._period_s:
             self._last[kind] = now
+            return True
+        return False
+
+    def report(self, kind: str, text: str, *, level: str = "warn") -> None:
+        self.counts[kind] = self.counts.get(kind, 0) + 1
+        if self._due(kind):
             n = self.counts[kind]
-            self._logger.warn(text + (f" ({n} so far)" if n > 1 else ""))
+            log = self._logger.error if level == "error" else self._logger.warn
+            log(text + (f" ({n} so far)" if n > 1 else ""))
+
+    def event(self, kind: str, text: str) -> None:
+        self.events[kind] = self.events.get(kind, 0) + 1
+        if self._due("event:" + kind):
+            n = self.events[kind]
+            self._logger.info(text + (f" ({n} so far)" if n > 1 else ""))
 
     @property
     def total(self) -> int:
         return sum(self.counts.values())
+
+
+def log_closing(node: Node, text: str) -> None:
+    """Log a node's closing line: through its logger while the context is up, else on stderr.
+
+    After Ctrl-C the rclpy signal handler has already shut the context down when ``close()`` runs;
+    the logger then still tries to publish to ``/rosout`` and prints "Failed to publish log message
+    to rosout: publisher's context is invalid" beside the line.
+    """
+    if node.context.ok():
+        node.get_logger().info(text)
+    else:
+        print(f"[INFO] [{node.get_name()}]: {text}", file=sys.stderr, flush=True)
 
 
 EXECUTORS = ("events", "single_threaded")

@@ -8,17 +8,29 @@ Publishes ``joint_states`` (JointState, ``model.dof_names``; root rotation as ro
 the exported URDF draws it), ``root_pose`` (PoseStamped), ``markers`` (MarkerArray skeleton),
 ``estimator/done`` (std_msgs/Header, one per processed frame set, tracked or not: the lockstep
 topic for the player), ``cam<i>/overlay`` (optional), ``/diagnostics`` and the REP-155 view
-``/humans/bodies/<id>/joint_states`` + latched ``/humans/bodies/<id>/urdf``.
+``/humans/bodies/<id>/joint_states`` + latched ``/humans/bodies/<id>/urdf``; latched ``model`` (String YAML:
+the tracking body model with its shape, the schema of ``/mocap/ground_truth/model``).
 
 Frame sets are synchronized exactly or approximately (:mod:`isa_mocap_ros.tracking.sync`); a
 worker thread runs the tracker so callbacks never block. In real-time mode a frame set that waits
 while the tracker is busy is replaced by a newer one and counted as dropped; in lockstep mode every
 set is processed and the estimator waits up to ``prediction_wait_s`` for the prediction node's
 prediction of that frame.
+
+Input checks, before anything reaches the synchronizer or the tracker (:mod:`isa_mocap_ros.intake`):
+a view's camera is what a ``camera_info`` and a mask of the same stamp agree on (frame id, size); a
+mask that disagrees with it, or lies more than ``max_stamp_gap_s`` from the view's stream, waits for
+a camera_info of its own stamp and is dropped when none comes. The tracker's cameras are made from
+those camera infos and from the ``extrinsics`` whose parent is ``world_frame`` and whose child is the
+frame the view's masks name. A prediction is stored only when it is well formed (the model's joints,
+finite) and its stamp lies within ``max_stamp_gap_s`` of the frame sets. A camera that changes (a
+pair of a new size) restarts the tracker with the new cameras. Every dropped message is counted
+(``bad_inputs`` in ``/diagnostics``) and logged, one rate-limited line per kind.
 """
 from __future__ import annotations
 
 import json
+import re
 import threading
 import time
 from collections import deque
@@ -38,6 +50,7 @@ from isa_mocap_ros.body import capsule_endpoints, joint_positions, make_model, p
 from isa_mocap_ros.body.hri import hri_joint_names, hri_urdf
 from isa_mocap_ros.eval.peers import register_peers
 from isa_mocap_ros.geometry import exp_so3
+from isa_mocap_ros.intake import Setting, StampWindow, ViewGate
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, one_numba_thread, run_node
 from isa_mocap_ros.tracking.predict import periods_between
@@ -47,14 +60,23 @@ from isa_mocap_ros.vision import Camera
 from isa_mocap_ros.vision.overlay import draw_overlay
 
 
-def _camera_info_key(msg: CameraInfo) -> tuple | None:
-    """The fields :func:`msg_adapters.camera_info_to_intrinsics` reads, as bytes (a cheap equality key;
-    ~10 µs instead of ~0.2 ms for the conversion), or None when a field is not a plain buffer."""
-    try:
-        return (msg.width, msg.height, msg.distortion_model, bytes(memoryview(msg.k)), bytes(memoryview(msg.d)),
-                bytes(memoryview(msg.r)), bytes(memoryview(msg.p)))
-    except (TypeError, ValueError):
-        return None
+#: distinct child frames kept per view from cam<i>/extrinsics (the one the view's masks name is used)
+MAX_CAMERA_FRAMES = 8
+
+#: the starts of the tracker's notes (``FrameResult.notes``) on what a normal run does: the empty masks of
+#: the frames before anyone is in view (the segmentation's background-learning frames), the automatic
+#: initialization, the heading check, stages that their budget share or the pose leaves out. Logged at
+#: INFO and counted apart from bad inputs; every other note is logged at WARN and counted as a problem.
+EXPECTED_NOTES = ("initialized automatically", "heading check", "initialization polish",
+                  "no usable view and no estimate yet", "contour stage: stopped", "limb stage: ",
+                  "prediction: the external one follows the estimates from before the heading check")
+_EXPECTED_NOTE_PATTERNS = (re.compile(r"view \d+: empty mask \(nobody in view\)"),
+                           re.compile(r"(pelvis|torso|limb|refinement|contour) stage skipped"))
+
+
+def note_is_expected(note: str) -> bool:
+    """Whether a tracker note reports an expected event (:data:`EXPECTED_NOTES`) rather than a problem."""
+    return note.startswith(EXPECTED_NOTES) or any(p.match(note) for p in _EXPECTED_NOTE_PATTERNS)
 
 
 class EstimatorNode(Node):
@@ -172,6 +194,11 @@ class EstimatorNode(Node):
         self.wait_for_inputs_s = declare(self, "wait_for_inputs_s", 0.0, "before saying ready, wait up to this "
                                          "long until every cam<i>/mask (and the prediction) has a publisher",
                                          lo=0.0, hi=600.0)
+        gap_s = declare(self, "max_stamp_gap_s", 5.0, "a mask or prediction farther than this in time from the "
+                        "view's stream is dropped (a mask with its own camera_info is taken; 0 = no check)",
+                        lo=0.0, hi=1e9)
+        depth = declare(self, "input_queue", 10, "masks waiting for the camera_info of their stamp (and camera "
+                        "infos for their mask), per view", lo=1, hi=1000)
         self.problems = ProblemLog(self)
         self.model = make_model(dof, shape=shape or None)
         self.hri_names = hri_joint_names(self.model, self.body_id)
@@ -206,8 +233,13 @@ class EstimatorNode(Node):
         self.slot = LatestSlot(keep_all=self.lockstep, depth=self.backlog)
         self.threads_in_use = 0          # numba threads of the tracker's worker (set when it starts)
         self._cv = threading.Condition()
+        # input checks (isa_mocap_ros.intake): a view's camera is what a camera_info and a mask of one stamp
+        # agree on; _intrinsics[v] is that camera_info's, _extrinsics[v] maps child frame -> (R, t)
+        self.gates = [ViewGate(f"cam{v}", max_gap_ns=int(gap_s * 1e9), depth=depth) for v in range(self.n_views)]
+        self._stream = StampWindow(int(gap_s * 1e9))     # the frame sets' stamps, for the predictions
         self._intrinsics: list = [None] * self.n_views
-        self._extrinsics: list = [None] * self.n_views
+        self._extrinsics: list[dict[str, tuple]] = [{} for _ in range(self.n_views)]
+        self._camera_changed: str | None = None   # a view's camera changed after the tracker was made
         self._images: list[dict[int, np.ndarray]] = [{} for _ in range(self.n_views)]
         self._predictions: dict[int, np.ndarray] = {}
         self._prev_stamp_ns: int | None = None   # stamp of the last frame set given to the tracker
@@ -226,7 +258,8 @@ class EstimatorNode(Node):
         for v in range(self.n_views):
             self.create_subscription(Image, f"cam{v}/mask", self._mask_cb(v), sensor,
                                      qos_overriding_options=QOS_OVERRIDES)
-            self.create_subscription(CameraInfo, f"cam{v}/camera_info", self._info_cb(v), sensor)
+            self.create_subscription(CameraInfo, f"cam{v}/camera_info", self._info_cb(v), sensor,
+                                     qos_overriding_options=QOS_OVERRIDES)
             self.create_subscription(TransformStamped, f"cam{v}/extrinsics", self._extr_cb(v), qos.LATCHED)
             if self.overlay:
                 self.create_subscription(Image, f"cam{v}/image_raw", self._image_cb(v), sensor)
@@ -240,6 +273,12 @@ class EstimatorNode(Node):
         self.pub_hri = self.create_publisher(JointState, f"/humans/bodies/{self.body_id}/joint_states", qos.RELIABLE)
         self.pub_urdf = self.create_publisher(String, f"/humans/bodies/{self.body_id}/urdf", qos.LATCHED)
         self.pub_urdf.publish(String(data=hri_urdf(self.model, self.body_id)))
+        # our own body model description (the schema of /mocap/ground_truth/model, with the shape we
+        # track with), latched, so a recording of our joint states describes itself
+        from isa_mocap_ros.sequence import model_to_yaml
+
+        self.pub_model = self.create_publisher(String, "model", qos.LATCHED)
+        self.pub_model.publish(String(data=model_to_yaml(self.model, role="estimator")))
         self.pub_overlay = [self.create_publisher(Image, f"cam{v}/overlay", qos.RELIABLE)
                             for v in range(self.n_views)] if self.overlay else []
         self.create_timer(0.05, self._poll_partial)
@@ -250,41 +289,71 @@ class EstimatorNode(Node):
             f"estimator: {self.model.name} ({self.model.dof} DOF), {self.optimizer} with {self.evals} evaluations "
             f"per frame, {self.n_views} views, seed {self.seed}, {'lockstep' if self.lockstep else 'real time'}")
 
-    # -- calibration --------------------------------------------------------------------------
+    # -- calibration and masks: checked before they reach the synchronizer (isa_mocap_ros.intake) ----------
     def _info_cb(self, v: int):
-        last_key = [None]  # the fields of the last good camera info: a camera sends the same one every frame
+        last = [None, None]  # key and intrinsics of the last good camera info: a camera sends the same one every frame
 
         def cb(msg: CameraInfo) -> None:
-            key = _camera_info_key(msg)
-            if key is not None and key == last_key[0]:
-                return  # unchanged (bit for bit): the stored intrinsics are this message's
+            key = ma.camera_info_key(msg)
             try:
-                self._intrinsics[v] = ma.camera_info_to_intrinsics(msg)
+                stamp = ma.stamp_to_ns(msg.header)
+                if key is not None and key == last[0]:
+                    intr = last[1]   # unchanged (bit for bit): the intrinsics are this message's
+                else:
+                    intr = ma.camera_info_to_intrinsics(msg)
+                    last[:] = key, intr
             except ma.AdapterError as exc:
                 self.problems.report(f"info{v}", f"cam{v}/camera_info dropped: {exc}")
                 return
-            last_key[0] = key
+            with self._cv:
+                self._settle(v, *self.gates[v].add_info(stamp, Setting(msg.header.frame_id, intr.width, intr.height),
+                                                        intr))
         return cb
 
     def _extr_cb(self, v: int):
         def cb(msg: TransformStamped) -> None:
             try:
-                self._extrinsics[v] = ma.transform_to_rt(msg)
+                parent = msg.header.frame_id
+                if parent != self.world_frame:
+                    raise ma.AdapterError("TransformStamped.header.frame_id", f"the world frame {self.world_frame!r}",
+                                          parent)
+                known = self.gates[v].setting
+                if known is not None and known.frame_id and msg.child_frame_id != known.frame_id:
+                    raise ma.AdapterError("TransformStamped.child_frame_id", f"the frame of cam{v}'s camera "
+                                          f"{known.frame_id!r}", msg.child_frame_id)
+                rt = ma.transform_to_rt(msg)
+                store = self._extrinsics[v]
+                if msg.child_frame_id not in store and len(store) >= MAX_CAMERA_FRAMES:
+                    raise ma.AdapterError("TransformStamped.child_frame_id", f"one of the {MAX_CAMERA_FRAMES} camera "
+                                          f"frames seen so far ({', '.join(map(repr, store))})", msg.child_frame_id)
             except ma.AdapterError as exc:
                 self.problems.report(f"extr{v}", f"cam{v}/extrinsics dropped: {exc}")
+                return
+            with self._cv:
+                store[msg.child_frame_id] = rt   # used when it is the frame of the view's masks (_cameras)
         return cb
 
+    def _pose_of(self, v: int):
+        """The extrinsics of view ``v`` for the frame its camera_info and masks name (any, when they name none)."""
+        frame = self.gates[v].setting.frame_id if self.gates[v].setting is not None else None
+        store = self._extrinsics[v]
+        if frame is None:
+            return None
+        if frame == "" and store:
+            return next(reversed(store.values()))
+        return store.get(frame)
+
     def _cameras(self) -> list[Camera] | None:
-        if any(i is None for i in self._intrinsics) or any(e is None for e in self._extrinsics):
+        poses = [self._pose_of(v) for v in range(self.n_views)]
+        if any(i is None for i in self._intrinsics) or any(p is None for p in poses):
             return None
         cams = []
-        for v, (intr, (R, t)) in enumerate(zip(self._intrinsics, self._extrinsics)):
+        for v, (intr, (R, t)) in enumerate(zip(self._intrinsics, poses)):
             # extrinsics carry the camera pose in the world (TF: parent world, child optical frame)
             cams.append(Camera.from_intrinsics_and_pose(f"cam{v}", K=intr.K, D=intr.D, width=intr.width,
                                                         height=intr.height, R_wc=R, t_wc=t))
         return cams
 
-    # -- inputs ---------------------------------------------------------------------------------
     def _mask_cb(self, v: int):
         def cb(msg: Image) -> None:
             try:
@@ -296,15 +365,31 @@ class EstimatorNode(Node):
                 self.problems.report(f"mask{v}", f"cam{v}/mask dropped: {exc}")
                 return
             with self._cv:
-                try:
-                    sets = self.sync.add(v, stamp, mask, time.monotonic())
-                except SyncError as exc:
-                    self.problems.report(f"order{v}", f"cam{v}/mask dropped: {exc}")
-                    return
-                for s in sets:
-                    self.slot.put((s, time.monotonic()))
-                self._cv.notify_all()
+                self._settle(v, *self.gates[v].add_image(stamp, Setting(msg.header.frame_id, mask.shape[1],
+                                                                        mask.shape[0], "mono8"), mask))
         return cb
+
+    def _settle(self, v: int, accepted, rejected) -> None:
+        """(Under ``_cv``.) Report view ``v``'s rejected inputs; its accepted masks go to the synchronizer."""
+        for r in rejected:
+            self.problems.report(f"info{v}:gate" if r.kind == "camera_info" else f"mask{v}:{r.kind}",
+                                 r.text.replace(": image", ": mask", 1))
+        for a in accepted:
+            self._intrinsics[v] = a.info
+            if a.changed and self.tracker is not None:
+                self._camera_changed = f"cam{v}: {a.changed}"
+                self.get_logger().warn(f"cam{v}: the camera changed ({a.changed}; its camera_info and mask of stamp "
+                                       f"{a.stamp_ns} agree): the tracker restarts with the new cameras")
+            try:
+                sets = self.sync.add(v, a.stamp_ns, a.payload, time.monotonic())
+            except SyncError as exc:
+                self.problems.report(f"order{v}", f"cam{v}/mask dropped: {exc}")
+                continue
+            self._stream.accept(a.stamp_ns)
+            for fs in sets:
+                self.slot.put((fs, time.monotonic()))
+        if accepted:
+            self._cv.notify_all()
 
     def _image_cb(self, v: int):
         def cb(msg: Image) -> None:
@@ -322,11 +407,16 @@ class EstimatorNode(Node):
     def _prediction_cb(self, msg: JointState) -> None:
         try:
             _, q = ma.joint_state_to_arrays(msg, self.model.dof_names)
+            stamp = ma.stamp_to_ns(msg.header)
         except ma.AdapterError as exc:
-            self.problems.report("prediction", f"prediction dropped: {exc}")
+            self.problems.report(f"prediction:{exc.field.split(' of ')[0]}", f"prediction dropped: {exc}")
             return
         with self._cv:
-            self._predictions[ma.stamp_to_ns(msg.header)] = q
+            far = self._stream.far(stamp) if self._stream.last_ns is not None else "it came before any frame set"
+            if far is not None:   # never stored: it could push the frames' own predictions out
+                self.problems.report("prediction:stamp", f"prediction dropped: {far}")
+                return
+            self._predictions[stamp] = q
             while len(self._predictions) > 100:
                 del self._predictions[min(self._predictions)]
             self._cv.notify_all()
@@ -354,6 +444,11 @@ class EstimatorNode(Node):
         the frame after the initialization: 63 instead of 25 ms), one or two more sets dropped in real
         time."""
         t0 = time.monotonic()
+        # said before the wait, so a first run is not a silent minute: numba compiles the kernels on their
+        # first call after an install (`make venv` does it ahead, `isa-mocap warmup`) and loads its cache after
+        self.get_logger().info("estimator: loading the compiled kernels (a few seconds from numba's cache; "
+                               "1.5-4 min when they were never compiled since the install: run `isa-mocap warmup` "
+                               "once to do that ahead)")
         try:
             from isa_mocap_ros.body import capsule_endpoints as caps
             from isa_mocap_ros.tracking.tracker import make_tracker
@@ -431,20 +526,28 @@ class EstimatorNode(Node):
             except Exception as exc:  # noqa: BLE001 - a node must survive any one bad frame set
                 if self._stop.is_set() or not self.context.ok():
                     return  # shutting down: publishers are gone with the context
-                self.problems.report("error", f"frame set {frame_set.stamp_ns} failed: {type(exc).__name__}: {exc}")
+                self.problems.report("error", f"frame set {frame_set.stamp_ns} failed: {type(exc).__name__}: {exc}",
+                                     level="error")
                 try:
                     self._done(frame_set.stamp_ns)
                 except Exception:  # noqa: BLE001 - the context may have gone meanwhile
                     return
 
     def _process(self, frame_set, prediction_msg, t_ready: float) -> None:
+        if self._camera_changed is not None and self.tracker is not None:
+            self.tracker = None          # made again below with the new cameras; it initializes itself anew
+            self._prev_stamp_ns = None
+            self.problems.event("camera_changed", f"frame set {frame_set.stamp_ns}: tracker restarted "
+                                                  f"({self._camera_changed})")
+        self._camera_changed = None
         if self.tracker is None:
-            cams = self._cameras()
+            with self._cv:
+                cams = self._cameras()
             if cams is None:
                 missing = [v for v in range(self.n_views)
-                           if self._intrinsics[v] is None or self._extrinsics[v] is None]
+                           if self._intrinsics[v] is None or self._pose_of(v) is None]
                 self.problems.report("calib", f"frame set {frame_set.stamp_ns} dropped: no camera_info/extrinsics "
-                                              f"yet for views {missing}")
+                                              f"(world -> the masks' frame) yet for views {missing}", level="error")
                 self._done(frame_set.stamp_ns)
                 return
             from isa_mocap_ros.tracking.published import PublishedPredictor
@@ -480,7 +583,11 @@ class EstimatorNode(Node):
                 self._publish(frame_set.stamp_ns, result)
             self._published_any = True
         for note in result.notes:
-            self.problems.report(f"note:{note.split(':')[0]}", f"frame {frame_set.stamp_ns}: {note}")
+            kind = f"note:{note.split(':')[0].split('(')[0].strip()}"
+            if note_is_expected(note):   # what a normal run does: INFO, not a bad input
+                self.problems.event(kind, f"frame {frame_set.stamp_ns}: {note}")
+            else:
+                self.problems.report(kind, f"frame {frame_set.stamp_ns}: {note}")
         self.latencies_ms.append((time.monotonic() - t_ready) * 1e3)
         self._done(frame_set.stamp_ns)
         if self.overlay and self.frames_done % self.overlay_every == 0 and result.x is not None:
@@ -544,7 +651,7 @@ class EstimatorNode(Node):
             "views_used": getattr(r, "views_used", 0),
             "latency_ms_p50": p50, "latency_ms_p95": p95,
             "tracker_ms_p50": t50, "tracker_ms_p95": t95, "init_ms": self.init_ms,
-            "problems": json.dumps(self.problems.counts),
+            "problems": json.dumps(self.problems.counts), "events": json.dumps(self.problems.events),
         }
         st.level = DiagnosticStatus.OK if self.problems.total == 0 else DiagnosticStatus.WARN
         st.message = "tracking" if self.tracker is not None else "waiting for calibration and masks"

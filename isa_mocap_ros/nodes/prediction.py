@@ -23,11 +23,14 @@ the node turns them back into pose vectors, predicts with the configured predict
 offline tracker). The body model is chosen by the number of joints of the first estimate (18, 28
 or 39) unless ``model_dof`` is set.
 
-Faults, each dropped with one rate-limited log line: a non-finite position, a name list missing
-one of the reference joints or disagreeing with the positions, an estimate whose stamp is not
-newer than the last accepted one. A jump back by more than ``restart_after_s`` (a replayed or
-looped bag starting again) is taken as a new sequence: the history is cleared and the estimate
-accepted. Later estimates may list the joints in another order; they are reordered by name.
+Faults, each dropped and counted with one rate-limited log line: a non-finite position, a name list
+missing one of the reference joints or disagreeing with the positions, an estimate whose stamp is
+not newer than the last accepted one (by at most ``restart_after_s``), an estimate far in time from
+the stream (more than ``restart_after_s`` back or ``max_stamp_gap_s`` ahead). A far estimate that the
+next one continues (a replayed or looped bag starting again) starts a new sequence: the history is
+cleared and that next estimate accepted (:class:`isa_mocap_ros.intake.StreamJumps`), so one stray
+message far in time neither resets nor derails the predictor. Later estimates may list the joints in
+another order; they are reordered by name.
 """
 from __future__ import annotations
 
@@ -39,6 +42,7 @@ from sensor_msgs.msg import JointState
 
 import msg_adapters as ma
 from isa_mocap_ros.body import make_model
+from isa_mocap_ros.intake import StreamJumps
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, run_node
 from isa_mocap_ros.tracking.predict import (ArPredictor, ConstantPosePredictor, ConstantVelocityPredictor,
@@ -77,9 +81,12 @@ class PredictionNode(Node):
                                       lo=1e-6, hi=3600.0)
         self.model_dof = declare(self, "model_dof", 0, "body model 18, 28 or 39 (0 = from the first estimate's "
                                  "joint count)", lo=0, hi=39)
-        self.restart_after_s = declare(self, "restart_after_s", 1.0, "a stamp this much older than the last "
-                                       "starts a new sequence (bag replayed); smaller steps back are dropped",
-                                       lo=0.0, hi=1e9)
+        self.restart_after_s = declare(self, "restart_after_s", 1.0, "a stamp this much older than the last, "
+                                       "followed by the next one, starts a new sequence (bag replayed); smaller "
+                                       "steps back are dropped", lo=0.0, hi=1e9)
+        gap_s = declare(self, "max_stamp_gap_s", 5.0, "an estimate this far ahead of the last is dropped unless the "
+                        "next one follows it (then a new sequence; 0 = no limit)", lo=0.0, hi=1e9)
+        self.jumps = StreamJumps(back_ns=int(self.restart_after_s * 1e9), ahead_ns=int(gap_s * 1e9))
         if self.model_dof not in (0, 18, 28, 39):
             raise ValueError(f"model_dof: expected 0, 18, 28 or 39, received {self.model_dof}")
         make_predictor(self.predictor_name, order=self.order, damping=self.damping)  # validate now
@@ -130,17 +137,15 @@ class PredictionNode(Node):
             except ValueError as exc:
                 self.problems.report("names", f"joint_states dropped: {exc}")
                 return
-        if self.last_stamp_ns is not None and stamp <= self.last_stamp_ns:
-            back_s = (self.last_stamp_ns - stamp) / 1e9
-            if back_s > self.restart_after_s:
-                self.restarts += 1
-                self.predictor.reset()
-                self.get_logger().info(f"joint_states went back {back_s:.3f} s: a new sequence; history cleared")
-            else:
-                self.problems.report("order", f"joint_states dropped: stamp {stamp} is not newer than the last "
-                                              f"estimate's {self.last_stamp_ns} "
-                                              f"(out of order by {back_s * 1e3:.1f} ms)")
-                return
+        kind, why = self.jumps.decide(stamp)
+        if kind == "drop":
+            self.problems.report("order" if "out of order" in why else "stamp", f"joint_states dropped: {why}")
+            return
+        if kind == "restart":
+            self.restarts += 1
+            self.predictor.reset()
+            self.last_stamp_ns = None
+            self.get_logger().info(f"joint_states: {why}: a new sequence; history cleared")
         x_model = q[self._perm]
         # frame periods since the last estimate: more than 1 when the estimator dropped frame sets,
         # so the motion is learnt per period (the prediction is still for the next frame)

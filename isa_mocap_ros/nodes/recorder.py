@@ -24,7 +24,7 @@ from rclpy.node import Node
 import msg_adapters as ma
 from isa_mocap_ros.bag import BagError, BagWriter
 from isa_mocap_ros.nodes import qos
-from isa_mocap_ros.nodes.common import declare, declare_executor, make_executor, spin_until_shutdown
+from isa_mocap_ros.nodes.common import declare, declare_executor, log_closing, make_executor, spin_until_shutdown
 
 # Topics every ROS graph has; recording them with --all only adds noise (ros2 bag skips them too).
 _ALWAYS_EXCLUDED = ("/rosout", "/parameter_events")
@@ -139,7 +139,8 @@ class BagRecorder(Node):
         with self._writer_lock:
             self.writer.close()
         total = sum(self.counts.values())
-        self.get_logger().info(f"closed {self.output}: {total} messages on {len(self.counts)} topics")
+        # after Ctrl-C the context is already shut down: no /rosout any more (log_closing)
+        log_closing(self, f"closed {self.output}: {total} messages on {len(self.counts)} topics")
 
 
 def main(args: list[str] | None = None, *, parameter_overrides=None) -> None:

@@ -14,27 +14,44 @@ impulsive pixel noise, ``robust``). Each image gives one
 frame id), including the all-zero masks of the learning phase, so frame sets stay complete
 downstream. The parameters mirror :class:`~isa_mocap_ros.vision.segmentation.SegmentationConfig`.
 
-Accepted encodings: ``rgb8``, ``bgr8`` (turned into RGB) and ``mono8``. A malformed image (data
-length disagreeing with ``height * step``, unknown or unsupported encoding, a size other than the
-one the background was learnt at) is dropped for that view with one rate-limited log line; the
-node goes on with the next image.
+Accepted encodings: ``rgb8``, ``bgr8`` (turned into RGB) and ``mono8``.
+
+Input checks (:mod:`isa_mocap_ros.intake`), before anything reaches a background model. The node
+also subscribes to ``cam<i>/camera_info`` and takes a view's camera to be what a camera_info and an
+image of the same stamp agree on (frame id and size; the image's encoding with it). So:
+
+* nothing is learnt before such a pair: images wait (``input_queue`` of them) for their camera info;
+  a stray image arriving first cannot fix the view's size;
+* later images are segmented when they agree with that camera (size, frame id, encoding) and their
+  stamp lies within ``max_stamp_gap_s`` of the view's last one; others wait for a camera info of
+  their stamp and are dropped when none comes;
+* a pair that agrees within itself but not with the camera (a real resolution change) restarts
+  that view's background learning, with one log line;
+* malformed images (data length disagreeing with ``height * step``, unknown or unsupported
+  encoding) and camera infos are dropped at once.
+
+Every dropped message is counted (``close()`` prints the total) and logged, one rate-limited line
+per view and kind, and reported on ``/diagnostics`` at 1 Hz. ``use_camera_info: false`` is for a camera without camera_info: then the first
+image fixes the view's size and encoding, and a later change needs a restart of the node.
 """
 from __future__ import annotations
 
 import dataclasses
-import sys
+import json
 import time
 from collections import deque
 
 import cv2
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CameraInfo, Image
 
 import msg_adapters as ma
 from isa_mocap_ros.nodes import qos
-from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, run_node
+from isa_mocap_ros.intake import Setting, ViewGate
+from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, log_closing, run_node
 from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig, SegmentationError
 
 __all__ = ["SegmentationNode", "main", "ENCODINGS"]
@@ -75,6 +92,8 @@ _PARAMS = {
                       0.0, 50.0),
     "field_coupling": ("robust mode, vote=field: coupling of a pixel to its 8 neighbours", 0.0, 10.0),
     "field_iterations": ("robust mode, vote=field: mean-field iterations", 0, 1000),
+    "learn_from": ("colour: frames (the learning frames show the empty scene) or stable (the person may be in "
+                   "them: per pixel the frames where the background shows, plus the clean plate)", None, None),
 }
 
 
@@ -97,24 +116,41 @@ class SegmentationNode(Node):
             values[f.name] = declare(self, f.name, f.default, text, lo=lo, hi=hi)
         plates = declare(self, "clean_plates", Parameter.Type.STRING_ARRAY,
                          "optional clean-plate image per view ('' = learn from the first frames)") or []
+        self.use_info = declare(self, "use_camera_info", True, "check images against cam<i>/camera_info "
+                                "(false: a camera without one; the first image fixes the view's size)")
+        gap_s = declare(self, "max_stamp_gap_s", 5.0, "an image farther than this from the view's last one in "
+                        "time is dropped unless its own camera_info comes with it (0 = no check)", lo=0.0, hi=1e9)
+        depth = declare(self, "input_queue", 10, "images waiting for the camera_info of their stamp (and camera "
+                        "infos for their image), per view", lo=1, hi=1000)
         self.config = SegmentationConfig(**values)
         if plates and len(plates) != self.n_views:
             raise ValueError(f"clean_plates: expected one entry per view ({self.n_views}), received {len(plates)}")
         plates = list(plates) or [""] * self.n_views
-        self.segmenters = [BackgroundSegmenter(self.config, clean_plate=_read_plate(p) if p else None)
-                           for p in plates]
+        self.plates = [_read_plate(p) if p else None for p in plates]
+        self.segmenters = [BackgroundSegmenter(self.config, clean_plate=plate) for plate in self.plates]
+        self.gates = [ViewGate(f"cam{v}", max_gap_ns=int(gap_s * 1e9), depth=depth, need_info=self.use_info)
+                      for v in range(self.n_views)]
+        self.restarts = [0] * self.n_views
         self._warm_up()
         self.problems = ProblemLog(self)
         self.mask_pubs = [self.create_publisher(Image, f"cam{i}/mask", qos.RELIABLE,
                                                 qos_overriding_options=QOS_OVERRIDES) for i in range(self.n_views)]
         for i in range(self.n_views):
-            self.create_subscription(Image, f"cam{i}/image_raw", self._callback(i), qos.SENSOR_DATA,
+            self.create_subscription(Image, f"cam{i}/image_raw", self._image_cb(i), qos.SENSOR_DATA,
                                      qos_overriding_options=QOS_OVERRIDES)
+            if self.use_info:
+                self.create_subscription(CameraInfo, f"cam{i}/camera_info", self._info_cb(i), qos.SENSOR_DATA,
+                                         qos_overriding_options=QOS_OVERRIDES)
         self.masks_published = [0] * self.n_views
+        self._reported = [False] * self.n_views
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.RELIABLE)
+        self.create_timer(1.0, self._publish_diagnostics)
         self.latency_s: deque[float] = deque(maxlen=1000)
         self.get_logger().info(
             f"segmentation: {self.n_views} views, method {self.config.method}, "
-            + ("clean plates" if any(plates) else f"learning from the first {self.config.learn_frames} frames"))
+            + (f"learning from the first {self.config.learn_frames} frames where the background shows"
+               + (" and clean plates" if any(plates) else "") if self.config.learn_from == "stable" else
+               "clean plates" if any(plates) else f"learning from the first {self.config.learn_frames} frames"))
 
     def _warm_up(self) -> None:
         """Run the compiled kernels once on a tiny image, so the first real frame is not slow.
@@ -130,50 +166,105 @@ class SegmentationNode(Node):
             for _ in range(self.config.learn_frames + 2):
                 seg.apply(img)
 
-    def _callback(self, v: int):
-        seg, pub = self.segmenters[v], self.mask_pubs[v]
-        reported = [False]   # the robust-mode decision is logged once per view
+    def _info_cb(self, v: int):
+        last = [None, None]  # key and intrinsics of the last good camera info: a camera sends the same one every frame
 
+        def cb(msg: CameraInfo) -> None:
+            try:
+                stamp = ma.stamp_to_ns(msg.header)
+                key = ma.camera_info_key(msg)
+                if key is not None and key == last[0]:
+                    intr = last[1]
+                else:
+                    intr = ma.camera_info_to_intrinsics(msg)
+                    last[:] = key, intr
+            except ma.AdapterError as exc:
+                self.problems.report(f"info{v}:{exc.field}", f"cam{v}/camera_info dropped: {exc}")
+                return
+            self._settle(v, *self.gates[v].add_info(stamp, Setting(msg.header.frame_id, intr.width, intr.height),
+                                                    intr))
+        return cb
+
+    def _image_cb(self, v: int):
         def cb(msg: Image) -> None:
             t0 = time.perf_counter()
             try:
                 if msg.encoding not in ENCODINGS:
                     raise ma.AdapterError("Image.encoding", f"one of {', '.join(ENCODINGS)}", msg.encoding)
                 img = ma.image_to_array(msg)
-                if msg.encoding == "bgr8":
-                    img = img[:, :, ::-1]
-                if not img.flags.c_contiguous:
-                    img = np.ascontiguousarray(img)
-                mask = seg.apply(img)
+                stamp = ma.stamp_to_ns(msg.header)
             except ma.AdapterError as exc:  # one rate-limited line per view and offending field
                 self.problems.report(f"image{v}:{exc.field}", f"cam{v}/image_raw dropped: {exc}")
                 return
-            except SegmentationError as exc:
-                self.problems.report(f"image{v}:segmenter", f"cam{v}/image_raw dropped: {exc}")
-                return
-            if not reported[0] and not seg.learning and seg.outlier_fraction is not None:
-                reported[0] = True
-                self.get_logger().info(
-                    f"cam{v}: background learnt, outlying share {seg.outlier_fraction:.3f} -> robust mode "
-                    + ("on (neighbourhood vote)" if seg.robust_active else "off"))
-            out = ma.array_to_image(mask, "mono8")
-            out.header = msg.header
-            self.masks_published[v] += 1      # before publish(): a Ctrl-C right after it must not lose the count
-            pub.publish(out)
-            self.latency_s.append(time.perf_counter() - t0)
+            setting = Setting(msg.header.frame_id, img.shape[1], img.shape[0], msg.encoding)
+            self._settle(v, *self.gates[v].add_image(stamp, setting, (msg, img)), t0=t0)
         return cb
+
+    def _settle(self, v: int, accepted, rejected, *, t0: float | None = None) -> None:
+        """Report the view's rejected inputs, segment its accepted images (in stamp order)."""
+        for r in rejected:
+            self.problems.report(f"info{v}:gate" if r.kind == "camera_info" else f"image{v}:{r.kind}", r.text)
+        for a in accepted:
+            if a.changed:
+                self.restarts[v] += 1
+                plate = self.plates[v]
+                if plate is not None and plate.shape[:2] != (self.gates[v].setting.height, self.gates[v].setting.width):
+                    plate = None
+                self.segmenters[v] = BackgroundSegmenter(self.config, clean_plate=plate)
+                self._reported[v] = False
+                self.get_logger().warn(
+                    f"cam{v}: the camera changed ({a.changed}; its camera_info and image of stamp {a.stamp_ns} "
+                    f"agree): background learning restarts"
+                    + ("" if plate is not None else f" from the next {self.config.learn_frames} images"))
+            self._segment(v, *a.payload, t0=t0)
+
+    def _segment(self, v: int, msg: Image, img: np.ndarray, *, t0: float | None) -> None:
+        t0 = time.perf_counter() if t0 is None else t0
+        seg, pub = self.segmenters[v], self.mask_pubs[v]
+        if msg.encoding == "bgr8":
+            img = img[:, :, ::-1]
+        if not img.flags.c_contiguous:
+            img = np.ascontiguousarray(img)
+        try:
+            mask = seg.apply(img)
+        except SegmentationError as exc:
+            self.problems.report(f"image{v}:segmenter", f"cam{v}/image_raw dropped: {exc}")
+            return
+        if not self._reported[v] and not seg.learning and seg.outlier_fraction is not None:
+            self._reported[v] = True    # the robust-mode decision is logged once per view (and learning)
+            self.get_logger().info(
+                f"cam{v}: background learnt, outlying share {seg.outlier_fraction:.3f} -> robust mode "
+                + ("on (neighbourhood vote)" if seg.robust_active else "off"))
+        out = ma.array_to_image(mask, "mono8")
+        out.header = msg.header
+        self.masks_published[v] += 1      # before publish(): a Ctrl-C right after it must not lose the count
+        pub.publish(out)
+        self.latency_s.append(time.perf_counter() - t0)
+
+    def _publish_diagnostics(self) -> None:
+        """1 Hz: masks published, inputs dropped (per kind), views still learning, learning restarts."""
+        st = DiagnosticStatus(name="isa_mocap_ros: segmentation", hardware_id="segmentation")
+        values = {"masks_published": self.masks_published, "bad_inputs": self.problems.total,
+                  "problems": json.dumps(self.problems.counts), "learning_restarts": self.restarts,
+                  "views_learning": [v for v, seg in enumerate(self.segmenters) if seg.learning],
+                  "images_waiting_for_camera_info": [g.waiting() for g in self.gates]}
+        st.level = DiagnosticStatus.OK if self.problems.total == 0 else DiagnosticStatus.WARN
+        st.message = "segmenting" if any(self.masks_published) else "waiting for images and camera infos"
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+        self.pub_diag.publish(DiagnosticArray(header=ma.make_header(self.get_clock().now().nanoseconds),
+                                              status=[st]))
 
     def close(self) -> None:
         """Log the masks published and the per-image processing time."""
         lat = np.array(self.latency_s) * 1e3
         text = (f"segmentation: {sum(self.masks_published)} masks published {self.masks_published}, "
-                f"{self.problems.total} images dropped"
+                f"{sum(n for k, n in self.problems.counts.items() if k.startswith('image'))} images dropped"
+                + (f", {infos} camera infos dropped" if (infos := sum(n for k, n in self.problems.counts.items()
+                                                                      if k.startswith('info'))) else "")
+                + (f", learning restarted {self.restarts} (camera changes)" if any(self.restarts) else "")
                 + (f", per image {np.median(lat):.2f} ms median / {np.percentile(lat, 95):.2f} ms p95 / "
                    f"{lat.max():.1f} ms max" if lat.size else ""))
-        if self.context.ok():
-            self.get_logger().info(text)
-        else:
-            print(text, file=sys.stderr, flush=True)
+        log_closing(self, text)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -207,6 +207,10 @@ class TrackerConfig:
         Growth of the predicted joints' box in which the hull filter looks, m (0.35).
     view_weights : bool
         Eq. 5's mean over views weighted by the share of the predicted body each view sees (True).
+    keypoint_weight : float
+        Weight of the keypoint term (:class:`~isa_mocap_ros.energy.KeypointEnergy`, 13.30-13.31) on frames given keypoints (0 = off; docs/keypoints.md).
+    keypoint_sigma_m : float
+        Scale of the keypoint term's Geman-McClure loss, m (> 0; 0.1).
     max_frames_ahead : float
         The own prediction looks at most this many periods ahead; beyond, the root follows the foreground (5).
     """
@@ -263,6 +267,8 @@ class TrackerConfig:
     hull_keep_px: int = 3
     hull_pad_m: float = 0.35
     view_weights: bool = True
+    keypoint_weight: float = 0.0
+    keypoint_sigma_m: float = 0.1
     max_frames_ahead: float = 5.0
 
     def __post_init__(self) -> None:
@@ -287,6 +293,8 @@ class TrackerConfig:
             raise TrackerError(f"predictor: expected one of {', '.join(PREDICTORS)}, received {self.predictor!r}")
         _check_number("predictor_order", self.predictor_order, lo=1, integer=True)
         _check_number("max_frames_ahead", self.max_frames_ahead, lo=1.0)
+        _check_number("keypoint_weight", self.keypoint_weight, lo=0.0)
+        _check_number("keypoint_sigma_m", self.keypoint_sigma_m, lo=0.0, strict=True)
         for name in ("root_velocity_gain", "joint_velocity_gain"):
             _check_number(name, getattr(self, name), lo=0.0)
         _check_number("prior_eta", self.prior_eta, lo=0.0)

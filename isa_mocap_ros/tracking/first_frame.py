@@ -15,7 +15,8 @@ from .plan import FrameBudget
 from .config import TrackerError, frame_rng
 
 
-def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int = 0):
+def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int = 0,
+               keypoints: Sequence | None = None):
     """Set the first estimate: ``pose`` if given, else automatically from ``masks``.
 
     Parameters
@@ -24,6 +25,9 @@ def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int
     pose : (D,) array_like, optional
     frame_index : int
         Frame key of the initialization's random stream.
+    keypoints : sequence of (uv, confidence) or None, optional
+        As for :meth:`Tracker.step`: with ``config.keypoint_weight > 0`` the grid and refinement also
+        score the keypoint term.
 
     Returns
     -------
@@ -55,12 +59,15 @@ def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int
     if frame_masks.set_masks(tr, usable, notes, frame_index) == 0:
         raise TrackerError(f"masks: expected foreground in at least one view, received none ({'; '.join(notes)})")
     cfg = tr.config
+    tr._keypoint_term = tr._keypoint_energy(keypoints)[0]
     try:
         res = initial_pose(tr.model, tr.cameras, usable, init_energy_fn(tr, usable, frame_index),
                            rng=frame_rng(cfg.seed, frame_index, 1), n_yaw=cfg.init_yaw_steps,
                            refine_evals=cfg.init_refine_evals)
     except InitError as exc:
         raise TrackerError(f"masks: automatic initialization failed: {exc}") from None
+    finally:
+        tr._keypoint_term = None
     tr._accept(res.x)
     tr._heading_views = res.views_used
     return res
@@ -78,10 +85,7 @@ def init_energy_fn(tr, usable: list, frame_index: int):
 
     def fn(X):
         X = np.atleast_2d(np.asarray(X, dtype=float))
-        E = np.asarray(tr._init_energy(X), dtype=float)
-        if tr.prior is not None and tr.config.prior_eta > 0:
-            E = E + tr.prior.energy(X, eta=tr.config.prior_eta)
-        return E
+        return tr._add_terms(X, np.asarray(tr._init_energy(X), dtype=float))
     return fn
 
 
@@ -100,7 +104,7 @@ def initial_runs(tr, starts: list, frame_index: int, notes: list[str], budget: F
             rng = frame_rng(cfg.seed, frame_index) if j == 0 else frame_rng(cfg.seed, frame_index, 3, j)
         opt, evals, _, _ = tr._search(pred, rng, budget, cfg.init_spread_scale, notes if j == 0 else None,
                                         stages=False)
-        if tr._compiled_search and _fast_search.supported(opt, tr.energy, tr._prior_active()):
+        if tr._compiled_search and _fast_search.supported(opt, tr.energy, tr._python_terms()):
             # compiled h-isa, paused after its first partition (the same numbers as below)
             runs.append((j, _fast_search.HisaRun(opt, tr.energy, evals), pred, None))
             continue

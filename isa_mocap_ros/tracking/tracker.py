@@ -153,6 +153,8 @@ class Tracker:
         # h-isa on the fast energy runs compiled per partition (tracking/_fast_search.py, the same
         # numbers as the optimizer protocol); False: always through the protocol (tests compare both)
         self._compiled_search = True
+        # the keypoint term of the frame being tracked (config.keypoint_weight; set by step/initialize)
+        self._keypoint_term = None
 
     # ------------------------------------------------------------------ state
     @property
@@ -198,13 +200,24 @@ class Tracker:
     def _prior_active(self) -> bool:
         return self.prior is not None and self.config.prior_eta > 0
 
-    def total_energy(self, X) -> np.ndarray:
-        """Data term plus the prior ``−η ln p`` (13.33) of poses ``(n, D)`` under the current masks."""
-        X = np.atleast_2d(np.asarray(X, dtype=float))
-        E = np.asarray(self.energy(X), dtype=float)
+    def _python_terms(self) -> bool:
+        """Whether a term beside the silhouette energy is active (prior, keypoints): the search then
+        runs through the optimizer protocol on :meth:`total_energy`, not the compiled path."""
+        return self._prior_active() or self._keypoint_term is not None
+
+    def _add_terms(self, X: np.ndarray, E: np.ndarray) -> np.ndarray:
+        """``E`` plus the prior ``−η ln p`` (13.33) and the frame's weighted keypoint term, if active."""
         if self.prior is not None and self.config.prior_eta > 0:
             E = E + self.prior.energy(X, eta=self.config.prior_eta)
+        if self._keypoint_term is not None:
+            E = E + self.config.keypoint_weight * self._keypoint_term(X)
         return E
+
+    def total_energy(self, X) -> np.ndarray:
+        """Data term plus the prior ``−η ln p`` (13.33) and the frame's keypoint term (if any) of poses
+        ``(n, D)`` under the current masks."""
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        return self._add_terms(X, np.asarray(self.energy(X), dtype=float))
 
     def restricted_energy(self, x_base, coords):
         """:meth:`total_energy` for poses equal to ``x_base`` outside ``coords``, the same values: the
@@ -217,19 +230,17 @@ class Tracker:
 
         def total(X):
             X = np.atleast_2d(np.asarray(X, dtype=float))
-            E = np.asarray(data(X), dtype=float)
-            if self.prior is not None and self.config.prior_eta > 0:
-                E = E + self.prior.energy(X, eta=self.config.prior_eta)
-            return E
+            return self._add_terms(X, np.asarray(data(X), dtype=float))
         return total
 
     # ------------------------------------------------------------------ masks
 
 
     # ------------------------------------------------------------------ initialization
-    def initialize(self, masks: Sequence | None=None, pose=None, *, frame_index: int=0):
+    def initialize(self, masks: Sequence | None = None, pose=None, *, frame_index: int = 0,
+                   keypoints: Sequence | None = None):
         """See :func:`.first_frame.initialize`."""
-        return first_frame.initialize(self, masks, pose, frame_index=frame_index)
+        return first_frame.initialize(self, masks, pose, frame_index=frame_index, keypoints=keypoints)
 
 
     def _accept(self, x: np.ndarray) -> None:
@@ -329,7 +340,7 @@ class Tracker:
         opt, budget, stage_shares, (lo, hi, spread, base) = self._search(pred, rng, budget, spread_scale, notes,
                                                                          stages)
         share, torso, limbs, contour = stage_shares
-        if self._compiled_search and _fast_search.supported(opt, self.energy, self._prior_active()):
+        if self._compiled_search and _fast_search.supported(opt, self.energy, self._python_terms()):
             res = _fast_search.run_hisa(opt, self.energy, budget)      # the same numbers, compiled per partition
         else:
             res = minimize(opt, TotalEnergy(self), max_evals=budget)
@@ -394,8 +405,44 @@ class Tracker:
         return x, float(energy)
 
 
+    def _keypoint_energy(self, keypoints) -> tuple[object, str | None]:
+        """The frame's :class:`~isa_mocap_ros.energy.KeypointEnergy` (or None) and a note on it."""
+        if keypoints is None or self.config.keypoint_weight <= 0:
+            return None, None
+        from isa_mocap_ros.energy import KeypointEnergy
+        try:
+            term = KeypointEnergy(self.model, self.cameras, keypoints, sigma_m=self.config.keypoint_sigma_m)
+        except ValueError as exc:
+            return None, f"keypoints ignored: {exc}"
+        if term.n_correspondences == 0:
+            return None, "keypoints: none usable (no detection above the confidence floor)"
+        return term, (f"keypoints: {term.n_correspondences} in {len(set(term.views.tolist()))} views, "
+                      f"weight {self.config.keypoint_weight:g}")
+
     def step(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1,
-             contour_stage: bool = True) -> FrameResult:
+             contour_stage: bool = True, keypoints: Sequence | None = None) -> FrameResult:
+        """Track one frame (see the module docstring). Never raises on bad masks, predictions or keypoints.
+
+        ``keypoints``: per camera ``(uv (33, 2), confidence (33,))`` BlazePose landmarks or None; with
+        ``config.keypoint_weight > 0`` they add the keypoint term to this frame's energy (also for the
+        heading check's rival, so both hypotheses are scored alike). See :meth:`_step_frame`.
+        """
+        term, note = self._keypoint_energy(keypoints)
+        rival = self._rival
+        self._keypoint_term = term
+        if rival is not None:
+            rival._keypoint_term = term
+        try:
+            res = self._step_frame(masks, frame_index, prediction=prediction, frames_elapsed=frames_elapsed,
+                                   contour_stage=contour_stage)
+        finally:
+            self._keypoint_term = None
+            if rival is not None:
+                rival._keypoint_term = None
+        return res if note is None else dataclasses.replace(res, notes=res.notes + (note,))
+
+    def _step_frame(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1,
+                    contour_stage: bool = True) -> FrameResult:
         """Track one frame (see the module docstring). Never raises on bad masks or predictions.
 
         Parameters
@@ -419,10 +466,9 @@ class Tracker:
         """
         t0 = time.perf_counter()
         rival = self._rival
-        # a frame of the heading check (consecutive frames only, see below) shares the budget
         self._contour_now = bool(contour_stage)
-        res = self._step(masks, frame_index, FrameBudget(self.config.evals_per_frame, self._contour_now), prediction=prediction,
-                         frames_elapsed=frames_elapsed)
+        res = self._step(masks, frame_index, FrameBudget(self.config.evals_per_frame, self._contour_now),
+                         prediction=prediction, frames_elapsed=frames_elapsed)
         if self._own_prediction_frames > 0:
             self._own_prediction_frames -= 1
         if res.initialized:

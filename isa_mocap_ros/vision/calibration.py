@@ -276,7 +276,8 @@ class Rig:
 
 
 def load_rig(path: str | Path) -> Rig:
-    """Read a rig file (see the module docstring)."""
+    """Read a rig file (see the module docstring). Calibration files of other tools:
+    :func:`~.calib_formats.read_calibration`, which reads these too."""
     d = _load_yaml(path)
     where = str(path)
     cams_d = _get(d, "cameras", where)

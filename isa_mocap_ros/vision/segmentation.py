@@ -73,11 +73,17 @@ import cv2
 import numba
 import numpy as np
 
+from .stable_background import estimate_background
+
+from .robust_mode import (_robust_background_numba, _robust_background_numpy, _robust_finish_numba,  # noqa: F401
+                          _robust_finish_numpy, _robust_pairs_numba, _robust_pairs_numpy)
+
 __all__ = ["SegmentationError", "SegmentationConfig", "BackgroundSegmenter", "clean_mask"]
 
 METHODS = ("colour", "mog2", "knn")
 ROBUST = ("auto", "on", "off")
 VOTES = ("field", "window")
+LEARN_FROM = ("frames", "stable")
 #: learning frames kept for the robust background estimate (evenly spread over ``learn_frames``)
 ROBUST_MAX_SAMPLES = 25
 _VOTE_SHARE = 0.5
@@ -174,6 +180,13 @@ class SegmentationConfig:
         iteration (0: no smoothing, every pixel decided by its own evidence).
     field_iterations : int
         ``vote="field"``: mean-field iterations (synchronous; deterministic).
+    learn_from : {"frames", "stable"}
+        ``"colour"`` only. ``"frames"``: the ``learn_frames`` first images are the background samples
+        (they must show the empty scene). ``"stable"``: the person may be in them -- they are buffered,
+        and per pixel the frames where the background shows are found
+        (:func:`~isa_mocap_ros.vision.stable_background.estimate_background`: temporal mode, person
+        region, the clean plate if given as an image of the empty scene); the model then learns from
+        ``learn_frames`` background frames drawn from those.
     """
 
     method: str = "colour"
@@ -202,6 +215,7 @@ class SegmentationConfig:
     vote_sigma_px: float = 0.0
     field_coupling: float = 0.3
     field_iterations: int = 8
+    learn_from: str = "frames"
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -215,6 +229,12 @@ class SegmentationConfig:
                                     f"{self.robust_detect_fraction!r}")
         if not (np.isfinite(self.robust_radius) and self.robust_radius >= 0):
             raise SegmentationError(f"robust_radius: expected a finite number >= 0, got {self.robust_radius!r}")
+        if self.learn_from not in LEARN_FROM:
+            raise SegmentationError(f"learn_from: expected one of {LEARN_FROM}, got {self.learn_from!r}")
+        if self.learn_from == "stable" and self.learn_frames < 3:
+            raise SegmentationError(f"learn_frames: learn_from 'stable' needs at least 3, got {self.learn_frames}")
+        if self.learn_from == "stable" and self.method != "colour":
+            raise SegmentationError(f"learn_from: 'stable' needs method 'colour', got method {self.method!r}")
         if self.vote not in VOTES:
             raise SegmentationError(f"vote: expected one of {VOTES}, got {self.vote!r}")
         if not (np.isfinite(self.field_coupling) and 0.0 <= self.field_coupling <= 10.0):
@@ -361,157 +381,6 @@ def _update_numba(img, mu, var, frozen, rho):  # pragma: no cover
                     var[y, x, c] += rho * (d * d - var[y, x, c])
 
 
-def _robust_background_numpy(stack, radius):
-    """Per-pixel mode of K samples: ``(mu, var, count)`` over the samples agreeing with the best one.
-
-    ``stack`` (K, H, W, C) uint8. Samples ``i`` and ``j`` agree when ``max_c |I_ic - I_jc| <= radius``.
-    The sample agreeing with the most others defines the inliers (the samples agreeing with it,
-    itself included, ``count`` of them); on equal counts the one whose inliers are closest (smallest
-    sum of distances) wins, then the first: two random colours that happen to agree are usually
-    farther apart than two camera-noise copies of the background. ``mu`` is the inliers' mean,
-    ``var`` their unbiased variance (0 for a single inlier).
-    """
-    x = stack.astype(np.int16)
-    K = x.shape[0]
-    agree = np.ones((K, K) + x.shape[1:3], bool)
-    spread = np.zeros((K,) + x.shape[1:3], np.int64)
-    for i in range(K):
-        for j in range(i + 1, K):
-            dist = np.abs(x[i] - x[j]).max(axis=-1)
-            a = dist <= radius
-            agree[i, j] = agree[j, i] = a
-            spread[i] += np.where(a, dist, 0)
-            spread[j] += np.where(a, dist, 0)
-    key = agree.sum(axis=1).astype(np.int64) * (256 * K + 1) - spread      # count first, then spread
-    best = key.argmax(axis=0)                                                # (H, W), first on ties
-    inl = np.take_along_axis(agree, best[None, None], axis=1)[:, 0]          # (K, H, W)
-    count = inl.sum(axis=0)
-    w = inl[..., None].astype(np.float64)
-    mu = (w * x).sum(axis=0) / count[..., None]
-    var = (w * (x - mu) ** 2).sum(axis=0) / np.maximum(count - 1, 1)[..., None]
-    return mu.astype(np.float32), var.astype(np.float32), count.astype(np.int32)
-
-
-def _robust_pairs_numpy(stack, k, n, spread, radius):
-    """Add the agreements of sample ``k`` with samples ``0..k-1`` to ``n`` and ``spread`` (K, H, W).
-
-    ``n`` starts at 1 (a sample agrees with itself), ``spread`` at 0: after every sample is added
-    they are the counts and distance sums of :func:`_robust_background_numpy`. Adding each sample
-    as it arrives spreads the K² / 2 pair work over the learning frames.
-    """
-    x = stack[:k + 1].astype(np.int16)       # the samples so far (the buffer may hold more)
-    for j in range(k):
-        dist = np.abs(x[k] - x[j]).max(axis=-1)
-        a = dist <= radius
-        n[k] += a
-        n[j] += a
-        d = np.where(a, dist, 0).astype(n.dtype)
-        spread[k] += d
-        spread[j] += d
-
-
-def _robust_finish_numpy(stack, n, spread, radius):
-    """``(mu, var, count)`` of :func:`_robust_background_numpy` from the accumulated pairs."""
-    x = stack.astype(np.int16)
-    K = x.shape[0]
-    key = n.astype(np.int64) * (256 * K + 1) - spread          # count first, then spread
-    best = key.argmax(axis=0)                                    # (H, W), first on ties
-    xb = np.take_along_axis(x, best[None, ..., None], axis=0)    # (1, H, W, C)
-    inl = np.abs(x - xb).max(axis=-1) <= radius                  # (K, H, W)
-    count = inl.sum(axis=0)
-    w = inl[..., None].astype(np.float64)
-    mu = (w * x).sum(axis=0) / count[..., None]
-    var = (w * (x - mu) ** 2).sum(axis=0) / np.maximum(count - 1, 1)[..., None]
-    return mu.astype(np.float32), var.astype(np.float32), count.astype(np.int32)
-
-
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _robust_pairs_numba(stack, k, n, spread, radius):  # pragma: no cover
-    # _robust_pairs_numpy, branch-free along a row of one channel plane, rows in parallel
-    K, H, W, C = stack.shape
-    for y in numba.prange(H):
-        pk = np.empty((C, W), np.int32)
-        for x in range(W):
-            for c in range(C):
-                pk[c, x] = stack[k, y, x, c]
-        d = np.empty(W, np.int32)
-        for j in range(k):
-            for x in range(W):
-                d[x] = abs(pk[0, x] - np.int32(stack[j, y, x, 0]))
-            for c in range(1, C):
-                for x in range(W):
-                    d[x] = max(d[x], abs(pk[c, x] - np.int32(stack[j, y, x, c])))
-            for x in range(W):
-                ok = np.int32(d[x] <= radius)
-                n[k, y, x] += ok
-                n[j, y, x] += ok
-                spread[k, y, x] += ok * d[x]
-                spread[j, y, x] += ok * d[x]
-
-
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _robust_finish_numba(stack, n, spread, radius):  # pragma: no cover
-    # _robust_finish_numpy, rows in parallel. A row's samples are first copied into channel planes,
-    # and an outlier adds 0.0 (the same sums, in the same order per pixel, as skipping it), so the
-    # inner loops run along x without branches (SIMD)
-    K, H, W, C = stack.shape
-    mu = np.zeros((H, W, C), np.float32)
-    var = np.zeros((H, W, C), np.float32)
-    count = np.zeros((H, W), np.int32)
-    for y in numba.prange(H):
-        P = np.empty((K, C, W), np.int32)
-        for j in range(K):
-            for x in range(W):
-                for c in range(C):
-                    P[j, c, x] = stack[j, y, x, c]
-        ref = np.empty((C, W), np.int32)
-        for x in range(W):
-            best, best_spread, b = -1, 0, 0
-            for i in range(K):
-                if n[i, y, x] > best or (n[i, y, x] == best and spread[i, y, x] < best_spread):
-                    best, best_spread, b = n[i, y, x], spread[i, y, x], i
-            count[y, x] = best
-            for c in range(C):
-                ref[c, x] = P[b, c, x]
-        inl = np.empty((K, W), np.float64)
-        d = np.empty(W, np.int32)
-        for j in range(K):
-            for x in range(W):
-                d[x] = abs(ref[0, x] - P[j, 0, x])
-            for c in range(1, C):
-                for x in range(W):
-                    d[x] = max(d[x], abs(ref[c, x] - P[j, c, x]))
-            for x in range(W):
-                inl[j, x] = 1.0 if d[x] <= radius else 0.0
-        m = np.empty(W, np.float64)
-        v = np.empty(W, np.float64)
-        for c in range(C):
-            m[:] = 0.0
-            for j in range(K):
-                for x in range(W):
-                    m[x] += inl[j, x] * np.float64(P[j, c, x])
-            for x in range(W):
-                m[x] /= count[y, x]
-            v[:] = 0.0
-            for j in range(K):
-                for x in range(W):
-                    e = np.float64(P[j, c, x]) - m[x]
-                    v[x] += inl[j, x] * (e * e)
-            for x in range(W):
-                mu[y, x, c] = m[x]
-                var[y, x, c] = v[x] / max(count[y, x] - 1, 1)
-    return mu, var, count
-
-
-def _robust_background_numba(stack, radius):
-    """:func:`_robust_background_numpy` with the compiled pair and finish kernels."""
-    n = np.ones(stack.shape[:3], np.int32)
-    spread = np.zeros(stack.shape[:3], np.int32)
-    for k in range(1, stack.shape[0]):
-        _robust_pairs_numba(stack, k, n, spread, float(radius))
-    return _robust_finish_numba(stack, n, spread, float(radius))
-
-
 def _agree_numpy(img, fg, radius):
     """``(H, W)`` uint8: 1 where ``fg`` is set and one of the 8 neighbours is set too with every
     colour channel within ``radius`` levels (two random colours rarely agree: ~0.4 % at 20 levels)."""
@@ -612,6 +481,7 @@ class BackgroundSegmenter:
         self._vote_exclude = None  # robust mode: previous dilated mask (left out of the noise level)
         self._outlier_fraction: float | None = None
         self._agree_fraction = 0.0  # robust field vote: share of background pixels of kind A
+        self._buffer: list[np.ndarray] | None = None   # learn_from="stable": the learning images
         if self.config.method != "colour":
             c = self.config
             if c.method == "mog2":
@@ -622,7 +492,9 @@ class BackgroundSegmenter:
                 self._cv = cv2.createBackgroundSubtractorKNN(
                     history=c.history, dist2Threshold=float(c.knn_dist2_threshold),
                     detectShadows=bool(c.shadow_suppression))
-        if self._plate is not None:
+        if self._plate is not None and self.config.learn_from == "stable":
+            self._shape = self._plate.shape   # the plate joins the estimate after the learning images
+        elif self._plate is not None:
             self._shape = self._plate.shape
             if self._cv is None:
                 self._mu = self._as3(self._plate).astype(np.float32)
@@ -740,17 +612,14 @@ class BackgroundSegmenter:
         c = self.config
         img = self._as3(image)
         if self.learning:
-            if self._sum is None:
-                self._sum = np.zeros(img.shape, np.float64)
-                self._sumsq = np.zeros(img.shape, np.float64)
-            if c.robust != "off" and self._n_learnt in _sample_indices(c.learn_frames):
-                self._add_sample(img)
-            imgf = img.astype(np.float32)
-            self._sum += imgf
-            self._sumsq += np.square(imgf, dtype=np.float64)
-            self._n_learnt += 1
-            if not self.learning:  # last learning image: mean and variance over the K images
-                self._finish_learning()
+            if c.learn_from == "stable":       # buffer; the background frames come at the last one
+                if self._buffer is None:
+                    self._buffer = []
+                self._buffer.append(img.copy())
+                if len(self._buffer) == c.learn_frames:
+                    self._learn_from_stable()
+            else:
+                self._learn_sample(img)
             return self._zero()
 
         kernels = _KERNELS[c.kernel]
@@ -773,6 +642,35 @@ class BackgroundSegmenter:
             if c.update_rate > 0:
                 kernels[1](img, self._mu, self._var, frozen, np.float32(c.update_rate))
         return mask
+
+    def _learn_sample(self, img: np.ndarray) -> None:
+        """Add one background sample (mean / variance sums, robust samples); finish at the last one."""
+        c = self.config
+        if self._sum is None:
+            self._sum = np.zeros(img.shape, np.float64)
+            self._sumsq = np.zeros(img.shape, np.float64)
+        if c.robust != "off" and self._n_learnt in _sample_indices(c.learn_frames):
+            self._add_sample(img)
+        imgf = img.astype(np.float32)
+        self._sum += imgf
+        self._sumsq += np.square(imgf, dtype=np.float64)
+        self._n_learnt += 1
+        if not self.learning:  # last learning image: mean and variance over the K images
+            self._finish_learning()
+
+    def _learn_from_stable(self) -> None:
+        """``learn_from="stable"``: background frames from the buffered images (and the plate), learnt."""
+        frames = np.stack(self._buffer)
+        self._buffer = None
+        grey = frames.shape[-1] == 1
+        f3 = np.repeat(frames, 3, axis=-1) if grey else frames
+        plates = []
+        if self._plate is not None:
+            p = self._as3(self._plate)
+            plates = [np.repeat(p, 3, axis=-1) if p.shape[-1] == 1 else p]
+        est = estimate_background(f3, plates=plates)
+        for f in est.frames(self.config.learn_frames, f3):
+            self._learn_sample(f[..., :1] if grey else f)
 
     def _foreground(self, img: np.ndarray) -> np.ndarray:
         c = self.config

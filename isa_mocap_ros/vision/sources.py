@@ -42,13 +42,14 @@ from typing import Any, Callable, Protocol, Sequence, runtime_checkable
 import cv2
 import numpy as np
 
-from .calibration import Rig, default_rig, load_rig
+from .calib_formats import read_calibration
+from .calibration import Rig, default_rig
 from .distort import occluders as _occluders
 from .distort import pixel_noise as _pixel_noise
 from .errors import VisionError
 
 __all__ = ["FrameSource", "EndOfSource", "SourceError", "SourceEvent", "DeviceSource", "VideoFileSource",
-           "ImageFolderSource", "SyntheticSource", "DistortedSource", "ResizedSource", "SourceConfig",
+           "ImageFolderSource", "SyntheticSource", "DistortedSource", "ResizedSource", "AdaptedSource", "SourceConfig",
            "SOURCE_KINDS", "resolve_rig", "open_source"]
 
 #: the ``source`` values of :class:`SourceConfig`
@@ -596,6 +597,103 @@ class ResizedSource:
         self.source.close()
 
 
+# ------------------------------------------------------------------------------- adapted (real) sources
+class AdaptedSource:
+    """Video / image-folder frames brought to the calibration: letterbox removed, resized, with the
+    matching cameras (:mod:`.adapt`).
+
+    The first frame set is read at construction: each view's frame size and content decide its
+    :class:`~.adapt.FrameGeometry` against the calibrated ``sensors`` (same size, scaled, letterboxed,
+    or cropped with ``fit="crop"``; another aspect ratio without visible bars raises
+    :class:`SourceError`). Output size: ``width x height`` if both are given (the content's aspect
+    ratio within 1 %), ``width`` wide or ``max_side`` long keeping the sensor's aspect ratio (so all
+    views of one sensor size get one size), else the content's own size. :attr:`rig` holds the cameras of the published images.
+
+    Parameters
+    ----------
+    source : FrameSource
+    sensors : sequence of Camera
+        The calibrated cameras, one per view (their sizes are the sensor images').
+    """
+
+    def __init__(self, source: FrameSource, sensors: Sequence[Any], *, fit: str = "auto", width: int = 0,
+                 height: int = 0, max_side: int = 0, rig_name: str = "rig", capture_volume: Any = None,
+                 labels: Sequence[str] | None = None,
+                 on_event: Callable[[SourceEvent], None] | None = None) -> None:
+        from .adapt import frame_geometry, working_size
+
+        if len(sensors) != source.n_views:
+            raise SourceError(f"sensors: expected one calibrated camera per view ({source.n_views}), received "
+                              f"{len(sensors)}")
+        self.source = source
+        self.n_views = source.n_views
+        self._on_event = on_event
+        self.events: list[SourceEvent] = []
+        try:
+            first = source.read()
+        except EndOfSource as exc:
+            raise SourceError(f"the source gives no frame ({exc})") from None
+        labels = list(labels) if labels else [f"view {v}" for v in range(self.n_views)]
+        self.geometries = []
+        cams = []
+        for v, (cam, img) in enumerate(zip(sensors, first)):
+            if img is None:
+                raise SourceError(f"{labels[v]}: the first frame cannot be read; its size is needed to adapt "
+                                  "the calibration")
+            try:
+                g = frame_geometry(cam, img.shape[1], img.shape[0], fit=fit, frame=img, source=labels[v])
+            except VisionError as exc:
+                raise SourceError(str(exc)) from None
+            # the sensor's size decides the working size (every view of one sensor size gets one size;
+            # a letterbox crop is stretched by < 1 px to it, which fx/fy, cx/cy follow exactly)
+            cw, ch = (g.crop[2], g.crop[3]) if g.fit == "crop" or not (width or max_side) else (cam.width, cam.height)
+            if width and height:
+                if abs(cw * height - ch * width) > 0.01 * ch * width:
+                    raise SourceError(f"width, height: {width}x{height} has another aspect ratio than the "
+                                      f"{cw}x{ch} image of {labels[v]}; give width only (height 0) to keep it")
+                size = (int(width), int(height))
+            else:
+                size = working_size(cw, ch, out_width=int(width), max_side=int(max_side))
+            self.geometries.append(g)
+            cams.append(g.camera(*size))
+        self.sizes = [(c.width, c.height) for c in cams]
+        self.rig = Rig(tuple(cams), rig_name, capture_volume)
+        self._pending: list[np.ndarray | None] | None = first
+
+    def describe(self) -> list[str]:
+        """One line per view: the geometry found and the published size."""
+        return [f"{g.describe()} -> {w}x{h}" for g, (w, h) in zip(self.geometries, self.sizes)]
+
+    def drain_events(self) -> list[SourceEvent]:
+        drain = getattr(self.source, "drain_events", None)
+        out = (drain() if drain else []) + self.events
+        self.events = []
+        return out
+
+    def read(self) -> list[np.ndarray | None]:
+        """The next frame set, adapted."""
+        from .adapt import adapt_frame
+
+        images = self._pending if self._pending is not None else self.source.read()
+        self._pending = None
+        out: list[np.ndarray | None] = []
+        for v, img in enumerate(images):
+            g = self.geometries[v]
+            if img is not None and img.shape[:2] != (g.frame_h, g.frame_w):
+                ev = SourceEvent("warning", v, f"view {v}: frame is {img.shape[1]}x{img.shape[0]}, the first was "
+                                               f"{g.frame_w}x{g.frame_h}; frame dropped")
+                self.events.append(ev)
+                del self.events[:-1000]
+                if self._on_event is not None:
+                    self._on_event(ev)
+                img = None
+            out.append(None if img is None else adapt_frame(img, g, self.sizes[v]))
+        return out
+
+    def close(self) -> None:
+        self.source.close()
+
+
 # ------------------------------------------------------------------------------- configuration
 @dataclass(frozen=True)
 class SourceConfig:
@@ -619,7 +717,10 @@ class SourceConfig:
     views : int
         Number of views (the first ``views`` cameras of the rig).
     width, height : int
-        Image size published (0 = the rig file's own sizes).
+        Image size published (0 = the rig file's own sizes). ``video``/``images``: ``height`` 0 keeps
+        the frames' aspect ratio at ``width`` (see :class:`AdaptedSource`).
+    fit : {"auto", "scale", "letterbox", "crop"}
+        ``video``/``images``: how frames of another size relate to the calibration (:mod:`.adapt`).
     fps : float
     seed : int
     noise : float
@@ -645,13 +746,19 @@ class SourceConfig:
     occluders: int = 0
     empty_frames: int = 10
     loop: bool = True
+    fit: str = "auto"
 
     def __post_init__(self) -> None:
         if self.source not in SOURCE_KINDS:
             raise SourceError(f"source: expected one of {', '.join(SOURCE_KINDS)}, received {self.source!r}")
         if self.views < 1:
             raise SourceError(f"views: expected an integer >= 1, received {self.views!r}")
-        if (self.width == 0) != (self.height == 0) or self.width < 0 or self.height < 0:
+        from .adapt import FITS
+
+        if self.fit not in FITS:
+            raise SourceError(f"fit: expected one of {', '.join(FITS)}, received {self.fit!r}")
+        keep_aspect = self.source in ("video", "images") and self.width > 0 and self.height == 0
+        if ((self.width == 0) != (self.height == 0) and not keep_aspect) or self.width < 0 or self.height < 0:
             raise SourceError(f"width, height: expected both > 0, or both 0 (the rig's sizes), received "
                               f"{self.width}x{self.height}")
         if not self.fps > 0:
@@ -682,10 +789,12 @@ def resolve_rig(cfg: SourceConfig) -> Rig:
     path = Path(cfg.rig_file)
     if not path.is_file():
         raise SourceError(f"rig_file: {cfg.rig_file!r} does not exist")
-    rig = load_rig(path)
+    rig = read_calibration(path)          # a rig YAML or any other tool's calibration file
     if len(rig) < cfg.views:
         raise SourceError(f"views: the rig file {cfg.rig_file!r} has {len(rig)} cameras, views={cfg.views}")
     rig = Rig(rig.cameras[:cfg.views], rig.name, rig.capture_volume)
+    if cfg.source in ("video", "images"):   # sizes follow the frames: AdaptedSource.rig
+        return rig
     if cfg.width and any((c.width, c.height) != (cfg.width, cfg.height) for c in rig.cameras):
         rig = rig.resized(cfg.width, cfg.height)
     return rig
@@ -695,9 +804,10 @@ def open_source(cfg: SourceConfig, rig: Rig, *,
                 on_event: Callable[[SourceEvent], None] | None = None) -> FrameSource:
     """Build the frame source of ``cfg`` for ``rig`` (distortions and resizing included).
 
-    The synthetic source renders at the rig's sizes and draws its own distortions; the others are
-    wrapped in :class:`ResizedSource` (to the rig's sizes) and, when ``noise`` or ``occluders`` is
-    set, :class:`DistortedSource`.
+    The synthetic source renders at the rig's sizes and draws its own distortions; devices are
+    wrapped in :class:`ResizedSource` (to the rig's sizes), video files and image folders in
+    :class:`AdaptedSource` (letterbox / scale / crop against the calibration; its ``rig`` has the
+    published cameras); then, when ``noise`` or ``occluders`` is set, :class:`DistortedSource`.
     """
     if cfg.source == "synthetic":
         return SyntheticSource(rig, cfg.motion, fps=cfg.fps, model_dof=cfg.model_dof, seed=cfg.seed,
@@ -706,11 +816,16 @@ def open_source(cfg: SourceConfig, rig: Rig, *,
     if cfg.source == "device":
         src: Any = DeviceSource(list(cfg.devices), width=rig.cameras[0].width, height=rig.cameras[0].height,
                                 fps=cfg.fps, on_event=on_event)
-    elif cfg.source == "video":
-        src = VideoFileSource(list(cfg.videos), loop=cfg.loop, on_event=on_event)
     else:
-        src = ImageFolderSource(list(cfg.image_globs), loop=cfg.loop, on_event=on_event)
-    src = ResizedSource(src, [(c.width, c.height) for c in rig.cameras], on_event=on_event)
+        if cfg.source == "video":
+            src, labels = VideoFileSource(list(cfg.videos), loop=cfg.loop, on_event=on_event), list(cfg.videos)
+        else:
+            src = ImageFolderSource(list(cfg.image_globs), loop=cfg.loop, on_event=on_event)
+            labels = list(cfg.image_globs)
+        src = AdaptedSource(src, rig.cameras, fit=cfg.fit, width=cfg.width, height=cfg.height, rig_name=rig.name,
+                            capture_volume=rig.capture_volume, labels=labels, on_event=on_event)
+    if cfg.source == "device":
+        src = ResizedSource(src, [(c.width, c.height) for c in rig.cameras], on_event=on_event)
     if cfg.noise > 0 or cfg.occluders > 0:
         src = DistortedSource(src, seed=cfg.seed, noise=cfg.noise, occluders=cfg.occluders)
     return src

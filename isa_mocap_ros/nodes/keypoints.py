@@ -1,0 +1,149 @@
+"""Keypoint node: BlazePose landmarks per view, ``cam<i>/image_raw`` + ``cam<i>/mask`` -> ``cam<i>/keypoints``.
+
+Run alone (relative topic names; ``/mocap`` namespace as the rest of the network)::
+
+    keypoints_node --ros-args -r __ns:=/mocap -p views:=4 -p every_k_frames:=3
+    python -m isa_mocap_ros.nodes.keypoints --ros-args -r __ns:=/mocap --params-file config/pipeline.yaml
+
+A node of its own, not a stage of the segmentation node: the landmark model costs 10-30 ms per view
+(measured under contention, docs/keypoints.md), ten times a mask, and runs every k-th frame only; in
+its own process it neither delays the masks the estimator waits for nor shares their thread, and a
+network without it (or without the model file) runs as before.
+
+Per view ``i`` it pairs ``cam<i>/image_raw`` and ``cam<i>/mask`` (sensor-data QoS) by stamp (the
+segmentation node copies the image header; either may arrive first, the last 8 unpaired of each are
+kept); for a pair that is one of every ``every_k_frames`` (counted per view over pairs), it crops the square
+around the mask's foreground (:func:`~isa_mocap_ros.vision.landmarks.box_from_mask`), runs
+:class:`~isa_mocap_ros.vision.landmarks.PoseLandmarker` and publishes ``cam<i>/keypoints``
+(``geometry_msgs/PolygonStamped``, x=u, y=v, z=confidence, the image's header; an empty polygon when
+the mask is empty or the pose score is below ``min_score``; msg_adapters/keypoints.py).
+
+Bad input (undecodable image, unsupported encoding, a mask of another size than its image) is dropped
+for that view with one rate-limited log line.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from collections import OrderedDict, deque
+
+import numpy as np
+from geometry_msgs.msg import PolygonStamped
+from rclpy.node import Node
+from sensor_msgs.msg import Image
+
+import msg_adapters as ma
+from isa_mocap_ros.nodes import qos
+from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, run_node
+from isa_mocap_ros.vision.errors import VisionError
+from isa_mocap_ros.vision.landmark_model import ModelUnavailable
+from isa_mocap_ros.vision.landmarks import PoseLandmarker, box_from_mask
+
+__all__ = ["KeypointNode", "main"]
+
+ENCODINGS = ("rgb8", "bgr8")
+_KEEP = 8                 # unpaired images (or masks) kept per view while the other is on its way
+
+
+class KeypointNode(Node):
+    """Thin node over :class:`PoseLandmarker` (see the module docstring)."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("keypoints", **kwargs)
+        self.n_views = declare(self, "views", 4, "number of camera views (cam0 .. cam<views-1>)", lo=1, hi=64)
+        self.every_k = declare(self, "every_k_frames", 4, "detect on every k-th frame of each view (1 = all)",
+                               lo=1, hi=10000)
+        self.min_score = declare(self, "min_score", 0.5, "pose presence score below which nobody is reported",
+                                 lo=0.0, hi=1.0)
+        self.box_scale = declare(self, "box_scale", 1.25, "crop side / longer side of the mask's bounding box",
+                                 lo=1.0, hi=4.0)
+        model_path = declare(self, "model_path", "", "landmark model file ('' = the cache of `make models`)")
+        threads = declare(self, "threads", 1, "interpreter threads", lo=1, hi=64)
+        try:
+            self.detector = PoseLandmarker(model_path or None, num_threads=threads)
+        except ModelUnavailable as exc:           # run_node prints a ValueError as one line, exit 2
+            raise ValueError(str(exc)) from None
+        self.problems = ProblemLog(self)
+        self.images: list[OrderedDict[int, Image]] = [OrderedDict() for _ in range(self.n_views)]
+        self.masks: list[OrderedDict[int, Image]] = [OrderedDict() for _ in range(self.n_views)]
+        self.unpaired = [0] * self.n_views
+        self.frames_seen = [0] * self.n_views
+        self.published = [0] * self.n_views
+        self.latency_s: deque[float] = deque(maxlen=1000)
+        self.pubs = [self.create_publisher(PolygonStamped, f"cam{i}/keypoints", qos.RELIABLE,
+                                           qos_overriding_options=QOS_OVERRIDES) for i in range(self.n_views)]
+        for i in range(self.n_views):
+            self.create_subscription(Image, f"cam{i}/image_raw", self._pair_cb(i, "image"), qos.SENSOR_DATA,
+                                     qos_overriding_options=QOS_OVERRIDES)
+            self.create_subscription(Image, f"cam{i}/mask", self._pair_cb(i, "mask"), qos.SENSOR_DATA,
+                                     qos_overriding_options=QOS_OVERRIDES)
+        self.get_logger().info(f"keypoints: {self.n_views} views, every {self.every_k} frame(s), model "
+                               f"{self.detector.model_path}")
+
+    def _pair_cb(self, v: int, kind: str):
+        """Callback of ``cam<v>/image_raw`` (kind "image") or ``cam<v>/mask``: the second of the pair of
+        one stamp to arrive (either order) runs the detection; an unpaired message waits among the last
+        :data:`_KEEP` of its kind, then ages out (counted in :attr:`unpaired`)."""
+        mine = (self.images if kind == "image" else self.masks)[v]
+        other = (self.masks if kind == "image" else self.images)[v]
+
+        def cb(msg: Image) -> None:
+            stamp = ma.stamp_to_ns(msg.header)
+            partner = other.pop(stamp, None)
+            if partner is None:
+                mine[stamp] = msg
+                while len(mine) > _KEEP:
+                    mine.popitem(last=False)
+                    self.unpaired[v] += 1
+                return
+            image, mask = (msg, partner) if kind == "image" else (partner, msg)
+            self._detect(v, stamp, image, mask)
+        return cb
+
+    def _detect(self, v: int, stamp: int, image: Image, mask_msg: Image) -> None:
+        k = self.frames_seen[v]
+        self.frames_seen[v] += 1
+        if k % self.every_k:
+            return
+        t0 = time.perf_counter()
+        try:
+            if image.encoding not in ENCODINGS:
+                raise ma.AdapterError("Image.encoding", f"one of {', '.join(ENCODINGS)}", image.encoding)
+            img = ma.image_to_array(image)
+            mask = ma.image_to_array(mask_msg)
+            if mask.shape[:2] != img.shape[:2]:
+                raise ma.AdapterError("mask size", f"the image's {img.shape[1]}x{img.shape[0]}",
+                                      f"{mask.shape[1]}x{mask.shape[0]}")
+            box = box_from_mask(mask if mask.ndim == 2 else mask[..., 0], scale=self.box_scale)
+            out = ma.keypoints_to_polygon(None, None, image.header)
+            if box is not None:
+                lm = self.detector.detect(img, box, bgr=image.encoding == "bgr8")
+                if lm.score >= self.min_score:
+                    out = ma.keypoints_to_polygon(lm.uv, lm.confidence, image.header)
+        except (ma.AdapterError, VisionError) as exc:
+            self.problems.report(f"view{v}:{type(exc).__name__}", f"cam{v} frame at {stamp} ns dropped: {exc}")
+            return
+        self.published[v] += 1
+        self.pubs[v].publish(out)
+        self.latency_s.append(time.perf_counter() - t0)
+
+    def close(self) -> None:
+        """Log what was published and the per-view detection time."""
+        lat = np.array(self.latency_s) * 1e3
+        text = (f"keypoints: {sum(self.published)} keypoint sets published {self.published}, "
+                f"{self.problems.total} frames dropped, {sum(self.unpaired)} images/masks never paired"
+                + (f", per view {np.median(lat):.1f} ms median / {np.percentile(lat, 95):.1f} ms p95"
+                   if lat.size else ""))
+        if self.context.ok():
+            self.get_logger().info(text)
+        else:
+            print(text, file=sys.stderr, flush=True)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console script ``keypoints_node``."""
+    return run_node(KeypointNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,247 @@
+"""Publishes malformed and valid-but-wrong messages on every input topic of the node network, until killed.
+
+``python fuzzer.py VIEWS RATE_HZ SEED`` (in the caller's ROS domain, namespace /mocap). Each tick it
+picks the next kind of a fixed cycle and a view (seeded), and publishes one message on
+``cam<v>/image_raw``, ``cam<v>/camera_info``, ``cam<v>/extrinsics``, ``cam<v>/mask`` or
+``prediction/joint_states``. It listens to ``cam0/camera_info`` to learn the stream's stamps and the
+cameras' size, so the valid-but-wrong messages come *near* the stream (a few ms after a real frame's
+stamp, never on it) where a stamp check alone would not catch them.
+
+What a correct network must reject (module docstring of ``isa_mocap_ros.intake``):
+malformed messages (truncated data, unknown encodings, NaN, zero K or quaternion, mismatched joint
+lists), and messages that disagree with what the node knows: another size or encoding than the
+view's camera, another frame id, a camera_info with no image of its stamp, a stamp far from the
+stream, extrinsics from another parent frame or for another child frame, predictions far from the
+frame sets. It never sends what a network cannot tell from the camera itself: an image and a
+camera_info of one stamp that agree, or a well-formed mask / prediction right in the stream.
+
+Prints ``sent <kind> <n>`` lines every second and a total per kind at exit (SIGINT/SIGTERM).
+"""
+import signal
+import sys
+import time
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import TransformStamped
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import CameraInfo, Image, JointState
+
+import msg_adapters as ma
+from isa_mocap_ros.body import make_model
+
+HOUR_NS = 3600 * 10**9
+
+
+class Fuzzer(Node):
+    def __init__(self, views: int, rate_hz: float, seed: int) -> None:
+        super().__init__("fuzzer", namespace="/mocap")
+        self.views = views
+        self.rng = np.random.default_rng(seed)
+        rel = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.img = [self.create_publisher(Image, f"cam{v}/image_raw", rel) for v in range(views)]
+        self.info = [self.create_publisher(CameraInfo, f"cam{v}/camera_info", rel) for v in range(views)]
+        self.mask = [self.create_publisher(Image, f"cam{v}/mask", rel) for v in range(views)]
+        self.extr = [self.create_publisher(TransformStamped, f"cam{v}/extrinsics", latched) for v in range(views)]
+        self.pred = self.create_publisher(JointState, "prediction/joint_states", rel)
+        self.names = make_model(39).dof_names
+        self.last_real_ns = 1_700_000_000_000_000_000   # until the stream is heard: the project's bags' epoch
+        self.size = (320, 240)
+        self.unique = 0
+        self.own_info_stamps: set[int] = set()   # its own camera infos come back to its subscription
+        self.create_subscription(CameraInfo, "cam0/camera_info", self._heard, rel)
+        self.kinds = [k for k in dir(self) if k.startswith("k_")]
+        self.sent: dict[str, int] = {k[2:]: 0 for k in self.kinds}
+        self.tick = 0
+        self.create_timer(1.0 / rate_hz, self._send)
+        self.create_timer(1.0, lambda: print("sent " + " ".join(f"{k}={n}" for k, n in self.sent.items()),
+                                             flush=True))
+
+    def _heard(self, msg: CameraInfo) -> None:
+        s = ma.stamp_to_ns(msg.header)
+        # only what fits the stream: the fuzzer's own camera infos (far stamps, 7x3) must not steer it
+        if s in self.own_info_stamps:
+            return
+        if msg.header.frame_id == "cam0_optical_frame" and msg.width > 16 and abs(s - self.last_real_ns) < HOUR_NS:
+            self.last_real_ns = max(self.last_real_ns, s)
+            self.size = (msg.width, msg.height)
+
+    # -- stamps ------------------------------------------------------------------------------------
+    def near(self) -> int:
+        """A stamp a few ms after the last real frame, never a real frame's (frames are 33.3 ms apart)."""
+        self.unique += 1
+        return self.last_real_ns + 3_000_000 + 1_000 * self.unique % 20_000_000 + 7
+
+    def far(self) -> int:
+        return int(self.rng.choice([self.last_real_ns + HOUR_NS, self.last_real_ns - HOUR_NS, 7]))
+
+    def frame(self, v: int) -> str:
+        return f"cam{v}_optical_frame"
+
+    # -- images ------------------------------------------------------------------------------------
+    def k_image_7x3_bgr8(self, v):        # the issue's stray image: valid, tiny, near the stream
+        return self.img[v], ma.array_to_image(self.rng.integers(0, 255, (3, 7, 3), dtype=np.uint8), "bgr8",
+                                              stamp_ns=self.near(), frame_id=self.frame(v))
+
+    def k_image_right_size_other_encoding(self, v):
+        w, h = self.size
+        enc = ["bgr8", "mono8"][self.unique % 2]
+        shape = (h, w, 3) if enc == "bgr8" else (h, w)
+        return self.img[v], ma.array_to_image(self.rng.integers(0, 255, shape, dtype=np.uint8), enc,
+                                              stamp_ns=self.near(), frame_id=self.frame(v))
+
+    def k_image_far_stamp(self, v):
+        w, h = self.size
+        return self.img[v], ma.array_to_image(self.rng.integers(0, 255, (h, w, 3), dtype=np.uint8), "rgb8",
+                                              stamp_ns=self.far(), frame_id=self.frame(v))
+
+    def k_image_other_frame(self, v):
+        w, h = self.size
+        return self.img[v], ma.array_to_image(self.rng.integers(0, 255, (h, w, 3), dtype=np.uint8), "rgb8",
+                                              stamp_ns=self.near(), frame_id=self.frame((v + 1) % self.views))
+
+    def k_image_malformed(self, v):
+        w, h = self.size
+        msg = ma.array_to_image(np.zeros((h, w, 3), np.uint8), "rgb8", stamp_ns=self.near(), frame_id=self.frame(v))
+        pick = self.unique % 5
+        if pick == 0:
+            msg.data = msg.data[: len(msg.data) // 2]            # truncated
+        elif pick == 1:
+            msg.encoding = "yuv422_fuzz"                          # unknown encoding
+        elif pick == 2:
+            msg.encoding = "rgba8"                                # known, not segmented (and data too short)
+        elif pick == 3:
+            msg = Image(header=msg.header, height=0, width=0, encoding="rgb8", step=0)   # empty
+        else:
+            msg = ma.array_to_image(np.zeros((960, 1280, 3), np.uint8), "rgb8", stamp_ns=self.near(),
+                                    frame_id=self.frame(v))        # huge
+        return self.img[v], msg
+
+    # -- camera infos --------------------------------------------------------------------------------
+    def _info(self, v, w, h, stamp, frame):
+        intr = ma.Intrinsics(K=np.array([[250.0, 0, w / 2], [0, 250.0, h / 2], [0, 0, 1]]), D=np.zeros(5),
+                             P=np.array([[250.0, 0, w / 2, 0], [0, 250.0, h / 2, 0], [0, 0, 1, 0]]), R=np.eye(3),
+                             width=w, height=h)
+        self.own_info_stamps.add(stamp)
+        return ma.intrinsics_to_camera_info(intr, stamp_ns=stamp, frame_id=frame)
+
+    def k_info_7x3(self, v):
+        return self.info[v], self._info(v, 7, 3, self.near(), self.frame(v))
+
+    def k_info_other_k_far_stamp(self, v):
+        return self.info[v], self._info(v, *self.size, self.far(), self.frame(v))
+
+    def k_info_other_frame(self, v):
+        return self.info[v], self._info(v, *self.size, self.near(), "fuzz_optical_frame")
+
+    def k_info_malformed(self, v):
+        msg = self._info(v, *self.size, self.near(), self.frame(v))
+        pick = self.unique % 3
+        if pick == 0:
+            msg.k = np.zeros(9)
+        elif pick == 1:
+            msg.d = [float("nan")] * 5
+        else:
+            msg.distortion_model = "fisheye_fuzz"
+        return self.info[v], msg
+
+    # -- extrinsics ----------------------------------------------------------------------------------
+    def _tf(self, parent, child, *, q=(0.0, 0.0, 0.0, 1.0), t=(3.0, -2.0, 1.0)):
+        tf = TransformStamped()
+        tf.header = ma.make_header(self.near(), parent)
+        tf.child_frame_id = child
+        tf.transform.translation.x, tf.transform.translation.y, tf.transform.translation.z = map(float, t)
+        r = tf.transform.rotation
+        r.x, r.y, r.z, r.w = map(float, q)
+        return tf
+
+    def k_extrinsics_other_parent(self, v):
+        return self.extr[v], self._tf("map", self.frame(v))
+
+    def k_extrinsics_other_child(self, v):
+        return self.extr[v], self._tf("world", ["fuzz_optical_frame", "base_link"][self.unique % 2])
+
+    def k_extrinsics_malformed(self, v):
+        if self.unique % 2:
+            return self.extr[v], self._tf("world", self.frame(v), q=(0.0, 0.0, 0.0, 0.0))
+        return self.extr[v], self._tf("world", self.frame(v), t=(float("nan"), 0.0, 0.0))
+
+    # -- masks ---------------------------------------------------------------------------------------
+    def k_mask_7x3(self, v):
+        return self.mask[v], ma.array_to_image(np.full((3, 7), 255, np.uint8), "mono8", stamp_ns=self.near(),
+                                               frame_id=self.frame(v))
+
+    def k_mask_far_stamp(self, v):
+        w, h = self.size
+        return self.mask[v], ma.array_to_image(np.full((h, w), 255, np.uint8), "mono8", stamp_ns=self.far(),
+                                               frame_id=self.frame(v))
+
+    def k_mask_other_frame(self, v):
+        w, h = self.size
+        return self.mask[v], ma.array_to_image(np.full((h, w), 255, np.uint8), "mono8", stamp_ns=self.near(),
+                                               frame_id="fuzz_optical_frame")
+
+    def k_mask_malformed(self, v):
+        w, h = self.size
+        if self.unique % 2:
+            return self.mask[v], ma.array_to_image(np.zeros((h, w, 3), np.uint8), "rgb8", stamp_ns=self.near(),
+                                                   frame_id=self.frame(v))
+        msg = ma.array_to_image(np.zeros((h, w), np.uint8), "mono8", stamp_ns=self.near(), frame_id=self.frame(v))
+        msg.data = msg.data[:-5]
+        return self.mask[v], msg
+
+    # -- predictions ---------------------------------------------------------------------------------
+    def _pred(self, names, q, stamp):
+        msg = JointState(header=ma.make_header(stamp))
+        msg.name = list(names)
+        msg.position = [float(x) for x in q]
+        return msg
+
+    def k_prediction_nan(self, v):
+        q = np.zeros(len(self.names))
+        q[self.unique % len(q)] = float("nan")
+        return self.pred, self._pred(self.names, q, self.last_real_ns + 33_333_333)
+
+    def k_prediction_wrong_names(self, v):
+        names = [f"fuzz_joint_{i}" for i in range(len(self.names))]
+        return self.pred, self._pred(names, np.zeros(len(names)), self.last_real_ns + 33_333_333)
+
+    def k_prediction_wrong_length(self, v):
+        msg = self._pred(self.names, np.zeros(len(self.names)), self.last_real_ns + 33_333_333)
+        msg.position = msg.position[: len(msg.position) // 2]
+        return self.pred, msg
+
+    def k_prediction_far_stamp(self, v):
+        q = self.rng.normal(0.0, 0.3, len(self.names))
+        return self.pred, self._pred(self.names, q, self.far())
+
+    # ----------------------------------------------------------------------------------------------
+    def _send(self) -> None:
+        kind = self.kinds[self.tick % len(self.kinds)]
+        self.tick += 1
+        v = int(self.rng.integers(self.views))
+        pub, msg = getattr(self, kind)(v)
+        pub.publish(msg)
+        self.sent[kind[2:]] += 1
+
+
+def main() -> None:
+    views, rate, seed = int(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3])
+    rclpy.init()
+    node = Fuzzer(views, rate, seed)
+    signal.signal(signal.SIGTERM, lambda *a: rclpy.try_shutdown())
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
+        pass
+    finally:
+        print("total " + " ".join(f"{k}={n}" for k, n in node.sent.items()), flush=True)
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,160 @@
+"""The nodes' input gate (isa_mocap_ros.intake): a view's camera is what camera_info and image agree on."""
+import pytest
+
+from isa_mocap_ros.intake import Setting, StampWindow, ViewGate
+
+S = 1_700_000_000_000_000_000
+P = 33_333_333
+CAM = Setting("cam0_optical_frame", 320, 240, "rgb8")
+INFO = Setting("cam0_optical_frame", 320, 240)
+
+
+def gate(**kw):
+    return ViewGate("cam0", max_gap_ns=5_000_000_000, **kw)
+
+
+def test_nothing_is_learnt_before_a_camera_info_vouches_for_an_image():
+    g = gate()
+    # the issue's stray image: a valid 7x3 bgr8 image arriving first
+    acc, rej = g.add_image(S - 10 * P, Setting("cam0_optical_frame", 7, 3, "bgr8"), "stray")
+    assert acc == [] and rej == [] and g.setting is None and g.waiting() == 1
+    acc, rej = g.add_image(S, CAM, "img0")                   # the real first image waits for its info
+    assert acc == [] and g.waiting() == 2
+    acc, rej = g.add_info(S, INFO, "info0")
+    assert [a.payload for a in acc] == ["img0"] and acc[0].first and acc[0].info == "info0"
+    assert g.setting == CAM
+    # the stray one is older than what got in: its camera_info is not coming
+    assert len(rej) == 1 and rej[0].kind == "size" and "7x3" in rej[0].text and g.waiting() == 0
+
+
+def test_images_that_disagree_with_the_camera_are_rejected_and_never_change_it():
+    g = gate()
+    g.add_info(S, INFO, "info0")
+    assert g.add_image(S, CAM, "img0")[0][0].first
+    # later images without their camera_info (yet): the confirmed setting decides
+    acc, _ = g.add_image(S + P, CAM, "img1")
+    assert [a.payload for a in acc] == ["img1"] and acc[0].info == "info0"
+    bad = [Setting("cam0_optical_frame", 7, 3, "rgb8"), Setting("cam0_optical_frame", 320, 240, "bgr8"),
+           Setting("cam5_optical_frame", 320, 240, "rgb8")]
+    for k, st in enumerate(bad):
+        assert g.add_image(S + (2 + k) * P + 1, st, "bad") == ([], [])    # waits for a camera_info of its stamp
+    acc, rej = g.add_image(S + 10 * P, CAM, "img10")                      # a newer good image gets in first
+    assert [a.payload for a in acc] == ["img10"]
+    assert sorted(r.kind for r in rej) == ["encoding", "frame_id", "size"], rej
+    assert g.setting == CAM
+
+
+def test_far_stamps_are_rejected():
+    g = gate()
+    g.add_info(S, INFO, "i")
+    g.add_image(S, CAM, "img0")
+    for far in (S + 3600 * 10**9, S - 100 * 10**9, 0):
+        assert g.add_image(far, CAM, "far")[0] == []
+    acc, rej = g.add_image(S + P, CAM, "img1")
+    assert len(acc) == 1
+    # 0 and the one an hour back are older than img1: rejected now; the future one waits until it drops out
+    assert [r.kind for r in rej] == ["stamp", "stamp"] and "s from the stream" in rej[0].text
+    assert g.waiting() == 1
+
+
+def test_a_camera_info_pair_that_disagrees_within_itself_is_rejected():
+    g = gate()
+    acc, rej = g.add_image(S, Setting("cam0_optical_frame", 7, 3, "bgr8"), "stray")
+    acc, rej = g.add_info(S, INFO, "info")                   # same stamp, other size
+    assert acc == [] and rej[0].kind == "pair" and "its camera_info says 320x240" in rej[0].text
+    g.add_info(S + P, Setting("other_frame", 320, 240), "info")
+    acc, rej = g.add_image(S + P, CAM, "img")
+    assert acc == [] and rej[0].kind == "pair" and "frame_id 'cam0_optical_frame', its camera_info's is" in rej[0].text
+    assert g.setting is None
+
+
+def test_a_real_resolution_change_restarts_the_view():
+    g = gate()
+    g.add_info(S, INFO, "i0")
+    g.add_image(S, CAM, "a")
+    big = Setting("cam0_optical_frame", 640, 480, "rgb8")
+    assert g.add_image(S + P, big, "b") == ([], [])          # before its camera_info: waits
+    acc, rej = g.add_info(S + P, Setting("cam0_optical_frame", 640, 480), "i1")
+    assert rej == [] and acc[0].payload == "b" and acc[0].changed == (
+        "320x240 rgb8 in 'cam0_optical_frame' -> 640x480 rgb8 in 'cam0_optical_frame'")
+    assert g.setting == big and g.info == "i1"
+    acc, _ = g.add_image(S + 2 * P, big, "c")                # and the next ones are the new size
+    assert acc[0].payload == "c" and acc[0].changed is None
+    # a lone camera_info of the old size changes nothing; it is counted once it drops out unmatched
+    rej = []
+    for k in range(11):
+        rej += g.add_info(S + (3 + k) * P + 7, INFO, "old")[1]
+    assert len(rej) == 1 and rej[0].kind == "camera_info" and g.setting == big
+
+
+def test_a_stream_that_jumps_is_followed_through_a_pair():
+    g = gate()
+    g.add_info(S, INFO, "i0")
+    g.add_image(S, CAM, "a")
+    later = S + 100 * 10**9                                  # a camera paused for 100 s, or a bag looped
+    assert g.add_image(later, CAM, "b") == ([], [])
+    acc, _ = g.add_info(later, INFO, "i1")
+    assert acc[0].payload == "b"
+    assert g.add_image(later + P, CAM, "c")[0][0].payload == "c"
+
+
+def test_waiting_images_are_bounded():
+    g = gate(depth=3)
+    rej = []
+    for k in range(5):
+        rej += g.add_image(S + k * P, CAM, k)[1]
+    assert g.waiting() == 3 and [r.kind for r in rej] == ["no_camera_info"] * 2
+    assert "no camera_info of its stamp arrived" in rej[0].text
+
+
+def test_without_camera_info_the_first_image_fixes_the_setting():
+    g = gate(need_info=False)
+    assert g.add_image(S, CAM, "a")[0][0].first
+    acc, rej = g.add_image(S + P, Setting("cam0_optical_frame", 7, 3, "rgb8"), "b")
+    assert acc == [] and rej[0].kind == "size"
+    assert g.add_image(S + 2 * P, CAM, "c")[0][0].payload == "c"
+
+
+def test_stamp_window():
+    w = StampWindow(10)
+    assert w.far(12345) is None          # nothing accepted yet
+    w.accept(100)
+    assert w.far(110) is None and w.far(90) is None
+    assert "s from the stream" in w.far(111)
+    assert StampWindow(0).far(10**18) is None
+    with pytest.raises(ValueError, match="depth"):
+        ViewGate("cam0", max_gap_ns=1, depth=0)
+
+
+def test_expected_tracker_notes_are_events_not_problems():
+    from isa_mocap_ros.nodes.estimator import note_is_expected
+
+    for note in ("view 2: empty mask (nobody in view); skipped",
+                 "initialized automatically (4 heading candidates, 3 searched to the end)",
+                 "heading check started: a run heading the other way ended 0.05",
+                 "heading check decided: kept the initial heading (energy sums ...)",
+                 "no usable view and no estimate yet: nothing to track",
+                 "pelvis stage skipped: its share (12 evaluations) is below one generation"):
+        assert note_is_expected(note), note
+    for note in ("view 1: mask shape (7, 3), expected (240, 320); skipped",
+                 "no usable view: falling back to the last estimate",
+                 "optimizer failed: boom; falling back to the last estimate",
+                 "view 0: empty mask after the gate (all 12 foreground pixels farther than 40 px); skipped",
+                 "energy: 3 non-finite evaluations"):
+        assert not note_is_expected(note), note
+
+
+def test_stream_jumps_one_stray_stamp_changes_nothing_a_real_restart_is_followed():
+    from isa_mocap_ros.intake import StreamJumps
+
+    j = StreamJumps(back_ns=10**9, ahead_ns=5 * 10**9)
+    assert j.decide(S) == ("take", None) and j.decide(S + P)[0] == "take"
+    assert "out of order" in j.decide(S)[1]                         # older, within back_ns
+    for stray in (S + 3600 * 10**9, S - 3600 * 10**9, 7):           # far, alone: dropped, the stream goes on
+        assert j.decide(stray)[0] == "drop"
+        assert j.decide(j.last_ns + P)[0] == "take"
+    start = S - 100 * 10**9                                         # a replayed bag: two stamps in sequence
+    assert j.decide(start)[0] == "drop"
+    kind, why = j.decide(start + P)
+    assert kind == "restart" and "restarted" in why and j.last_ns == start + P
+    assert j.decide(start + 2 * P)[0] == "take"

@@ -1,0 +1,79 @@
+"""The node network under a fuzzer: `isa-mocap run --lockstep` on the fixture bag (real node processes)
+while another process publishes malformed and valid-but-wrong messages on every input topic
+(``test/fuzzer.py``: images, camera infos, extrinsics, masks, predictions; ~30 a second, from before
+the first frame to after the last). The run must finish with every frame set processed, every
+person frame estimated, and the same estimates as the offline tracker (hence the same accuracy).
+
+What the network guarantees (``isa_mocap_ros.intake``): a message that is malformed, or disagrees
+with what a node knows of its view (size, encoding or frame id against the camera that a camera_info
+and an image of one stamp agreed on; a stamp far from the stream; extrinsics of another parent or
+child frame; predictions not in the frame sets' time), changes nothing. A well-formed message that
+agrees with all of that is data: no network can tell it from the camera's own.
+"""
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import msg_adapters as ma
+from isa_mocap_ros.bag import BagReader
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.timeout(600)]
+HERE = Path(__file__).parent
+FIXTURE = HERE.parent / "bags" / "fixture"
+CLI = [sys.executable, "-m", "isa_mocap_ros.cli.main"]
+SETTINGS = ["--optimizer", "isa", "--evals", "300", "--seed", "3"]
+
+
+def _joint_states(bag: Path) -> dict[int, np.ndarray]:
+    out = {}
+    with BagReader(bag) as r:
+        for m in r.messages(["/mocap/joint_states"]):
+            msg = ma.from_cdr(m.data, m.type)
+            out[ma.stamp_to_ns(msg.header)] = np.array(msg.position)
+    return out
+
+
+def test_a_fuzzer_on_every_input_topic_changes_no_estimate(spawn, rosenv, tmp_path):
+    fuzzer = spawn("fuzzer", str(HERE / "fuzzer.py"), "4", "30", "0")
+    assert fuzzer.wait_for_output("sent ", 30), fuzzer.output()
+    run = subprocess.run(CLI + ["run", str(FIXTURE), "--lockstep", "--out", str(tmp_path / "run"), "--quiet",
+                                *SETTINGS], env=rosenv, capture_output=True, text=True, timeout=400)
+    fuzzer.stop(signal.SIGINT)
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
+    total = next(ln for ln in fuzzer.output().splitlines() if ln.startswith("total "))
+    sent = {k: int(n) for k, n in (kv.split("=") for kv in total.split()[1:])}
+    print(f"fuzzer: {sum(sent.values())} messages: {sent}")
+    assert len(sent) >= 20 and min(sent.values()) >= 3, sent     # every kind, throughout the run
+
+    s = json.loads((tmp_path / "run" / "summary.json").read_text())
+    with BagReader(FIXTURE) as r:
+        n_sets = r.topics["/mocap/cam0/image_raw"].message_count
+        n_truth = r.topics["/mocap/ground_truth/joint_states"].message_count
+    assert s["frames_processed"] == n_sets and s["dropped_frames"] == 0
+    assert s["frames"] == n_truth                                   # every person frame estimated
+    assert s["bad_inputs"] > 0                                      # the estimator saw and counted the fuzz
+
+    res = subprocess.run(CLI + ["track", str(FIXTURE), "--out", str(tmp_path / "track"), "--shape", "default",
+                                *SETTINGS], capture_output=True, text=True, timeout=400)
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    offline = json.loads((tmp_path / "track" / "summary.json").read_text())
+    print(f"mean joint error: network under the fuzzer {s['mpjpe_mm']:.3f} mm, offline {offline['mpjpe_mm']:.3f} mm")
+    assert abs(s["mpjpe_mm"] - offline["mpjpe_mm"]) <= 1.0
+    # lockstep is deterministic: nothing the fuzzer sent got into a result
+    node, ref = _joint_states(tmp_path / "run" / "estimates"), _joint_states(tmp_path / "track" / "estimates")
+    assert node.keys() == ref.keys()
+    for stamp in node:
+        assert np.array_equal(node[stamp], ref[stamp]), (stamp, np.abs(node[stamp] - ref[stamp]).max())
+
+    log = (tmp_path / "run" / "nodes.log").read_text()
+    assert "Traceback" not in log and "[ERROR]" not in log, log[-3000:]
+    for text in ("cam0: image", "Image.encoding", "Image.data", "camera_info dropped", "extrinsics dropped",
+                 "mask dropped", "prediction dropped", "s from the stream"):
+        assert text in log, text

@@ -1,0 +1,114 @@
+"""Keypoint node as a real process: BlazePose landmarks of a rendered person on cam<i>/keypoints,
+every k-th frame, image and mask paired in either order, source headers, empty masks give empty
+polygons, bad masks are dropped."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+from geometry_msgs.msg import PolygonStamped
+from sensor_msgs.msg import Image
+
+import msg_adapters as ma
+from isa_mocap_ros.body import joint_positions
+from isa_mocap_ros.nodes import qos
+from isa_mocap_ros.synth import SceneRenderer, make_clip
+from isa_mocap_ros.vision import default_rig
+from isa_mocap_ros.vision.landmark_model import ModelUnavailable, landmark_model_path
+from isa_mocap_ros.vision.landmarks import LANDMARK_NAMES
+from rosnode import ros_node, spin_until
+
+pytestmark = [pytest.mark.ros, pytest.mark.timeout(180)]
+NODE = ["-m", "isa_mocap_ros.nodes.keypoints", "--ros-args", "-r", "__ns:=/mocap"]
+
+
+@pytest.fixture(scope="module")
+def model_file():
+    try:
+        return landmark_model_path()
+    except ModelUnavailable as exc:
+        pytest.skip(f"landmark model not available: {exc}")
+
+
+def test_node_publishes_landmarks_every_k_frames(model_file, rosenv, spawn, tmp_path):
+    params = {"views": 2, "every_k_frames": 2}
+    path = tmp_path / "kp.yaml"
+    path.write_text(yaml.safe_dump({"/mocap/keypoints": {"ros__parameters": params}}))
+    proc = spawn("keypoints", *NODE, "--params-file", str(path))
+    assert proc.wait_for_output("keypoints: 2 views, every 2 frame(s)", 90), proc.output()
+
+    rig = default_rig(n_views=2, width=480, height=360)
+    clip = make_clip("walk", dof=39, fps=30.0, duration_s=0.2, seed=1)
+    renderer = SceneRenderer(clip.model, rig, seed=1)
+    J = joint_positions(clip.model, clip.poses)
+    names = ["left_shoulder", "right_shoulder", "left_hip", "right_hip", "left_knee", "right_knee"]
+    ji = [clip.model.joint_names.index(n) for n in names]
+    li = [LANDMARK_NAMES.index(n) for n in names]
+    with ros_node(rosenv, "kp_test") as (node, ex):
+        img_pubs = [node.create_publisher(Image, f"/mocap/cam{v}/image_raw", qos.RELIABLE) for v in range(2)]
+        mask_pubs = [node.create_publisher(Image, f"/mocap/cam{v}/mask", qos.RELIABLE) for v in range(2)]
+        got: list[dict[int, PolygonStamped]] = [{}, {}]
+        for v in range(2):
+            node.create_subscription(PolygonStamped, f"/mocap/cam{v}/keypoints",
+                                     lambda m, v=v: got[v].__setitem__(ma.stamp_to_ns(m.header), m), qos.RELIABLE)
+        assert spin_until(ex, lambda: all(p.get_subscription_count() > 0 for p in img_pubs + mask_pubs)
+                          and all(node.count_publishers(f"/mocap/cam{v}/keypoints") for v in range(2)), 30)
+        stamps = []
+        for f in range(4):
+            images, masks = renderer.render(clip.poses[f], f)
+            stamp = 1_700_000_000 * 10**9 + f * 33_333_333
+            stamps.append(stamp)
+            for v in range(2):
+                im = ma.array_to_image(images[v], "rgb8")
+                im.header = ma.make_header(stamp, f"cam{v}_optical_frame")
+                mk = ma.array_to_image(masks[v], "mono8")
+                mk.header = im.header
+                first, second = (mask_pubs, img_pubs) if f == 2 else (img_pubs, mask_pubs)   # either order pairs
+                first[v].publish(mk if f == 2 else im)
+                spin_until(ex, lambda: False, 0.05)
+                second[v].publish(im if f == 2 else mk)
+            spin_until(ex, lambda: False, 0.05)
+        assert spin_until(ex, lambda: all(len(g) >= 2 for g in got), 60), (got, proc.output())
+        # an empty mask: "looked, nobody"; a mask of the wrong size: dropped with a log line
+        stamp = stamps[-1] + 10 * 33_333_333
+        for v, mask in ((0, np.zeros((360, 480), np.uint8)), (1, np.zeros((10, 10), np.uint8))):
+            im = ma.array_to_image(images[v], "rgb8")
+            im.header = ma.make_header(stamp, f"cam{v}_optical_frame")
+            mk = ma.array_to_image(mask, "mono8")
+            mk.header = im.header
+            img_pubs[v].publish(im)
+            spin_until(ex, lambda: False, 0.05)
+            mask_pubs[v].publish(mk)
+        assert spin_until(ex, lambda: stamp in got[0], 30), proc.output()
+        assert proc.wait_for_output("cam1 frame at", 30), proc.output()
+    # every 2nd frame (0 and 2) per view, with the image's header
+    for v in range(2):
+        assert sorted(got[v])[:2] == [stamps[0], stamps[2]]
+        assert got[v][stamps[0]].header.frame_id == f"cam{v}_optical_frame"
+        for f in (0, 2):
+            uv, conf = ma.polygon_to_keypoints(got[v][stamps[f]])
+            ref = rig.cameras[v].project(J[f, ji])
+            err = np.linalg.norm(uv[li] - ref, axis=1)
+            assert np.median(err) < 15.0, err              # pixels, at 480x360
+            assert conf.min() >= 0 and conf.max() <= 1 and np.median(conf[li]) > 0.5
+    assert ma.polygon_to_keypoints(got[0][stamp]) is None
+    assert stamp not in got[1]
+
+
+def test_run_starts_the_keypoint_node_only_when_asked_and_records_its_topic():
+    import argparse
+    from pathlib import Path
+
+    from isa_mocap_ros.cli.run import RECORDED, _network
+
+    def names(**kw):
+        ns = argparse.Namespace(lockstep=True, optimizer=None, evals=None, model=None, seed=None, helper_nice=0, **kw)
+        return {s.name: s for s in _network(ns, "p.yaml", Path("out"), 2, None)}
+
+    assert "keypoints" not in names() and "keypoints" not in names(keypoints=False)
+    spec = names(keypoints=True)["keypoints"]
+    params = dict(spec.params)
+    assert spec.exec == "keypoints_node" and params["views"] == "2"
+    # lockstep: image and mask subscriptions reliable, as the segmentation's and the estimator's
+    assert params["qos_overrides./mocap/cam1/mask.subscription.reliability"] == "reliable"
+    assert "/mocap/cam*/keypoints" in RECORDED
