@@ -8,11 +8,10 @@ from typing import Sequence
 
 import numpy as np
 
-from . import _fast_search, frame_masks
-from .init import InitError, initial_pose
-from .objective import TotalEnergy
-from .plan import FrameBudget
+from . import _fast_search, frame_masks, objective
 from .config import TrackerError, frame_rng
+from .init import InitError, initial_pose
+from .plan import FrameBudget
 
 
 def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int = 0,
@@ -59,7 +58,7 @@ def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int
     if frame_masks.set_masks(tr, usable, notes, frame_index) == 0:
         raise TrackerError(f"masks: expected foreground in at least one view, received none ({'; '.join(notes)})")
     cfg = tr.config
-    tr._keypoint_term = tr._keypoint_energy(keypoints)[0]
+    tr._keypoint_term = objective.keypoint_energy(tr, keypoints)[0]
     try:
         res = initial_pose(tr.model, tr.cameras, usable, init_energy_fn(tr, usable, frame_index),
                            rng=frame_rng(cfg.seed, frame_index, 1), n_yaw=cfg.init_yaw_steps,
@@ -110,7 +109,7 @@ def initial_runs(tr, starts: list, frame_index: int, notes: list[str], budget: F
             continue
         # bind + iterate + result() is minimize(), split at the checkpoint: the end of the first
         # partition (hierarchical optimizers, whose shares bind() sets) or a sixth of the budget
-        opt.bind(TotalEnergy(tr), max_evals=evals)
+        opt.bind(objective.TotalEnergy(tr), max_evals=evals)
         shares = getattr(opt, "shares", None)
         runs.append((j, opt, pred, shares[0] if shares else evals // 6))
     n_pruned = 0

@@ -22,7 +22,7 @@ import numpy as np
 
 from isa_mocap_ros.geometry import nearest_rotvec
 
-from . import _fast_search, first_frame, frame_masks, frame_prediction, heading, plan, stages
+from . import _fast_search, first_frame, frame_masks, frame_prediction, heading, objective, plan, stages
 from .config import (DEFAULT_PARAMS, PREDICTORS, TRAVEL_FRAMES, FrameResult, TrackerConfig, TrackerError,
                      _partition_coords, _whole_generations, frame_rng)
 from .contour import ContourFit
@@ -405,45 +405,9 @@ class Tracker:
         return x, float(energy)
 
 
-    def _keypoint_energy(self, keypoints) -> tuple[object, str | None]:
-        """The frame's :class:`~isa_mocap_ros.energy.KeypointEnergy` (or None) and a note on it."""
-        if keypoints is None or self.config.keypoint_weight <= 0:
-            return None, None
-        from isa_mocap_ros.energy import KeypointEnergy
-        try:
-            term = KeypointEnergy(self.model, self.cameras, keypoints, sigma_m=self.config.keypoint_sigma_m)
-        except ValueError as exc:
-            return None, f"keypoints ignored: {exc}"
-        if term.n_correspondences == 0:
-            return None, "keypoints: none usable (no detection above the confidence floor)"
-        return term, (f"keypoints: {term.n_correspondences} in {len(set(term.views.tolist()))} views, "
-                      f"weight {self.config.keypoint_weight:g}")
-
     def step(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1,
              contour_stage: bool = True, keypoints: Sequence | None = None) -> FrameResult:
         """Track one frame (see the module docstring). Never raises on bad masks, predictions or keypoints.
-
-        ``keypoints``: per camera ``(uv (33, 2), confidence (33,))`` BlazePose landmarks or None; with
-        ``config.keypoint_weight > 0`` they add the keypoint term to this frame's energy (also for the
-        heading check's rival, so both hypotheses are scored alike). See :meth:`_step_frame`.
-        """
-        term, note = self._keypoint_energy(keypoints)
-        rival = self._rival
-        self._keypoint_term = term
-        if rival is not None:
-            rival._keypoint_term = term
-        try:
-            res = self._step_frame(masks, frame_index, prediction=prediction, frames_elapsed=frames_elapsed,
-                                   contour_stage=contour_stage)
-        finally:
-            self._keypoint_term = None
-            if rival is not None:
-                rival._keypoint_term = None
-        return res if note is None else dataclasses.replace(res, notes=res.notes + (note,))
-
-    def _step_frame(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1,
-                    contour_stage: bool = True) -> FrameResult:
-        """Track one frame (see the module docstring). Never raises on bad masks or predictions.
 
         Parameters
         ----------
@@ -459,11 +423,31 @@ class Tracker:
             False: this frame without the contour stage (its share goes to the main search, as with
             ``contour_iterations=0``): what the estimator node does in real time with a frame set that
             waited too long (its ``catch_up_ms``; the stage is the costliest in time per evaluation).
+        keypoints : sequence of ``(uv (33, 2), confidence (33,))`` or None
+            Per camera BlazePose landmarks; with ``config.keypoint_weight > 0`` they add the keypoint term
+            to this frame's energy (the heading check's rival's too, so both are scored alike).
 
         Returns
         -------
         FrameResult
         """
+        term, note = objective.keypoint_energy(self, keypoints)
+        rival = self._rival
+        self._keypoint_term = term
+        if rival is not None:
+            rival._keypoint_term = term
+        try:
+            res = self._step_frame(masks, frame_index, prediction=prediction, frames_elapsed=frames_elapsed,
+                                   contour_stage=contour_stage)
+        finally:
+            self._keypoint_term = None
+            if rival is not None:
+                rival._keypoint_term = None
+        return res if note is None else dataclasses.replace(res, notes=res.notes + (note,))
+
+    def _step_frame(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1,
+                    contour_stage: bool = True) -> FrameResult:
+        """The frame without its keypoint term (set by :meth:`step`)."""
         t0 = time.perf_counter()
         rival = self._rival
         self._contour_now = bool(contour_stage)
