@@ -11,7 +11,7 @@ from sensor_msgs.msg import CameraInfo
 
 from isa_mocap_ros.body import joint_positions, make_model
 from isa_mocap_ros.nodes.common import one_numba_thread
-from isa_mocap_ros.nodes.estimator import _camera_info_key
+from msg_adapters.camera_info import camera_info_key as _camera_info_key
 from isa_mocap_ros.vision.segmentation import clean_mask
 
 
