@@ -17,17 +17,16 @@ def test_estimator_section_matches_tracker_defaults():
     pairs = {"optimizer": tc.optimizer, "evals": tc.evals_per_frame, "energy": tc.energy_method,
              "downsample": tc.downsample, "search_radius_rad": tc.search_radius_rad, "predictor": tc.predictor,
              "predictor_order": tc.predictor_order, "prior_eta": tc.prior_eta, "seed": tc.seed,
-             "pelvis_fraction": tc.pelvis_fraction, "pelvis_move": tc.pelvis_move,
+             "pelvis_fraction": tc.pelvis_fraction,
              "torso_fraction": tc.torso_fraction, "limb_fold_deg": tc.limb_fold_deg,
              "limb_hinge_window_deg": tc.limb_hinge_window_deg,
              "limb_proposals": tc.limb_proposals,
              "limb_proposal_limbs": list(tc.limb_proposal_limbs), "limb_hinge_limbs": list(tc.limb_hinge_limbs),
              "limb_extrapolations": list(tc.limb_extrapolations),
              "init_confirm_frames": tc.init_confirm_frames,
-             "init_confirm_share": tc.init_confirm_share, "heading_travel_cue": tc.heading_travel_cue,
-             "refine_fraction": tc.refine_fraction, "refine_partitions": list(tc.refine_partitions),
+             "heading_travel_cue": tc.heading_travel_cue,
              "partition_order": list(tc.partition_order), "gate_margin_px": tc.gate_margin_px,
-             "hull_filter": tc.hull_filter, "hull_misses": tc.hull_misses, "hull_dilate_px": tc.hull_dilate_px,
+             "hull_filter": tc.hull_filter, "hull_dilate_px": tc.hull_dilate_px,
              "hull_keep_px": tc.hull_keep_px,
              "hull_pad_m": tc.hull_pad_m, "view_weights": tc.view_weights}
     assert {k: est[k] for k in pairs} == pairs
@@ -44,3 +43,11 @@ def test_every_section_is_a_node_with_parameters():
     cfg = yaml.safe_load((REPO / "config" / "pipeline.yaml").read_text())
     assert set(cfg) >= {"/mocap/camera", "/mocap/segmentation", "/mocap/prediction", "/mocap/estimator"}
     assert all(isinstance(v.get("ros__parameters"), dict) for v in cfg.values())
+
+
+def test_deleted_settings_are_gone_everywhere():
+    """Settings that only selected variants measured worse were deleted with their code (issue #31)."""
+    est = yaml.safe_load((REPO / "config" / "pipeline.yaml").read_text())["/mocap/estimator"]["ros__parameters"]
+    names = {f for f in TrackerConfig.__dataclass_fields__}
+    for gone in ("pelvis_move", "refine_fraction", "refine_partitions", "hull_misses", "init_confirm_share"):
+        assert gone not in est and gone not in names

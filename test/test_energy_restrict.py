@@ -221,13 +221,13 @@ def test_hierarchical_with_the_silhouette_energy_same_result_and_counts(scene):
 def test_tracker_restricted_total_energy_adds_the_prior(scene):
     from isa_mocap_ros.body.motion import generate_motion
     from isa_mocap_ros.energy.prior import ParzenPrior
-    from isa_mocap_ros.tracking import Tracker, TrackerConfig
+    from isa_mocap_ros.tracking import Tracker, TrackerConfig, frame_masks
 
     model, cams, x0, masks = scene
     prior = ParzenPrior(generate_motion("walk", model, duration_s=1.0, fps=30, rng=np.random.default_rng(5)))
     tr = Tracker(model, cams, TrackerConfig(optimizer="h-isa", evals_per_frame=600, prior_eta=0.01), prior=prior)
     tr.initialize(pose=x0)
-    tr._set_masks(list(masks), [], 0)
+    frame_masks.set_masks(tr, list(masks), [], 0)
     cols = model.partitions["left_arm"]
     X = np.repeat(x0[None], 6, axis=0)
     X[:, cols] += np.random.default_rng(6).normal(0, 0.2, (6, len(cols)))

@@ -166,8 +166,6 @@ def test_bad_masks_and_box_are_named(scene):
 def test_tracker_config_checks_the_hull_settings():
     with pytest.raises(TrackerError, match="hull_dilate_px"):
         TrackerConfig(hull_dilate_px=-1)
-    with pytest.raises(TrackerError, match="hull_misses"):
-        TrackerConfig(hull_misses=-2)
     with pytest.raises(TrackerError, match="hull_keep_px"):
         TrackerConfig(hull_keep_px=-1)
     with pytest.raises(TrackerError, match="hull_pad_m"):

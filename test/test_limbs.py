@@ -8,7 +8,14 @@ from isa_mocap_ros.body import capsule_endpoints, joint_positions, make_model
 from isa_mocap_ros.body.motion import generate_motion
 from isa_mocap_ros.tracking import Tracker, TrackerConfig, TrackerError
 from isa_mocap_ros.tracking.limbs import LIMBS, LimbMove
+from isa_mocap_ros.tracking import plan
+from isa_mocap_ros.tracking.plan import FrameBudget
 from isa_mocap_ros.tracking.tracker import frame_rng
+
+
+def _limb_stage_of(tr, notes, pred):
+    """The limb stage's plan on a full frame budget."""
+    return plan.limb_stage(tr, notes, pred, FrameBudget(tr.config.evals_per_frame))
 from isa_mocap_ros.vision import default_rig, render_mask
 
 
@@ -131,7 +138,7 @@ def test_stage_budget_skip_note_and_off(scene):
                             (330, ("left_arm", "right_arm"), 12), (290, LIMBS, 0), (170, LIMBS, 0)]:
         tr = Tracker(model, cams, TrackerConfig(evals_per_frame=evals, seed=1, limb_proposal_limbs=limbs))
         notes = []
-        got = tr._limb_stage(notes, truth)
+        got = _limb_stage_of(tr, notes, truth)
         assert got == ((list(limbs), [v for v in limbs if v.endswith("_leg")], n) if n else ([], [], 0))
         assert (notes == ["limb stage skipped: fewer than 4 proposals per limb fit in a tenth of the frame "
                           f"budget ({evals}; 4 limbs)"]) == (n == 0)
@@ -196,19 +203,19 @@ def test_a_leg_folded_in_the_prediction_joins_the_stage(scene):
     arms = dict(limb_proposal_limbs=("left_arm", "right_arm"))
     tr = Tracker(model, cams, TrackerConfig(seed=1, **arms))
     tr.initialize(pose=truth)
-    assert tr._limb_stage([], truth) == (["left_arm", "right_arm"], [], 16)
+    assert _limb_stage_of(tr, [], truth) == (["left_arm", "right_arm"], [], 16)
     notes = []
-    assert tr._limb_stage(notes, folded) == (["left_arm", "right_arm", "right_leg"], [], 16) and len(notes) == 1
+    assert _limb_stage_of(tr, notes, folded) == (["left_arm", "right_arm", "right_leg"], [], 16) and len(notes) == 1
     # the folded leg joins only while the stage stays within a tenth of the budget (16 x 3 + 2 = 50 > 40)
     tr = Tracker(model, cams, TrackerConfig(seed=1, evals_per_frame=400, **arms))
     notes = []
-    assert tr._limb_stage(notes, folded) == (["left_arm", "right_arm"], [], 16) and notes == []
-    assert Tracker(model, cams, TrackerConfig(seed=1, limb_proposals=0))._limb_stage(notes, folded) == ([], [], 0)
+    assert _limb_stage_of(tr, notes, folded) == (["left_arm", "right_arm"], [], 16) and notes == []
+    assert _limb_stage_of(Tracker(model, cams, TrackerConfig(seed=1, limb_proposals=0)), notes, folded) == ([], [], 0)
     # the default stage has the legs with hinge proposals; a folded one gets the twist too (no note: it is in)
     tr = Tracker(model, cams, TrackerConfig(seed=1))
     notes = []
-    assert tr._limb_stage(notes, truth) == (list(LIMBS), ["left_leg", "right_leg"], 16)
-    assert tr._limb_stage(notes, folded) == (list(LIMBS), ["left_leg"], 16) and notes == []
+    assert _limb_stage_of(tr, notes, truth) == (list(LIMBS), ["left_leg", "right_leg"], 16)
+    assert _limb_stage_of(tr, notes, folded) == (list(LIMBS), ["left_leg"], 16) and notes == []
 
 
 @pytest.mark.parametrize("off_deg, window", [(70.0, 0.0), (70.0, 90.0), (40.0, 45.0)])
@@ -280,5 +287,5 @@ def test_extrapolated_proposals_carry_a_limb_along_its_motion(scene):
     assert n == 1 + 2
     # off
     tr = Tracker(model, cams, TrackerConfig(seed=1, limb_extrapolations=()))
-    assert tr._limb_stage([], truth) == (list(LIMBS), ["left_leg", "right_leg"], 16)
-    assert tr._limb_share(4, 16) == 66
+    assert _limb_stage_of(tr, [], truth) == (list(LIMBS), ["left_leg", "right_leg"], 16)
+    assert plan.limb_share(tr, 4, 16) == 66

@@ -40,3 +40,23 @@ def test_problems_are_counted_and_rate_limited_events_apart():
     log2.report("k", "again")
     log2.report("k", "again")
     assert log2._logger.lines[-1] == ("WARN", "again (2 so far)")
+
+
+def test_a_real_rclpy_logger_takes_warn_and_error_from_one_problem_log(ros_domain):
+    # rclpy raises ValueError when one call site logs at two severities; that killed the estimator's
+    # worker thread the first time a frame set was lost after a warned-about input
+    import rclpy
+    from rclpy.context import Context
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=ros_domain)
+    try:
+        node = rclpy.create_node("problem_log_test", context=ctx)
+        log = ProblemLog(node, period_s=0.0)
+        log.report("mask0:stamp", "cam0: mask dropped")
+        log.report("calib", "frame set lost", level="error")
+        log.report("mask0:stamp", "cam0: mask dropped")
+        assert log.counts == {"mask0:stamp": 2, "calib": 1}
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)

@@ -9,7 +9,6 @@ from isa_mocap_ros.body.kinematics import forward_kinematics
 from isa_mocap_ros.body.motion import generate_motion
 from isa_mocap_ros.geometry import exp_so3, log_so3
 from isa_mocap_ros.tracking import Tracker, TrackerConfig, TrackerError
-from isa_mocap_ros.tracking.pelvis import PelvisMove
 from isa_mocap_ros.tracking.reaim import ReaimMove, euler_angles
 from isa_mocap_ros.tracking.tracker import frame_rng
 from isa_mocap_ros.vision import default_rig, render_mask
@@ -180,30 +179,25 @@ def test_reaim_stage_puts_the_hip_centres_back(scene):
     """The trap of the re-aimed move: the pelvis turned 12 deg about the vertical with the thighs
     swung about the knees and the lower spine about the chest — knees, chest, arms and head where
     they were, the hip centres 18.8 mm off. Measured at 160x120, 601 evaluations, seeds 0-7: the
-    re-aimed stage takes the hip centres to 3.6-13.1 mm (mean 7.4) and always lowers the energy; the
-    world move (children keep their world rotations, so the legs move with the hips) leaves 13.9-20.5
-    mm (mean 16.6)."""
+    re-aimed stage takes the hip centres to 3.6-13.1 mm (mean 7.4) and always lowers the energy (the
+    deleted world move, whose legs moved with the hips, left 13.9-20.5 mm, mean 16.6)."""
     model, cams, walk, masks = scene
     truth = walk[3]
     root = truth[:6].copy()
     root[3:6] = log_so3(exp_so3(truth[3:6]) @ exp_so3(np.array([0.0, 0.0, np.deg2rad(12.0)])))
     trapped = ReaimMove(model, [0])(truth, root[None])[0]
     assert 15.0 < _hip_error_mm(model, trapped, truth) < 25.0
-    res = {}
-    for move in ("reaim", "world"):
-        tr = Tracker(model, cams, TrackerConfig(seed=1, pelvis_move=move))
-        tr.initialize(pose=trapped)
-        tr.step(masks[3], 3)                                  # sets the masks of frame 3
-        e0 = tr.total_energy(trapped[None])[0]
-        res[move] = []
-        for s in range(8):
-            x, e, n = tr.refit_pelvis(trapped, evals=601, rng=frame_rng(s, 3))     # 20 generations + 1
-            assert n == 601 and np.all(x >= model.lower) and np.all(x <= model.upper)
-            res[move].append(_hip_error_mm(model, x, truth))
-            if move == "reaim":
-                assert e < e0
-    assert np.mean(res["reaim"]) < 10.0 and max(res["reaim"]) < 16.0
-    assert np.mean(res["world"]) > 1.5 * np.mean(res["reaim"])
+    tr = Tracker(model, cams, TrackerConfig(seed=1))
+    tr.initialize(pose=trapped)
+    tr.step(masks[3], 3)                                  # sets the masks of frame 3
+    e0 = tr.total_energy(trapped[None])[0]
+    res = []
+    for s in range(8):
+        x, e, n = tr.refit_pelvis(trapped, evals=601, rng=frame_rng(s, 3))     # 20 generations + 1
+        assert n == 601 and np.all(x >= model.lower) and np.all(x <= model.upper)
+        res.append(_hip_error_mm(model, x, truth))
+        assert e < e0
+    assert np.mean(res) < 10.0 and max(res) < 16.0
 
 
 def test_torso_stage_budget_replacement_and_skip_note(scene):
@@ -258,29 +252,10 @@ def test_models_without_a_torso_skip_the_stage():
                                        ({"torso_fraction": 1.0}, "torso_fraction"),
                                        ({"torso_fraction": float("nan")}, "torso_fraction"),
                                        ({"pelvis_fraction": 0.5, "torso_fraction": 0.5},
-                                        "pelvis_fraction \\+ torso_fraction \\+ refine_fraction"),
-                                       ({"pelvis_move": "rigid"}, "pelvis_move: expected one of reaim, world")])
+                                        "pelvis_fraction \\+ torso_fraction: expected below 1")])
 def test_bad_config(kw, match):
     with pytest.raises(TrackerError, match=match):
         TrackerConfig(**kw)
-
-
-def test_world_move_is_the_pelvis_move(scene):
-    """``pelvis_move="world"`` is the former stage: PelvisMove with its spreads x2."""
-    model, cams, walk, masks = scene
-    tr = Tracker(model, cams, TrackerConfig(seed=1, pelvis_move="world"))
-    tr.initialize(pose=walk[2])
-    tr.step(masks[3], 3)
-    x = walk[3].copy()
-    x[3:6] += 0.05
-    got, _, _ = tr.refit_pelvis(x, evals=200, rng=frame_rng(4, 3))
-    # the world move keeps the hips' world rotations: the thigh vectors equal the input's
-    names = list(model.joint_names)
-    h, k = names.index("left_hip"), names.index("left_knee")
-    lo, hi, _ = tr.search_box(x)
-    P0, P = joint_positions(model, np.clip(x, lo, hi)[None])[0], joint_positions(model, got[None])[0]
-    np.testing.assert_allclose(P[k] - P[h], P0[k] - P0[h], atol=1e-9)
-    assert PelvisMove(model).children
 
 
 def test_flat_algorithms_have_no_torso_stage(scene):

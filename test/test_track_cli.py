@@ -69,17 +69,6 @@ def test_track_partition_order(tmp_path, capsys):
     assert "partition_order: expected every partition of model" in capsys.readouterr().err
 
 
-@pytest.mark.skipif(not FIXTURE.is_dir(), reason="bags/fixture not present")
-def test_track_init_confirm_share(tmp_path, capsys):
-    out = tmp_path / "out"
-    assert main(["track", str(FIXTURE), "--out", str(out), "--evals", "300", "--frames", "2", "--no-progress",
-                 "--init", "truth", "--shape", "truth", "--use-masks", "--init-confirm-share", "0.5"]) == 0
-    assert json.loads((out / "summary.json").read_text())["init_confirm_share"] == 0.5
-    capsys.readouterr()
-    assert main(["track", str(FIXTURE), "--out", str(tmp_path / "o2"), "--init-confirm-share", "1.5", "--shape", "default"]) == 2
-    assert "init_confirm_share: expected a share in (0, 1], received 1.5" in capsys.readouterr().err
-
-
 def test_track_bad_input(tmp_path, capsys):
     assert main(["track", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]) == 2
     assert "no such path" in capsys.readouterr().err

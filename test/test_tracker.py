@@ -6,6 +6,7 @@ from isa_mocap_ros.body import capsule_endpoints, make_model
 from isa_mocap_ros.body.motion import generate_motion
 from isa_mocap_ros.eval import frame_errors_mm, marker_positions
 from isa_mocap_ros.tracking import FrameResult, Tracker, TrackerConfig, TrackerError, make_tracker
+from isa_mocap_ros.tracking import first_frame, heading
 from isa_mocap_ros.tracking.contour import ContourFitInfo
 from isa_mocap_ros.vision import default_rig, render_mask
 
@@ -147,21 +148,20 @@ def _heading_runs(scene, monkeypatch, *, wrong_first: bool, external=None, **cfg
     runs heading like the truth get 1.4x their energy, so a run facing the other way wins."""
     import dataclasses
 
-    from isa_mocap_ros.tracking import tracker as T
     from isa_mocap_ros.tracking.init import _wrap, _yaw_of
 
     model, cams, walk, masks = scene
     if wrong_first:
-        orig = T.Tracker._initial_runs
+        orig = first_frame.initial_runs
         yaw = _yaw_of(walk[0][3:6])
 
-        def runs(self, starts, frame_index, notes, stream=()):
-            out, n = orig(self, starts, frame_index, notes, stream)
+        def runs(tr, starts, frame_index, notes, budget, stream=()):
+            out, n = orig(tr, starts, frame_index, notes, budget, stream)
             if stream:                                  # the heading re-check's runs are left alone
                 return out, n
             return [(j, dataclasses.replace(r, energy=1.4 * r.energy, best_energy=1.4 * r.best_energy)
                      if abs(_wrap(_yaw_of(r.x[3:6]) - yaw)) < np.pi / 2 else r, p) for j, r, p in out], n
-        monkeypatch.setattr(T.Tracker, "_initial_runs", runs)
+        monkeypatch.setattr(first_frame, "initial_runs", runs)
     # init_confirm_ratio 1.5: here the right and the wrong heading end 29 % apart on the first frame
     tr = Tracker(model, cams, TrackerConfig(**{"seed": 0, "init_confirm_ratio": 1.5, **cfg}))
     out = [tr.step(masks[0], 0)]
@@ -237,9 +237,8 @@ def test_an_undecided_heading_check_is_rechecked_once(scene320_long, monkeypatch
     """A check that keeps the winner only for want of evidence (sums within init_confirm_margin: the
     rival may still have been converging, the generated box seed 2) is re-checked once, a few frames
     later, from standing poses heading the other way."""
-    from isa_mocap_ros.tracking import tracker as T
 
-    monkeypatch.setattr(T, "UNDECIDED_RECHECK_FRAMES", 2)
+    monkeypatch.setattr(heading, "UNDECIDED_RECHECK_FRAMES", 2)
     _, on, _ = _heading_runs(scene320_long, monkeypatch, wrong_first=False, init_confirm_margin=10.0)
     notes = [(k, n) for k, r in enumerate(on) for n in r.notes if n.startswith("heading")]
     assert notes[0][0] == 0 and notes[0][1].startswith("heading check started")
@@ -268,7 +267,7 @@ def test_travel_cue_rechecks_a_track_that_moves_backwards(scene320_two_views, mo
     from isa_mocap_ros.tracking import tracker as T
 
     def runs(**cfg):
-        monkeypatch.setattr(T.Tracker, "_pick_rival", lambda self, *a, **k: None)   # no check after the first frame
+        monkeypatch.setattr(first_frame, "pick_rival", lambda tr, *a, **k: None)   # no check after the first frame
         # the contour stage off: with it the backwards track fits the two views so closely that the re-check
         # can keep it on its energies (seen with the test workers' thread count; session 16)
         return _heading_runs(scene320_two_views, monkeypatch, wrong_first=True, init_confirm_frames=2,
@@ -317,16 +316,16 @@ def test_travel_reads_the_root_motion(scene320_two_views):
         tr._accept(x)
     direction, dist, span = tr.travel()
     assert span == T.TRAVEL_FRAMES and dist == pytest.approx(np.hypot(*(walk[T.TRAVEL_FRAMES][:2] - walk[0][:2])))
-    assert tr._off_travel(direction, walk[T.TRAVEL_FRAMES]) < 20.0            # the generated walk moves forwards
+    assert heading.off_travel(direction, walk[T.TRAVEL_FRAMES]) < 20.0            # the generated walk moves forwards
     assert tr.travel(min_periods=T.TRAVEL_FRAMES + 1) is None
-    assert tr._travel_recheck_due() is None                                   # forwards: no re-check
+    assert heading.travel_recheck_due(tr) is None                                   # forwards: no re-check
     assert not tr.heading_recheck_pending([None] * len(cams))
     from isa_mocap_ros.geometry.so3 import exp_so3, log_so3, rot_z
 
     turned = tr._last.copy()
     turned[3:6] = log_so3(rot_z(np.pi) @ exp_so3(turned[3:6]))              # heading the other way
     tr._last = turned
-    assert tr._travel_recheck_due()[0] > 160.0
+    assert heading.travel_recheck_due(tr)[0] > 160.0
     assert tr.heading_recheck_pending([None] * len(cams))                    # the estimator holds the frames after
     tr.reset()
     assert tr.travel() is None
@@ -337,24 +336,6 @@ def test_travel_reads_the_root_motion(scene320_two_views):
     assert still.travel() is None
     with pytest.raises(TrackerError, match="heading_travel_cue"):
         TrackerConfig(heading_travel_cue=1)
-
-
-def test_heading_check_shares_the_frame_budget(scene320, monkeypatch):
-    # init_confirm_share 0.5: a frame of the check costs one frame's budget, 750 evaluations each
-    _, on, err = _heading_runs(scene320, monkeypatch, wrong_first=False, init_confirm_share=0.5)
-    notes = _heading_notes(on)
-    assert notes[1].startswith("heading check decided: kept the initial heading")
-    checked = [k for k, r in enumerate(on) if any("kept the initial heading" in n for n in r.notes)][0]
-    assert checked >= 1
-    # the check's frames (two hypotheses of 750) cost what the frames after it (one of 1500) cost
-    assert all(1500 - 8 < r.n_evals <= 1500 for r in on[1:]) and len(on) > 2
-    assert err.max() < 60.0
-    model, cams, _, _ = scene320
-    # never below 500 (or the frame budget when it is smaller)
-    for evals, share, each in ((1500, 0.5, 750), (3000, 0.5, 1500), (800, 0.5, 500), (400, 0.5, 400),
-                               (1500, 0.1, 500), (1500, 1.0, 1500)):
-        tr = Tracker(model, cams, TrackerConfig(evals_per_frame=evals, init_confirm_share=share))
-        assert tr.confirm_evals() == each
 
 
 def test_heading_check_ends_at_a_gap(scene320):
@@ -483,8 +464,6 @@ def test_search_box_respects_radius_and_limits(scene):
     ({"init_keep": 1.5}, "init_keep: expected an integer >= 0"),
     ({"init_confirm_frames": -1}, "init_confirm_frames: expected an integer >= 0"),
     ({"init_confirm_ratio": 0.9}, "init_confirm_ratio: expected a finite number >= 1.0"),
-    ({"init_confirm_share": 0.0}, "init_confirm_share: expected a finite number > 0.0"),
-    ({"init_confirm_share": 1.5}, "init_confirm_share: expected a share in \\(0, 1\\], received 1.5"),
     ({"init_confirm_margin": float("nan")}, "init_confirm_margin: expected a finite number >= 1.0"),
     ({"init_polish": "yes"}, "init_polish: expected true or false, received 'yes'"),
     ({"contour_extra_iterations": -1}, "contour_extra_iterations: expected an integer >= 0"),

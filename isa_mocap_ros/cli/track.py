@@ -78,9 +78,6 @@ def register(sub) -> None:
     p.add_argument("--init-confirm-frames", type=int, default=None, metavar="N",
                    help="heading check after the automatic initialization: frames an opposite-heading rival is "
                         "tracked beside the winner (0 = off; default: the tracker's default)")
-    p.add_argument("--init-confirm-share", type=float, default=None, metavar="F",
-                   help="share of the frame budget each hypothesis of the heading check gets, in (0, 1] "
-                        "(default: the tracker's default, 1.0)")
     p.add_argument("--partition-order", default=None, metavar="NAMES",
                    help="comma-separated order of the hierarchy's partitions (default: the tracker's, root,left_arm,"
                         "right_arm,torso,left_leg,right_leg; the paper's: root,torso,left_arm,right_arm,left_leg,"
@@ -274,8 +271,6 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         cfg_kw["view_weights"] = False
     if getattr(args, "init_confirm_frames", None) is not None:
         cfg_kw["init_confirm_frames"] = args.init_confirm_frames
-    if getattr(args, "init_confirm_share", None) is not None:
-        cfg_kw["init_confirm_share"] = args.init_confirm_share
     if getattr(args, "partition_order", None) is not None:
         cfg_kw["partition_order"] = tuple(v.strip() for v in args.partition_order.split(",") if v.strip())
     cfg = TrackerConfig(**cfg_kw)
@@ -398,7 +393,6 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                      "gate_margin_px": cfg.gate_margin_px, "hull_filter": cfg.hull_filter,
                      "view_weights": cfg.view_weights,
                      "init_confirm_frames": cfg.init_confirm_frames,
-                     "init_confirm_share": cfg.init_confirm_share,
                      "partition_order": list(cfg.partition_order),
                      "keypoint_weight": kp_weight, "keypoint_every": kp_every,
                      "keypoint_frames": len(kp_seconds),

@@ -32,6 +32,25 @@ import numpy as np
 
 from isa_mocap_ros.body.kinematics import rodrigues_into
 
+# Columns of a view's capsule table ``G (C, G_COLS)`` (:func:`_project_cap`), in the capsule's 2-D frame:
+# start point a, unit axis u, length, radii at a and b, sine and cosine of the tangent angle, the
+# capsule's extent along u (after clipping to the image), half width, and flags. Module-level ints are
+# compile-time constants to numba.
+G_AX, G_AY = 0, 1          # projected start point a (normalised image coordinates)
+G_UX, G_UY = 2, 3          # unit axis from a to b
+G_LEN = 4                  # projected length |b - a|
+G_RA, G_RB = 5, 6          # projected radii at a and b
+G_SB, G_CA = 7, 8          # sine / cosine of the tangent lines' angle (cone); 0 / 1 when one disc holds the other
+G_YLO, G_YHI = 9, 10       # extent along the axis (lower, upper), clipped to the image
+G_XMAX = 11                # half width across the axis
+G_VALID = 12               # 1.0: a bounded projection; 0.0: skipped (a ball reaching the camera plane)
+G_CONE = 13                # 1.0: tangent lines exist (a truncated cone between the discs)
+G_COLS = 14
+# ``G32`` repeats columns 0-8 in float32, then (:func:`_hull32`):
+G32_CA_LEN = 9             # cos * L, -1 when one disc holds the other
+G32_RA2, G32_RB2 = 10, 11  # squared radii
+G32_COLS = 12
+
 __all__ = ["fk_positions_batch", "silhouette_batch", "project_capsules", "inside_points"]
 
 
@@ -103,7 +122,7 @@ def _to_camera_joint(P, Rs, ts, v, CP, j):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, inline="always")
 def _project_caps(CP, caps, radii, G):  # pragma: no cover - compiled
-    """2-D hulls of the capsules in one view into ``G (C, 14)`` from the joints in camera
+    """2-D hulls of the capsules in one view into ``G (C, G_COLS)`` from the joints in camera
     coordinates ``CP (J, 4)`` (see :func:`_to_camera`); returns nothing.
 
     ``G[c]``: ax, ay, ux, uy, L, ra, rb, sb, ca, ylo, yhi, xmax, valid, cone
@@ -123,7 +142,7 @@ def _project_cap(CP, caps, radii, G, c):  # pragma: no cover - compiled
     r0 = radii[c, 0]
     r1 = radii[c, 1]
     if za <= 1.001 * r0 or zb <= 1.001 * r1:
-        G[c, 12] = 0.0  # a ball reaching the camera plane: no bounded projection; skipped
+        G[c, G_VALID] = 0.0  # a ball reaching the camera plane: no bounded projection; skipped
         return
     ax = CP[ja, 0]
     ay = CP[ja, 1]
@@ -140,20 +159,20 @@ def _project_cap(CP, caps, radii, G, c):  # pragma: no cover - compiled
     else:
         ux = 1.0
         uy = 0.0
-    G[c, 0], G[c, 1], G[c, 2], G[c, 3], G[c, 4], G[c, 5], G[c, 6] = ax, ay, ux, uy, L, ra, rb
+    G[c, G_AX], G[c, G_AY], G[c, G_UX], G[c, G_UY], G[c, G_LEN], G[c, G_RA], G[c, G_RB] = ax, ay, ux, uy, L, ra, rb
     if L > abs(ra - rb) * (1.0 + 1e-9) + 1e-15:
         sb = (ra - rb) / L
-        G[c, 7] = sb
-        G[c, 8] = np.sqrt(1.0 - sb * sb)
-        G[c, 13] = 1.0
+        G[c, G_SB] = sb
+        G[c, G_CA] = np.sqrt(1.0 - sb * sb)
+        G[c, G_CONE] = 1.0
     else:
-        G[c, 7] = 0.0
-        G[c, 8] = 1.0
-        G[c, 13] = 0.0
-    G[c, 9] = min(-ra, L - rb)
-    G[c, 10] = max(ra, L + rb)
-    G[c, 11] = max(ra, rb)
-    G[c, 12] = 1.0
+        G[c, G_SB] = 0.0
+        G[c, G_CA] = 1.0
+        G[c, G_CONE] = 0.0
+    G[c, G_YLO] = min(-ra, L - rb)
+    G[c, G_YHI] = max(ra, L + rb)
+    G[c, G_XMAX] = max(ra, rb)
+    G[c, G_VALID] = 1.0
 
 
 @numba.njit(cache=True, inline="always")
@@ -176,44 +195,44 @@ def _clip_cap(G, c, v, cam_K, cov_wh, cam_hasd):  # pragma: no cover - compiled
     Term 1 counts only template points inside the image, so for a capsule that leaves the image
     the points off it are wasted: with few left, the estimate of ``|M|`` and of its uncovered part
     is noisy (a body 5 % inside a view got 0.5 where the exact count gives 0.08). The axis points
-    whose cross-section (half width ``G[c, 11]``) lies entirely outside the image are cut off: the
+    whose cross-section (half width ``G[c, G_XMAX]``) lies entirely outside the image are cut off: the
     axis is clipped against the image grown by that half width, so no point that lands in the image
     is lost and the estimate stays unbiased, with all of the capsule's points where they count.
     A capsule inside the image, or missing it altogether, keeps its rectangle to the bit."""
-    if cam_hasd[v] or G[c, 12] == 0.0:
+    if cam_hasd[v] or G[c, G_VALID] == 0.0:
         return
-    xm = G[c, 11]
+    xm = G[c, G_XMAX]
     fx = cam_K[v, 0]
     fy = cam_K[v, 1]
     x0 = (-0.5 - cam_K[v, 2]) / fx - xm         # pixel u in [-0.5, W - 0.5): _t1_points' test
     x1 = (cov_wh[v, 0] - 0.5 - cam_K[v, 2]) / fx + xm
     y0 = (-0.5 - cam_K[v, 3]) / fy - xm
     y1 = (cov_wh[v, 1] - 0.5 - cam_K[v, 3]) / fy + xm
-    ax, ay, ux, uy = G[c, 0], G[c, 1], G[c, 2], G[c, 3]
-    meets, lo, hi = _slab(ax, ux, x0, x1, G[c, 9], G[c, 10])
+    ax, ay, ux, uy = G[c, G_AX], G[c, G_AY], G[c, G_UX], G[c, G_UY]
+    meets, lo, hi = _slab(ax, ux, x0, x1, G[c, G_YLO], G[c, G_YHI])
     if not meets:
         return
     meets, lo, hi = _slab(ay, uy, y0, y1, lo, hi)
     if not meets:
         return
-    if hi - lo <= 1e-9 * (G[c, 10] - G[c, 9]):
+    if hi - lo <= 1e-9 * (G[c, G_YHI] - G[c, G_YLO]):
         return                                   # misses the image: no point counts anyway
-    G[c, 9] = lo
-    G[c, 10] = hi
+    G[c, G_YLO] = lo
+    G[c, G_YHI] = hi
 
 
 @numba.njit(cache=True, inline="always")
 def _inside_local(xl, yl, G, c):  # pragma: no cover - compiled
     """Point with axis coordinate ``yl`` and |across| ``xl`` (frame of capsule ``c``) inside its 2-D hull."""
-    L = G[c, 4]
-    ra = G[c, 5]
-    rb = G[c, 6]
-    if G[c, 13] == 0.0:  # one disc contains the other: the bigger disc (testing both is harmless)
+    L = G[c, G_LEN]
+    ra = G[c, G_RA]
+    rb = G[c, G_RB]
+    if G[c, G_CONE] == 0.0:  # one disc contains the other: the bigger disc (testing both is harmless)
         if xl * xl + yl * yl <= ra * ra:
             return True
         return xl * xl + (yl - L) * (yl - L) <= rb * rb
-    sb = G[c, 7]
-    ca = G[c, 8]
+    sb = G[c, G_SB]
+    ca = G[c, G_CA]
     k = -xl * sb + yl * ca      # Quilez' uneven capsule: which part of the boundary is nearest
     if k < 0.0:
         return xl * xl + yl * yl <= ra * ra
@@ -225,18 +244,18 @@ def _inside_local(xl, yl, G, c):  # pragma: no cover - compiled
 @numba.njit(cache=True, inline="always")
 def _inside(px, py, G, c):  # pragma: no cover - compiled
     """Normalized point ``(px, py)`` inside the 2-D hull of capsule ``c``."""
-    dx = px - G[c, 0]
-    dy = py - G[c, 1]
-    yl = dx * G[c, 2] + dy * G[c, 3]
-    xl = abs(-dx * G[c, 3] + dy * G[c, 2])
+    dx = px - G[c, G_AX]
+    dy = py - G[c, G_AY]
+    yl = dx * G[c, G_UX] + dy * G[c, G_UY]
+    xl = abs(-dx * G[c, G_UY] + dy * G[c, G_UX])
     return _inside_local(xl, yl, G, c)
 
 
 @numba.njit(cache=True)
 def project_capsules(P, caps, radii, Rs, ts, v):  # pragma: no cover - compiled
     """Python-callable wrapper of the projection into view ``v`` of ``Rs (V, 3, 3)``, ``ts (V, 3)``
-    (tests): ``G (C, 14)`` for joint positions ``P (J, 3)``."""
-    G = np.zeros((caps.shape[0], 14))
+    (tests): ``G (C, G_COLS)`` for joint positions ``P (J, 3)``."""
+    G = np.zeros((caps.shape[0], G_COLS))
     CP = np.empty((P.shape[0], 4))
     _to_camera(P, Rs, ts, v, CP)
     _project_caps(CP, caps, radii, G)
@@ -249,7 +268,7 @@ def inside_points(G, pts):  # pragma: no cover - compiled
     out = np.zeros(pts.shape[0], np.bool_)
     for i in range(pts.shape[0]):
         for c in range(G.shape[0]):
-            if G[c, 12] != 0.0 and _inside(pts[i, 0], pts[i, 1], G, c):
+            if G[c, G_VALID] != 0.0 and _inside(pts[i, 0], pts[i, 1], G, c):
                 out[i] = True
                 break
     return out
@@ -277,11 +296,11 @@ def _lookup(x, y, v, K, D, hasd, cov, W, H, stride):  # pragma: no cover - compi
 def _hull32(G, G32, c):  # pragma: no cover - compiled
     """Single-precision parameters of capsule ``c``'s 2-D hull for the point tests into ``G32[c]``:
     ax, ay, ux, uy, L, ra, rb, sb, ca, ca L (-1 when one disc holds the other), ra^2, rb^2."""
-    for k in range(9):
+    for k in range(G32_CA_LEN):
         G32[c, k] = G[c, k]
-    G32[c, 9] = G[c, 8] * G[c, 4] if G[c, 13] != 0.0 else -1.0
-    G32[c, 10] = G[c, 5] * G[c, 5]
-    G32[c, 11] = G[c, 6] * G[c, 6]
+    G32[c, G32_CA_LEN] = G[c, G_CA] * G[c, G_LEN] if G[c, G_CONE] != 0.0 else -1.0
+    G32[c, G32_RA2] = G[c, G_RA] * G[c, G_RA]
+    G32[c, G32_RB2] = G[c, G_RB] * G[c, G_RB]
 
 
 @numba.njit(cache=True, inline="always")
@@ -312,8 +331,8 @@ def _mark_hull(X, Y, Fl, k0, k1, ax, ay, ux, uy, L, ra, sb, ca, caL, ra2, rb2, v
 @numba.njit(cache=True, inline="always")
 def _mark_run(X, Y, Fl, k0, k1, G32, c, val):  # pragma: no cover - compiled
     """:func:`_mark_hull` with the hull of capsule ``c`` in ``G32``."""
-    _mark_hull(X, Y, Fl, k0, k1, G32[c, 0], G32[c, 1], G32[c, 2], G32[c, 3], G32[c, 4], G32[c, 5], G32[c, 7],
-               G32[c, 8], G32[c, 9], G32[c, 10], G32[c, 11], val)
+    _mark_hull(X, Y, Fl, k0, k1, G32[c, G_AX], G32[c, G_AY], G32[c, G_UX], G32[c, G_UY], G32[c, G_LEN], G32[c, G_RA], G32[c, G_SB],
+               G32[c, G_CA], G32[c, G32_CA_LEN], G32[c, G32_RA2], G32[c, G32_RB2], val)
 
 
 @numba.njit(cache=True, inline="always")
@@ -331,17 +350,17 @@ def _bin(y, y0, inv_dy, nb):  # pragma: no cover - compiled
 def _cap_box(G, G32, box, c):  # pragma: no cover - compiled
     """Single-precision hull of capsule ``c`` (:func:`_hull32`) and its bounding box ``box[c]``: x0, x1,
     y0, y1 (an empty box, x0 > x1, for a capsule left out of the view)."""
-    if G[c, 12] == 0.0:
+    if G[c, G_VALID] == 0.0:
         box[c, 0] = 1.0
         box[c, 1] = -1.0
         box[c, 2] = 1.0
         box[c, 3] = -1.0
         return
     _hull32(G, G32, c)
-    ax, ay, L = G[c, 0], G[c, 1], G[c, 4]
-    bx = ax + L * G[c, 2]
-    by = ay + L * G[c, 3]
-    ra, rb = G[c, 5], G[c, 6]
+    ax, ay, L = G[c, G_AX], G[c, G_AY], G[c, G_LEN]
+    bx = ax + L * G[c, G_UX]
+    by = ay + L * G[c, G_UY]
+    ra, rb = G[c, G_RA], G[c, G_RB]
     box[c, 0] = min(ax - ra, bx - rb)
     box[c, 1] = max(ax + ra, bx + rb)
     box[c, 2] = min(ay - ra, by - rb)
@@ -355,7 +374,7 @@ def _eb_set(EB, ci, G, box, c):  # pragma: no cover - compiled
     the view, so that no stale value is computed on), the earlier capsules of :func:`_earlier_runs`."""
     for a in range(4):
         EB[a, ci] = box[c, a]
-    if G[c, 12] == 0.0:
+    if G[c, G_VALID] == 0.0:
         for a in range(7):
             EB[4 + a, ci] = 0.0
     else:
@@ -370,7 +389,7 @@ def _earlier_runs(ci, G, c, EB, ylo, xm, na, na_ly, S, OK):  # pragma: no cover 
     the boxes meet and the capsule reaches ``c``'s rectangle, with ``S[0, ei], S[1, ei]`` its ``sa, ta``
     and ``S[2, ei], S[3, ei]`` the strata bounds ``s0, s1`` (the same operations as there, so the same
     values)."""
-    dax, day, dux, duy = G[c, 0], G[c, 1], G[c, 2], G[c, 3]
+    dax, day, dux, duy = G[c, G_AX], G[c, G_AY], G[c, G_UX], G[c, G_UY]
     bx0, bx1, by0, by1 = EB[0, ci], EB[1, ci], EB[2, ci], EB[3, ci]
     for j in range((ci + 7) & ~7):
         k = numba.uint64(j)
@@ -401,13 +420,13 @@ def _earlier_run(G, c, e, ylo, xm, na, na_ly):  # pragma: no cover - compiled
     strata ``i0..i1`` of ``c`` that ``e``'s extent along ``c``'s axis reaches (``reaches`` False when
     its extent across misses ``c``'s rectangle, or along it every stratum) and ``e``'s first centre in
     ``c``'s frame (along, across)."""
-    dax, day, dux, duy = G[c, 0], G[c, 1], G[c, 2], G[c, 3]
-    dxa = G[e, 0] - dax
-    dya = G[e, 1] - day
-    dxb = dxa + G[e, 4] * G[e, 2]
-    dyb = dya + G[e, 4] * G[e, 3]
-    rea = G[e, 5]
-    reb = G[e, 6]
+    dax, day, dux, duy = G[c, G_AX], G[c, G_AY], G[c, G_UX], G[c, G_UY]
+    dxa = G[e, G_AX] - dax
+    dya = G[e, G_AY] - day
+    dxb = dxa + G[e, G_LEN] * G[e, G_UX]
+    dyb = dya + G[e, G_LEN] * G[e, G_UY]
+    rea = G[e, G_RA]
+    reb = G[e, G_RB]
     ta = dya * dux - dxa * duy
     tb = dyb * dux - dxb * duy
     if min(ta - rea, tb - reb) > xm or max(ta + rea, tb + reb) < -xm:
@@ -428,10 +447,10 @@ def _mark_earlier(X, Y, Fl, k0, k1, G, G32, c, e, sa, ta, val):  # pragma: no co
     """``Fl[k] = val`` for the points ``k0:k1`` (frame coordinates of capsule ``c``: ``X`` along, ``Y``
     across) inside the hull of capsule ``e`` (a rotation into ``c``'s frame: the rest of its
     parameters stays; ``sa, ta`` from :func:`_earlier_run`)."""
-    dux, duy = G[c, 2], G[c, 3]
-    _mark_hull(X, Y, Fl, k0, k1, np.float32(sa), np.float32(ta), np.float32(G[e, 2] * dux + G[e, 3] * duy),
-               np.float32(G[e, 3] * dux - G[e, 2] * duy), G32[e, 4], G32[e, 5], G32[e, 7],
-               G32[e, 8], G32[e, 9], G32[e, 10], G32[e, 11], val)
+    dux, duy = G[c, G_UX], G[c, G_UY]
+    _mark_hull(X, Y, Fl, k0, k1, np.float32(sa), np.float32(ta), np.float32(G[e, G_UX] * dux + G[e, G_UY] * duy),
+               np.float32(G[e, G_UY] * dux - G[e, G_UX] * duy), G32[e, G_LEN], G32[e, G_RA], G32[e, G_SB],
+               G32[e, G_CA], G32[e, G32_CA_LEN], G32[e, G32_RA2], G32[e, G32_RB2], val)
 
 
 @numba.njit(cache=True, inline="always")
@@ -451,23 +470,23 @@ def _t1_points(ci, c, v, G, G32, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, c
     Wf = np.float32(cov_wh[v, 0])
     Hf = np.float32(cov_wh[v, 1])
     Wst = np.int32(cov_wh[v, 2])
-    ylo = G[c, 9]
-    ly = G[c, 10] - ylo
-    xm = G[c, 11]
+    ylo = G[c, G_YLO]
+    ly = G[c, G_YHI] - ylo
+    xm = G[c, G_XMAX]
     k0 = tmpl_ptr[c]
     nk = tmpl_ptr[c + 1] - k0
     na = tmpl_na[c]
     ns = nk // na
     nkp = (nk + 7) & ~7     # padded: points nk.. are dropped (IDX = zpix)
-    L, ra, sb, ca = G32[c, 4], G32[c, 5], G32[c, 7], G32[c, 8]
-    caL, ra2, rb2 = G32[c, 9], G32[c, 10], G32[c, 11]
+    L, ra, sb, ca = G32[c, G_LEN], G32[c, G_RA], G32[c, G_SB], G32[c, G_CA]
+    caL, ra2, rb2 = G32[c, G32_CA_LEN], G32[c, G32_RA2], G32[c, G32_RB2]
     # the pixel as an affine map of the point's frame coordinates (pinhole)
-    u0 = np.float32(cam_K[v, 0] * G[c, 0] + cam_K[v, 2] + 0.5)
-    uya = np.float32(cam_K[v, 0] * G[c, 2])
-    uxs = np.float32(-cam_K[v, 0] * G[c, 3])
-    w0 = np.float32(cam_K[v, 1] * G[c, 1] + cam_K[v, 3] + 0.5)
-    wya = np.float32(cam_K[v, 1] * G[c, 3])
-    wxs = np.float32(cam_K[v, 1] * G[c, 2])
+    u0 = np.float32(cam_K[v, 0] * G[c, G_AX] + cam_K[v, 2] + 0.5)
+    uya = np.float32(cam_K[v, 0] * G[c, G_UX])
+    uxs = np.float32(-cam_K[v, 0] * G[c, G_UY])
+    w0 = np.float32(cam_K[v, 1] * G[c, G_AY] + cam_K[v, 3] + 0.5)
+    wya = np.float32(cam_K[v, 1] * G[c, G_UY])
+    wxs = np.float32(cam_K[v, 1] * G[c, G_UX])
     ylo32 = np.float32(ylo)
     ly32 = np.float32(ly)
     xm32 = np.float32(xm)
@@ -526,7 +545,7 @@ def _t1_lookup(G, c, px, py, v, cam_K, cam_D, cam_hasd, cov, cov_wh):  # pragma:
     -1 outside the image (the lens-distortion path of term 1)."""
     yl = np.float64(px)
     xs = np.float64(py)
-    return _lookup(G[c, 0] + yl * G[c, 2] - xs * G[c, 3], G[c, 1] + yl * G[c, 3] + xs * G[c, 2],
+    return _lookup(G[c, G_AX] + yl * G[c, G_UX] - xs * G[c, G_UY], G[c, G_AY] + yl * G[c, G_UY] + xs * G[c, G_UX],
                    v, cam_K, cam_D, cam_hasd, cov, cov_wh[v, 0], cov_wh[v, 1], cov_wh[v, 2])
 
 
@@ -560,8 +579,8 @@ def _t1_count(c, v, nk, G, PX, PY, IDX, zpix, cam_K, cam_D, cam_hasd, cov, cov_w
 @numba.njit(cache=True, inline="always")
 def _t1_weight(G, c, nk):  # pragma: no cover - compiled
     """Weight of one template point of capsule ``c``: its rectangle's area over ``nk`` points."""
-    ly = G[c, 10] - G[c, 9]
-    return ly * 2.0 * G[c, 11] / nk
+    ly = G[c, G_YHI] - G[c, G_YLO]
+    return ly * 2.0 * G[c, G_XMAX] / nk
 
 
 @numba.njit(cache=True, inline="always")
@@ -647,8 +666,8 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
         R = np.empty((J, 3, 3))
         P = np.empty((J, 3))
         CP = np.empty((J, 4))
-        G = np.empty((C, 14))
-        G32 = np.empty((C, 12), np.float32)
+        G = np.empty((C, G_COLS))
+        G32 = np.empty((C, G32_COLS), np.float32)
         box = np.empty((C, 4))
         EB = np.zeros((11, C + 8))     # the capsules in processing order (whole vectors)
         S = np.zeros((4, C + 8))
@@ -677,7 +696,7 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                 den = 0.0
                 for ci in range(C):
                     c = order[ci]
-                    if G[c, 12] == 0.0:
+                    if G[c, G_VALID] == 0.0:
                         continue
                     _t1_points(ci, c, v, G, G32, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na,
                                cam_K, cov_wh, cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK, True)
@@ -699,7 +718,7 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
                         flag[numba.uint64(r0 * fg_ms + k)] = zero
                     for ci in range(C):
                         c = order[ci]
-                        if G[c, 12] == 0.0:
+                        if G[c, G_VALID] == 0.0:
                             continue
                         _t2_runs(c, box, v, n_strips, fg_x, fg_y, fg_tab, fg_bins, fg_xr, fg_ms, flag, G32)
                     # the padding is never inside a hull: count whole strips (an integer count of the
@@ -749,8 +768,8 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
     """What the poses of a stage share, from the base pose ``x`` and ``moving (C,)`` (bool: capsules
     whose end joints move); arguments as :func:`silhouette_batch`. Returns a tuple:
 
-    ``R (J, 3, 3), P (J, 3)`` forward kinematics of ``x``; per view ``CP (V, J, 4)``, ``G (V, C, 14)``,
-    ``G32 (V, C, 12)``, ``box (V, C, 4)``, ``BX (V, 4, C)`` (the boxes in processing order);
+    ``R (J, 3, 3), P (J, 3)`` forward kinematics of ``x``; per view ``CP (V, J, 4)``, ``G (V, C, G_COLS)``,
+    ``G32 (V, C, G32_COLS)``, ``box (V, C, 4)``, ``BX (V, 4, C)`` (the boxes in processing order);
     ``t1 (V, C, 3)``: weight, count and foreground sum of each fixed capsule's term-1 points that lie
     in its hull, in no earlier *fixed* capsule's hull and inside the image; those points themselves,
     view ``v`` at ``v T``: ``s_px, s_py`` (frame coordinates), ``s_idx`` (pixel), ``s_f`` (coverage,
@@ -771,8 +790,8 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
     P = np.empty((J, 3))
     _fk_one(x, parents, offsets, ptr, dofs, axes, R, P)
     CP = np.zeros((V, J, 4))
-    G = np.zeros((V, C, 14))
-    G32 = np.zeros((V, C, 12), np.float32)
+    G = np.zeros((V, C, G_COLS))
+    G32 = np.zeros((V, C, G32_COLS), np.float32)
     box = np.zeros((V, C, 4))
     BX = np.zeros((V, 4, C))
     BXf = np.zeros((11, C + 8))

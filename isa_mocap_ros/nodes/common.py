@@ -100,8 +100,13 @@ class ProblemLog:
         self.counts[kind] = self.counts.get(kind, 0) + 1
         if self._due(kind):
             n = self.counts[kind]
-            log = self._logger.error if level == "error" else self._logger.warn
-            log(text + (f" ({n} so far)" if n > 1 else ""))
+            text += f" ({n} so far)" if n > 1 else ""
+            # one call site per severity: rclpy keys its per-call-site logging context by the caller's
+            # line and raises ValueError when one site logs at two severities (it killed the worker)
+            if level == "error":
+                self._logger.error(text)
+            else:
+                self._logger.warn(text)
 
     def event(self, kind: str, text: str) -> None:
         self.events[kind] = self.events.get(kind, 0) + 1

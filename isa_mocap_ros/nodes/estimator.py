@@ -100,9 +100,6 @@ class EstimatorNode(Node):
                          "joint-angle search radius around the prediction", lo=0.01, hi=3.2)
         pelvis = declare(self, "pelvis_fraction", tc.pelvis_fraction, "share of the budget for the pelvis stage "
                          "(root re-fit with the limbs below it kept in place; 0 = off)", lo=0.0, hi=0.9)
-        pelvis_move = declare(self, "pelvis_move", tc.pelvis_move, "move of the pelvis stage: reaim (thighs swung "
-                              "about the knees, lower spine about the chest) or world (children keep their world "
-                              "rotations)")
         torso = declare(self, "torso_fraction", tc.torso_fraction, "share of the budget for the torso stage (spine "
                         "and neck re-fit with the upper arms swung about the elbows; 0 = off)", lo=0.0, hi=0.9)
         limb_n = declare(self, "limb_proposals", tc.limb_proposals, "drawn proposals per limb and frame "
@@ -125,11 +122,6 @@ class EstimatorNode(Node):
         part_order = declare(self, "partition_order", list(tc.partition_order),
                              "order in which hierarchical optimizers search the model's partitions (root, "
                              "left_arm, right_arm, torso, left_leg, right_leg; the paper's: root, torso, arms, legs)")
-        refine = declare(self, "refine_fraction", tc.refine_fraction, "share of the budget for the refinement stage "
-                         "(hierarchical optimizers: the flat form searches torso and arms together; 0 = off)",
-                         lo=0.0, hi=0.9)
-        refine_parts = declare(self, "refine_partitions", list(tc.refine_partitions),
-                               "partitions the refinement stage searches together (torso, left_arm, right_arm, ...)")
         contour_it = declare(self, "contour_iterations", tc.contour_iterations, "contour stage: Levenberg-Marquardt "
                              "steps on the mask contours after the search, each charged D + 1 evaluations (0 = off)",
                              lo=0, hi=100)
@@ -149,8 +141,6 @@ class EstimatorNode(Node):
         hull = declare(self, "hull_filter", tc.hull_filter, "visual-hull filter: keep only foreground pixels whose "
                        "viewing ray the other views' foreground confirms (drops what one view alone reports, e.g. "
                        "an occluder glued to the person there)")
-        hull_misses = declare(self, "hull_misses", tc.hull_misses, "visual-hull filter: other views that may fail "
-                              "to confirm a pixel", lo=0, hi=64)
         hull_dil = declare(self, "hull_dilate_px", tc.hull_dilate_px, "visual-hull filter: dilation of the "
                            "confirming views' foreground, pixels", lo=0, hi=1000)
         hull_keep = declare(self, "hull_keep_px", tc.hull_keep_px, "visual-hull filter: foreground inside the "
@@ -167,10 +157,6 @@ class EstimatorNode(Node):
         confirm = declare(self, "init_confirm_frames", tc.init_confirm_frames, "heading check after the automatic "
                           "initialization: frames an opposite-heading rival of similar energy is tracked beside the "
                           "winner before the lower energy sum decides (0 = off)", lo=0, hi=100)
-        confirm_share = declare(self, "init_confirm_share", tc.init_confirm_share, "share of the frame budget each "
-                                "hypothesis of the heading check gets (0.5: a frame of the check costs one frame's "
-                                "budget but decides worse on fast motion; never below 500 evaluations or the frame "
-                                "budget)", lo=0.01, hi=1.0)
         travel_cue = declare(self, "heading_travel_cue", tc.heading_travel_cue, "heading check: a track that "
                              "moves backwards (0.9 m/s, > 135 deg from its heading) is re-checked, and a check the "
                              "energies leave close picks the heading that moves forwards (false: a person walking "
@@ -228,20 +214,19 @@ class EstimatorNode(Node):
                                      seed=self.seed, energy=energy, downsample=downsample,
                                      search_radius_rad=radius, predictor=predictor, predictor_order=order,
                                      prior_eta=self.prior_eta, prior_file=prior_file, pelvis_fraction=pelvis,
-                                     pelvis_move=pelvis_move, torso_fraction=torso,
+                                     torso_fraction=torso,
                                      limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs),
                                      limb_hinge_limbs=tuple(hinge_limbs),
                                      limb_extrapolations=tuple(float(k) for k in extrap if k > 0), limb_fold_deg=fold,
                                      limb_hinge_window_deg=window,
-                                     partition_order=tuple(part_order), refine_fraction=refine,
-                                     refine_partitions=tuple(refine_parts), contour_iterations=contour_it,
+                                     partition_order=tuple(part_order), contour_iterations=contour_it,
                                      contour_extra_iterations=contour_extra,
                                      contour_extra_partitions=tuple(contour_extra_parts), init_polish=polish,
                                      contour_points=contour_pts, contour_max_px=contour_px, gate_margin_px=gate,
-                                     hull_filter=hull, hull_misses=hull_misses, hull_dilate_px=hull_dil,
+                                     hull_filter=hull, hull_dilate_px=hull_dil,
                                      hull_keep_px=hull_keep, hull_pad_m=hull_pad, view_weights=view_w,
                                      max_frames_ahead=ahead, init_confirm_frames=confirm,
-                                     init_confirm_share=confirm_share, heading_travel_cue=travel_cue)
+                                     heading_travel_cue=travel_cue)
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
                                       slop_ns=0 if sync == "exact" else int(slop_s * 1e9),
                                       max_wait_s=self.view_timeout_s, min_views=min(min_views, self.n_views))

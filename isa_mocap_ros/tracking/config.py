@@ -1,0 +1,408 @@
+"""The tracker's settings (:class:`TrackerConfig`), its result record (:class:`FrameResult`), its errors
+and the module constants its stages share. Pure: no ROS import.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from .limbs import LIMBS
+
+__all__ = ["TrackerError", "TrackerConfig", "FrameResult", "DEFAULT_PARAMS", "PREDICTORS", "frame_rng"]
+
+PREDICTORS = ("ar", "constant_pose", "constant_velocity")
+#: Share of a view's foreground the mask gate may remove before ``FrameResult.notes`` says so.
+GATE_NOTE_SHARE = 0.25
+#: Frames after a heading check that kept the winner for want of evidence (the sums within
+#: ``init_confirm_margin``) until the heading is re-checked once (``TrackerConfig.init_confirm_frames``).
+UNDECIDED_RECHECK_FRAMES = 10
+
+#: The heading check's **travel cue**: people walk and run forwards. Over the last ``TRAVEL_FRAMES`` frame
+#: periods, a root that moved at least ``TRAVEL_MIN_M_PER_FRAME`` per period (0.9 m/s at 30 fps) in a direction
+#: more than ``TRAVEL_BACKWARDS_DEG`` from the estimate's heading starts a heading re-check (once per
+#: ``TRAVEL_RECHECK_FRAMES`` frames), and in a check where this heading moves backwards and the other forwards
+#: (within ``180 - TRAVEL_BACKWARDS_DEG``) this heading is kept only on a clearly lower energy sum
+#: (``init_confirm_margin``) over all the check's frames, else the check switches. With two
+#: views a figure seen from the front and from the back casts nearly the same silhouettes (generated jog,
+#: seed 7: energy sums 0.2829 vs 0.2813 over the check), and the motion tells them apart.
+TRAVEL_FRAMES = 3
+TRAVEL_MIN_M_PER_FRAME = 0.03
+TRAVEL_BACKWARDS_DEG = 135.0
+TRAVEL_RECHECK_FRAMES = 15
+
+#: The contour stage's fit replaces the pose unless its energy is more than this share above the pose's: the
+#: fast energy's samples make a strict "lower" reject good fits (CMU walk seeds 0-7 10.30 mm / 2.69° knee
+#: strictly lower, 10.00 / 2.60° at 0.1, 9.93 / 2.49° always kept), and always keeping follows noise and
+#: occluders (robustness knee RMSE, 3 sequences: 50 % noise 11.3° always, 7.1° strict, 7.0° at 0.1).
+CONTOUR_KEEP_TOLERANCE = 0.1
+
+#: Fewest proposals per limb of the limb stage: when fewer fit in a tenth of the budget, the stage is skipped.
+MIN_LIMB_PROPOSALS = 4
+ESTIMATES = ("optimizer", "best")
+
+#: Optimizer parameters used unless ``optimizer_params`` sets them (tuned on the silhouette energy,
+#: see ``docs/tracking.md``); the library defaults apply to anything not listed.
+DEFAULT_PARAMS: Mapping[str, Mapping[str, Any]] = MappingProxyType({
+    "isa": MappingProxyType({"n_particles": 100, "kernel": "s2", "schedule": "adaptive", "target_ess": 0.3,
+                             "c": 0.5, "variance": "selected"}),
+    "h-isa": MappingProxyType({"n_particles": 30, "kernel": "s2", "schedule": "adaptive", "target_ess": 0.3,
+                               "c": 0.5, "variance": "selected"}),
+})
+
+
+class TrackerError(ValueError):
+    """Bad tracker configuration or argument (names the argument, the expected and the received value)."""
+
+
+def _whole_generations(evals: int, generation: int) -> int:
+    """``evals`` rounded down to whole generations (unchanged below one generation: the optimizer's error
+    names it). The tracker's searches never end on a truncated generation, whose few rows would make a
+    weighted-mean estimate (ISA, APF) that of a few random particles (``docs/tracking.md``, "Whole
+    generations")."""
+    return evals // generation * generation if evals >= generation else evals
+
+
+def frame_rng(seed: int, frame_index: int, *extra: int) -> np.random.Generator:
+    """The generator of one frame: ``default_rng([seed, frame_index, *extra])``."""
+    return np.random.default_rng([int(seed), int(frame_index), *map(int, extra)])
+
+
+def _check_number(name: str, value, *, lo: float | None = None, strict: bool = False, integer: bool = False):
+    ok_type = (int, np.integer) if integer else (int, float, np.integer, np.floating)
+    if isinstance(value, bool) or not isinstance(value, ok_type) or not math.isfinite(value) \
+            or (lo is not None and (value <= lo if strict else value < lo)):
+        kind = "an integer" if integer else "a finite number"
+        bound = "" if lo is None else f" {'>' if strict else '>='} {lo}"
+        raise TrackerError(f"{name}: expected {kind}{bound}, received {value!r}")
+
+
+def _partition_names(name: str, value, example: str, *, empty: bool) -> tuple:
+    """``value`` as a tuple of distinct partition names (a sequence of strings, not a string; ``empty``:
+    whether none is allowed), else :class:`TrackerError` naming the setting."""
+    if isinstance(value, str) or not isinstance(value, Sequence) or not all(isinstance(v, str) for v in value) \
+            or len(set(value)) != len(value) or not (empty or value):
+        raise TrackerError(f"{name}: expected distinct partition names (e.g. {example}), received {value!r}")
+    return tuple(value)
+
+
+def _partition_coords(model, names) -> np.ndarray:
+    """Sorted coordinate indices of the partitions ``names`` the model has (the others ignored)."""
+    return np.array(sorted(int(i) for k in names if k in model.partitions for i in model.partitions[k]),
+                    dtype=np.int64)
+
+
+def _limb_names(name: str, value) -> tuple:
+    """``value`` as a tuple of distinct names among :data:`~.limbs.LIMBS`, else :class:`TrackerError`."""
+    if isinstance(value, str) or not isinstance(value, Sequence) or any(v not in LIMBS for v in value) \
+            or len(set(value)) != len(value):
+        raise TrackerError(f"{name}: expected distinct names among {', '.join(LIMBS)}, received {value!r}")
+    return tuple(value)
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Fixed settings of a :class:`Tracker`: one line per setting (unit, default, why). The measurements
+    behind the defaults: ``docs/decisions/`` and ``docs/history/tracker_config.md``.
+
+    Attributes
+    ----------
+    optimizer : str
+        Registry name (``h-isa`` default: ISA over the §3.3 hierarchy; flat ISA drifts off at 1500 evaluations).
+    evals_per_frame : int
+        Energy evaluations per frame, every stage included (EA-vs-PF: 500 / 1500 / 3000; default 1500).
+    optimizer_params : mapping
+        Keyword arguments of the optimizer over :data:`DEFAULT_PARAMS` (default none).
+    search_radius_rad : float
+        Half-width of every joint angle's search box around the prediction, rad (EA-vs-PF: 0.5).
+    joint_spread_rad : float
+        Initial standard deviation of the joint angles around the prediction, rad (0.05).
+    spread_velocity_gain : float
+        Joint ``j`` starts with spread ``sqrt(joint_spread_rad² + (k |p_j − x_j|)²)``: wider where the prediction moves (1.5; 0 = off).
+    root_translation_radius_m, root_translation_spread_m : float
+        Search half-width and initial standard deviation of the root position, m (0.25, 0.015).
+    root_rotation_radius_rad, root_rotation_spread_rad : float
+        The same per root rotation-vector component, rad (0.5, 0.025).
+    predictor : {"ar", "constant_pose", "constant_velocity"}
+        The tracker's own predictor (``ar``: ISA 13.28).
+    predictor_order : int
+        AR order (1).
+    root_velocity_gain, joint_velocity_gain : float
+        Damping ``g`` of the own prediction ``x_k + g (p − x_k)``, root's 6 DOF and joints (0.7, 0.5; 1 = undamped, 0 = constant pose).
+    prior_eta : float
+        Weight η of the Parzen prior ``−η ln p(x)`` (13.33); 0 = off (default).
+    prior_file : str or None
+        ``.npz`` of :meth:`ParzenPrior.save`, used when no ``prior=`` object is given.
+    energy_method : {"fast", "exact"}
+        Silhouette energy: compiled sampled kernel (default) or the exact raster reference.
+    downsample : int
+        Mask downsampling of the fast energy (1 = none).
+    n_model_points, n_mask_points : int
+        Fast energy's sample sizes: model-template points and foreground pixels per view (640, 384).
+    estimate : {"optimizer", "best"}
+        The frame's pose: the optimizer's estimate (weighted mean / mean / best, default) or the best particle.
+    include_prediction : bool
+        The prediction is the first particle of a flat optimizer's first generation (True).
+    seed : int
+        Seed of every per-frame stream ``default_rng([seed, frame, ...])`` (0).
+    init_yaw_steps : int
+        Headings of the automatic initialization's grid (24).
+    init_refine_evals : int
+        Evaluations of each of the initialization's four root refinements (400; 0 = none).
+    init_spread_scale : float
+        Factor on the initial spreads on the automatically initialized frame (2.0: it starts from a standing pose).
+    init_keep : int
+        Heading-candidate runs kept after the first partition on the first frame (3; 0 = all run to the end).
+    init_polish : bool
+        The first frame's winner is searched once more from itself with every stage (True).
+    init_confirm_frames : int
+        Frames a rival heading is tracked beside the track in a heading check, re-checks included (3; 0 = no check).
+    init_confirm_ratio : float
+        A rival is checked when its energy is within this factor of the track's (>= 1; 1.25).
+    init_confirm_margin : float
+        Factor (>= 1) by which one hypothesis' energy sum must be lower to decide the check (1.1).
+    heading_travel_cue : bool
+        A track moving backwards (:data:`TRAVEL_FRAMES`) starts a re-check and decides a close one (True).
+    pelvis_fraction : float
+        Budget share of the pelvis stage: root re-fitted with the thighs re-aimed about the knees (0.15; 0 = off).
+    torso_fraction : float
+        Budget share of the torso stage (hierarchical optimizers): spine and neck with the upper arms re-aimed (0.13; 0 = off).
+    limb_proposals : int
+        Twist-and-hinge proposals per limb of the limb stage, within a tenth of the budget (16; 0 = off).
+    limb_proposal_limbs : tuple of str
+        Limbs of the limb stage (all four).
+    limb_hinge_limbs : tuple of str
+        Limbs whose proposals redraw the hinge only, unless folded (the legs).
+    limb_extrapolations : tuple of float
+        Factors ``k`` of the extrapolated proposals ``x + k (x − x_prev)`` per limb ((1, 2, 3); () = none).
+    limb_fold_deg : float
+        A limb bent beyond this (deg) in the prediction gets twist-and-hinge proposals (130; 0 or >= 180 = never).
+    limb_hinge_window_deg : float
+        Hinge-only proposals are drawn within this many degrees of the pose's hinge (90; 0 or >= 180 = whole range).
+    partition_order : tuple of str
+        Order of a hierarchical optimizer's partitions (arms before the torso; every partition of the model named).
+    contour_iterations : int
+        Levenberg-Marquardt steps of the contour stage (ISA 13.30-13.31), each charged D + 1 evaluations (3; 0 = off).
+    contour_extra_iterations : int
+        Further contour steps on ``contour_extra_partitions`` alone, each charged k + 1 (3; 0 = none).
+    contour_extra_partitions : tuple of str
+        Partitions of those steps (the legs).
+    contour_points : int
+        Model contour points per view and contour iteration (200).
+    contour_max_px : float
+        Contour pairs farther apart than this are dropped, px (2.0).
+    gate_margin_px : int
+        Mask gate: foreground components farther than this from the predicted silhouette are dropped, px (10; 0 = off).
+    hull_filter : bool
+        Visual-hull filter: foreground the other views do not confirm, beyond the predicted silhouette, is dropped (True).
+    hull_dilate_px : int
+        Dilation of the confirming views' foreground, px (2).
+    hull_keep_px : int
+        Foreground within this many px of the predicted silhouette is kept unconfirmed (3).
+    hull_pad_m : float
+        Growth of the predicted joints' box in which the hull filter looks, m (0.35).
+    view_weights : bool
+        Eq. 5's mean over views weighted by the share of the predicted body each view sees (True).
+    keypoint_weight : float
+        Weight of the keypoint term (:class:`~isa_mocap_ros.energy.KeypointEnergy`, 13.30-13.31) on frames given keypoints (0 = off; docs/keypoints.md).
+    keypoint_sigma_m : float
+        Scale of the keypoint term's Geman-McClure loss, m (> 0; 0.1).
+    max_frames_ahead : float
+        The own prediction looks at most this many periods ahead; beyond, the root follows the foreground (5).
+    """
+
+    optimizer: str = "h-isa"
+    evals_per_frame: int = 1500
+    optimizer_params: Mapping[str, Any] = field(default_factory=dict)
+    search_radius_rad: float = 0.5
+    joint_spread_rad: float = 0.05
+    spread_velocity_gain: float = 1.5
+    root_translation_radius_m: float = 0.25
+    root_translation_spread_m: float = 0.015
+    root_rotation_radius_rad: float = 0.5
+    root_rotation_spread_rad: float = 0.025
+    predictor: str = "ar"
+    predictor_order: int = 1
+    root_velocity_gain: float = 0.7
+    joint_velocity_gain: float = 0.5
+    prior_eta: float = 0.0
+    prior_file: str | None = None
+    energy_method: str = "fast"
+    downsample: int = 1
+    n_model_points: int = 640
+    n_mask_points: int = 384
+    estimate: str = "optimizer"
+    include_prediction: bool = True
+    seed: int = 0
+    init_yaw_steps: int = 24
+    init_refine_evals: int = 400
+    init_spread_scale: float = 2.0
+    init_keep: int = 3
+    init_polish: bool = True
+    init_confirm_frames: int = 3
+    init_confirm_ratio: float = 1.25
+    init_confirm_margin: float = 1.1
+    heading_travel_cue: bool = True
+    pelvis_fraction: float = 0.15
+    torso_fraction: float = 0.13
+    limb_proposals: int = 16
+    limb_proposal_limbs: tuple = ("left_arm", "right_arm", "left_leg", "right_leg")
+    limb_hinge_limbs: tuple = ("left_leg", "right_leg")
+    limb_extrapolations: tuple = (1.0, 2.0, 3.0)
+    limb_fold_deg: float = 130.0
+    limb_hinge_window_deg: float = 90.0
+    partition_order: tuple = ("root", "left_arm", "right_arm", "torso", "left_leg", "right_leg")
+    contour_iterations: int = 3
+    contour_extra_iterations: int = 3
+    contour_extra_partitions: tuple = ("left_leg", "right_leg")
+    contour_points: int = 200
+    contour_max_px: float = 2.0
+    gate_margin_px: int = 10
+    hull_filter: bool = True
+    hull_dilate_px: int = 2
+    hull_keep_px: int = 3
+    hull_pad_m: float = 0.35
+    view_weights: bool = True
+    keypoint_weight: float = 0.0
+    keypoint_sigma_m: float = 0.1
+    max_frames_ahead: float = 5.0
+
+    def __post_init__(self) -> None:
+        from isa_mocap_ros.optim import OPTIMIZERS
+
+        if self.optimizer not in OPTIMIZERS:
+            raise TrackerError(f"optimizer: expected one of {', '.join(OPTIMIZERS)}, received {self.optimizer!r}")
+        _check_number("evals_per_frame", self.evals_per_frame, lo=1, integer=True)
+        if not isinstance(self.optimizer_params, Mapping):
+            raise TrackerError(f"optimizer_params: expected a mapping, received {type(self.optimizer_params).__name__}")
+        bad = [k for k in self.optimizer_params if k in ("bounds", "rng", "rotation_blocks", "partitions", "x0",
+                                                         "spread")]
+        if bad:
+            raise TrackerError(f"optimizer_params: expected algorithm parameters only, received {bad} "
+                               "(set by the tracker)")
+        object.__setattr__(self, "optimizer_params", MappingProxyType(dict(self.optimizer_params)))
+        for name in ("search_radius_rad", "joint_spread_rad", "root_translation_radius_m", "root_translation_spread_m",
+                     "root_rotation_radius_rad", "root_rotation_spread_rad"):
+            _check_number(name, getattr(self, name), lo=0.0, strict=True)
+        _check_number("spread_velocity_gain", self.spread_velocity_gain, lo=0.0)
+        if self.predictor not in PREDICTORS:
+            raise TrackerError(f"predictor: expected one of {', '.join(PREDICTORS)}, received {self.predictor!r}")
+        _check_number("predictor_order", self.predictor_order, lo=1, integer=True)
+        _check_number("max_frames_ahead", self.max_frames_ahead, lo=1.0)
+        _check_number("keypoint_weight", self.keypoint_weight, lo=0.0)
+        _check_number("keypoint_sigma_m", self.keypoint_sigma_m, lo=0.0, strict=True)
+        for name in ("root_velocity_gain", "joint_velocity_gain"):
+            _check_number(name, getattr(self, name), lo=0.0)
+        _check_number("prior_eta", self.prior_eta, lo=0.0)
+        if self.prior_file is not None and not isinstance(self.prior_file, (str, Path)):
+            raise TrackerError(f"prior_file: expected a path or None, received {self.prior_file!r}")
+        if self.energy_method not in ("fast", "exact"):
+            raise TrackerError(f"energy_method: expected 'fast' or 'exact', received {self.energy_method!r}")
+        _check_number("downsample", self.downsample, lo=1, integer=True)
+        _check_number("n_model_points", self.n_model_points, lo=1, integer=True)
+        _check_number("n_mask_points", self.n_mask_points, lo=0, integer=True)
+        if self.estimate not in ESTIMATES:
+            raise TrackerError(f"estimate: expected one of {', '.join(ESTIMATES)}, received {self.estimate!r}")
+        if not isinstance(self.include_prediction, bool):
+            raise TrackerError(f"include_prediction: expected a bool, received {self.include_prediction!r}")
+        _check_number("seed", self.seed, lo=0, integer=True)
+        _check_number("init_yaw_steps", self.init_yaw_steps, lo=4, integer=True)
+        _check_number("init_refine_evals", self.init_refine_evals, lo=0, integer=True)
+        _check_number("init_spread_scale", self.init_spread_scale, lo=0.0, strict=True)
+        _check_number("init_keep", self.init_keep, lo=0, integer=True)
+        _check_number("init_confirm_frames", self.init_confirm_frames, lo=0, integer=True)
+        _check_number("init_confirm_ratio", self.init_confirm_ratio, lo=1.0)
+        _check_number("init_confirm_margin", self.init_confirm_margin, lo=1.0)
+        if not isinstance(self.heading_travel_cue, bool):
+            raise TrackerError(f"heading_travel_cue: expected a bool, received {self.heading_travel_cue!r}")
+        _check_number("pelvis_fraction", self.pelvis_fraction, lo=0.0)
+        if self.pelvis_fraction >= 1.0:
+            raise TrackerError(f"pelvis_fraction: expected a share in [0, 1), received {self.pelvis_fraction!r}")
+        _check_number("torso_fraction", self.torso_fraction, lo=0.0)
+        if self.torso_fraction >= 1.0:
+            raise TrackerError(f"torso_fraction: expected a share in [0, 1), received {self.torso_fraction!r}")
+        _check_number("limb_proposals", self.limb_proposals, lo=0, integer=True)
+        for name in ("limb_proposal_limbs", "limb_hinge_limbs"):
+            object.__setattr__(self, name, _limb_names(name, getattr(self, name)))
+        ext = self.limb_extrapolations
+        if isinstance(ext, (str, bytes)) or not isinstance(ext, Sequence) or not all(
+                isinstance(k, (int, float, np.integer, np.floating)) and not isinstance(k, bool)
+                and np.isfinite(k) and k > 0 for k in ext):
+            raise TrackerError(f"limb_extrapolations: expected a sequence of positive factors, received {ext!r}")
+        object.__setattr__(self, "limb_extrapolations", tuple(float(k) for k in ext))
+        _check_number("limb_fold_deg", self.limb_fold_deg, lo=0.0)
+        _check_number("limb_hinge_window_deg", self.limb_hinge_window_deg, lo=0.0)
+        object.__setattr__(self, "partition_order", _partition_names(
+            "partition_order", self.partition_order, "root, left_arm, right_arm, torso, left_leg, right_leg",
+            empty=False))
+        _check_number("contour_iterations", self.contour_iterations, lo=0, integer=True)
+        _check_number("contour_extra_iterations", self.contour_extra_iterations, lo=0, integer=True)
+        object.__setattr__(self, "contour_extra_partitions", _partition_names(
+            "contour_extra_partitions", self.contour_extra_partitions, "left_leg, right_leg", empty=True))
+        if not isinstance(self.init_polish, (bool, np.bool_)):
+            raise TrackerError(f"init_polish: expected true or false, received {self.init_polish!r}")
+        _check_number("contour_points", self.contour_points, lo=1, integer=True)
+        _check_number("contour_max_px", self.contour_max_px, lo=0.0, strict=True)
+        if self.pelvis_fraction + self.torso_fraction >= 1.0:
+            raise TrackerError(f"pelvis_fraction + torso_fraction: expected below 1 (the main search needs a share), "
+                               f"received {self.pelvis_fraction!r} + {self.torso_fraction!r}")
+        _check_number("gate_margin_px", self.gate_margin_px, lo=0, integer=True)
+        if not isinstance(self.hull_filter, (bool, np.bool_)):
+            raise TrackerError(f"hull_filter: expected a bool, received {self.hull_filter!r}")
+        _check_number("hull_dilate_px", self.hull_dilate_px, lo=0, integer=True)
+        _check_number("hull_keep_px", self.hull_keep_px, lo=0, integer=True)
+        _check_number("hull_pad_m", self.hull_pad_m, lo=0.0, strict=True)
+        if not isinstance(self.view_weights, (bool, np.bool_)):
+            raise TrackerError(f"view_weights: expected a bool, received {self.view_weights!r}")
+
+    def params(self) -> dict:
+        """Optimizer keyword arguments: :data:`DEFAULT_PARAMS` of the optimizer, then ``optimizer_params``."""
+        out = dict(DEFAULT_PARAMS.get(self.optimizer, {}))
+        out.update(self.optimizer_params)
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class FrameResult:
+    """What one :meth:`Tracker.step` produced.
+
+    Attributes
+    ----------
+    x : (D,) ndarray or None
+        The estimate (None only when the tracker has never had an estimate: no usable masks yet).
+    energy : float
+        Energy of the estimate as the optimizer reports it (nan when no optimization ran).
+    n_evals : int
+        Evaluations this frame (initialization included).
+    spread : float
+        Final population spread (mean over coordinates of the standard deviation), nan if none.
+    time_s : float
+        Wall time of the call.
+    views_used : int
+        Views whose mask entered the energy.
+    notes : tuple of str
+        Everything skipped or replaced, and why (``"view 2: empty mask; skipped"``, ...); with the
+        mask gate (``gate_margin_px``) also each view that lost more than :data:`GATE_NOTE_SHARE`
+        of its foreground (``"view 1: the gate removed 812 of 2440 foreground pixels (33 %)"``).
+    fell_back : bool
+        True when no optimization ran and ``x`` is the last estimate.
+    prediction : (D,) ndarray or None
+        The prediction the search was centred on.
+    initialized : bool
+        True on the frame that ran the automatic initialization.
+    """
+
+    x: np.ndarray | None
+    energy: float
+    n_evals: int
+    spread: float
+    time_s: float
+    views_used: int
+    notes: tuple = ()
+    fell_back: bool = False
+    prediction: np.ndarray | None = None
+    initialized: bool = False

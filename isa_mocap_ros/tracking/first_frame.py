@@ -1,0 +1,171 @@
+"""The first frame: the automatic initialization (:mod:`.init`), the frame's search from each heading
+candidate pruned to ``init_keep`` runs, the polish of the winner (``init_polish``) and the pick of a
+heading-check rival (``init_confirm_frames``).
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from . import _fast_search, frame_masks, objective
+from .config import TrackerError, frame_rng
+from .init import InitError, initial_pose
+from .plan import FrameBudget
+
+
+def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int = 0,
+               keypoints: Sequence | None = None):
+    """Set the first estimate: ``pose`` if given, else automatically from ``masks``.
+
+    Parameters
+    ----------
+    masks : sequence of (H, W) array_like or None, optional
+    pose : (D,) array_like, optional
+    frame_index : int
+        Frame key of the initialization's random stream.
+    keypoints : sequence of (uv, confidence) or None, optional
+        As for :meth:`Tracker.step`: with ``config.keypoint_weight > 0`` the grid and refinement also
+        score the keypoint term.
+
+    Returns
+    -------
+    InitResult or None
+        The automatic initialization's result (None for a given pose).
+
+    Raises
+    ------
+    TrackerError
+        Neither argument, a pose of the wrong length or not finite, or no usable foreground.
+    """
+    tr.reset()
+    if pose is not None:
+        try:
+            x = np.asarray(tr.model.validate_pose(pose, name="pose"), dtype=float)
+        except ValueError as exc:
+            raise TrackerError(str(exc)) from None
+        if x.ndim != 1:
+            raise TrackerError(f"pose: expected shape ({tr.model.dof},), received {x.shape}")
+        x = np.clip(x, tr.model.lower, tr.model.upper)
+        tr._masks_now = None          # no frame: nothing to re-centre from later
+        tr._accept(x)
+        tr._heading_views = len(tr.cameras)     # a given pose's heading is not re-checked
+        return None
+    if masks is None:
+        raise TrackerError("initialize: expected masks= or pose=, received neither")
+    usable, notes = frame_masks.check_masks(tr, masks)
+    tr._masks_now = usable
+    if frame_masks.set_masks(tr, usable, notes, frame_index) == 0:
+        raise TrackerError(f"masks: expected foreground in at least one view, received none ({'; '.join(notes)})")
+    cfg = tr.config
+    tr._keypoint_term = objective.keypoint_energy(tr, keypoints)[0]
+    try:
+        res = initial_pose(tr.model, tr.cameras, usable, init_energy_fn(tr, usable, frame_index),
+                           rng=frame_rng(cfg.seed, frame_index, 1), n_yaw=cfg.init_yaw_steps,
+                           refine_evals=cfg.init_refine_evals)
+    except InitError as exc:
+        raise TrackerError(f"masks: automatic initialization failed: {exc}") from None
+    finally:
+        tr._keypoint_term = None
+    tr._accept(res.x)
+    tr._heading_views = res.views_used
+    return res
+
+
+def init_energy_fn(tr, usable: list, frame_index: int):
+    """The energy the automatic initialization scores its grid with (see ``__init__``)."""
+    if tr._init_energy is None:
+        return tr.total_energy
+    tr._init_energy.rng = frame_rng(tr.config.seed, frame_index, 4)
+    try:
+        tr._init_energy.set_masks(usable)
+    except ValueError:
+        return tr.total_energy
+
+    def fn(X):
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        return tr._add_terms(X, np.asarray(tr._init_energy(X), dtype=float))
+    return fn
+
+
+def initial_runs(tr, starts: list, frame_index: int, notes: list[str], budget: FrameBudget,
+                  stream: tuple = ()) -> tuple[list, int]:
+    """The automatically initialized frame's search from every start (heading candidate), pruned
+    to ``config.init_keep`` runs at the checkpoint (see :class:`TrackerConfig`): the list of
+    ``(start index, result, start)`` of the runs that ended, and the evaluations of all runs.
+    Raises the optimizer's errors."""
+    cfg = tr.config
+    runs = []
+    for j, pred in enumerate(starts):
+        if stream:          # the heading re-check's runs: their own streams
+            rng = frame_rng(cfg.seed, frame_index, *stream, j)
+        else:
+            rng = frame_rng(cfg.seed, frame_index) if j == 0 else frame_rng(cfg.seed, frame_index, 3, j)
+        opt, evals, _, _ = tr._search(pred, rng, budget, cfg.init_spread_scale, notes if j == 0 else None,
+                                        stages=False)
+        if tr._compiled_search and _fast_search.supported(opt, tr.energy, tr._python_terms()):
+            # compiled h-isa, paused after its first partition (the same numbers as below)
+            runs.append((j, _fast_search.HisaRun(opt, tr.energy, evals), pred, None))
+            continue
+        # bind + iterate + result() is minimize(), split at the checkpoint: the end of the first
+        # partition (hierarchical optimizers, whose shares bind() sets) or a sixth of the budget
+        opt.bind(objective.TotalEnergy(tr), max_evals=evals)
+        shares = getattr(opt, "shares", None)
+        runs.append((j, opt, pred, shares[0] if shares else evals // 6))
+    n_pruned = 0
+    if 0 < cfg.init_keep < len(runs):
+        for _, opt, _, checkpoint in runs:
+            if checkpoint is None:
+                opt.advance(1)
+                continue
+            for _ in opt:
+                if opt.n_evals >= checkpoint:
+                    break
+        ranked = sorted(runs, key=lambda r: r[1].best_energy)      # stable: ties keep the start order
+        n_pruned = sum(r[1].n_evals for r in ranked[cfg.init_keep:])
+        runs = sorted(ranked[:cfg.init_keep], key=lambda r: r[0])
+    out = []
+    for j, opt, pred, checkpoint in runs:
+        if checkpoint is None:
+            out.append((j, opt.advance().result(), pred))
+            continue
+        for _ in opt:
+            pass
+        out.append((j, opt.result(), pred))
+    return out, n_pruned + sum(res.n_evals for _, res, _ in out)
+
+
+def polish(tr, x: np.ndarray, energy: float, frame_index: int, stream: int, notes, budget: FrameBudget):
+    """``config.init_polish``'s search of the initialized frame's pose ``x`` (energy ``energy``) as a tracked
+    frame, every stage, stream ``[seed, frame, stream]``: ``(result or None if the optimizer refused, the
+    lower-energy pose of the two, its energy)``; a refusal is noted in ``notes`` (when given)."""
+    try:
+        res = tr._optimize(x, frame_rng(tr.config.seed, frame_index, stream), budget, notes=notes)
+    except ValueError as exc:
+        if notes is not None:
+            notes.append(f"initialization polish failed: {exc}")
+        return None, x, energy
+    xp, ep = tr._final_pose(res)
+    return (res, xp, ep) if ep < energy else (res, x, energy)
+
+
+def pick_rival(tr, runs: list, winner, x: np.ndarray, energy: float):
+    """The heading check's rival among the initialized frame's runs (``config.init_confirm_frames``):
+    the lowest-energy run heading more than 90° away from the winner's estimate ``x``, if its
+    energy is within ``config.init_confirm_ratio`` of ``energy``; else None."""
+    from .init import _wrap, _yaw_of
+
+    if not tr._has_heading or not np.isfinite(energy):
+        return None
+    yaw = _yaw_of(x[3:6])
+    best = None
+    for _, res, _ in runs:
+        if res is winner:
+            continue
+        xr, er = tr._final_pose(res)
+        if abs(float(_wrap(_yaw_of(xr[3:6]) - yaw))) > np.pi / 2 and np.isfinite(er) \
+                and (best is None or er < best[1]):
+            best = (xr, er)
+    if best is None or best[1] > tr.config.init_confirm_ratio * max(energy, 0.0):
+        return None
+    return best[0], best[1], energy

@@ -1,0 +1,90 @@
+"""The frame's prediction: the external one (the prediction node's) when usable, else the tracker's
+own predictor looking as many periods ahead as passed, damped towards the last estimate; after a long
+gap the predicted root follows the foreground's triangulated centroid (:func:`recentre`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from isa_mocap_ros.geometry import nearest_rotvec
+
+from .init import InitError, root_from_masks
+from .predict import frames_kwargs
+
+
+def predict(tr, external, notes: list[str]) -> np.ndarray:
+    """The (damped) prediction: ``external`` (e.g. the prediction node's) or the tracker's own.
+
+    Both are damped the same way towards the last estimate (``root/joint_velocity_gain``), so the
+    node network (prediction from the prediction node) and ``isa-mocap track`` (own predictor,
+    same conversions) give identical numbers.
+    """
+    D = tr.model.dof
+    p = None
+    if external is not None and tr._own_prediction_frames > 0:
+        notes.append("prediction: the external one follows the estimates from before the heading check's "
+                     "switch; using the tracker's own")
+        external = None
+    if external is not None:
+        try:
+            p = np.asarray(external, dtype=float)
+        except (TypeError, ValueError):
+            p = None
+        if p is None or p.shape != (D,):
+            notes.append(f"prediction: expected shape ({D},), received "
+                         f"{None if p is None else p.shape}; using the tracker's own")
+            p = None
+        elif not np.all(np.isfinite(p)):
+            notes.append("prediction: non-finite values; using the tracker's own")
+            p = None
+    if p is None:
+        try:
+            ahead = min(tr._elapsed or 1, tr.config.max_frames_ahead)
+            p = np.asarray(tr.predictor.predict(**frames_kwargs(ahead)), dtype=float)
+        except ValueError as exc:      # PredictionError: empty history (cannot happen once initialized)
+            notes.append(f"prediction: {exc}; using the last estimate")
+            return tr._last.copy()
+        if p.shape != (D,) or not np.all(np.isfinite(p)):
+            notes.append("prediction: non-finite values; using the last estimate")
+            return tr._last.copy()
+    cfg = tr.config
+    for blk in tr.model.rotation_blocks:
+        # a prediction that went through a JointState (roll/pitch/yaw) has |r| <= pi: near a
+        # half turn it can lie on the other side of pi from the last estimate (demo, frame 127:
+        # 174° vs -179° gave -72° after damping, and the track was lost)
+        idx = list(blk)
+        p = p.copy() if p is external else p
+        p[idx] = nearest_rotvec(p[idx], tr._last[idx])
+    gain = np.full(D, cfg.joint_velocity_gain)
+    gain[:6] = cfg.root_velocity_gain
+    out = tr._last + gain * (p - tr._last)        # damped extrapolation
+    if tr._elapsed > cfg.max_frames_ahead or (tr._elapsed > 1 and motion_unknown(tr)):
+        recentre(tr, out, notes)
+    return out
+
+
+def motion_unknown(tr) -> bool:
+    """True when the predictor holds a single estimate (no motion to extrapolate: the frame after
+    the first, e.g. in real time after the sets that came during the initialization were dropped)."""
+    n = getattr(tr.predictor, "n_estimates", None)
+    return n is not None and int(n) < 2
+
+
+def recentre(tr, pred: np.ndarray, notes: list[str]) -> None:
+    """After more frames than ``max_frames_ahead`` unseen — or after any gap when the predictor holds
+    a single estimate (the first estimate's frame: no motion to extrapolate) — move the predicted
+    root position (x, y) by how far the foreground moved: the triangulated mask centroid
+    (:func:`.init.root_from_masks`) of this frame minus that of the last estimate's frame.
+    Extrapolating the last motion over such a gap says little (in real time the automatic
+    initialization alone takes 4-10 frame periods, and a person walking moves 0.2-0.5 m
+    meanwhile), the foreground says where the body is."""
+    if tr._masks_last is None or tr._masks_now is None:
+        return
+    try:
+        c_last = root_from_masks(tr.model, tr.cameras, tr._masks_last)[0]
+        c_now = root_from_masks(tr.model, tr.cameras, tr._masks_now)[0]
+    except InitError:
+        return
+    pred[:2] = tr._last[:2] + (c_now[:2] - c_last[:2])
+    notes.append(f"prediction: {tr._elapsed:g} frame periods since the last estimate; root moved with the "
+                 f"foreground by {1e3 * float(np.hypot(*(c_now[:2] - c_last[:2]))):.0f} mm")
