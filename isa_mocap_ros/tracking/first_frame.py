@@ -9,7 +9,7 @@ from typing import Sequence
 import numpy as np
 
 from . import _fast_search, frame_masks, objective
-from .config import TrackerError, frame_rng
+from .config import INIT_SPREAD_SCALE, TrackerError, frame_rng
 from .init import InitError, initial_pose
 from .plan import FrameBudget
 
@@ -101,7 +101,7 @@ def initial_runs(tr, starts: list, frame_index: int, notes: list[str], budget: F
             rng = frame_rng(cfg.seed, frame_index, *stream, j)
         else:
             rng = frame_rng(cfg.seed, frame_index) if j == 0 else frame_rng(cfg.seed, frame_index, 3, j)
-        opt, evals, _, _ = tr._search(pred, rng, budget, cfg.init_spread_scale, notes if j == 0 else None,
+        opt, evals, _, _ = tr._search(pred, rng, budget, INIT_SPREAD_SCALE, notes if j == 0 else None,
                                         stages=False)
         if tr._compiled_search and _fast_search.supported(opt, tr.energy, tr._python_terms()):
             # compiled h-isa, paused after its first partition (the same numbers as below)

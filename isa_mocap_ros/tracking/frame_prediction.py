@@ -8,6 +8,7 @@ import numpy as np
 
 from isa_mocap_ros.geometry import nearest_rotvec
 
+from .config import ROOT_VELOCITY_GAIN
 from .init import InitError, root_from_masks
 from .predict import frames_kwargs
 
@@ -56,7 +57,7 @@ def predict(tr, external, notes: list[str]) -> np.ndarray:
         p = p.copy() if p is external else p
         p[idx] = nearest_rotvec(p[idx], tr._last[idx])
     gain = np.full(D, cfg.joint_velocity_gain)
-    gain[:6] = cfg.root_velocity_gain
+    gain[:6] = ROOT_VELOCITY_GAIN
     out = tr._last + gain * (p - tr._last)        # damped extrapolation
     if tr._elapsed > cfg.max_frames_ahead or (tr._elapsed > 1 and motion_unknown(tr)):
         recentre(tr, out, notes)

@@ -122,7 +122,7 @@ def recheck_heading(tr, res: FrameResult, frame_index: int, frames_elapsed: floa
     else:
         head = f"heading re-check: {res.views_used} views see the person ({before} when the heading was checked)"
     try:
-        runs, n = first_frame.initial_runs(tr, list(starts), frame_index, None, FrameBudget(cfg.evals_per_frame), stream=(5,))
+        runs, n = first_frame.initial_runs(tr, list(starts), frame_index, None, FrameBudget(cfg.evals), stream=(5,))
     except ValueError as exc:
         return dataclasses.replace(res, time_s=time.perf_counter() - t0,
                                    notes=res.notes + (f"{head}; its search failed ({exc}); kept this heading",))
@@ -146,7 +146,7 @@ def confirm_heading(tr, res: FrameResult, masks, frame_index: int, frames_elapse
     (see ``TrackerConfig.init_confirm_frames``); the frame's result (the rival's when it wins)."""
     cfg = tr.config
     rival = tr._rival
-    other = rival._step(masks, frame_index, FrameBudget(tr.config.evals_per_frame, tr._contour_now), prediction=None,
+    other = rival._step(masks, frame_index, FrameBudget(tr.config.evals, tr._contour_now), prediction=None,
                         frames_elapsed=frames_elapsed)
     n_evals = res.n_evals + other.n_evals
     if res.fell_back and other.fell_back:       # nothing to compare this frame

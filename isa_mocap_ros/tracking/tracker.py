@@ -23,7 +23,8 @@ import numpy as np
 from isa_mocap_ros.geometry import nearest_rotvec
 
 from . import _fast_search, first_frame, frame_masks, frame_prediction, heading, objective, plan, stages
-from .config import (DEFAULT_PARAMS, PREDICTORS, TRAVEL_FRAMES, FrameResult, TrackerConfig, TrackerError,
+from .config import (DEFAULT_PARAMS, JOINT_SPREAD_RAD, ROOT_ROTATION_RADIUS_RAD, ROOT_ROTATION_SPREAD_RAD,
+                     ROOT_TRANSLATION_SPREAD_M, PREDICTORS, TRAVEL_FRAMES, FrameResult, TrackerConfig, TrackerError,
                      _partition_coords, _whole_generations, frame_rng)
 from .contour import ContourFit
 from .gate import visible_shares
@@ -104,7 +105,7 @@ class Tracker:
         from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
         if energy is None:
 
-            energy = SilhouetteEnergy(model, cams, None, method=config.energy_method, downsample=config.downsample,
+            energy = SilhouetteEnergy(model, cams, None, method=config.energy, downsample=config.downsample,
                                       n_model_points=config.n_model_points, n_mask_points=config.n_mask_points,
                                       rng=np.random.default_rng([config.seed, 2**32 - 1]))
         if not (callable(energy) and hasattr(energy, "set_masks")):
@@ -114,7 +115,7 @@ class Tracker:
         # the automatic initialization's grid scores rough standing poses: with the fine sample
         # sizes it picked a heading 180 deg off on bags/demo, with the library's coarse ones not
         self._init_energy = None
-        if own_energy and config.energy_method == "fast":
+        if own_energy and config.energy == "fast":
             self._init_energy = SilhouetteEnergy(model, cams, None, method="fast", downsample=config.downsample,
                                                  rng=np.random.default_rng([config.seed, 2**32 - 2]))
         self.predictor = _make_predictor(config) if predictor is None else predictor
@@ -259,10 +260,10 @@ class Tracker:
         cfg, m = self.config, self.model
         radius = np.full(m.dof, cfg.search_radius_rad)
         radius[:3] = cfg.root_translation_radius_m
-        radius[3:6] = cfg.root_rotation_radius_rad
-        spread = np.full(m.dof, cfg.joint_spread_rad)
-        spread[:3] = cfg.root_translation_spread_m
-        spread[3:6] = cfg.root_rotation_spread_rad
+        radius[3:6] = ROOT_ROTATION_RADIUS_RAD
+        spread = np.full(m.dof, JOINT_SPREAD_RAD)
+        spread[:3] = ROOT_TRANSLATION_SPREAD_M
+        spread[3:6] = ROOT_ROTATION_SPREAD_RAD
         c = np.clip(np.asarray(center, dtype=float), m.lower, m.upper)
         lo = np.maximum(c - radius, m.lower)
         hi = np.minimum(c + radius, m.upper)
@@ -292,7 +293,7 @@ class Tracker:
             # whole generations (not on the automatically initialized frame, whose runs from the heading
             # candidates keep the proportional split their pruning and heading choice were measured with)
             params.setdefault("whole_generations", stages)
-        elif cfg.include_prediction and "initial_population" not in params:
+        elif "initial_population" not in params:
             # first generation: the prediction itself plus draws around it (so the estimate
             # can never be worse than the prediction by the energy's own measure)
             n = make_optimizer(cfg.optimizer, x0, spread, rng=np.random.default_rng(0), bounds=(lo, hi),
@@ -392,9 +393,9 @@ class Tracker:
 
 
     def _final_pose(self, res) -> tuple[np.ndarray, float]:
-        """The estimate of an optimizer result (``config.estimate``) in the model's limits, rotation
-        vectors shortened (|r| <= pi), and its energy."""
-        if self.config.estimate == "best" or not np.all(np.isfinite(res.x)):
+        """The optimizer's estimate (its best particle when the estimate is not finite) in the model's
+        limits, rotation vectors shortened (|r| <= pi), and its energy."""
+        if not np.all(np.isfinite(res.x)):
             x, energy = res.best_x, res.best_energy
         else:
             x, energy = res.x, res.energy
@@ -451,7 +452,7 @@ class Tracker:
         t0 = time.perf_counter()
         rival = self._rival
         self._contour_now = bool(contour_stage)
-        res = self._step(masks, frame_index, FrameBudget(self.config.evals_per_frame, self._contour_now),
+        res = self._step(masks, frame_index, FrameBudget(self.config.evals, self._contour_now),
                          prediction=prediction, frames_elapsed=frames_elapsed)
         if self._own_prediction_frames > 0:
             self._own_prediction_frames -= 1
@@ -555,7 +556,7 @@ class Tracker:
                                fell_back=True, prediction=starts[0], initialized=initialized)
         best = None
         for _, res, pred in runs:
-            e = res.best_energy if cfg.estimate == "best" else res.energy
+            e = res.energy
             if best is None or e < best[0]:
                 best = (e, res, pred)
         n_evals += n
@@ -597,20 +598,8 @@ class Tracker:
                            prediction=pred, initialized=initialized)
 
 
-def make_tracker(model, cameras: Sequence, *, optimizer: str = "h-isa", evals: int = 1500,
-                 params: Mapping | None = None, seed: int = 0, energy: str = "fast", downsample: int = 1,
-                 search_radius_rad: float = 0.5, predictor: str = "ar", predictor_order: int = 1,
-                 prior_eta: float = 0.0, prior_file: str | None = None, energy_fn: Callable | None = None,
-                 **config) -> Tracker:
-    """A :class:`Tracker` from flat settings (the estimator node's parameters).
-
-    ``optimizer, evals, params, seed, energy, downsample, search_radius_rad, predictor,
-    predictor_order, prior_eta, prior_file`` map onto :class:`TrackerConfig` fields (``prior_file``
-    ``""`` = none); further ``config`` keywords are passed to it as they are. ``energy_fn``: a data
-    term object (see :class:`Tracker`).
-    """
-    cfg = TrackerConfig(optimizer=optimizer, evals_per_frame=evals, optimizer_params=dict(params or {}), seed=seed,
-                        energy_method=energy, downsample=downsample, search_radius_rad=search_radius_rad,
-                        predictor=predictor, predictor_order=predictor_order, prior_eta=prior_eta,
-                        prior_file=prior_file or None, **config)
-    return Tracker(model, cameras, cfg, energy=energy_fn)
+def make_tracker(model, cameras: Sequence, *, energy_fn: Callable | None = None, **config) -> Tracker:
+    """A :class:`Tracker` from flat settings: ``config`` keywords are :class:`TrackerConfig` fields (the
+    estimator node's parameters carry the same names); ``energy_fn``: a data term object (see
+    :class:`Tracker`)."""
+    return Tracker(model, cameras, TrackerConfig(**config), energy=energy_fn)
