@@ -189,7 +189,7 @@ def test_tracker_hands_the_energy_the_filtered_masks(scene):
         tr.initialize(pose=poses[0])
         res = tr.step(m, 1)
         assert not res.fell_back
-        seen[on] = tr._masks_last[0] > 0
+        seen[on] = tr.track.masks_last[0] > 0
     assert seen[True][added].mean() < 0.35
     assert seen[False][added].mean() == 1.0
 

@@ -323,9 +323,9 @@ def test_travel_reads_the_root_motion(scene320_two_views):
     assert not tr.heading_recheck_pending([None] * len(cams))
     from isa_mocap_ros.geometry.so3 import exp_so3, log_so3, rot_z
 
-    turned = tr._last.copy()
+    turned = tr.track.last.copy()
     turned[3:6] = log_so3(rot_z(np.pi) @ exp_so3(turned[3:6]))              # heading the other way
-    tr._last = turned
+    tr.track.last = turned
     assert heading.travel_recheck_due(tr)[0] > 160.0
     assert tr.heading_recheck_pending([None] * len(cams))                    # the estimator holds the frames after
     tr.reset()

@@ -47,14 +47,14 @@ def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int
         if x.ndim != 1:
             raise TrackerError(f"pose: expected shape ({tr.model.dof},), received {x.shape}")
         x = np.clip(x, tr.model.lower, tr.model.upper)
-        tr._masks_now = None          # no frame: nothing to re-centre from later
+        tr.track.masks_now = None          # no frame: nothing to re-centre from later
         tr._accept(x)
         tr._heading_views = len(tr.cameras)     # a given pose's heading is not re-checked
         return None
     if masks is None:
         raise TrackerError("initialize: expected masks= or pose=, received neither")
     usable, notes = frame_masks.check_masks(tr, masks)
-    tr._masks_now = usable
+    tr.track.masks_now = usable
     if frame_masks.set_masks(tr, usable, notes, frame_index) == 0:
         raise TrackerError(f"masks: expected foreground in at least one view, received none ({'; '.join(notes)})")
     cfg = tr.config

@@ -25,7 +25,7 @@ def heading_recheck_pending(tr, masks: Sequence) -> bool:
     backwards): a caller that drops frames (the estimator node in real time) should hand the tracker
     the frames that follow in sequence, as for :attr:`checking_heading`, or the check ends at the
     first gap."""
-    if tr.config.init_confirm_frames <= 0 or tr._last is None or tr._rival is not None:
+    if tr.config.init_confirm_frames <= 0 or tr.track.last is None or tr._rival is not None:
         return False
     if tr._recheck_at is not None and tr.frames + 1 >= tr._recheck_at:
         return True
@@ -47,8 +47,8 @@ def start_rival(tr, frame_index: int) -> None:
     rival = type(tr)(tr.model, tr.cameras, dataclasses.replace(tr.config, init_confirm_frames=0),
                      prior=tr.prior, energy=tr.energy, predictor=predictor)
     first_frame.initialize(rival, pose=xr, frame_index=frame_index)
-    rival._elapsed = tr._elapsed
-    rival._masks_last = tr._masks_last
+    rival.track.elapsed = tr.track.elapsed
+    rival.track.masks_last = tr.track.masks_last
     tr._rival = rival
     tr._confirm = [0, 0.0, 0.0]
 
@@ -58,9 +58,9 @@ def travel(tr, min_periods: float = 0.0) -> tuple[float, float, float] | None:
     root's horizontal travel over the last estimates, or None when they span fewer than ``min_periods``
     periods (or none), the root moved less than :data:`TRAVEL_MIN_M_PER_FRAME` per period, or the model
     has no 3-DOF root rotation."""
-    if len(tr._roots) < 2 or not tr._has_heading:
+    if len(tr.track.roots) < 2 or not tr._has_heading:
         return None
-    (ta, xa, ya), (tb, xb, yb) = tr._roots[0], tr._roots[-1]
+    (ta, xa, ya), (tb, xb, yb) = tr.track.roots[0], tr.track.roots[-1]
     span, dist = tb - ta, math.hypot(xb - xa, yb - ya)
     if span <= 0 or span < min_periods or dist < TRAVEL_MIN_M_PER_FRAME * span:
         return None
@@ -78,12 +78,12 @@ def travel_recheck_due(tr) -> tuple[float, float, float] | None:
     """The travel cue's trigger of a re-check: ``(degrees off the heading, m, periods)`` of :meth:`travel`
     over :data:`TRAVEL_FRAMES` periods when it points backwards (beyond :data:`TRAVEL_BACKWARDS_DEG`) and no
     re-check ran in the last :data:`TRAVEL_RECHECK_FRAMES` frames; else None."""
-    if not tr.config.heading_travel_cue or tr.frames < tr._travel_recheck_after or tr._last is None:
+    if not tr.config.heading_travel_cue or tr.frames < tr._travel_recheck_after or tr.track.last is None:
         return None
     t = travel(tr, TRAVEL_FRAMES)
     if t is None:
         return None
-    off = off_travel(t[0], tr._last)
+    off = off_travel(t[0], tr.track.last)
     return (off, t[1], t[2]) if off > TRAVEL_BACKWARDS_DEG else None
 
 
@@ -185,17 +185,14 @@ def confirm_heading(tr, res: FrameResult, masks, frame_index: int, frames_elapse
                                    notes=res.notes + (f"heading check decided: kept the initial heading ({sums})",))
     if not last:
         return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0)
-    # the rival wins: take over its state; external predictions were made from this tracker's
+    # the rival wins: its track (estimate, predictor, masks, root history) becomes this tracker's; external predictions were made from this tracker's
     # estimates, so they are ignored while the predictor's history still holds any of them
     tr._rival = None
     # views that joined during the check took part in a switch: no re-check for them (a fresh track
     # checked again at once lost its heading to a fresh rival, generated walk seed 6); a check that
     # kept the heading is re-checked on the next frame that sees them
     tr._heading_views = max(tr._heading_views, res.views_used, other.views_used)
-    tr._last, tr._elapsed = rival._last, rival._elapsed
-    tr._masks_last, tr._masks_now = rival._masks_last, rival._masks_now
-    tr._roots, tr._clock = rival._roots, rival._clock
-    tr.predictor = rival.predictor
+    tr.track = rival.track
     cap = getattr(tr.predictor, "capacity", None)
     tr._own_prediction_frames = (int(cap) if cap is not None else cfg.predictor_order + 1) - 1
     return dataclasses.replace(other, n_evals=n_evals, time_s=time.perf_counter() - t0, notes=other.notes + (

@@ -25,12 +25,12 @@ def fit_contours(tr, x, *, iterations: int | None = None, extra_iterations: int 
     :data:`CONTOUR_KEEP_TOLERANCE` above ``x``'s (both evaluated in one batch: a mask contour bent by an
     occluder or noise can pull the fit away); the evaluations charged are ``(D + 1)`` per iteration
     taken over all coordinates, ``(k + 1)`` per iteration over ``k`` of them, + 2."""
-    if tr._masks_now is None:
+    if tr.track.masks_now is None:
         raise TrackerError("fit_contours: no masks yet (call step first)")
     iterations = tr.config.contour_iterations if iterations is None else iterations
     extra = plan.contour_extra(tr) if extra_iterations is None else extra_iterations
     x = np.asarray(x, dtype=np.float64)
-    tr._contour.set_masks(tr._masks_now)
+    tr._contour.set_masks(tr.track.masks_now)
     y, info = tr._contour.fit(x, iterations=iterations)
     n = info.iterations * (tr.model.dof + 1) + 2
     if extra and tr._contour_extra_coords.size and not info.stopped:

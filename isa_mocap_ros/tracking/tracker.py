@@ -13,7 +13,6 @@ are notes in :class:`FrameResult`, never exceptions. Reference: ``docs/tracking.
 """
 from __future__ import annotations
 
-import collections
 import dataclasses
 import time
 from typing import Callable, Mapping, Sequence
@@ -24,7 +23,7 @@ from isa_mocap_ros.geometry import nearest_rotvec
 
 from . import _fast_search, first_frame, frame_masks, frame_prediction, heading, objective, plan, stages
 from .config import (DEFAULT_PARAMS, JOINT_SPREAD_RAD, ROOT_ROTATION_RADIUS_RAD, ROOT_ROTATION_SPREAD_RAD,
-                     ROOT_TRANSLATION_SPREAD_M, PREDICTORS, TRAVEL_FRAMES, FrameResult, TrackerConfig, TrackerError,
+                     ROOT_TRANSLATION_SPREAD_M, PREDICTORS, FrameResult, TrackerConfig, TrackerError,
                      _partition_coords, _whole_generations, frame_rng)
 from .contour import ContourFit
 from .gate import visible_shares
@@ -32,9 +31,10 @@ from .init import InitError, initial_pose
 from .limbs import LimbMove
 from .objective import TotalEnergy
 from .plan import FrameBudget
-from .predict import (ArPredictor, ConstantPosePredictor, ConstantVelocityPredictor, PredictionError, frame_periods,
-                      frames_kwargs)
+from .predict import (ArPredictor, ConstantPosePredictor, ConstantVelocityPredictor, PredictionError,
+                      frame_periods)
 from .reaim import ReaimMove
+from .state import TrackState
 
 __all__ = ["TrackerError", "TrackerConfig", "FrameResult", "FrameBudget", "Tracker", "make_tracker", "DEFAULT_PARAMS",
            "PREDICTORS", "frame_rng"]
@@ -118,11 +118,8 @@ class Tracker:
         if own_energy and config.energy == "fast":
             self._init_energy = SilhouetteEnergy(model, cams, None, method="fast", downsample=config.downsample,
                                                  rng=np.random.default_rng([config.seed, 2**32 - 2]))
-        self.predictor = _make_predictor(config) if predictor is None else predictor
-        self._last: np.ndarray | None = None
-        self._elapsed = 0.0        # frame periods since the last estimate (step's frames_elapsed, summed)
-        self._masks_last: list | None = None   # usable masks of the last estimate's frame (re-centring)
-        self._masks_now: list | None = None    # usable masks of the frame being tracked
+        # what the frame carries to the next (last estimate, predictor, masks, root history, clock)
+        self.track = TrackState(_make_predictor(config) if predictor is None else predictor)
         self._pelvis_reaim = ReaimMove(model, [0]) if "root" in model.partitions else None
         # the torso stage's move: the joints of the torso partition (e.g. spine and neck), the arms re-aimed
         torso_joints = sorted({int(model.dof_joint[d]) for d in model.partitions.get("torso", ())})
@@ -147,9 +144,6 @@ class Tracker:
         self._recheck_at: int | None = None   # self.frames at which an undecided check is re-checked
         self._rechecked_undecided = False
         self._own_prediction_frames = 0    # frames left that ignore external predictions (after a switch)
-        # (frame periods since the start, root x, y) of the last estimates: the travel cue (TRAVEL_FRAMES)
-        self._roots: collections.deque = collections.deque(maxlen=TRAVEL_FRAMES + 1)
-        self._clock = 0.0
         self._travel_recheck_after = 0     # self.frames from which the travel cue may start a re-check
         # h-isa on the fast energy runs compiled per partition (tracking/_fast_search.py, the same
         # numbers as the optimizer protocol); False: always through the protocol (tests compare both)
@@ -159,13 +153,23 @@ class Tracker:
 
     # ------------------------------------------------------------------ state
     @property
+    def predictor(self):
+        """The track's own predictor (:attr:`TrackState.predictor`); assignable (e.g. a
+        :class:`.published.PublishedPredictor` around it)."""
+        return self.track.predictor
+
+    @predictor.setter
+    def predictor(self, value) -> None:
+        self.track.predictor = value
+
+    @property
     def initialized(self) -> bool:
         """True once an estimate exists (given, automatic or tracked)."""
-        return self._last is not None
+        return self.track.last is not None
 
     @property
     def last_estimate(self) -> np.ndarray | None:
-        return None if self._last is None else self._last.copy()
+        return None if self.track.last is None else self.track.last.copy()
 
     @property
     def checking_heading(self) -> bool:
@@ -181,16 +185,12 @@ class Tracker:
 
     def reset(self) -> None:
         """Forget the estimates (the next step initializes again)."""
-        self._last = None
-        self._elapsed = 0.0
-        self._masks_last = None
-        self.predictor.reset()
+        self.track.forget()
         self._rival_start = self._rival = None
         self._own_prediction_frames = 0
         self._heading_views = 0
         self._recheck_at = None
         self._rechecked_undecided = False
-        self._roots.clear()
         self._travel_recheck_after = 0
 
     @property
@@ -245,13 +245,7 @@ class Tracker:
 
 
     def _accept(self, x: np.ndarray) -> None:
-        self._last = np.array(x, dtype=float)
-        self.predictor.update(self._last, **frames_kwargs(self._elapsed or 1))
-        self._clock += self._elapsed or 1
-        self._roots.append((self._clock, float(self._last[0]), float(self._last[1])))
-        self._elapsed = 0.0
-        self._masks_last = self._masks_now
-        self._masks_now = None
+        self.track.accept(x)
 
     # ------------------------------------------------------------------ one frame
 
@@ -283,8 +277,8 @@ class Tracker:
         lo, hi, spread = self.search_box(pred)
         base = spread * spread_scale
         spread = base.copy()              # the motion term widens the main search's spreads only
-        if stages and cfg.spread_velocity_gain > 0 and self._last is not None:
-            moved = cfg.spread_velocity_gain * np.abs(pred[6:] - self._last[6:])
+        if stages and cfg.spread_velocity_gain > 0 and self.track.last is not None:
+            moved = cfg.spread_velocity_gain * np.abs(pred[6:] - self.track.last[6:])
             spread[6:] = np.sqrt(spread[6:] ** 2 + moved ** 2)
         x0 = np.clip(pred, lo, hi)
         params = cfg.params()
@@ -361,7 +355,7 @@ class Tracker:
         if limbs:
             extra = spare // len(limbs)       # more proposals with the rest
             x, e, n, _ = self.propose_limbs(res.x, n=n_limb + extra, rng=rng, limbs=limbs, hinge_only=hinge,
-                                            last=self._last)
+                                            last=self.track.last)
             spare -= extra * len(limbs)
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         if contour is not None:
@@ -491,14 +485,14 @@ class Tracker:
         if isinstance(frame_index, bool) or not isinstance(frame_index, (int, np.integer)) or frame_index < 0:
             raise TrackerError(f"frame_index: expected an integer >= 0, received {frame_index!r}")
         try:
-            self._elapsed += frame_periods("frames_elapsed", frames_elapsed)
+            self.track.elapsed += frame_periods("frames_elapsed", frames_elapsed)
         except PredictionError as exc:
             raise TrackerError(str(exc)) from None
         cfg = self.config
         usable, notes = frame_masks.check_masks(self, masks)
-        self._masks_now = usable
+        self.track.masks_now = usable
         gated_pred = None
-        if (cfg.gate_margin_px > 0 or cfg.hull_filter) and self._last is not None \
+        if (cfg.gate_margin_px > 0 or cfg.hull_filter) and self.track.last is not None \
                 and any(m is not None for m in usable):
             gated_pred = frame_prediction.predict(self, prediction, notes)
             if cfg.gate_margin_px > 0:
@@ -509,22 +503,22 @@ class Tracker:
                 usable = frame_masks.hull(self, usable, gated_pred, notes)
             # the filtered masks from here on: the contour stage fits what the energy scores, and a later
             # re-centring starts from the person's foreground (the prediction above re-centred on the raw ones)
-            self._masks_now = usable
+            self.track.masks_now = usable
         weights = None
-        if cfg.view_weights and self._last is not None and any(m is not None for m in usable):
+        if cfg.view_weights and self.track.last is not None and any(m is not None for m in usable):
             if gated_pred is None:
                 gated_pred = frame_prediction.predict(self, prediction, notes)
             # Eq. 5's view weights (config.view_weights): the share of the predicted body each view sees
             weights = visible_shares(self.model, self.cameras, gated_pred)
         views = frame_masks.set_masks(self, usable, notes, frame_index, weights)
         if views == 0:
-            notes.append("no usable view: falling back to the last estimate" if self._last is not None
+            notes.append("no usable view: falling back to the last estimate" if self.track.last is not None
                          else "no usable view and no estimate yet: nothing to track")
             return FrameResult(x=self.last_estimate, energy=float("nan"), n_evals=0, spread=float("nan"),
                                time_s=time.perf_counter() - t0, views_used=0, notes=tuple(notes), fell_back=True)
         n_evals = 0
         initialized = False
-        if self._last is None:
+        if self.track.last is None:
             try:
                 res0 = initial_pose(self.model, self.cameras, usable, first_frame.init_energy_fn(self, usable, frame_index),
                                     rng=frame_rng(cfg.seed, frame_index, 1), n_yaw=cfg.init_yaw_steps,
