@@ -265,7 +265,7 @@ def test_travel_cue_rechecks_a_track_that_moves_backwards(scene320_two_views, mo
     """A track facing backwards (the first frame forced so, its heading check suppressed) whose root
     travels against its heading is re-checked once it has moved for TRAVEL_FRAMES frames, and the
     check switches; without the cue it faces backwards to the end."""
-    from isa_mocap_ros.tracking import tracker as T
+    from isa_mocap_ros.tracking import config as T
 
     def runs(**cfg):
         monkeypatch.setattr(first_frame, "pick_rival", lambda tr, *a, **k: None)   # no check after the first frame
@@ -306,7 +306,7 @@ def test_travel_cue_decides_a_close_heading_check(scene320_two_views, monkeypatc
 
 
 def test_travel_reads_the_root_motion(scene320_two_views):
-    from isa_mocap_ros.tracking import tracker as T
+    from isa_mocap_ros.tracking import config as T
 
     model, cams, walk, _ = scene320_two_views
     tr = Tracker(model, cams, TrackerConfig(seed=0))

@@ -49,7 +49,7 @@ def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int
         x = np.clip(x, tr.model.lower, tr.model.upper)
         tr.track.masks_now = None          # no frame: nothing to re-centre from later
         tr._accept(x)
-        tr._heading_views = len(tr.cameras)     # a given pose's heading is not re-checked
+        tr.heading_check.views = len(tr.cameras)     # a given pose's heading is not re-checked
         return None
     if masks is None:
         raise TrackerError("initialize: expected masks= or pose=, received neither")
@@ -68,7 +68,7 @@ def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int
     finally:
         tr._keypoint_term = None
     tr._accept(res.x)
-    tr._heading_views = res.views_used
+    tr.heading_check.views = res.views_used
     return res
 
 
@@ -147,6 +147,34 @@ def polish(tr, x: np.ndarray, energy: float, frame_index: int, stream: int, note
         return None, x, energy
     xp, ep = tr._final_pose(res)
     return (res, xp, ep) if ep < energy else (res, x, energy)
+
+
+def polish_winner(tr, x: np.ndarray, energy: float, res, frame_index: int, notes: list[str],
+                  budget: FrameBudget):
+    """``config.init_polish``: the first frame's winner searched once more as a tracked frame (all stages)
+    from itself, and the heading check's rival (``heading_check.rival_start``) alike; the heading that
+    fits better after it leads (the check still tracks both). Returns ``(x, energy, result, evaluations)``
+    of the frame."""
+    n_evals = 0
+    res2, x2, e2 = polish(tr, x, energy, frame_index, 6, notes, budget)
+    if res2 is not None:
+        n_evals += res2.n_evals
+        if e2 < energy:
+            x, energy, res = x2, e2, res2
+    check = tr.heading_check
+    if check.rival_start is not None:
+        res_r, xr, er = polish(tr, *check.rival_start[:2], frame_index, 7, None, budget)
+        if res_r is not None:
+            n_evals += res_r.n_evals
+        if er < energy:
+            notes.append(f"initialization polish: the heading check's rival fits better ({er:.4g} against "
+                         f"{energy:.4g}) and leads")
+            check.rival_start = (x, energy, er)
+            x, energy = xr, er
+            res = res_r if res_r is not None else res
+        else:
+            check.rival_start = (xr, er, energy)
+    return x, energy, res, n_evals
 
 
 def pick_rival(tr, runs: list, winner, x: np.ndarray, energy: float):

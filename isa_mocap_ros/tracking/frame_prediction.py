@@ -22,7 +22,7 @@ def predict(tr, external, notes: list[str]) -> np.ndarray:
     """
     D = tr.model.dof
     p = None
-    if external is not None and tr._own_prediction_frames > 0:
+    if external is not None and tr.heading_check.own_prediction_frames > 0:
         notes.append("prediction: the external one follows the estimates from before the heading check's "
                      "switch; using the tracker's own")
         external = None

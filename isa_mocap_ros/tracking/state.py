@@ -12,7 +12,7 @@ import numpy as np
 from .config import TRAVEL_FRAMES
 from .predict import frames_kwargs
 
-__all__ = ["TrackState"]
+__all__ = ["TrackState", "HeadingCheckState"]
 
 
 def _roots() -> collections.deque:
@@ -67,3 +67,38 @@ class TrackState:
         self.masks_last = None
         self.predictor.reset()
         self.roots.clear()
+
+
+@dataclass(eq=False)
+class HeadingCheckState:
+    """The heading check's bookkeeping of a :class:`~.tracker.Tracker` (:mod:`.heading`); it stays with the
+    tracker when the rival's :class:`TrackState` is taken over.
+
+    Attributes
+    ----------
+    rival : Tracker or None
+        The hypothesis heading the other way, tracked beside this one while a check runs.
+    rival_start : (pose, energy, winner's energy) or None
+        Where the rival starts (set on the initialized frame, used by the next step).
+    confirm : list
+        ``[frames compared, energy sum of this tracker, energy sum of the rival]``.
+    views : int
+        Views the heading was checked with (re-checked when more see the person).
+    recheck_at : int or None
+        ``Tracker.frames`` at which an undecided check is re-checked.
+    rechecked_undecided : bool
+        Whether that re-check ran.
+    travel_recheck_after : int
+        ``Tracker.frames`` from which the travel cue may start a re-check.
+    own_prediction_frames : int
+        Frames left that ignore external predictions (after a switch).
+    """
+
+    rival: object = None
+    rival_start: tuple | None = None
+    confirm: list = field(default_factory=lambda: [0, 0.0, 0.0])
+    views: int = 0
+    recheck_at: int | None = None
+    rechecked_undecided: bool = False
+    travel_recheck_after: int = 0
+    own_prediction_frames: int = 0

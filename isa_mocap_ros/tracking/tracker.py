@@ -34,7 +34,7 @@ from .plan import FrameBudget
 from .predict import (ArPredictor, ConstantPosePredictor, ConstantVelocityPredictor, PredictionError,
                       frame_periods)
 from .reaim import ReaimMove
-from .state import TrackState
+from .state import HeadingCheckState, TrackState
 
 __all__ = ["TrackerError", "TrackerConfig", "FrameResult", "FrameBudget", "Tracker", "make_tracker", "DEFAULT_PARAMS",
            "PREDICTORS", "frame_rng"]
@@ -137,14 +137,7 @@ class Tracker:
         self.frames = 0
         self._contour_now = True               # step(contour_stage=...) of the frame being tracked
         # the heading check after an automatic initialization (config.init_confirm_frames)
-        self._rival_start: tuple[np.ndarray, float, float] | None = None   # (pose, energy, winner's energy)
-        self._rival: Tracker | None = None
-        self._confirm = [0, 0.0, 0.0]      # frames compared, energy sums: this tracker, the rival
-        self._heading_views = 0            # views the heading was checked with (re-checked when more see the person)
-        self._recheck_at: int | None = None   # self.frames at which an undecided check is re-checked
-        self._rechecked_undecided = False
-        self._own_prediction_frames = 0    # frames left that ignore external predictions (after a switch)
-        self._travel_recheck_after = 0     # self.frames from which the travel cue may start a re-check
+        self.heading_check = HeadingCheckState()
         # h-isa on the fast energy runs compiled per partition (tracking/_fast_search.py, the same
         # numbers as the optimizer protocol); False: always through the protocol (tests compare both)
         self._compiled_search = True
@@ -176,7 +169,7 @@ class Tracker:
         """True while the heading check after the automatic initialization runs (``init_confirm_frames``):
         it decides on consecutive frames only, so a caller that drops frames (the estimator node in
         real time) should hand it the frames that follow in sequence meanwhile."""
-        return self._rival is not None
+        return self.heading_check.rival is not None
 
     def heading_recheck_pending(self, masks: Sequence) -> bool:
         """See :func:`.heading.heading_recheck_pending`."""
@@ -186,12 +179,7 @@ class Tracker:
     def reset(self) -> None:
         """Forget the estimates (the next step initializes again)."""
         self.track.forget()
-        self._rival_start = self._rival = None
-        self._own_prediction_frames = 0
-        self._heading_views = 0
-        self._recheck_at = None
-        self._rechecked_undecided = False
-        self._travel_recheck_after = 0
+        self.heading_check = HeadingCheckState()
 
     @property
     def _has_heading(self) -> bool:
@@ -427,7 +415,7 @@ class Tracker:
         FrameResult
         """
         term, note = objective.keypoint_energy(self, keypoints)
-        rival = self._rival
+        rival = self.heading_check.rival
         self._keypoint_term = term
         if rival is not None:
             rival._keypoint_term = term
@@ -444,17 +432,17 @@ class Tracker:
                     contour_stage: bool = True) -> FrameResult:
         """The frame without its keypoint term (set by :meth:`step`)."""
         t0 = time.perf_counter()
-        rival = self._rival
+        rival = self.heading_check.rival
         self._contour_now = bool(contour_stage)
         res = self._step(masks, frame_index, FrameBudget(self.config.evals, self._contour_now),
                          prediction=prediction, frames_elapsed=frames_elapsed)
-        if self._own_prediction_frames > 0:
-            self._own_prediction_frames -= 1
+        if self.heading_check.own_prediction_frames > 0:
+            self.heading_check.own_prediction_frames -= 1
         if res.initialized:
-            self._rival = None
-            self._heading_views = res.views_used
-            if self._rival_start is not None:
-                e_rival, e_win = self._rival_start[1], self._rival_start[2]
+            self.heading_check.rival = None
+            self.heading_check.views = res.views_used
+            if self.heading_check.rival_start is not None:
+                e_rival, e_win = self.heading_check.rival_start[1], self.heading_check.rival_start[2]
                 heading.start_rival(self, frame_index)
                 return dataclasses.replace(res, notes=res.notes + (
                     f"heading check started: a run heading the other way ended {e_rival:.4g} (winner {e_win:.4g}); both "
@@ -462,12 +450,12 @@ class Tracker:
             return res
         if rival is None:
             return heading.recheck_heading(self, res, frame_index, frames_elapsed, t0)
-        if rival is not self._rival:
+        if rival is not self.heading_check.rival:
             return res
         if frames_elapsed != 1:
             # after a gap both hypotheses are still catching up and their energies say little (real
             # time, the sets that arrived during the initialization dropped: wrong switches measured)
-            self._rival = None
+            self.heading_check.rival = None
             return dataclasses.replace(res, notes=res.notes + (
                 f"heading check ended: no decision ({frames_elapsed:g} frame periods since the last frame; "
                 "it compares consecutive frames only); kept this heading",))
@@ -490,20 +478,8 @@ class Tracker:
             raise TrackerError(str(exc)) from None
         cfg = self.config
         usable, notes = frame_masks.check_masks(self, masks)
-        self.track.masks_now = usable
-        gated_pred = None
-        if (cfg.gate_margin_px > 0 or cfg.hull_filter) and self.track.last is not None \
-                and any(m is not None for m in usable):
-            gated_pred = frame_prediction.predict(self, prediction, notes)
-            if cfg.gate_margin_px > 0:
-                # the mask gate (config.gate_margin_px): foreground far from the predicted silhouette is dropped
-                usable = frame_masks.gate(self, usable, gated_pred, notes)
-            if cfg.hull_filter:
-                # the visual-hull filter (config.hull_filter): foreground the other views do not confirm
-                usable = frame_masks.hull(self, usable, gated_pred, notes)
-            # the filtered masks from here on: the contour stage fits what the energy scores, and a later
-            # re-centring starts from the person's foreground (the prediction above re-centred on the raw ones)
-            self.track.masks_now = usable
+        # the mask gate and the visual-hull filter around the prediction (made here when they run)
+        usable, gated_pred = frame_masks.filter_masks(self, usable, prediction, notes)
         weights = None
         if cfg.view_weights and self.track.last is not None and any(m is not None for m in usable):
             if gated_pred is None:
@@ -548,40 +524,18 @@ class Tracker:
             return FrameResult(x=self.last_estimate, energy=float("nan"), n_evals=n_evals, spread=float("nan"),
                                time_s=time.perf_counter() - t0, views_used=views, notes=tuple(notes),
                                fell_back=True, prediction=starts[0], initialized=initialized)
-        best = None
-        for _, res, pred in runs:
-            e = res.energy
-            if best is None or e < best[0]:
-                best = (e, res, pred)
+        _, res, pred = min(runs, key=lambda run: run[1].energy)     # the first of the lowest energy
         n_evals += n
-        _, res, pred = best
         if initialized:
             notes.append(f"initialized automatically ({len(starts)} heading candidates, {len(runs)} searched to the "
                          f"end, grid best yaw {np.rad2deg(res0.yaw):.0f} deg {res0.variant}, {n_evals} evaluations)")
         x, energy = self._final_pose(res)
         if initialized and cfg.init_confirm_frames > 0:
-            self._rival_start = first_frame.pick_rival(self, runs, res, x, energy)
+            self.heading_check.rival_start = first_frame.pick_rival(self, runs, res, x, energy)
         if initialized and cfg.init_polish:
-            # config.init_polish: the winner searched once more as a tracked frame (all stages), from itself
-            res2, x2, e2 = first_frame.polish(self, x, energy, frame_index, 6, notes, budget)
-            if res2 is not None:
-                n_evals += res2.n_evals
-                if e2 < energy:
-                    x, energy, res = x2, e2, res2
-            if self._rival_start is not None:
-                # the heading check's rival polished alike: the heading that fits better after it wins (the
-                # check still tracks both)
-                res_r, xr, er = first_frame.polish(self, *self._rival_start[:2], frame_index, 7, None, budget)
-                if res_r is not None:
-                    n_evals += res_r.n_evals
-                if er < energy:
-                    notes.append(f"initialization polish: the heading check's rival fits better ({er:.4g} against "
-                                 f"{energy:.4g}) and leads")
-                    self._rival_start = (x, energy, er)
-                    x, energy = xr, er
-                    res = res_r if res_r is not None else res
-                else:
-                    self._rival_start = (xr, er, energy)
+            # config.init_polish: the winner (and the heading check's rival) searched once more, from itself
+            x, energy, res, n = first_frame.polish_winner(self, x, energy, res, frame_index, notes, budget)
+            n_evals += n
         if res.n_nonfinite:
             notes.append(f"energy: {res.n_nonfinite} non-finite evaluations")
         spread_out = res.history[-1].spread if res.history else float("nan")
