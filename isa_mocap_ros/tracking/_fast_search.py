@@ -100,13 +100,13 @@ def supported(opt, energy, prior_active: bool) -> bool:
     from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
     from isa_mocap_ros.optim import Hierarchical
 
-    if prior_active or type(energy) is not SilhouetteEnergy or energy.method != "fast" or energy._frame is None:
+    if prior_active or type(energy) is not SilhouetteEnergy or energy.method != "fast" or not energy.has_masks:
         return False
     if type(opt) is not Hierarchical or getattr(opt, "inner_name", None) != "isa" or opt.n_iter != 0:
         return False
     p = opt.params
     return (set(p) <= _PARAMS and p.get("kernel", "s1") in _KERNELS and p.get("schedule") == "adaptive"
-            and p.get("resampling", "multinomial") == "multinomial" and opt._initial_population is None
+            and p.get("resampling", "multinomial") == "multinomial" and opt.initial_population is None
             and opt.init == "normal" and opt.max_iter is None
             and p.get("variance", VARIANCE_READINGS[0]) in VARIANCE_READINGS
             and p.get("c_scale", C_SCALES[0]) in C_SCALES)
@@ -320,7 +320,7 @@ class HisaRun:
     def advance(self, to: int | None = None) -> "HisaRun":
         """Run the partitions up to (not including) ``to`` (default: all)."""
         energy, opt = self.energy, self.opt
-        threads8 = 8 * energy._threads
+        threads8 = 8 * energy.threads
         stop = len(self.parts) if to is None else min(int(to), len(self.parts))
         while self.k < stop:
             k = self.k
@@ -331,9 +331,9 @@ class HisaRun:
             args = (self.xbase, idx, x0, np.ascontiguousarray(opt.spread[idx]), lo, hi, self.shares[k], self.n,
                     opt.rng, self.target, self.kernel, self.c, self.rho, self.population, self.blocks[k], self.best,
                     self.best_x, self.stats, self.g, self.n_evals, threads8)
-            x, gens, used, nb, self.X = _partition(*args, energy._kernel_args() if rest.full else rest._args)
+            x, gens, used, nb, self.X = _partition(*args, energy.kernel_args() if rest.full else rest.kernel_args())
             if gens < 0:
-                raise rest._violation(self.X, np.flatnonzero(np.any(self.X != rest.x_base, axis=1)))
+                raise rest.violation(self.X, np.flatnonzero(np.any(self.X != rest.x_base, axis=1)))
             energy.n_evals += used
             self.xbase[idx] = x
             self.g += gens
@@ -364,8 +364,8 @@ def supported_flat(opt) -> bool:
     from isa_mocap_ros.optim.schedules import AdaptiveEss
 
     blocks = opt.rotation_blocks if isinstance(opt, Isa) else ()
-    return (type(opt) is Isa and opt.n_iter == 0 and opt._fused and isinstance(opt.schedule, AdaptiveEss)
-            and opt.kernel in _KERNELS and opt._initial_population is None and opt.init == "normal"
+    return (type(opt) is Isa and opt.n_iter == 0 and opt.fused and isinstance(opt.schedule, AdaptiveEss)
+            and opt.kernel in _KERNELS and opt.initial_population is None and opt.init == "normal"
             and opt.max_iter is None and len(blocks) <= 1
             and all(list(b) == list(range(b[0], b[0] + 3)) for b in blocks))
 
