@@ -8,7 +8,9 @@ from typing import Sequence
 
 import numpy as np
 
-from . import _fast_search, frame_masks, objective
+from isa_mocap_ros.optim import compiled_search
+
+from . import frame_masks, objective
 from .config import INIT_SPREAD_SCALE, TrackerError, frame_rng
 from .init import InitError, initial_pose
 from .plan import FrameBudget
@@ -103,9 +105,11 @@ def initial_runs(tr, starts: list, frame_index: int, notes: list[str], budget: F
             rng = frame_rng(cfg.seed, frame_index) if j == 0 else frame_rng(cfg.seed, frame_index, 3, j)
         opt, evals, _, _ = tr._search(pred, rng, budget, INIT_SPREAD_SCALE, notes if j == 0 else None,
                                         stages=False)
-        if tr._compiled_search and _fast_search.supported(opt, tr.energy, tr._python_terms()):
-            # compiled h-isa, paused after its first partition (the same numbers as below)
-            runs.append((j, _fast_search.HisaRun(opt, tr.energy, evals), pred, None))
+        run = compiled_search.search(opt, tr.energy, evals, extra_terms=tr._python_terms(), paused=True) \
+            if tr._compiled_search else None
+        if run is not None:
+            # compiled h-isa, bound; the pruning below advances it (the same numbers as the protocol)
+            runs.append((j, run, pred, None))
             continue
         # bind + iterate + result() is minimize(), split at the checkpoint: the end of the first
         # partition (hierarchical optimizers, whose shares bind() sets) or a sixth of the budget

@@ -21,7 +21,9 @@ import numpy as np
 
 from isa_mocap_ros.geometry import nearest_rotvec
 
-from . import _fast_search, first_frame, frame_masks, frame_prediction, heading, objective, plan, stages
+from isa_mocap_ros.optim import compiled_search
+
+from . import first_frame, frame_masks, frame_prediction, heading, objective, plan, stages
 from .config import (DEFAULT_PARAMS, JOINT_SPREAD_RAD, ROOT_ROTATION_RADIUS_RAD, ROOT_ROTATION_SPREAD_RAD,
                      ROOT_TRANSLATION_SPREAD_M, PREDICTORS, FrameResult, TrackerConfig, TrackerError,
                      _partition_coords, _whole_generations, frame_rng)
@@ -138,7 +140,7 @@ class Tracker:
         self._contour_now = True               # step(contour_stage=...) of the frame being tracked
         # the heading check after an automatic initialization (config.init_confirm_frames)
         self.heading_check = HeadingCheckState()
-        # h-isa on the fast energy runs compiled per partition (tracking/_fast_search.py, the same
+        # h-isa on the fast energy runs compiled per partition (optim/compiled_search.py, the same
         # numbers as the optimizer protocol); False: always through the protocol (tests compare both)
         self._compiled_search = True
         # the keypoint term of the frame being tracked (config.keypoint_weight; set by step/initialize)
@@ -323,9 +325,9 @@ class Tracker:
         opt, budget, stage_shares, (lo, hi, spread, base) = self._search(pred, rng, budget, spread_scale, notes,
                                                                          stages)
         share, torso, limbs, contour = stage_shares
-        if self._compiled_search and _fast_search.supported(opt, self.energy, self._python_terms()):
-            res = _fast_search.run_hisa(opt, self.energy, budget)      # the same numbers, compiled per partition
-        else:
+        res = compiled_search.search(opt, self.energy, budget, extra_terms=self._python_terms()) \
+            if self._compiled_search else None
+        if res is None:                   # not covered by the compiled path (the same numbers through the protocol)
             res = minimize(opt, TotalEnergy(self), max_evals=budget)
         # what a search leaves unspent (less than a generation: whole generations) goes to the next stage
         spare = budget - res.n_evals

@@ -8,7 +8,7 @@ a fifth of a tracked frame's time went there. :func:`run_hisa` runs the same alg
 call per partition: the same compiled helpers (:mod:`isa_mocap_ros.optim._fast`,
 :mod:`~isa_mocap_ros.optim._fast_so3`), the same energy kernels, the same random draws from the same
 ``numpy.random.Generator`` (numba draws from its state exactly as numpy does), in the same order — so
-the result is the protocol's, bit for bit (``test/test_fast_search.py`` checks estimates, best
+the result is the protocol's, bit for bit (``test/test_compiled_search.py`` checks estimates, best
 particles, energies, diagnostics and the generator's state afterwards). What it covers, and the
 tracker checks before using it (:func:`supported`): inner ISA with multinomial replacement (kernels
 S1/S2/S3, either variance reading) and the adaptive schedule, the fast energy, no prior, no initial
@@ -212,7 +212,7 @@ def _embed(xbase, idx, Xs):  # pragma: no cover - compiled
 def _kernel(X, kargs, n_chunks, out):  # pragma: no cover - compiled only (see the overload below)
     """``silhouette_batch`` or ``silhouette_restricted`` of ``X`` with their arguments ``kargs`` (between
     the poses and ``n_chunks``), told apart by the number of arguments when numba compiles the caller."""
-    raise NotImplementedError("_fast_search._kernel is for compiled code only")
+    raise NotImplementedError("compiled_search._kernel is for compiled code only")
 
 
 _N_BATCH = _k.silhouette_batch.py_func.__code__.co_argcount - 3          # without X, n_chunks, out
@@ -351,6 +351,29 @@ class HisaRun:
                       n_iter=self.g, reason=f"max_evals={self.max_evals}, partitions={len(self.parts)}",
                       population=np.array(self.X, dtype=float), weights=None, history=history,
                       n_nonfinite=self.bad)
+
+
+def search(opt, energy, max_evals: int, *, extra_terms: bool = False, paused: bool = False):
+    """The entry point: ``minimize(opt, energy, max_evals=max_evals)`` compiled, or None when this path does
+    not cover ``opt`` and ``energy`` (then run it through the optimizer protocol, :func:`~.minimize`).
+
+    An unbound :class:`~isa_mocap_ros.optim.Hierarchical` over ISA on the fast
+    :class:`~isa_mocap_ros.energy.silhouette.SilhouetteEnergy` (:func:`supported`; ``extra_terms``: the
+    energy is not the whole objective, a prior or keypoint term is added in Python, so not covered) runs
+    compiled per partition; with ``paused`` it is returned as a :class:`HisaRun` stopped before its first
+    partition (``advance()``, ``result()``: the first frame's pruned runs). A flat
+    :class:`~isa_mocap_ros.optim.Isa` (:func:`supported_flat`) on any batch energy runs with compiled
+    generations (:func:`run_isa`). The numbers are the protocol's, bit for bit."""
+    from isa_mocap_ros.optim import Hierarchical
+
+    if type(opt) is Hierarchical:
+        if not supported(opt, energy, extra_terms):
+            return None
+        run = HisaRun(opt, energy, max_evals)
+        return run if paused else run.advance().result()
+    if paused or extra_terms or not supported_flat(opt):
+        return None
+    return run_isa(opt, energy, max_evals)
 
 
 def run_hisa(opt, energy, max_evals: int) -> Result:
