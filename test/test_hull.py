@@ -184,12 +184,12 @@ def test_tracker_hands_the_energy_the_filtered_masks(scene):
     m[0][added] = 255
     seen = {}
     for on in (True, False):
-        tr = Tracker(model, cams, TrackerConfig(evals_per_frame=300, hull_filter=on, hull_keep_px=0,
+        tr = Tracker(model, cams, TrackerConfig(evals=300, hull_filter=on, hull_keep_px=0,
                                                 contour_iterations=0, contour_extra_iterations=0, limb_proposals=0))
         tr.initialize(pose=poses[0])
         res = tr.step(m, 1)
         assert not res.fell_back
-        seen[on] = tr._masks_last[0] > 0
+        seen[on] = tr.track.masks_last[0] > 0
     assert seen[True][added].mean() < 0.35
     assert seen[False][added].mean() == 1.0
 
@@ -215,7 +215,7 @@ def test_tracker_with_occluder_blobs_tracks_better_with_the_filter_alone():
     err = np.zeros((3, 2))
     for seed in range(3):
         for j, on in enumerate((False, True)):
-            tr = Tracker(model, cams, TrackerConfig(evals_per_frame=600, seed=seed, gate_margin_px=0,
+            tr = Tracker(model, cams, TrackerConfig(evals=600, seed=seed, gate_margin_px=0,
                                                     contour_iterations=0, hull_filter=on))
             tr.initialize(pose=walk[0])
             out = [tr.step(masks[k], k) for k in range(1, n)]

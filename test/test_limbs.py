@@ -15,7 +15,7 @@ from isa_mocap_ros.tracking.tracker import frame_rng
 
 def _limb_stage_of(tr, notes, pred):
     """The limb stage's plan on a full frame budget."""
-    return plan.limb_stage(tr, notes, pred, FrameBudget(tr.config.evals_per_frame))
+    return plan.limb_stage(tr, notes, pred, FrameBudget(tr.config.evals))
 from isa_mocap_ros.vision import default_rig, render_mask
 
 
@@ -114,7 +114,7 @@ def test_stage_reopens_a_folded_arm(scene):
         fixed += changed == ["right_arm"] and wrist_err(x) < 0.06
     assert fixed == 3
     # the hierarchy's own search, from the trapped pose with the same number of evaluations, stays folded
-    tr = Tracker(model, cams, TrackerConfig(seed=1, evals_per_frame=402, pelvis_fraction=0.0, limb_proposals=0))
+    tr = Tracker(model, cams, TrackerConfig(seed=1, evals=402, pelvis_fraction=0.0, limb_proposals=0))
     tr.initialize(pose=trapped)
     r = tr.step(masks, 4, prediction=trapped)
     assert wrist_err(r.x) > 0.15
@@ -122,21 +122,21 @@ def test_stage_reopens_a_folded_arm(scene):
 
 def test_stage_budget_skip_note_and_off(scene):
     model, cams, walk, truth, masks = scene
-    for cfg, note in [(TrackerConfig(evals_per_frame=700, seed=1), False),        # (14 + 3) x 4 + 2 = 70
-                      (TrackerConfig(evals_per_frame=330, seed=1, pelvis_fraction=0.0), False),   # 4 + 3 per limb
-                      (TrackerConfig(evals_per_frame=700, seed=1, limb_proposals=0), False)]:
+    for cfg, note in [(TrackerConfig(evals=700, seed=1), False),        # (14 + 3) x 4 + 2 = 70
+                      (TrackerConfig(evals=330, seed=1, pelvis_fraction=0.0), False),   # 4 + 3 per limb
+                      (TrackerConfig(evals=700, seed=1, limb_proposals=0), False)]:
         tr = Tracker(model, cams, cfg)
         tr.initialize(pose=walk[2])
         r = tr.step(masks, 3)
         # whole generations: the limb stage (last) takes the rest as proposals, < 4 left; without it < 30
         slack = 4 if cfg.limb_proposals and not note else 30
-        assert cfg.evals_per_frame - slack < r.n_evals <= cfg.evals_per_frame and not r.fell_back
+        assert cfg.evals - slack < r.n_evals <= cfg.evals and not r.fell_back
         assert not any(n.startswith("limb stage skipped") for n in r.notes)
     # drawn proposals per limb: limb_proposals, or as many as fit in a tenth of the budget beside the 3
     # extrapolated ones; below 4 no stage
     for evals, limbs, n in [(1500, LIMBS, 16), (700, LIMBS, 14), (500, LIMBS, 9), (330, LIMBS, 4),
                             (330, ("left_arm", "right_arm"), 12), (290, LIMBS, 0), (170, LIMBS, 0)]:
-        tr = Tracker(model, cams, TrackerConfig(evals_per_frame=evals, seed=1, limb_proposal_limbs=limbs))
+        tr = Tracker(model, cams, TrackerConfig(evals=evals, seed=1, limb_proposal_limbs=limbs))
         notes = []
         got = _limb_stage_of(tr, notes, truth)
         assert got == ((list(limbs), [v for v in limbs if v.endswith("_leg")], n) if n else ([], [], 0))
@@ -153,7 +153,7 @@ def test_not_on_the_automatically_initialized_frame(scene, monkeypatch):
     # rival) is a tracked frame's, with every stage
     for polish in (False, True):
         calls.clear()
-        tr = Tracker(model, cams, TrackerConfig(seed=1, evals_per_frame=600, init_refine_evals=50, init_yaw_steps=8,
+        tr = Tracker(model, cams, TrackerConfig(seed=1, evals=600, init_refine_evals=50, init_yaw_steps=8,
                                                 init_polish=polish))
         r = tr.step(masks, 0)
         polished = 1 + any(n.startswith("heading check started") for n in r.notes)
@@ -207,7 +207,7 @@ def test_a_leg_folded_in_the_prediction_joins_the_stage(scene):
     notes = []
     assert _limb_stage_of(tr, notes, folded) == (["left_arm", "right_arm", "right_leg"], [], 16) and len(notes) == 1
     # the folded leg joins only while the stage stays within a tenth of the budget (16 x 3 + 2 = 50 > 40)
-    tr = Tracker(model, cams, TrackerConfig(seed=1, evals_per_frame=400, **arms))
+    tr = Tracker(model, cams, TrackerConfig(seed=1, evals=400, **arms))
     notes = []
     assert _limb_stage_of(tr, notes, folded) == (["left_arm", "right_arm"], [], 16) and notes == []
     assert _limb_stage_of(Tracker(model, cams, TrackerConfig(seed=1, limb_proposals=0)), notes, folded) == ([], [], 0)

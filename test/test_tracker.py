@@ -7,6 +7,7 @@ from isa_mocap_ros.body.motion import generate_motion
 from isa_mocap_ros.eval import frame_errors_mm, marker_positions
 from isa_mocap_ros.tracking import FrameResult, Tracker, TrackerConfig, TrackerError, make_tracker
 from isa_mocap_ros.tracking import first_frame, heading
+from isa_mocap_ros.tracking.config import JOINT_SPREAD_RAD, ROOT_TRANSLATION_SPREAD_M
 from isa_mocap_ros.tracking.contour import ContourFitInfo
 from isa_mocap_ros.vision import default_rig, render_mask
 
@@ -33,7 +34,7 @@ def test_tracks_a_tiny_walk(scene):
     """Bound measured: ~15-25 mm mean per frame at 160x120 / 800 evaluations (ISA, default settings);
     checked against 45 mm, and against the error of simply keeping the first pose."""
     model, cams, walk, masks = scene
-    _, out = _track(scene, TrackerConfig(evals_per_frame=800, seed=3))  # default optimizer: h-isa
+    _, out = _track(scene, TrackerConfig(evals=800, seed=3))  # default optimizer: h-isa
     est = np.array([r.x for r in out])
     err = frame_errors_mm(marker_positions(model, est), marker_positions(model, walk[1:]))
     still = frame_errors_mm(marker_positions(model, np.repeat(walk[:1], N_FRAMES - 1, 0)),
@@ -47,19 +48,19 @@ def test_tracks_a_tiny_walk(scene):
 
 
 def test_same_seed_same_estimates(scene):
-    cfg = TrackerConfig(evals_per_frame=300, seed=7)
+    cfg = TrackerConfig(evals=300, seed=7)
     _, a = _track(scene, cfg)
     _, b = _track(scene, cfg)
     for ra, rb in zip(a, b):
         np.testing.assert_array_equal(ra.x, rb.x)
         assert ra.energy == rb.energy
-    _, c = _track(scene, TrackerConfig(evals_per_frame=300, seed=8))
+    _, c = _track(scene, TrackerConfig(evals=300, seed=8))
     assert any(not np.array_equal(ra.x, rc.x) for ra, rc in zip(a, c))
 
 
 def test_automatic_initialization_on_first_step(scene):
     model, cams, walk, masks = scene
-    tr = Tracker(model, cams, TrackerConfig(evals_per_frame=300, init_refine_evals=200, seed=1))
+    tr = Tracker(model, cams, TrackerConfig(evals=300, init_refine_evals=200, seed=1))
     assert not tr.initialized
     r = tr.step(masks[0], 0)
     assert r.initialized and r.x is not None and tr.initialized
@@ -74,7 +75,7 @@ def test_initialization_prunes_candidate_runs_part_way(scene):
     model, cams, walk, masks = scene
 
     def first(keep):
-        tr = Tracker(model, cams, TrackerConfig(evals_per_frame=300, init_refine_evals=100, seed=2, init_keep=keep))
+        tr = Tracker(model, cams, TrackerConfig(evals=300, init_refine_evals=100, seed=2, init_keep=keep))
         r = tr.step(masks[0], 0)
         assert r.initialized
         return r
@@ -101,7 +102,7 @@ def test_initialization_polish_searches_the_winner_once_more(scene):
     model, cams, walk, masks = scene
 
     def first(polish):
-        tr = Tracker(model, cams, TrackerConfig(evals_per_frame=300, init_refine_evals=100, seed=2,
+        tr = Tracker(model, cams, TrackerConfig(evals=300, init_refine_evals=100, seed=2,
                                                 init_polish=polish))
         r = tr.step(masks[0], 0)
         assert r.initialized and not r.fell_back
@@ -121,7 +122,7 @@ def test_a_frame_without_the_contour_stage(scene):
     model, cams, walk, masks = scene
 
     def tracker(**kw):
-        tr = Tracker(model, cams, TrackerConfig(evals_per_frame=1000, seed=4, **kw))
+        tr = Tracker(model, cams, TrackerConfig(evals=1000, seed=4, **kw))
         tr.initialize(pose=walk[0])
         return tr
 
@@ -264,7 +265,7 @@ def test_travel_cue_rechecks_a_track_that_moves_backwards(scene320_two_views, mo
     """A track facing backwards (the first frame forced so, its heading check suppressed) whose root
     travels against its heading is re-checked once it has moved for TRAVEL_FRAMES frames, and the
     check switches; without the cue it faces backwards to the end."""
-    from isa_mocap_ros.tracking import tracker as T
+    from isa_mocap_ros.tracking import config as T
 
     def runs(**cfg):
         monkeypatch.setattr(first_frame, "pick_rival", lambda tr, *a, **k: None)   # no check after the first frame
@@ -305,7 +306,7 @@ def test_travel_cue_decides_a_close_heading_check(scene320_two_views, monkeypatc
 
 
 def test_travel_reads_the_root_motion(scene320_two_views):
-    from isa_mocap_ros.tracking import tracker as T
+    from isa_mocap_ros.tracking import config as T
 
     model, cams, walk, _ = scene320_two_views
     tr = Tracker(model, cams, TrackerConfig(seed=0))
@@ -322,9 +323,9 @@ def test_travel_reads_the_root_motion(scene320_two_views):
     assert not tr.heading_recheck_pending([None] * len(cams))
     from isa_mocap_ros.geometry.so3 import exp_so3, log_so3, rot_z
 
-    turned = tr._last.copy()
+    turned = tr.track.last.copy()
     turned[3:6] = log_so3(rot_z(np.pi) @ exp_so3(turned[3:6]))              # heading the other way
-    tr._last = turned
+    tr.track.last = turned
     assert heading.travel_recheck_due(tr)[0] > 160.0
     assert tr.heading_recheck_pending([None] * len(cams))                    # the estimator holds the frames after
     tr.reset()
@@ -388,7 +389,7 @@ def test_heading_check_switches_from_a_wrong_first_heading(scene320, monkeypatch
 
 def test_fallbacks_never_raise_and_say_why(scene):
     model, cams, walk, masks = scene
-    tr = Tracker(model, cams, TrackerConfig(evals_per_frame=200, seed=0))
+    tr = Tracker(model, cams, TrackerConfig(evals=200, seed=0))
     r = tr.step([None] * 4, 0)                           # nothing yet: no estimate
     assert r.x is None and r.fell_back and any("no estimate yet" in n for n in r.notes)
     tr.initialize(pose=walk[0])
@@ -429,7 +430,7 @@ def test_nan_from_own_predictor_falls_back_to_last_estimate(scene):
         def reset(self):
             pass
 
-    tr = Tracker(model, cams, TrackerConfig(evals_per_frame=200), predictor=NanPredictor())
+    tr = Tracker(model, cams, TrackerConfig(evals=200), predictor=NanPredictor())
     tr.initialize(pose=walk[0])
     r = tr.step(masks[1], 1)
     assert not r.fell_back and any("using the last estimate" in n for n in r.notes)
@@ -452,11 +453,11 @@ def test_search_box_respects_radius_and_limits(scene):
 
 @pytest.mark.parametrize("kw, match", [
     ({"optimizer": "nope"}, "optimizer: expected one of"),
-    ({"evals_per_frame": 0}, "evals_per_frame: expected an integer >= 1"),
+    ({"evals": 0}, "evals: expected an integer >= 1"),
     ({"search_radius_rad": -1.0}, "search_radius_rad: expected a finite number > 0"),
     ({"predictor": "kalman"}, "predictor: expected one of ar, constant_pose, constant_velocity"),
     ({"optimizer_params": {"bounds": 1}}, r"optimizer_params: expected algorithm parameters only"),
-    ({"energy_method": "slow"}, "energy_method: expected 'fast' or 'exact'"),
+    ({"energy": "slow"}, "energy: expected 'fast' or 'exact'"),
     ({"seed": -1}, "seed: expected an integer >= 0"),
     ({"n_model_points": 0}, "n_model_points: expected an integer >= 1"),
     ({"n_mask_points": -1}, "n_mask_points: expected an integer >= 0"),
@@ -489,7 +490,7 @@ def test_tracker_argument_errors(scene):
 
 def test_optimizer_rejecting_budget_is_reported_not_raised(scene):
     model, cams, walk, masks = scene
-    tr = make_tracker(model, cams, optimizer="isa", evals=10, params={"n_particles": 50})
+    tr = make_tracker(model, cams, optimizer="isa", evals=10, optimizer_params={"n_particles": 50})
     tr.initialize(pose=walk[0])
     r = tr.step(masks[1], 1)
     assert r.fell_back and any("optimizer failed" in n for n in r.notes)
@@ -500,7 +501,7 @@ def test_hierarchical_and_prior(scene):
 
     model, cams, walk, masks = scene
     prior = ParzenPrior(generate_motion("walk", model, duration_s=1.0, fps=30, rng=np.random.default_rng(5)))
-    tr = Tracker(model, cams, TrackerConfig(optimizer="h-cmaes", evals_per_frame=600, prior_eta=0.01), prior=prior)
+    tr = Tracker(model, cams, TrackerConfig(optimizer="h-cmaes", evals=600, prior_eta=0.01), prior=prior)
     tr.initialize(pose=walk[0])
     r = tr.step(masks[1], 1)
     assert not r.fell_back and 600 - 4 < r.n_evals <= 600       # < 4 limbs left unspent
@@ -538,7 +539,7 @@ def test_tracks_through_a_half_turn():
         truth[k, 3:6] = log_so3(turn @ R)
     masks = [[render_mask(c, capsule_endpoints(model, x)[0], model.capsule_radii) for c in rig.cameras]
              for x in truth]
-    tr = Tracker(model, rig.cameras, TrackerConfig(evals_per_frame=800, seed=3))
+    tr = Tracker(model, rig.cameras, TrackerConfig(evals=800, seed=3))
     tr.predictor = PublishedPredictor(model, tr.predictor)
     tr.initialize(pose=truth[0])
     out = [tr.step(masks[k], k) for k in range(1, len(truth))]
@@ -553,7 +554,7 @@ def test_tracks_through_a_half_turn():
 @pytest.mark.parametrize("gain", [0.0, 1.5])
 def test_spreads_grow_with_the_predicted_motion(scene, monkeypatch, gain):
     """Joints the (damped) prediction moves start with sqrt(s0^2 + (k |p - x|)^2); the others, the
-    root, and every joint with gain 0 keep joint_spread_rad."""
+    root, and every joint with gain 0 keep JOINT_SPREAD_RAD."""
     import isa_mocap_ros.optim as optim
 
     model, cams, walk, masks = scene
@@ -565,7 +566,7 @@ def test_spreads_grow_with_the_predicted_motion(scene, monkeypatch, gain):
         return real(name, x0, spread, **kw)
 
     monkeypatch.setattr(optim, "make_optimizer", spy)
-    cfg = TrackerConfig(evals_per_frame=300, seed=1, spread_velocity_gain=gain, pelvis_fraction=0.0,
+    cfg = TrackerConfig(evals=300, seed=1, spread_velocity_gain=gain, pelvis_fraction=0.0,
                         limb_proposals=0, joint_velocity_gain=0.5)
     tr = Tracker(model, cams, cfg)
     tr.initialize(pose=walk[0])
@@ -574,10 +575,10 @@ def test_spreads_grow_with_the_predicted_motion(scene, monkeypatch, gain):
     p[k] += 0.4                                       # the external prediction bends one knee
     tr.step(masks[1], 1, prediction=p)
     spread = seen[0]
-    want = np.full(model.dof, cfg.joint_spread_rad)
-    want[k] = np.hypot(cfg.joint_spread_rad, gain * 0.5 * 0.4)   # damped: half of the predicted motion
+    want = np.full(model.dof, JOINT_SPREAD_RAD)
+    want[k] = np.hypot(JOINT_SPREAD_RAD, gain * 0.5 * 0.4)   # damped: half of the predicted motion
     np.testing.assert_allclose(spread[6:], want[6:], rtol=1e-12)
-    np.testing.assert_allclose(spread[:3], cfg.root_translation_spread_m)
+    np.testing.assert_allclose(spread[:3], ROOT_TRANSLATION_SPREAD_M)
 
 
 class _SpyPredictor:
@@ -604,7 +605,7 @@ def test_own_prediction_looks_as_many_frames_ahead_as_have_passed(scene):
     prediction look further ahead (at most max_frames_ahead); the predictor learns per period."""
     model, cams, walk, masks = scene
     spy = _SpyPredictor()
-    tr = Tracker(model, cams, TrackerConfig(evals_per_frame=300, seed=1, max_frames_ahead=4), predictor=spy)
+    tr = Tracker(model, cams, TrackerConfig(evals=300, seed=1, max_frames_ahead=4), predictor=spy)
     tr.initialize(pose=walk[0])
     assert tr.step(masks[1], 1).fell_back is False                   # consecutive: the plain calls
     assert tr.step([None] * len(cams), 2).fell_back is True          # nothing seen: no update
@@ -622,7 +623,7 @@ def test_own_prediction_looks_as_many_frames_ahead_as_have_passed(scene):
 
 
 def test_consecutive_frames_give_the_same_estimates_with_frames_elapsed_one(scene):
-    cfg = TrackerConfig(evals_per_frame=300, seed=4)
+    cfg = TrackerConfig(evals=300, seed=4)
     _, a = _track(scene, cfg)
     model, cams, walk, masks = scene
     tr = Tracker(model, cams, cfg)
@@ -636,7 +637,7 @@ def test_after_a_long_gap_the_root_follows_the_foreground(scene):
     """More than max_frames_ahead periods unseen (e.g. the automatic initialization in real time):
     the predicted root position moves with the triangulated foreground centroid, not the motion."""
     model, cams, walk, masks = scene
-    tr = Tracker(model, cams, TrackerConfig(evals_per_frame=300, seed=2))
+    tr = Tracker(model, cams, TrackerConfig(evals=300, seed=2))
     tr.initialize(pose=walk[0])
     tr.step(masks[1], 1)
     far = walk[2].copy()
@@ -657,7 +658,7 @@ def test_after_a_gap_from_the_first_estimate_the_root_follows_the_foreground(sce
     initialization comes a few periods later): even a short gap moves the predicted root with the
     foreground; once the motion is known a short gap extrapolates it."""
     model, cams, walk, masks = scene
-    tr = Tracker(model, cams, TrackerConfig(evals_per_frame=300, init_refine_evals=100, seed=2, init_confirm_frames=0))
+    tr = Tracker(model, cams, TrackerConfig(evals=300, init_refine_evals=100, seed=2, init_confirm_frames=0))
     assert tr.step(masks[0], 0).initialized                           # automatic: the masks say where it was
     far = walk[2].copy()
     far[0] += 0.15                                                   # 15 cm further than the walk's frame 2

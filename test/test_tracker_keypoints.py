@@ -36,7 +36,7 @@ def _turned(model, x):
 
 def test_keypoints_decide_the_initial_heading(scene):
     model, cams, poses, masks = scene
-    cfg = TrackerConfig(evals_per_frame=300, init_refine_evals=200, seed=1, keypoint_weight=1.0)
+    cfg = TrackerConfig(evals=300, init_refine_evals=200, seed=1, keypoint_weight=1.0)
     truth = _heading(poses[0])
     right = Tracker(model, cams, cfg).step(masks[0], 0, keypoints=true_keypoints(model, cams, poses[0]))
     assert right.initialized and any(n.startswith("keypoints: 56 in 4 views") for n in right.notes)
@@ -50,8 +50,8 @@ def test_keypoints_decide_the_initial_heading(scene):
 def test_weight_zero_or_no_keypoints_change_nothing(scene):
     model, cams, poses, masks = scene
     kp = true_keypoints(model, cams, poses[0])
-    a = Tracker(model, cams, TrackerConfig(evals_per_frame=300, init_refine_evals=200, seed=1)).step(masks[0], 0)
-    b = Tracker(model, cams, TrackerConfig(evals_per_frame=300, init_refine_evals=200, seed=1)).step(
+    a = Tracker(model, cams, TrackerConfig(evals=300, init_refine_evals=200, seed=1)).step(masks[0], 0)
+    b = Tracker(model, cams, TrackerConfig(evals=300, init_refine_evals=200, seed=1)).step(
         masks[0], 0, keypoints=kp)
     np.testing.assert_array_equal(a.x, b.x)
     assert a.notes == b.notes
@@ -59,7 +59,7 @@ def test_weight_zero_or_no_keypoints_change_nothing(scene):
 
 def test_bad_keypoints_are_a_note_and_bad_weights_raise(scene):
     model, cams, poses, masks = scene
-    tr = Tracker(model, cams, TrackerConfig(evals_per_frame=300, init_refine_evals=200, seed=1, keypoint_weight=1.0))
+    tr = Tracker(model, cams, TrackerConfig(evals=300, init_refine_evals=200, seed=1, keypoint_weight=1.0))
     r = tr.step(masks[0], 0, keypoints=[None, (np.zeros((5, 2)), np.zeros(5)), None, None])
     assert r.initialized and any("keypoints ignored" in n and "keypoints[1]" in n for n in r.notes)
     r = tr.step(masks[1], 1, keypoints=[None] * 4)

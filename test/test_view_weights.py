@@ -56,7 +56,7 @@ def test_the_tracker_weighs_the_views_by_the_predicted_share(rig):
     side = x.copy()
     side[0] += 2.1
     masks = _masks(model, cams, side)
-    cfg = dict(evals_per_frame=200, contour_iterations=0, contour_extra_iterations=0, limb_proposals=0)
+    cfg = dict(evals=200, contour_iterations=0, contour_extra_iterations=0, limb_proposals=0)
     for on in (True, False):
         tr = Tracker(model, cams, TrackerConfig(view_weights=on, **cfg))
         tr.initialize(pose=side)
@@ -82,7 +82,7 @@ def test_an_empty_mask_where_the_body_is_predicted_does_not_drop_the_frame(rig):
     masks = _masks(model, cams, x)
     masks[1] = np.zeros_like(masks[1])
     masks[2] = np.zeros_like(masks[2])
-    tr = Tracker(model, cams, TrackerConfig(evals_per_frame=200, contour_iterations=0, contour_extra_iterations=0,
+    tr = Tracker(model, cams, TrackerConfig(evals=200, contour_iterations=0, contour_extra_iterations=0,
                                             limb_proposals=0, gate_margin_px=0, hull_filter=False))
     tr.initialize(pose=side)
     res = tr.step(masks, 1)
@@ -94,7 +94,7 @@ def test_views_that_see_the_whole_body_change_nothing(rig):
     """Every view sees the whole person: the weights are all 1 and the estimates equal, bit for bit."""
     model, cams, x = rig
     masks = _masks(model, cams, x)
-    cfg = dict(evals_per_frame=200, contour_iterations=0, contour_extra_iterations=0, limb_proposals=0)
+    cfg = dict(evals=200, contour_iterations=0, contour_extra_iterations=0, limb_proposals=0)
     out = []
     for on in (True, False):
         tr = Tracker(model, cams, TrackerConfig(view_weights=on, **cfg))

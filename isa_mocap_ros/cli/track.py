@@ -259,8 +259,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
             raise ValueError("--prior-eta: expected --prior NPZ as well, received none")
         from isa_mocap_ros.energy.prior import ParzenPrior
         prior = ParzenPrior.load(args.prior)
-    cfg_kw = dict(optimizer=args.optimizer, evals_per_frame=args.evals, optimizer_params=params, seed=args.seed,
-                  energy_method=args.energy, prior_eta=args.prior_eta, keypoint_weight=kp_weight)
+    cfg_kw = dict(optimizer=args.optimizer, evals=args.evals, optimizer_params=params, seed=args.seed,
+                  energy=args.energy, prior_eta=args.prior_eta, keypoint_weight=kp_weight)
     if args.predictor:
         cfg_kw["predictor"] = args.predictor
     if getattr(args, "gate_margin_px", None) is not None:

@@ -329,6 +329,11 @@ class SilhouetteEnergy:
             self.set_masks(masks)
 
     # ------------------------------------------------------------------ frames
+    @property
+    def has_masks(self) -> bool:
+        """Whether masks with at least one usable view are set (the energy can be evaluated)."""
+        return self._frame is not None
+
     def set_masks(self, masks: Sequence[Any], weights: Sequence[float] | None = None) -> None:
         """Take the foreground masks of a new frame, one per camera (``None`` allowed).
 
@@ -466,6 +471,15 @@ class SilhouetteEnergy:
             total += w * _view_terms(self.cameras[v], fr["F"][v], fr["n_fg"][v], E, self._radii)
         return total / fr["view_w"].sum()
 
+    @property
+    def threads(self) -> int:
+        """numba threads of the kernels, read by the last :meth:`set_masks`."""
+        return self._threads
+
+    def kernel_args(self) -> tuple:
+        """See :meth:`_kernel_args` (the public name, for the tracker's compiled search)."""
+        return self._kernel_args()
+
     def _kernel_args(self) -> tuple:
         """The arguments of :func:`~._silhouette_kernel.silhouette_batch` between the poses and
         ``n_chunks`` for the current masks (also what the tracker's compiled search passes it)."""
@@ -597,6 +611,15 @@ class RestrictedSilhouetteEnergy:
                       fr["cam_K"], fr["cam_D"], fr["cam_hasd"], fr["cov"], fr["cov_wh"], energy._order,
                       energy._tmpl_a, energy._tmpl_s, energy._tmpl_ptr, energy._tmpl_na, fr["fg_n"], fr["fg_tab"],
                       fr["fg_bins"], fr["fg_xr"], fr["fg_area"], fr["view_w"], *stage)
+
+    def kernel_args(self) -> tuple:
+        """The arguments of the restricted kernel between the poses and ``(n_chunks, out)`` (for the
+        tracker's compiled search)."""
+        return self._args
+
+    def violation(self, X: np.ndarray, rows: np.ndarray) -> EnergyError:
+        """The error for rows ``rows`` of ``X`` that move coordinates outside :attr:`coords`."""
+        return self._violation(X, rows)
 
     def _violation(self, X: np.ndarray, rows: np.ndarray) -> EnergyError:
         i = int(rows[0])

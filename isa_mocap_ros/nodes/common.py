@@ -13,13 +13,15 @@ Every node of the package:
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 import time
 from contextlib import contextmanager
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, Iterator, Mapping
 
 import rclpy
+import yaml
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
@@ -69,6 +71,35 @@ def declare(node: Node, name: str, default: Any, description: str, *, lo: float 
                 if isinstance(default, str) and isinstance(given, bool) else "")
         raise ValueError(f"parameter {name}: expected a {type(default).__name__}, received "
                          f"{type(given).__name__} {given!r}{hint}") from None
+
+
+def declare_config(node: Node, cls, docs: Mapping[str, str], *, skip: tuple = ()) -> dict[str, Any]:
+    """Declare one parameter per field of the frozen config dataclass ``cls`` (name, default and
+    description from the dataclass: ``docs`` maps each field to its one-line doc), except the fields in
+    ``skip``; return the values as keyword arguments of ``cls``. The dataclass checks them (its error
+    names the field). A tuple field is a list parameter, read back as a tuple; a mapping field is a
+    YAML/JSON string parameter (``"{}"`` = empty), read back as a dict."""
+    values: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        if f.name in skip:
+            continue
+        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+        if isinstance(default, Mapping):
+            text = declare(node, f.name, yaml.safe_dump(dict(default), default_flow_style=True).strip(),
+                           f"{docs[f.name]} (YAML/JSON mapping)")
+            try:
+                value = yaml.safe_load(text) or {}
+            except yaml.YAMLError as exc:
+                raise ValueError(f"parameter {f.name}: expected a YAML/JSON mapping, received {text!r} ({exc})") \
+                    from None
+            if not isinstance(value, dict):
+                raise ValueError(f"parameter {f.name}: expected a YAML/JSON mapping, received {text!r}")
+        elif isinstance(default, tuple):
+            value = tuple(declare(node, f.name, list(default), docs[f.name]))
+        else:
+            value = declare(node, f.name, default, docs[f.name])
+        values[f.name] = value
+    return values
 
 
 class ProblemLog:

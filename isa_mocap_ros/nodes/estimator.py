@@ -36,7 +36,6 @@ import time
 from collections import deque
 
 import numpy as np
-import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, PoseStamped
 from rclpy.node import Node
@@ -52,13 +51,17 @@ from isa_mocap_ros.eval.peers import register_peers
 from isa_mocap_ros.geometry import exp_so3
 from isa_mocap_ros.intake import Setting, StampWindow, ViewGate
 from isa_mocap_ros.nodes import qos
-from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, one_numba_thread, run_node
+from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, declare_config, one_numba_thread, run_node
 from isa_mocap_ros.tracking.predict import periods_between
 from isa_mocap_ros.tracking.sync import FrameSynchronizer, LatestSlot, SyncError
-from isa_mocap_ros.tracking.tracker import TrackerConfig
+from isa_mocap_ros.tracking.config import TrackerConfig, field_docs
 from isa_mocap_ros.vision import Camera
 from isa_mocap_ros.vision.overlay import draw_overlay
 
+
+#: TrackerConfig fields that are not parameters of this node: the keypoint term needs keypoints, which the
+#: node does not take (``isa-mocap track --keypoint-weight`` does)
+NOT_PARAMETERS = ("keypoint_weight", "keypoint_sigma_m")
 
 #: distinct child frames kept per view from cam<i>/extrinsics (the one the view's masks name is used)
 MAX_CAMERA_FRAMES = 8
@@ -88,83 +91,8 @@ class EstimatorNode(Node):
         self.n_views = declare(self, "views", 4, "number of camera views", lo=1, hi=64)
         dof = declare(self, "model_dof", 39, "body model: 18, 28 or 39 DOF", lo=18, hi=39)
         shape = declare(self, "body_shape", "", "body-shape YAML file ('' = default shape)")
-        tc = TrackerConfig()  # the tracker's defaults are the node's defaults (one source of truth)
-        self.optimizer = declare(self, "optimizer", tc.optimizer, "isa, h-isa, apf, psapf, cmaes, h-cmaes, de, h-de, "
-                                 "pso, h-pso")
-        self.evals = declare(self, "evals", tc.evals_per_frame, "energy evaluations per frame", lo=10, hi=1_000_000)
-        params = declare(self, "optimizer_params", "{}", "optimizer parameters as a YAML/JSON mapping")
-        self.seed = declare(self, "seed", 0, "seed of the per-frame random streams", lo=0, hi=2**31 - 1)
-        energy = declare(self, "energy", tc.energy_method, "silhouette energy: fast or exact")
-        downsample = declare(self, "downsample", tc.downsample, "mask downsampling for the fast energy", lo=1, hi=16)
-        radius = declare(self, "search_radius_rad", tc.search_radius_rad,
-                         "joint-angle search radius around the prediction", lo=0.01, hi=3.2)
-        pelvis = declare(self, "pelvis_fraction", tc.pelvis_fraction, "share of the budget for the pelvis stage "
-                         "(root re-fit with the limbs below it kept in place; 0 = off)", lo=0.0, hi=0.9)
-        torso = declare(self, "torso_fraction", tc.torso_fraction, "share of the budget for the torso stage (spine "
-                        "and neck re-fit with the upper arms swung about the elbows; 0 = off)", lo=0.0, hi=0.9)
-        limb_n = declare(self, "limb_proposals", tc.limb_proposals, "drawn proposals per limb and frame "
-                         "(limb stage: twist and hinge for the arms, re-opening a folded arm; the knee for the legs; "
-                         "0 = off)", lo=0, hi=10_000)
-        limbs = declare(self, "limb_proposal_limbs", list(tc.limb_proposal_limbs),
-                        "limbs of the limb stage: left_arm, right_arm, left_leg, right_leg")
-        hinge_limbs = declare(self, "limb_hinge_limbs", list(tc.limb_hinge_limbs),
-                              "limbs of the limb stage with hinge proposals only (the legs: a knee faster than the "
-                              "search box; twist too when folded)")
-        extrap = declare(self, "limb_extrapolations", list(tc.limb_extrapolations),
-                         "limb stage: factors k of the extrapolated proposals x + k (x - last) per limb (a limb "
-                         "the search trails; [0.0] = off)")
-        fold = declare(self, "limb_fold_deg", tc.limb_fold_deg, "a limb whose prediction bends its hinge beyond this "
-                       "many degrees gets twist-and-hinge proposals, joining the limb stage if not in it (a folded "
-                       "knee; 0 = never)", lo=0.0, hi=360.0)
-        window = declare(self, "limb_hinge_window_deg", tc.limb_hinge_window_deg,
-                         "limb stage: hinge-only proposals (the knees) within this many degrees of the pose's "
-                         "hinge (0 = the whole range)", lo=0.0, hi=360.0)
-        part_order = declare(self, "partition_order", list(tc.partition_order),
-                             "order in which hierarchical optimizers search the model's partitions (root, "
-                             "left_arm, right_arm, torso, left_leg, right_leg; the paper's: root, torso, arms, legs)")
-        contour_it = declare(self, "contour_iterations", tc.contour_iterations, "contour stage: Levenberg-Marquardt "
-                             "steps on the mask contours after the search, each charged D + 1 evaluations (0 = off)",
-                             lo=0, hi=100)
-        contour_extra = declare(self, "contour_extra_iterations", tc.contour_extra_iterations, "contour stage: "
-                                "further steps on the coordinates of contour_extra_partitions alone, each charged k + 1 "
-                                "evaluations for their k coordinates (0 = none)", lo=0, hi=100)
-        contour_extra_parts = declare(self, "contour_extra_partitions", list(tc.contour_extra_partitions),
-                                      "partitions of the contour stage's further steps (the legs: the knees trail "
-                                      "their motion)")
-        contour_pts = declare(self, "contour_points", tc.contour_points, "contour stage: model contour points per "
-                              "view and step", lo=1, hi=100_000)
-        contour_px = declare(self, "contour_max_px", tc.contour_max_px, "contour stage: drop pairs farther apart "
-                             "than this many pixels", lo=0.01, hi=10_000.0)
-        gate = declare(self, "gate_margin_px", tc.gate_margin_px, "mask gate: keep only foreground components "
-                       "touching the predicted silhouette grown by this many pixels (drops far occluders; 0 = off)",
-                       lo=0, hi=10_000)
-        hull = declare(self, "hull_filter", tc.hull_filter, "visual-hull filter: keep only foreground pixels whose "
-                       "viewing ray the other views' foreground confirms (drops what one view alone reports, e.g. "
-                       "an occluder glued to the person there)")
-        hull_dil = declare(self, "hull_dilate_px", tc.hull_dilate_px, "visual-hull filter: dilation of the "
-                           "confirming views' foreground, pixels", lo=0, hi=1000)
-        hull_keep = declare(self, "hull_keep_px", tc.hull_keep_px, "visual-hull filter: foreground inside the "
-                            "predicted silhouette grown by this many pixels is kept unconfirmed", lo=0, hi=1000)
-        hull_pad = declare(self, "hull_pad_m", tc.hull_pad_m, "visual-hull filter: growth of the predicted joints' "
-                           "bounding box, metres", lo=0.01, hi=100.0)
-        view_w = declare(self, "view_weights", tc.view_weights, "count each view in the silhouette energy by the "
-                         "share of the predicted body inside its image (a person entering or leaving a view at its "
-                         "border counts for what that view sees)")
-        ahead = declare(self, "max_frames_ahead", tc.max_frames_ahead, "after frame sets this node could not keep up "
-                        "with, its own prediction looks as many periods ahead, at most this many", lo=1.0, hi=1000.0)
-        polish = declare(self, "init_polish", tc.init_polish, "automatic initialization: search the winner once more "
-                         "as a tracked frame (all stages, one more frame budget), kept if its energy is lower")
-        confirm = declare(self, "init_confirm_frames", tc.init_confirm_frames, "heading check after the automatic "
-                          "initialization: frames an opposite-heading rival of similar energy is tracked beside the "
-                          "winner before the lower energy sum decides (0 = off)", lo=0, hi=100)
-        travel_cue = declare(self, "heading_travel_cue", tc.heading_travel_cue, "heading check: a track that "
-                             "moves backwards (0.9 m/s, > 135 deg from its heading) is re-checked, and a check the "
-                             "energies leave close picks the heading that moves forwards (false: a person walking "
-                             "backwards on purpose)")
-        predictor = declare(self, "predictor", tc.predictor, "ar, constant_pose or constant_velocity")
-        order = declare(self, "predictor_order", tc.predictor_order, "AR order (past motions used; keep equal to the prediction node's order)", lo=1, hi=20)
-        self.prior_eta = declare(self, "prior_eta", 0.0, "weight of the pose prior (0 = off)", lo=0.0, hi=1e6)
-        prior_file = declare(self, "prior_file", "", "Parzen prior .npz ('' = none)")
+        # the tracker's settings: one parameter per TrackerConfig field, with its name, default and one-line doc
+        settings = declare_config(self, TrackerConfig, field_docs(TrackerConfig), skip=NOT_PARAMETERS)
         sync = declare(self, "sync", "exact", "frame-set matching: exact or approximate")
         queue = declare(self, "queue_size", 10, "stamps kept per view while synchronizing", lo=1, hi=1000)
         slop_s = declare(self, "slop_s", 0.01, "approximate sync window, seconds", lo=0.0, hi=10.0)
@@ -202,31 +130,9 @@ class EstimatorNode(Node):
         self.problems = ProblemLog(self)
         self.model = make_model(dof, shape=shape or None)
         self.hri_names = hri_joint_names(self.model, self.body_id)
-        try:
-            self.optimizer_params = yaml.safe_load(params) or {}
-        except yaml.YAMLError as exc:
-            raise ValueError(f"optimizer_params is not YAML/JSON: {exc}") from None
-        if not isinstance(self.optimizer_params, dict):
-            raise ValueError(f"optimizer_params must be a mapping, got {params!r}")
         if sync not in ("exact", "approximate"):
             raise ValueError(f"sync must be 'exact' or 'approximate', got {sync!r}")
-        self.tracker_settings = dict(optimizer=self.optimizer, evals=self.evals, params=self.optimizer_params,
-                                     seed=self.seed, energy=energy, downsample=downsample,
-                                     search_radius_rad=radius, predictor=predictor, predictor_order=order,
-                                     prior_eta=self.prior_eta, prior_file=prior_file, pelvis_fraction=pelvis,
-                                     torso_fraction=torso,
-                                     limb_proposals=limb_n, limb_proposal_limbs=tuple(limbs),
-                                     limb_hinge_limbs=tuple(hinge_limbs),
-                                     limb_extrapolations=tuple(float(k) for k in extrap if k > 0), limb_fold_deg=fold,
-                                     limb_hinge_window_deg=window,
-                                     partition_order=tuple(part_order), contour_iterations=contour_it,
-                                     contour_extra_iterations=contour_extra,
-                                     contour_extra_partitions=tuple(contour_extra_parts), init_polish=polish,
-                                     contour_points=contour_pts, contour_max_px=contour_px, gate_margin_px=gate,
-                                     hull_filter=hull, hull_dilate_px=hull_dil,
-                                     hull_keep_px=hull_keep, hull_pad_m=hull_pad, view_weights=view_w,
-                                     max_frames_ahead=ahead, init_confirm_frames=confirm,
-                                     heading_travel_cue=travel_cue)
+        self.tracker_config = TrackerConfig(**settings)   # checks every setting (TrackerError names it)
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
                                       slop_ns=0 if sync == "exact" else int(slop_s * 1e9),
                                       max_wait_s=self.view_timeout_s, min_views=min(min_views, self.n_views))
@@ -286,8 +192,8 @@ class EstimatorNode(Node):
         self._worker = threading.Thread(target=self._work, name="estimator", daemon=True)
         self._worker.start()
         self.get_logger().info(
-            f"estimator: {self.model.name} ({self.model.dof} DOF), {self.optimizer} with {self.evals} evaluations "
-            f"per frame, {self.n_views} views, seed {self.seed}, {'lockstep' if self.lockstep else 'real time'}")
+            f"estimator: {self.model.name} ({self.model.dof} DOF), {self.tracker_config.optimizer} with "
+            f"{self.tracker_config.evals} evaluations per frame, {self.n_views} views, seed {self.tracker_config.seed}, {'lockstep' if self.lockstep else 'real time'}")
 
     # -- calibration and masks: checked before they reach the synchronizer (isa_mocap_ros.intake) ----------
     def _info_cb(self, v: int):
@@ -451,13 +357,13 @@ class EstimatorNode(Node):
                                "once to do that ahead)")
         try:
             from isa_mocap_ros.body import capsule_endpoints as caps
-            from isa_mocap_ros.tracking.tracker import make_tracker
+            from isa_mocap_ros.tracking.tracker import Tracker
             from isa_mocap_ros.vision import default_rig, render_mask
             rig = default_rig(n_views=2, width=80, height=60)
             x = self.model.rest_pose()
             E = caps(self.model, x[None])[0]
             masks = [render_mask(c, E, self.model.capsule_radii) for c in rig.cameras]
-            tracker = make_tracker(self.model, rig.cameras, **self.tracker_settings)
+            tracker = Tracker(self.model, rig.cameras, self.tracker_config)
             tracker.initialize(pose=x)
             tracker.step(masks, 0)
         except Exception as exc:  # noqa: BLE001 - warm-up is an optimisation, never fatal
@@ -500,11 +406,11 @@ class EstimatorNode(Node):
                 if not self.lockstep and (self.tracker is None or not self.tracker.initialized):
                     # this set may initialize the tracker: keep the sets that follow it in sequence
                     # for the heading check (Tracker.checking_heading), not only the newest
-                    self.slot.hold(self.tracker_settings["init_confirm_frames"])
+                    self.slot.hold(self.tracker_config.init_confirm_frames)
                 elif not self.lockstep and self.tracker.heading_recheck_pending(item[0].items):
                     # the same for a heading re-check (more views see the person): else its check ends at
                     # the gap after the re-check's own, longer frame
-                    self.slot.hold(self.tracker_settings["init_confirm_frames"])
+                    self.slot.hold(self.tracker_config.init_confirm_frames)
                 frame_set, t_ready = item
                 prediction = None
                 if self.use_prediction and self._published_any:
@@ -551,8 +457,8 @@ class EstimatorNode(Node):
                 self._done(frame_set.stamp_ns)
                 return
             from isa_mocap_ros.tracking.published import PublishedPredictor
-            from isa_mocap_ros.tracking.tracker import make_tracker
-            self.tracker = make_tracker(self.model, cams, **self.tracker_settings)
+            from isa_mocap_ros.tracking.tracker import Tracker
+            self.tracker = Tracker(self.model, cams, self.tracker_config)
             # The estimator's own prediction (used when the prediction node's is missing) goes
             # through the same JointState conversions as the prediction node's.
             self.tracker.predictor = PublishedPredictor(self.model, self.tracker.predictor)
@@ -646,7 +552,7 @@ class EstimatorNode(Node):
             "frames": self.frames_done, "dropped_frame_sets": self.slot.dropped,
             "frames_without_contour_stage": self.frames_caught_up,
             "sync_dropped_messages": self.sync.dropped, "bad_inputs": self.problems.total,
-            "optimizer": self.optimizer, "evals_per_frame": self.evals, "tracker_threads": self.threads_in_use,
+            "optimizer": self.tracker_config.optimizer, "evals_per_frame": self.tracker_config.evals, "tracker_threads": self.threads_in_use,
             "energy": getattr(r, "energy", float("nan")), "evaluations": getattr(r, "n_evals", 0),
             "views_used": getattr(r, "views_used", 0),
             "latency_ms_p50": p50, "latency_ms_p95": p95,

@@ -272,6 +272,12 @@ class Optimizer:
             Z = self.rng.standard_normal((n, self.d))
         return self.clip(self.x0 + Z * self.spread)
 
+    @property
+    def initial_population(self) -> np.ndarray | None:
+        """The first generation given to the constructor (clipped to the bounds), or None (drawn around
+        ``x0``)."""
+        return self._initial_population
+
     # ----------------------------------------------------------- to implement
     @property
     def generation_size(self) -> int:

@@ -158,6 +158,11 @@ class Isa(ParticleOptimizer):
         self._ess = float("nan")
 
     @property
+    def fused(self) -> bool:
+        """Whether selection, variance and mutation run as one compiled step (multinomial resampling)."""
+        return self._fused
+
+    @property
     def generation_size(self) -> int:
         return self.n
 

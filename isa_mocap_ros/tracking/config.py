@@ -3,8 +3,9 @@ and the module constants its stages share. Pure: no ROS import.
 """
 from __future__ import annotations
 
+import inspect
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Mapping, Sequence
@@ -13,9 +14,22 @@ import numpy as np
 
 from .limbs import LIMBS
 
-__all__ = ["TrackerError", "TrackerConfig", "FrameResult", "DEFAULT_PARAMS", "PREDICTORS", "frame_rng"]
+__all__ = ["TrackerError", "TrackerConfig", "FrameResult", "DEFAULT_PARAMS", "PREDICTORS", "frame_rng", "field_docs"]
 
 PREDICTORS = ("ar", "constant_pose", "constant_velocity")
+#: Initial standard deviation of the joint angles around the prediction, rad.
+JOINT_SPREAD_RAD = 0.05
+#: Initial standard deviation of the root position around the prediction, m.
+ROOT_TRANSLATION_SPREAD_M = 0.015
+#: Half-width of the search box of each root rotation-vector component, rad.
+ROOT_ROTATION_RADIUS_RAD = 0.5
+#: Initial standard deviation of each root rotation-vector component, rad.
+ROOT_ROTATION_SPREAD_RAD = 0.025
+#: Damping ``g`` of the own prediction ``x_k + g (p − x_k)`` of the root's 6 DOF.
+ROOT_VELOCITY_GAIN = 0.7
+#: Factor on the initial spreads on the automatically initialized frame (it starts from a standing pose).
+INIT_SPREAD_SCALE = 2.0
+
 #: Share of a view's foreground the mask gate may remove before ``FrameResult.notes`` says so.
 GATE_NOTE_SHARE = 0.25
 #: Frames after a heading check that kept the winner for want of evidence (the sums within
@@ -43,7 +57,6 @@ CONTOUR_KEEP_TOLERANCE = 0.1
 
 #: Fewest proposals per limb of the limb stage: when fewer fit in a tenth of the budget, the stage is skipped.
 MIN_LIMB_PROPOSALS = 4
-ESTIMATES = ("optimizer", "best")
 
 #: Optimizer parameters used unless ``optimizer_params`` sets them (tuned on the silhouette energy,
 #: see ``docs/tracking.md``); the library defaults apply to anything not listed.
@@ -113,48 +126,40 @@ class TrackerConfig:
     ----------
     optimizer : str
         Registry name (``h-isa`` default: ISA over the §3.3 hierarchy; flat ISA drifts off at 1500 evaluations).
-    evals_per_frame : int
+    evals : int
         Energy evaluations per frame, every stage included (EA-vs-PF: 500 / 1500 / 3000; default 1500).
     optimizer_params : mapping
         Keyword arguments of the optimizer over :data:`DEFAULT_PARAMS` (default none).
     search_radius_rad : float
         Half-width of every joint angle's search box around the prediction, rad (EA-vs-PF: 0.5).
-    joint_spread_rad : float
-        Initial standard deviation of the joint angles around the prediction, rad (0.05).
     spread_velocity_gain : float
-        Joint ``j`` starts with spread ``sqrt(joint_spread_rad² + (k |p_j − x_j|)²)``: wider where the prediction moves (1.5; 0 = off).
-    root_translation_radius_m, root_translation_spread_m : float
-        Search half-width and initial standard deviation of the root position, m (0.25, 0.015).
-    root_rotation_radius_rad, root_rotation_spread_rad : float
-        The same per root rotation-vector component, rad (0.5, 0.025).
+        Joint ``j`` starts with spread ``sqrt(JOINT_SPREAD_RAD² + (k |p_j − x_j|)²)``: wider where the prediction moves (1.5; 0 = off).
+    root_translation_radius_m : float
+        Half-width of the root position's search box, m (0.25).
     predictor : {"ar", "constant_pose", "constant_velocity"}
         The tracker's own predictor (``ar``: ISA 13.28).
     predictor_order : int
         AR order (1).
-    root_velocity_gain, joint_velocity_gain : float
-        Damping ``g`` of the own prediction ``x_k + g (p − x_k)``, root's 6 DOF and joints (0.7, 0.5; 1 = undamped, 0 = constant pose).
+    joint_velocity_gain : float
+        Damping ``g`` of the own prediction ``x_k + g (p − x_k)`` of the joints (0.5; 1 = undamped, 0 = constant pose; the root's: :data:`ROOT_VELOCITY_GAIN`).
     prior_eta : float
         Weight η of the Parzen prior ``−η ln p(x)`` (13.33); 0 = off (default).
-    prior_file : str or None
-        ``.npz`` of :meth:`ParzenPrior.save`, used when no ``prior=`` object is given.
-    energy_method : {"fast", "exact"}
+    prior_file : str
+        ``.npz`` of :meth:`ParzenPrior.save`, used when no ``prior=`` object is given ("" = none).
+    energy : {"fast", "exact"}
         Silhouette energy: compiled sampled kernel (default) or the exact raster reference.
     downsample : int
         Mask downsampling of the fast energy (1 = none).
-    n_model_points, n_mask_points : int
-        Fast energy's sample sizes: model-template points and foreground pixels per view (640, 384).
-    estimate : {"optimizer", "best"}
-        The frame's pose: the optimizer's estimate (weighted mean / mean / best, default) or the best particle.
-    include_prediction : bool
-        The prediction is the first particle of a flat optimizer's first generation (True).
+    n_model_points : int
+        Fast energy's sample size: model-template points per view (640).
+    n_mask_points : int
+        Fast energy's sample size: foreground pixels per view (384).
     seed : int
         Seed of every per-frame stream ``default_rng([seed, frame, ...])`` (0).
     init_yaw_steps : int
         Headings of the automatic initialization's grid (24).
     init_refine_evals : int
         Evaluations of each of the initialization's four root refinements (400; 0 = none).
-    init_spread_scale : float
-        Factor on the initial spreads on the automatically initialized frame (2.0: it starts from a standing pose).
     init_keep : int
         Heading-candidate runs kept after the first partition on the first frame (3; 0 = all run to the end).
     init_polish : bool
@@ -178,7 +183,7 @@ class TrackerConfig:
     limb_hinge_limbs : tuple of str
         Limbs whose proposals redraw the hinge only, unless folded (the legs).
     limb_extrapolations : tuple of float
-        Factors ``k`` of the extrapolated proposals ``x + k (x − x_prev)`` per limb ((1, 2, 3); () = none).
+        Factors ``k`` of the extrapolated proposals ``x + k (x − x_prev)`` per limb ((1, 2, 3); () or [0.0] = none).
     limb_fold_deg : float
         A limb bent beyond this (deg) in the prediction gets twist-and-hinge proposals (130; 0 or >= 180 = never).
     limb_hinge_window_deg : float
@@ -216,31 +221,23 @@ class TrackerConfig:
     """
 
     optimizer: str = "h-isa"
-    evals_per_frame: int = 1500
+    evals: int = 1500
     optimizer_params: Mapping[str, Any] = field(default_factory=dict)
     search_radius_rad: float = 0.5
-    joint_spread_rad: float = 0.05
     spread_velocity_gain: float = 1.5
     root_translation_radius_m: float = 0.25
-    root_translation_spread_m: float = 0.015
-    root_rotation_radius_rad: float = 0.5
-    root_rotation_spread_rad: float = 0.025
     predictor: str = "ar"
     predictor_order: int = 1
-    root_velocity_gain: float = 0.7
     joint_velocity_gain: float = 0.5
     prior_eta: float = 0.0
-    prior_file: str | None = None
-    energy_method: str = "fast"
+    prior_file: str = ""
+    energy: str = "fast"
     downsample: int = 1
     n_model_points: int = 640
     n_mask_points: int = 384
-    estimate: str = "optimizer"
-    include_prediction: bool = True
     seed: int = 0
     init_yaw_steps: int = 24
     init_refine_evals: int = 400
-    init_spread_scale: float = 2.0
     init_keep: int = 3
     init_polish: bool = True
     init_confirm_frames: int = 3
@@ -276,7 +273,7 @@ class TrackerConfig:
 
         if self.optimizer not in OPTIMIZERS:
             raise TrackerError(f"optimizer: expected one of {', '.join(OPTIMIZERS)}, received {self.optimizer!r}")
-        _check_number("evals_per_frame", self.evals_per_frame, lo=1, integer=True)
+        _check_number("evals", self.evals, lo=1, integer=True)
         if not isinstance(self.optimizer_params, Mapping):
             raise TrackerError(f"optimizer_params: expected a mapping, received {type(self.optimizer_params).__name__}")
         bad = [k for k in self.optimizer_params if k in ("bounds", "rng", "rotation_blocks", "partitions", "x0",
@@ -285,8 +282,7 @@ class TrackerConfig:
             raise TrackerError(f"optimizer_params: expected algorithm parameters only, received {bad} "
                                "(set by the tracker)")
         object.__setattr__(self, "optimizer_params", MappingProxyType(dict(self.optimizer_params)))
-        for name in ("search_radius_rad", "joint_spread_rad", "root_translation_radius_m", "root_translation_spread_m",
-                     "root_rotation_radius_rad", "root_rotation_spread_rad"):
+        for name in ("search_radius_rad", "root_translation_radius_m"):
             _check_number(name, getattr(self, name), lo=0.0, strict=True)
         _check_number("spread_velocity_gain", self.spread_velocity_gain, lo=0.0)
         if self.predictor not in PREDICTORS:
@@ -295,24 +291,18 @@ class TrackerConfig:
         _check_number("max_frames_ahead", self.max_frames_ahead, lo=1.0)
         _check_number("keypoint_weight", self.keypoint_weight, lo=0.0)
         _check_number("keypoint_sigma_m", self.keypoint_sigma_m, lo=0.0, strict=True)
-        for name in ("root_velocity_gain", "joint_velocity_gain"):
-            _check_number(name, getattr(self, name), lo=0.0)
+        _check_number("joint_velocity_gain", self.joint_velocity_gain, lo=0.0)
         _check_number("prior_eta", self.prior_eta, lo=0.0)
-        if self.prior_file is not None and not isinstance(self.prior_file, (str, Path)):
-            raise TrackerError(f"prior_file: expected a path or None, received {self.prior_file!r}")
-        if self.energy_method not in ("fast", "exact"):
-            raise TrackerError(f"energy_method: expected 'fast' or 'exact', received {self.energy_method!r}")
+        if not isinstance(self.prior_file, (str, Path)):
+            raise TrackerError(f"prior_file: expected a path ('' = none), received {self.prior_file!r}")
+        if self.energy not in ("fast", "exact"):
+            raise TrackerError(f"energy: expected 'fast' or 'exact', received {self.energy!r}")
         _check_number("downsample", self.downsample, lo=1, integer=True)
         _check_number("n_model_points", self.n_model_points, lo=1, integer=True)
         _check_number("n_mask_points", self.n_mask_points, lo=0, integer=True)
-        if self.estimate not in ESTIMATES:
-            raise TrackerError(f"estimate: expected one of {', '.join(ESTIMATES)}, received {self.estimate!r}")
-        if not isinstance(self.include_prediction, bool):
-            raise TrackerError(f"include_prediction: expected a bool, received {self.include_prediction!r}")
         _check_number("seed", self.seed, lo=0, integer=True)
         _check_number("init_yaw_steps", self.init_yaw_steps, lo=4, integer=True)
         _check_number("init_refine_evals", self.init_refine_evals, lo=0, integer=True)
-        _check_number("init_spread_scale", self.init_spread_scale, lo=0.0, strict=True)
         _check_number("init_keep", self.init_keep, lo=0, integer=True)
         _check_number("init_confirm_frames", self.init_confirm_frames, lo=0, integer=True)
         _check_number("init_confirm_ratio", self.init_confirm_ratio, lo=1.0)
@@ -331,9 +321,10 @@ class TrackerConfig:
         ext = self.limb_extrapolations
         if isinstance(ext, (str, bytes)) or not isinstance(ext, Sequence) or not all(
                 isinstance(k, (int, float, np.integer, np.floating)) and not isinstance(k, bool)
-                and np.isfinite(k) and k > 0 for k in ext):
-            raise TrackerError(f"limb_extrapolations: expected a sequence of positive factors, received {ext!r}")
-        object.__setattr__(self, "limb_extrapolations", tuple(float(k) for k in ext))
+                and np.isfinite(k) and k >= 0 for k in ext):
+            raise TrackerError(f"limb_extrapolations: expected a sequence of positive factors ([0.0] = none), "
+                               f"received {ext!r}")
+        object.__setattr__(self, "limb_extrapolations", tuple(float(k) for k in ext if k > 0))
         _check_number("limb_fold_deg", self.limb_fold_deg, lo=0.0)
         _check_number("limb_hinge_window_deg", self.limb_hinge_window_deg, lo=0.0)
         object.__setattr__(self, "partition_order", _partition_names(
@@ -364,6 +355,23 @@ class TrackerConfig:
         out = dict(DEFAULT_PARAMS.get(self.optimizer, {}))
         out.update(self.optimizer_params)
         return out
+
+
+def field_docs(cls=None) -> dict[str, str]:
+    """The one-line description of every field of the config dataclass ``cls`` (default
+    :class:`TrackerConfig`), read from its docstring's Attributes section (``name : type`` then one
+    indented line); :class:`TrackerError` naming the field when one has none."""
+    cls = TrackerConfig if cls is None else cls
+    lines = inspect.cleandoc(cls.__doc__ or "").splitlines()
+    docs: dict[str, str] = {}
+    for head, text in zip(lines, lines[1:]):
+        if " : " in head and not head[0].isspace() and text.startswith(" "):
+            docs[head.split(" : ")[0]] = text.strip()
+    names = [f.name for f in fields(cls)]
+    missing = [n for n in names if n not in docs]
+    if missing:
+        raise TrackerError(f"{cls.__name__}: no one-line description in its docstring for {missing}")
+    return {n: docs[n] for n in names}
 
 
 @dataclass(frozen=True, eq=False)

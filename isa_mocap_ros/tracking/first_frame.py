@@ -8,8 +8,10 @@ from typing import Sequence
 
 import numpy as np
 
-from . import _fast_search, frame_masks, objective
-from .config import TrackerError, frame_rng
+from isa_mocap_ros.optim import compiled_search
+
+from . import frame_masks, objective
+from .config import INIT_SPREAD_SCALE, TrackerError, frame_rng
 from .init import InitError, initial_pose
 from .plan import FrameBudget
 
@@ -47,14 +49,14 @@ def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int
         if x.ndim != 1:
             raise TrackerError(f"pose: expected shape ({tr.model.dof},), received {x.shape}")
         x = np.clip(x, tr.model.lower, tr.model.upper)
-        tr._masks_now = None          # no frame: nothing to re-centre from later
+        tr.track.masks_now = None          # no frame: nothing to re-centre from later
         tr._accept(x)
-        tr._heading_views = len(tr.cameras)     # a given pose's heading is not re-checked
+        tr.heading_check.views = len(tr.cameras)     # a given pose's heading is not re-checked
         return None
     if masks is None:
         raise TrackerError("initialize: expected masks= or pose=, received neither")
     usable, notes = frame_masks.check_masks(tr, masks)
-    tr._masks_now = usable
+    tr.track.masks_now = usable
     if frame_masks.set_masks(tr, usable, notes, frame_index) == 0:
         raise TrackerError(f"masks: expected foreground in at least one view, received none ({'; '.join(notes)})")
     cfg = tr.config
@@ -68,7 +70,7 @@ def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int
     finally:
         tr._keypoint_term = None
     tr._accept(res.x)
-    tr._heading_views = res.views_used
+    tr.heading_check.views = res.views_used
     return res
 
 
@@ -101,11 +103,13 @@ def initial_runs(tr, starts: list, frame_index: int, notes: list[str], budget: F
             rng = frame_rng(cfg.seed, frame_index, *stream, j)
         else:
             rng = frame_rng(cfg.seed, frame_index) if j == 0 else frame_rng(cfg.seed, frame_index, 3, j)
-        opt, evals, _, _ = tr._search(pred, rng, budget, cfg.init_spread_scale, notes if j == 0 else None,
+        opt, evals, _, _ = tr._search(pred, rng, budget, INIT_SPREAD_SCALE, notes if j == 0 else None,
                                         stages=False)
-        if tr._compiled_search and _fast_search.supported(opt, tr.energy, tr._python_terms()):
-            # compiled h-isa, paused after its first partition (the same numbers as below)
-            runs.append((j, _fast_search.HisaRun(opt, tr.energy, evals), pred, None))
+        run = compiled_search.search(opt, tr.energy, evals, extra_terms=tr._python_terms(), paused=True) \
+            if tr._compiled_search else None
+        if run is not None:
+            # compiled h-isa, bound; the pruning below advances it (the same numbers as the protocol)
+            runs.append((j, run, pred, None))
             continue
         # bind + iterate + result() is minimize(), split at the checkpoint: the end of the first
         # partition (hierarchical optimizers, whose shares bind() sets) or a sixth of the budget
@@ -147,6 +151,34 @@ def polish(tr, x: np.ndarray, energy: float, frame_index: int, stream: int, note
         return None, x, energy
     xp, ep = tr._final_pose(res)
     return (res, xp, ep) if ep < energy else (res, x, energy)
+
+
+def polish_winner(tr, x: np.ndarray, energy: float, res, frame_index: int, notes: list[str],
+                  budget: FrameBudget):
+    """``config.init_polish``: the first frame's winner searched once more as a tracked frame (all stages)
+    from itself, and the heading check's rival (``heading_check.rival_start``) alike; the heading that
+    fits better after it leads (the check still tracks both). Returns ``(x, energy, result, evaluations)``
+    of the frame."""
+    n_evals = 0
+    res2, x2, e2 = polish(tr, x, energy, frame_index, 6, notes, budget)
+    if res2 is not None:
+        n_evals += res2.n_evals
+        if e2 < energy:
+            x, energy, res = x2, e2, res2
+    check = tr.heading_check
+    if check.rival_start is not None:
+        res_r, xr, er = polish(tr, *check.rival_start[:2], frame_index, 7, None, budget)
+        if res_r is not None:
+            n_evals += res_r.n_evals
+        if er < energy:
+            notes.append(f"initialization polish: the heading check's rival fits better ({er:.4g} against "
+                         f"{energy:.4g}) and leads")
+            check.rival_start = (x, energy, er)
+            x, energy = xr, er
+            res = res_r if res_r is not None else res
+        else:
+            check.rival_start = (xr, er, energy)
+    return x, energy, res, n_evals
 
 
 def pick_rival(tr, runs: list, winner, x: np.ndarray, energy: float):

@@ -7,6 +7,7 @@ from typing import Callable
 
 import numpy as np
 
+from . import frame_prediction
 from .gate import gate_masks, predicted_silhouettes
 from .hull import hull_filter, pose_box
 from .config import GATE_NOTE_SHARE, frame_rng
@@ -81,6 +82,27 @@ def set_masks(tr, masks: list, notes: list[str], frame_index: int | None, weight
                      else f"energy skipped view {s}")
     used = getattr(tr.energy, "n_views_used", None)
     return int(used) if used is not None else sum(m is not None for m in masks)
+
+
+def filter_masks(tr, usable: list, prediction, notes: list[str]) -> tuple[list, np.ndarray | None]:
+    """The frame's masks after the mask gate (``config.gate_margin_px``: foreground far from the predicted
+    silhouette dropped) and the visual-hull filter (``config.hull_filter``: foreground the other views do
+    not confirm), both around the frame's prediction; ``(masks, that prediction or None)`` (None when
+    neither ran: off, no estimate yet or no usable view). Sets ``tr.track.masks_now`` to the masks
+    returned: the contour stage fits what the energy scores, and a later re-centring starts from the
+    person's foreground (the prediction itself re-centres on the unfiltered ones)."""
+    cfg = tr.config
+    tr.track.masks_now = usable
+    if not (cfg.gate_margin_px > 0 or cfg.hull_filter) or tr.track.last is None \
+            or not any(m is not None for m in usable):
+        return usable, None
+    pred = frame_prediction.predict(tr, prediction, notes)
+    if cfg.gate_margin_px > 0:
+        usable = gate(tr, usable, pred, notes)
+    if cfg.hull_filter:
+        usable = hull(tr, usable, pred, notes)
+    tr.track.masks_now = usable
+    return usable, pred
 
 
 def gate(tr, usable: list, pred: np.ndarray, notes: list[str]) -> list:

@@ -8,6 +8,7 @@ import numpy as np
 
 from isa_mocap_ros.geometry import nearest_rotvec
 
+from .config import ROOT_VELOCITY_GAIN
 from .init import InitError, root_from_masks
 from .predict import frames_kwargs
 
@@ -21,7 +22,7 @@ def predict(tr, external, notes: list[str]) -> np.ndarray:
     """
     D = tr.model.dof
     p = None
-    if external is not None and tr._own_prediction_frames > 0:
+    if external is not None and tr.heading_check.own_prediction_frames > 0:
         notes.append("prediction: the external one follows the estimates from before the heading check's "
                      "switch; using the tracker's own")
         external = None
@@ -39,14 +40,14 @@ def predict(tr, external, notes: list[str]) -> np.ndarray:
             p = None
     if p is None:
         try:
-            ahead = min(tr._elapsed or 1, tr.config.max_frames_ahead)
+            ahead = min(tr.track.elapsed or 1, tr.config.max_frames_ahead)
             p = np.asarray(tr.predictor.predict(**frames_kwargs(ahead)), dtype=float)
         except ValueError as exc:      # PredictionError: empty history (cannot happen once initialized)
             notes.append(f"prediction: {exc}; using the last estimate")
-            return tr._last.copy()
+            return tr.track.last.copy()
         if p.shape != (D,) or not np.all(np.isfinite(p)):
             notes.append("prediction: non-finite values; using the last estimate")
-            return tr._last.copy()
+            return tr.track.last.copy()
     cfg = tr.config
     for blk in tr.model.rotation_blocks:
         # a prediction that went through a JointState (roll/pitch/yaw) has |r| <= pi: near a
@@ -54,11 +55,11 @@ def predict(tr, external, notes: list[str]) -> np.ndarray:
         # 174° vs -179° gave -72° after damping, and the track was lost)
         idx = list(blk)
         p = p.copy() if p is external else p
-        p[idx] = nearest_rotvec(p[idx], tr._last[idx])
+        p[idx] = nearest_rotvec(p[idx], tr.track.last[idx])
     gain = np.full(D, cfg.joint_velocity_gain)
-    gain[:6] = cfg.root_velocity_gain
-    out = tr._last + gain * (p - tr._last)        # damped extrapolation
-    if tr._elapsed > cfg.max_frames_ahead or (tr._elapsed > 1 and motion_unknown(tr)):
+    gain[:6] = ROOT_VELOCITY_GAIN
+    out = tr.track.last + gain * (p - tr.track.last)        # damped extrapolation
+    if tr.track.elapsed > cfg.max_frames_ahead or (tr.track.elapsed > 1 and motion_unknown(tr)):
         recentre(tr, out, notes)
     return out
 
@@ -78,13 +79,13 @@ def recentre(tr, pred: np.ndarray, notes: list[str]) -> None:
     Extrapolating the last motion over such a gap says little (in real time the automatic
     initialization alone takes 4-10 frame periods, and a person walking moves 0.2-0.5 m
     meanwhile), the foreground says where the body is."""
-    if tr._masks_last is None or tr._masks_now is None:
+    if tr.track.masks_last is None or tr.track.masks_now is None:
         return
     try:
-        c_last = root_from_masks(tr.model, tr.cameras, tr._masks_last)[0]
-        c_now = root_from_masks(tr.model, tr.cameras, tr._masks_now)[0]
+        c_last = root_from_masks(tr.model, tr.cameras, tr.track.masks_last)[0]
+        c_now = root_from_masks(tr.model, tr.cameras, tr.track.masks_now)[0]
     except InitError:
         return
-    pred[:2] = tr._last[:2] + (c_now[:2] - c_last[:2])
-    notes.append(f"prediction: {tr._elapsed:g} frame periods since the last estimate; root moved with the "
+    pred[:2] = tr.track.last[:2] + (c_now[:2] - c_last[:2])
+    notes.append(f"prediction: {tr.track.elapsed:g} frame periods since the last estimate; root moved with the "
                  f"foreground by {1e3 * float(np.hypot(*(c_now[:2] - c_last[:2]))):.0f} mm")

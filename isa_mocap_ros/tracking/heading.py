@@ -25,32 +25,32 @@ def heading_recheck_pending(tr, masks: Sequence) -> bool:
     backwards): a caller that drops frames (the estimator node in real time) should hand the tracker
     the frames that follow in sequence, as for :attr:`checking_heading`, or the check ends at the
     first gap."""
-    if tr.config.init_confirm_frames <= 0 or tr._last is None or tr._rival is not None:
+    if tr.config.init_confirm_frames <= 0 or tr.track.last is None or tr.heading_check.rival is not None:
         return False
-    if tr._recheck_at is not None and tr.frames + 1 >= tr._recheck_at:
+    if tr.heading_check.recheck_at is not None and tr.frames + 1 >= tr.heading_check.recheck_at:
         return True
     if travel_recheck_due(tr) is not None:
         return True
-    if tr._heading_views >= len(tr.cameras):      # every view counted: no need to look at the masks
+    if tr.heading_check.views >= len(tr.cameras):      # every view counted: no need to look at the masks
         return False
     usable, _ = frame_masks.check_masks(tr, masks)
-    return sum(m is not None for m in usable) > tr._heading_views
+    return sum(m is not None for m in usable) > tr.heading_check.views
 
 
 def start_rival(tr, frame_index: int) -> None:
     """A second tracker (same model, cameras, configuration and energy; a fresh predictor of this
     one's kind) at the rival's pose of the initialized frame."""
-    xr, _, _ = tr._rival_start
-    tr._rival_start = None
+    xr, _, _ = tr.heading_check.rival_start
+    tr.heading_check.rival_start = None
     predictor = copy.deepcopy(tr.predictor, memo={id(tr.model): tr.model})
     predictor.reset()
     rival = type(tr)(tr.model, tr.cameras, dataclasses.replace(tr.config, init_confirm_frames=0),
                      prior=tr.prior, energy=tr.energy, predictor=predictor)
     first_frame.initialize(rival, pose=xr, frame_index=frame_index)
-    rival._elapsed = tr._elapsed
-    rival._masks_last = tr._masks_last
-    tr._rival = rival
-    tr._confirm = [0, 0.0, 0.0]
+    rival.track.elapsed = tr.track.elapsed
+    rival.track.masks_last = tr.track.masks_last
+    tr.heading_check.rival = rival
+    tr.heading_check.confirm = [0, 0.0, 0.0]
 
 
 def travel(tr, min_periods: float = 0.0) -> tuple[float, float, float] | None:
@@ -58,9 +58,9 @@ def travel(tr, min_periods: float = 0.0) -> tuple[float, float, float] | None:
     root's horizontal travel over the last estimates, or None when they span fewer than ``min_periods``
     periods (or none), the root moved less than :data:`TRAVEL_MIN_M_PER_FRAME` per period, or the model
     has no 3-DOF root rotation."""
-    if len(tr._roots) < 2 or not tr._has_heading:
+    if len(tr.track.roots) < 2 or not tr._has_heading:
         return None
-    (ta, xa, ya), (tb, xb, yb) = tr._roots[0], tr._roots[-1]
+    (ta, xa, ya), (tb, xb, yb) = tr.track.roots[0], tr.track.roots[-1]
     span, dist = tb - ta, math.hypot(xb - xa, yb - ya)
     if span <= 0 or span < min_periods or dist < TRAVEL_MIN_M_PER_FRAME * span:
         return None
@@ -78,12 +78,12 @@ def travel_recheck_due(tr) -> tuple[float, float, float] | None:
     """The travel cue's trigger of a re-check: ``(degrees off the heading, m, periods)`` of :meth:`travel`
     over :data:`TRAVEL_FRAMES` periods when it points backwards (beyond :data:`TRAVEL_BACKWARDS_DEG`) and no
     re-check ran in the last :data:`TRAVEL_RECHECK_FRAMES` frames; else None."""
-    if not tr.config.heading_travel_cue or tr.frames < tr._travel_recheck_after or tr._last is None:
+    if not tr.config.heading_travel_cue or tr.frames < tr.heading_check.travel_recheck_after or tr.track.last is None:
         return None
     t = travel(tr, TRAVEL_FRAMES)
     if t is None:
         return None
-    off = off_travel(t[0], tr._last)
+    off = off_travel(t[0], tr.track.last)
     return (off, t[1], t[2]) if off > TRAVEL_BACKWARDS_DEG else None
 
 
@@ -99,18 +99,18 @@ def recheck_heading(tr, res: FrameResult, frame_index: int, frames_elapsed: floa
     from .init import _wrap, _yaw_of, standing_poses
 
     cfg = tr.config
-    due = tr._recheck_at is not None and tr.frames >= tr._recheck_at
+    due = tr.heading_check.recheck_at is not None and tr.frames >= tr.heading_check.recheck_at
     if cfg.init_confirm_frames <= 0 or res.fell_back or res.initialized or frames_elapsed != 1 \
             or not np.isfinite(res.energy) or not tr._has_heading:
         return res
-    more_views = res.views_used > tr._heading_views
+    more_views = res.views_used > tr.heading_check.views
     travel = None if due or more_views else travel_recheck_due(tr)
     if not (due or more_views or travel):
         return res
     if due:
-        tr._recheck_at, tr._rechecked_undecided = None, True
-    tr._travel_recheck_after = tr.frames + TRAVEL_RECHECK_FRAMES
-    before, tr._heading_views = tr._heading_views, max(tr._heading_views, res.views_used)
+        tr.heading_check.recheck_at, tr.heading_check.rechecked_undecided = None, True
+    tr.heading_check.travel_recheck_after = tr.frames + TRAVEL_RECHECK_FRAMES
+    before, tr.heading_check.views = tr.heading_check.views, max(tr.heading_check.views, res.views_used)
     x = np.asarray(res.x, dtype=float)
     yaw = _yaw_of(x[3:6])
     starts, _ = standing_poses(tr.model, x[:3], [yaw + np.pi])
@@ -122,14 +122,14 @@ def recheck_heading(tr, res: FrameResult, frame_index: int, frames_elapsed: floa
     else:
         head = f"heading re-check: {res.views_used} views see the person ({before} when the heading was checked)"
     try:
-        runs, n = first_frame.initial_runs(tr, list(starts), frame_index, None, FrameBudget(cfg.evals_per_frame), stream=(5,))
+        runs, n = first_frame.initial_runs(tr, list(starts), frame_index, None, FrameBudget(cfg.evals), stream=(5,))
     except ValueError as exc:
         return dataclasses.replace(res, time_s=time.perf_counter() - t0,
                                    notes=res.notes + (f"{head}; its search failed ({exc}); kept this heading",))
     xr, er = min((tr._final_pose(r) for _, r, _ in runs), key=lambda t: t[1])
     turned = abs(float(_wrap(_yaw_of(xr[3:6]) - yaw))) > np.pi / 2
     if turned and np.isfinite(er) and er <= cfg.init_confirm_ratio * max(res.energy, 0.0):
-        tr._rival_start = (xr, er, res.energy)
+        tr.heading_check.rival_start = (xr, er, res.energy)
         start_rival(tr, frame_index)
         note = (f"{head}: a run heading the other way ended {er:.4g} (estimate {res.energy:.4g}); both tracked for "
                 f"up to {cfg.init_confirm_frames} frames")
@@ -145,17 +145,17 @@ def confirm_heading(tr, res: FrameResult, masks, frame_index: int, frames_elapse
     """One frame of the heading check: step the rival on the same masks, add both energies, decide
     (see ``TrackerConfig.init_confirm_frames``); the frame's result (the rival's when it wins)."""
     cfg = tr.config
-    rival = tr._rival
-    other = rival._step(masks, frame_index, FrameBudget(tr.config.evals_per_frame, tr._contour_now), prediction=None,
+    rival = tr.heading_check.rival
+    other = rival._step(masks, frame_index, FrameBudget(tr.config.evals, tr._contour_now), prediction=None,
                         frames_elapsed=frames_elapsed)
     n_evals = res.n_evals + other.n_evals
     if res.fell_back and other.fell_back:       # nothing to compare this frame
         return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0)
     if res.fell_back != other.fell_back or not (np.isfinite(res.energy) and np.isfinite(other.energy)):
-        tr._rival = None
+        tr.heading_check.rival = None
         return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0, notes=res.notes + (
             "heading check ended: no decision (only one hypothesis could be tracked); kept this one",))
-    c = tr._confirm
+    c = tr.heading_check.confirm
     c[0] += 1
     c[1] += res.energy
     c[2] += other.energy
@@ -176,28 +176,25 @@ def confirm_heading(tr, res: FrameResult, masks, frame_index: int, frames_elapse
         sums += (f"; this heading moves backwards ({off:.0f} deg from the travel, {t[1]:.2f} m in {t[2]:g} "
                  "frames), the other forwards")
     if not by_travel and ((c[2] > margin * c[1] and not contra) or (last and not c[1] > margin * c[2])):
-        tr._rival = None
-        if not c[2] > margin * c[1] and not tr._rechecked_undecided:
+        tr.heading_check.rival = None
+        if not c[2] > margin * c[1] and not tr.heading_check.rechecked_undecided:
             # kept for want of evidence: the rival may still have been converging; once more later
-            tr._recheck_at = tr.frames + UNDECIDED_RECHECK_FRAMES
+            tr.heading_check.recheck_at = tr.frames + UNDECIDED_RECHECK_FRAMES
             sums += f"; undecided, re-checked in {UNDECIDED_RECHECK_FRAMES} frames"
         return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0,
                                    notes=res.notes + (f"heading check decided: kept the initial heading ({sums})",))
     if not last:
         return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0)
-    # the rival wins: take over its state; external predictions were made from this tracker's
+    # the rival wins: its track (estimate, predictor, masks, root history) becomes this tracker's; external predictions were made from this tracker's
     # estimates, so they are ignored while the predictor's history still holds any of them
-    tr._rival = None
+    tr.heading_check.rival = None
     # views that joined during the check took part in a switch: no re-check for them (a fresh track
     # checked again at once lost its heading to a fresh rival, generated walk seed 6); a check that
     # kept the heading is re-checked on the next frame that sees them
-    tr._heading_views = max(tr._heading_views, res.views_used, other.views_used)
-    tr._last, tr._elapsed = rival._last, rival._elapsed
-    tr._masks_last, tr._masks_now = rival._masks_last, rival._masks_now
-    tr._roots, tr._clock = rival._roots, rival._clock
-    tr.predictor = rival.predictor
+    tr.heading_check.views = max(tr.heading_check.views, res.views_used, other.views_used)
+    tr.track = rival.track
     cap = getattr(tr.predictor, "capacity", None)
-    tr._own_prediction_frames = (int(cap) if cap is not None else cfg.predictor_order + 1) - 1
+    tr.heading_check.own_prediction_frames = (int(cap) if cap is not None else cfg.predictor_order + 1) - 1
     return dataclasses.replace(other, n_evals=n_evals, time_s=time.perf_counter() - t0, notes=other.notes + (
         f"heading check decided: switched to the other heading ({sums}); the frames before were estimated facing "
         "the wrong way",))

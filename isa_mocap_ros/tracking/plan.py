@@ -16,7 +16,7 @@ from .config import MIN_LIMB_PROPOSALS
 
 @dataclass(frozen=True)
 class FrameBudget:
-    """What one hypothesis may spend on a frame: ``evals`` evaluations (``evals_per_frame``, or a heading
+    """What one hypothesis may spend on a frame: ``evals`` evaluations (``TrackerConfig.evals``, or a heading
     hypothesis of a heading check alike) and whether the contour stage runs (``step(contour_stage=)``).
     Every stage sizes its share from it; the configuration is never changed mid-step."""
 

@@ -10,7 +10,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from . import _fast_search, plan
+from isa_mocap_ros.optim import compiled_search
+
+from . import plan
 from .contour import ContourFitInfo
 from .config import CONTOUR_KEEP_TOLERANCE, TrackerError, _whole_generations
 
@@ -25,12 +27,12 @@ def fit_contours(tr, x, *, iterations: int | None = None, extra_iterations: int 
     :data:`CONTOUR_KEEP_TOLERANCE` above ``x``'s (both evaluated in one batch: a mask contour bent by an
     occluder or noise can pull the fit away); the evaluations charged are ``(D + 1)`` per iteration
     taken over all coordinates, ``(k + 1)`` per iteration over ``k`` of them, + 2."""
-    if tr._masks_now is None:
+    if tr.track.masks_now is None:
         raise TrackerError("fit_contours: no masks yet (call step first)")
     iterations = tr.config.contour_iterations if iterations is None else iterations
     extra = plan.contour_extra(tr) if extra_iterations is None else extra_iterations
     x = np.asarray(x, dtype=np.float64)
-    tr._contour.set_masks(tr._masks_now)
+    tr._contour.set_masks(tr.track.masks_now)
     y, info = tr._contour.fit(x, iterations=iterations)
     n = info.iterations * (tr.model.dof + 1) + 2
     if extra and tr._contour_extra_coords.size and not info.stopped:
@@ -73,9 +75,8 @@ def refit_pelvis(tr, x, *, evals: int, rng: np.random.Generator, optimizer: str 
     opt = make_optimizer(optimizer, x1[:6], np.array(spread[:6]), rng=rng,
                          bounds=(lo[:6], hi[:6]), rotation_blocks=((3, 4, 5),), **dict(params or {}))
     evals_search = _whole_generations(int(evals) - 1, opt.generation_size)
-    if tr._compiled_search and _fast_search.supported_flat(opt):
-        r = _fast_search.run_isa(opt, energy, evals_search)     # the same numbers, generations compiled
-    else:
+    r = compiled_search.search(opt, energy, evals_search) if tr._compiled_search else None
+    if r is None:                                 # not covered by the compiled path (the same numbers)
         r = minimize(opt, energy, max_evals=evals_search)
     out = np.clip(move(r.x)[0], m.lower, m.upper)
     return out, float(tr.total_energy(out[None, :])[0]), r.n_evals + 1
@@ -121,9 +122,8 @@ def refit_torso(tr, x, *, evals: int, rng: np.random.Generator, energy: float | 
     name, params = plan.flat_algorithm(tr)
     opt = make_optimizer(name, x[c], spread, rng=rng, bounds=(lo, hi), **params)
     evals_search = _whole_generations(int(evals) - used - 1, opt.generation_size)
-    if tr._compiled_search and _fast_search.supported_flat(opt):
-        r = _fast_search.run_isa(opt, energy_of, evals_search)
-    else:
+    r = compiled_search.search(opt, energy_of, evals_search) if tr._compiled_search else None
+    if r is None:
         r = minimize(opt, energy_of, max_evals=evals_search)
     y = np.clip(move(r.x[None, :])[0], m.lower, m.upper)
     ey = float(tr.total_energy(y[None, :])[0])

@@ -13,7 +13,6 @@ are notes in :class:`FrameResult`, never exceptions. Reference: ``docs/tracking.
 """
 from __future__ import annotations
 
-import collections
 import dataclasses
 import time
 from typing import Callable, Mapping, Sequence
@@ -22,8 +21,11 @@ import numpy as np
 
 from isa_mocap_ros.geometry import nearest_rotvec
 
-from . import _fast_search, first_frame, frame_masks, frame_prediction, heading, objective, plan, stages
-from .config import (DEFAULT_PARAMS, PREDICTORS, TRAVEL_FRAMES, FrameResult, TrackerConfig, TrackerError,
+from isa_mocap_ros.optim import compiled_search
+
+from . import first_frame, frame_masks, frame_prediction, heading, objective, plan, stages
+from .config import (DEFAULT_PARAMS, JOINT_SPREAD_RAD, ROOT_ROTATION_RADIUS_RAD, ROOT_ROTATION_SPREAD_RAD,
+                     ROOT_TRANSLATION_SPREAD_M, PREDICTORS, FrameResult, TrackerConfig, TrackerError,
                      _partition_coords, _whole_generations, frame_rng)
 from .contour import ContourFit
 from .gate import visible_shares
@@ -31,9 +33,10 @@ from .init import InitError, initial_pose
 from .limbs import LimbMove
 from .objective import TotalEnergy
 from .plan import FrameBudget
-from .predict import (ArPredictor, ConstantPosePredictor, ConstantVelocityPredictor, PredictionError, frame_periods,
-                      frames_kwargs)
+from .predict import (ArPredictor, ConstantPosePredictor, ConstantVelocityPredictor, PredictionError,
+                      frame_periods)
 from .reaim import ReaimMove
+from .state import HeadingCheckState, TrackState
 
 __all__ = ["TrackerError", "TrackerConfig", "FrameResult", "FrameBudget", "Tracker", "make_tracker", "DEFAULT_PARAMS",
            "PREDICTORS", "frame_rng"]
@@ -104,7 +107,7 @@ class Tracker:
         from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
         if energy is None:
 
-            energy = SilhouetteEnergy(model, cams, None, method=config.energy_method, downsample=config.downsample,
+            energy = SilhouetteEnergy(model, cams, None, method=config.energy, downsample=config.downsample,
                                       n_model_points=config.n_model_points, n_mask_points=config.n_mask_points,
                                       rng=np.random.default_rng([config.seed, 2**32 - 1]))
         if not (callable(energy) and hasattr(energy, "set_masks")):
@@ -114,14 +117,11 @@ class Tracker:
         # the automatic initialization's grid scores rough standing poses: with the fine sample
         # sizes it picked a heading 180 deg off on bags/demo, with the library's coarse ones not
         self._init_energy = None
-        if own_energy and config.energy_method == "fast":
+        if own_energy and config.energy == "fast":
             self._init_energy = SilhouetteEnergy(model, cams, None, method="fast", downsample=config.downsample,
                                                  rng=np.random.default_rng([config.seed, 2**32 - 2]))
-        self.predictor = _make_predictor(config) if predictor is None else predictor
-        self._last: np.ndarray | None = None
-        self._elapsed = 0.0        # frame periods since the last estimate (step's frames_elapsed, summed)
-        self._masks_last: list | None = None   # usable masks of the last estimate's frame (re-centring)
-        self._masks_now: list | None = None    # usable masks of the frame being tracked
+        # what the frame carries to the next (last estimate, predictor, masks, root history, clock)
+        self.track = TrackState(_make_predictor(config) if predictor is None else predictor)
         self._pelvis_reaim = ReaimMove(model, [0]) if "root" in model.partitions else None
         # the torso stage's move: the joints of the torso partition (e.g. spine and neck), the arms re-aimed
         torso_joints = sorted({int(model.dof_joint[d]) for d in model.partitions.get("torso", ())})
@@ -139,18 +139,8 @@ class Tracker:
         self.frames = 0
         self._contour_now = True               # step(contour_stage=...) of the frame being tracked
         # the heading check after an automatic initialization (config.init_confirm_frames)
-        self._rival_start: tuple[np.ndarray, float, float] | None = None   # (pose, energy, winner's energy)
-        self._rival: Tracker | None = None
-        self._confirm = [0, 0.0, 0.0]      # frames compared, energy sums: this tracker, the rival
-        self._heading_views = 0            # views the heading was checked with (re-checked when more see the person)
-        self._recheck_at: int | None = None   # self.frames at which an undecided check is re-checked
-        self._rechecked_undecided = False
-        self._own_prediction_frames = 0    # frames left that ignore external predictions (after a switch)
-        # (frame periods since the start, root x, y) of the last estimates: the travel cue (TRAVEL_FRAMES)
-        self._roots: collections.deque = collections.deque(maxlen=TRAVEL_FRAMES + 1)
-        self._clock = 0.0
-        self._travel_recheck_after = 0     # self.frames from which the travel cue may start a re-check
-        # h-isa on the fast energy runs compiled per partition (tracking/_fast_search.py, the same
+        self.heading_check = HeadingCheckState()
+        # h-isa on the fast energy runs compiled per partition (optim/compiled_search.py, the same
         # numbers as the optimizer protocol); False: always through the protocol (tests compare both)
         self._compiled_search = True
         # the keypoint term of the frame being tracked (config.keypoint_weight; set by step/initialize)
@@ -158,20 +148,30 @@ class Tracker:
 
     # ------------------------------------------------------------------ state
     @property
+    def predictor(self):
+        """The track's own predictor (:attr:`TrackState.predictor`); assignable (e.g. a
+        :class:`.published.PublishedPredictor` around it)."""
+        return self.track.predictor
+
+    @predictor.setter
+    def predictor(self, value) -> None:
+        self.track.predictor = value
+
+    @property
     def initialized(self) -> bool:
         """True once an estimate exists (given, automatic or tracked)."""
-        return self._last is not None
+        return self.track.last is not None
 
     @property
     def last_estimate(self) -> np.ndarray | None:
-        return None if self._last is None else self._last.copy()
+        return None if self.track.last is None else self.track.last.copy()
 
     @property
     def checking_heading(self) -> bool:
         """True while the heading check after the automatic initialization runs (``init_confirm_frames``):
         it decides on consecutive frames only, so a caller that drops frames (the estimator node in
         real time) should hand it the frames that follow in sequence meanwhile."""
-        return self._rival is not None
+        return self.heading_check.rival is not None
 
     def heading_recheck_pending(self, masks: Sequence) -> bool:
         """See :func:`.heading.heading_recheck_pending`."""
@@ -180,17 +180,8 @@ class Tracker:
 
     def reset(self) -> None:
         """Forget the estimates (the next step initializes again)."""
-        self._last = None
-        self._elapsed = 0.0
-        self._masks_last = None
-        self.predictor.reset()
-        self._rival_start = self._rival = None
-        self._own_prediction_frames = 0
-        self._heading_views = 0
-        self._recheck_at = None
-        self._rechecked_undecided = False
-        self._roots.clear()
-        self._travel_recheck_after = 0
+        self.track.forget()
+        self.heading_check = HeadingCheckState()
 
     @property
     def _has_heading(self) -> bool:
@@ -244,13 +235,7 @@ class Tracker:
 
 
     def _accept(self, x: np.ndarray) -> None:
-        self._last = np.array(x, dtype=float)
-        self.predictor.update(self._last, **frames_kwargs(self._elapsed or 1))
-        self._clock += self._elapsed or 1
-        self._roots.append((self._clock, float(self._last[0]), float(self._last[1])))
-        self._elapsed = 0.0
-        self._masks_last = self._masks_now
-        self._masks_now = None
+        self.track.accept(x)
 
     # ------------------------------------------------------------------ one frame
 
@@ -259,10 +244,10 @@ class Tracker:
         cfg, m = self.config, self.model
         radius = np.full(m.dof, cfg.search_radius_rad)
         radius[:3] = cfg.root_translation_radius_m
-        radius[3:6] = cfg.root_rotation_radius_rad
-        spread = np.full(m.dof, cfg.joint_spread_rad)
-        spread[:3] = cfg.root_translation_spread_m
-        spread[3:6] = cfg.root_rotation_spread_rad
+        radius[3:6] = ROOT_ROTATION_RADIUS_RAD
+        spread = np.full(m.dof, JOINT_SPREAD_RAD)
+        spread[:3] = ROOT_TRANSLATION_SPREAD_M
+        spread[3:6] = ROOT_ROTATION_SPREAD_RAD
         c = np.clip(np.asarray(center, dtype=float), m.lower, m.upper)
         lo = np.maximum(c - radius, m.lower)
         hi = np.minimum(c + radius, m.upper)
@@ -282,8 +267,8 @@ class Tracker:
         lo, hi, spread = self.search_box(pred)
         base = spread * spread_scale
         spread = base.copy()              # the motion term widens the main search's spreads only
-        if stages and cfg.spread_velocity_gain > 0 and self._last is not None:
-            moved = cfg.spread_velocity_gain * np.abs(pred[6:] - self._last[6:])
+        if stages and cfg.spread_velocity_gain > 0 and self.track.last is not None:
+            moved = cfg.spread_velocity_gain * np.abs(pred[6:] - self.track.last[6:])
             spread[6:] = np.sqrt(spread[6:] ** 2 + moved ** 2)
         x0 = np.clip(pred, lo, hi)
         params = cfg.params()
@@ -292,7 +277,7 @@ class Tracker:
             # whole generations (not on the automatically initialized frame, whose runs from the heading
             # candidates keep the proportional split their pruning and heading choice were measured with)
             params.setdefault("whole_generations", stages)
-        elif cfg.include_prediction and "initial_population" not in params:
+        elif "initial_population" not in params:
             # first generation: the prediction itself plus draws around it (so the estimate
             # can never be worse than the prediction by the energy's own measure)
             n = make_optimizer(cfg.optimizer, x0, spread, rng=np.random.default_rng(0), bounds=(lo, hi),
@@ -340,9 +325,9 @@ class Tracker:
         opt, budget, stage_shares, (lo, hi, spread, base) = self._search(pred, rng, budget, spread_scale, notes,
                                                                          stages)
         share, torso, limbs, contour = stage_shares
-        if self._compiled_search and _fast_search.supported(opt, self.energy, self._python_terms()):
-            res = _fast_search.run_hisa(opt, self.energy, budget)      # the same numbers, compiled per partition
-        else:
+        res = compiled_search.search(opt, self.energy, budget, extra_terms=self._python_terms()) \
+            if self._compiled_search else None
+        if res is None:                   # not covered by the compiled path (the same numbers through the protocol)
             res = minimize(opt, TotalEnergy(self), max_evals=budget)
         # what a search leaves unspent (less than a generation: whole generations) goes to the next stage
         spare = budget - res.n_evals
@@ -360,7 +345,7 @@ class Tracker:
         if limbs:
             extra = spare // len(limbs)       # more proposals with the rest
             x, e, n, _ = self.propose_limbs(res.x, n=n_limb + extra, rng=rng, limbs=limbs, hinge_only=hinge,
-                                            last=self._last)
+                                            last=self.track.last)
             spare -= extra * len(limbs)
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         if contour is not None:
@@ -392,9 +377,9 @@ class Tracker:
 
 
     def _final_pose(self, res) -> tuple[np.ndarray, float]:
-        """The estimate of an optimizer result (``config.estimate``) in the model's limits, rotation
-        vectors shortened (|r| <= pi), and its energy."""
-        if self.config.estimate == "best" or not np.all(np.isfinite(res.x)):
+        """The optimizer's estimate (its best particle when the estimate is not finite) in the model's
+        limits, rotation vectors shortened (|r| <= pi), and its energy."""
+        if not np.all(np.isfinite(res.x)):
             x, energy = res.best_x, res.best_energy
         else:
             x, energy = res.x, res.energy
@@ -432,7 +417,7 @@ class Tracker:
         FrameResult
         """
         term, note = objective.keypoint_energy(self, keypoints)
-        rival = self._rival
+        rival = self.heading_check.rival
         self._keypoint_term = term
         if rival is not None:
             rival._keypoint_term = term
@@ -449,17 +434,17 @@ class Tracker:
                     contour_stage: bool = True) -> FrameResult:
         """The frame without its keypoint term (set by :meth:`step`)."""
         t0 = time.perf_counter()
-        rival = self._rival
+        rival = self.heading_check.rival
         self._contour_now = bool(contour_stage)
-        res = self._step(masks, frame_index, FrameBudget(self.config.evals_per_frame, self._contour_now),
+        res = self._step(masks, frame_index, FrameBudget(self.config.evals, self._contour_now),
                          prediction=prediction, frames_elapsed=frames_elapsed)
-        if self._own_prediction_frames > 0:
-            self._own_prediction_frames -= 1
+        if self.heading_check.own_prediction_frames > 0:
+            self.heading_check.own_prediction_frames -= 1
         if res.initialized:
-            self._rival = None
-            self._heading_views = res.views_used
-            if self._rival_start is not None:
-                e_rival, e_win = self._rival_start[1], self._rival_start[2]
+            self.heading_check.rival = None
+            self.heading_check.views = res.views_used
+            if self.heading_check.rival_start is not None:
+                e_rival, e_win = self.heading_check.rival_start[1], self.heading_check.rival_start[2]
                 heading.start_rival(self, frame_index)
                 return dataclasses.replace(res, notes=res.notes + (
                     f"heading check started: a run heading the other way ended {e_rival:.4g} (winner {e_win:.4g}); both "
@@ -467,12 +452,12 @@ class Tracker:
             return res
         if rival is None:
             return heading.recheck_heading(self, res, frame_index, frames_elapsed, t0)
-        if rival is not self._rival:
+        if rival is not self.heading_check.rival:
             return res
         if frames_elapsed != 1:
             # after a gap both hypotheses are still catching up and their energies say little (real
             # time, the sets that arrived during the initialization dropped: wrong switches measured)
-            self._rival = None
+            self.heading_check.rival = None
             return dataclasses.replace(res, notes=res.notes + (
                 f"heading check ended: no decision ({frames_elapsed:g} frame periods since the last frame; "
                 "it compares consecutive frames only); kept this heading",))
@@ -490,40 +475,28 @@ class Tracker:
         if isinstance(frame_index, bool) or not isinstance(frame_index, (int, np.integer)) or frame_index < 0:
             raise TrackerError(f"frame_index: expected an integer >= 0, received {frame_index!r}")
         try:
-            self._elapsed += frame_periods("frames_elapsed", frames_elapsed)
+            self.track.elapsed += frame_periods("frames_elapsed", frames_elapsed)
         except PredictionError as exc:
             raise TrackerError(str(exc)) from None
         cfg = self.config
         usable, notes = frame_masks.check_masks(self, masks)
-        self._masks_now = usable
-        gated_pred = None
-        if (cfg.gate_margin_px > 0 or cfg.hull_filter) and self._last is not None \
-                and any(m is not None for m in usable):
-            gated_pred = frame_prediction.predict(self, prediction, notes)
-            if cfg.gate_margin_px > 0:
-                # the mask gate (config.gate_margin_px): foreground far from the predicted silhouette is dropped
-                usable = frame_masks.gate(self, usable, gated_pred, notes)
-            if cfg.hull_filter:
-                # the visual-hull filter (config.hull_filter): foreground the other views do not confirm
-                usable = frame_masks.hull(self, usable, gated_pred, notes)
-            # the filtered masks from here on: the contour stage fits what the energy scores, and a later
-            # re-centring starts from the person's foreground (the prediction above re-centred on the raw ones)
-            self._masks_now = usable
+        # the mask gate and the visual-hull filter around the prediction (made here when they run)
+        usable, gated_pred = frame_masks.filter_masks(self, usable, prediction, notes)
         weights = None
-        if cfg.view_weights and self._last is not None and any(m is not None for m in usable):
+        if cfg.view_weights and self.track.last is not None and any(m is not None for m in usable):
             if gated_pred is None:
                 gated_pred = frame_prediction.predict(self, prediction, notes)
             # Eq. 5's view weights (config.view_weights): the share of the predicted body each view sees
             weights = visible_shares(self.model, self.cameras, gated_pred)
         views = frame_masks.set_masks(self, usable, notes, frame_index, weights)
         if views == 0:
-            notes.append("no usable view: falling back to the last estimate" if self._last is not None
+            notes.append("no usable view: falling back to the last estimate" if self.track.last is not None
                          else "no usable view and no estimate yet: nothing to track")
             return FrameResult(x=self.last_estimate, energy=float("nan"), n_evals=0, spread=float("nan"),
                                time_s=time.perf_counter() - t0, views_used=0, notes=tuple(notes), fell_back=True)
         n_evals = 0
         initialized = False
-        if self._last is None:
+        if self.track.last is None:
             try:
                 res0 = initial_pose(self.model, self.cameras, usable, first_frame.init_energy_fn(self, usable, frame_index),
                                     rng=frame_rng(cfg.seed, frame_index, 1), n_yaw=cfg.init_yaw_steps,
@@ -553,40 +526,18 @@ class Tracker:
             return FrameResult(x=self.last_estimate, energy=float("nan"), n_evals=n_evals, spread=float("nan"),
                                time_s=time.perf_counter() - t0, views_used=views, notes=tuple(notes),
                                fell_back=True, prediction=starts[0], initialized=initialized)
-        best = None
-        for _, res, pred in runs:
-            e = res.best_energy if cfg.estimate == "best" else res.energy
-            if best is None or e < best[0]:
-                best = (e, res, pred)
+        _, res, pred = min(runs, key=lambda run: run[1].energy)     # the first of the lowest energy
         n_evals += n
-        _, res, pred = best
         if initialized:
             notes.append(f"initialized automatically ({len(starts)} heading candidates, {len(runs)} searched to the "
                          f"end, grid best yaw {np.rad2deg(res0.yaw):.0f} deg {res0.variant}, {n_evals} evaluations)")
         x, energy = self._final_pose(res)
         if initialized and cfg.init_confirm_frames > 0:
-            self._rival_start = first_frame.pick_rival(self, runs, res, x, energy)
+            self.heading_check.rival_start = first_frame.pick_rival(self, runs, res, x, energy)
         if initialized and cfg.init_polish:
-            # config.init_polish: the winner searched once more as a tracked frame (all stages), from itself
-            res2, x2, e2 = first_frame.polish(self, x, energy, frame_index, 6, notes, budget)
-            if res2 is not None:
-                n_evals += res2.n_evals
-                if e2 < energy:
-                    x, energy, res = x2, e2, res2
-            if self._rival_start is not None:
-                # the heading check's rival polished alike: the heading that fits better after it wins (the
-                # check still tracks both)
-                res_r, xr, er = first_frame.polish(self, *self._rival_start[:2], frame_index, 7, None, budget)
-                if res_r is not None:
-                    n_evals += res_r.n_evals
-                if er < energy:
-                    notes.append(f"initialization polish: the heading check's rival fits better ({er:.4g} against "
-                                 f"{energy:.4g}) and leads")
-                    self._rival_start = (x, energy, er)
-                    x, energy = xr, er
-                    res = res_r if res_r is not None else res
-                else:
-                    self._rival_start = (xr, er, energy)
+            # config.init_polish: the winner (and the heading check's rival) searched once more, from itself
+            x, energy, res, n = first_frame.polish_winner(self, x, energy, res, frame_index, notes, budget)
+            n_evals += n
         if res.n_nonfinite:
             notes.append(f"energy: {res.n_nonfinite} non-finite evaluations")
         spread_out = res.history[-1].spread if res.history else float("nan")
@@ -597,20 +548,8 @@ class Tracker:
                            prediction=pred, initialized=initialized)
 
 
-def make_tracker(model, cameras: Sequence, *, optimizer: str = "h-isa", evals: int = 1500,
-                 params: Mapping | None = None, seed: int = 0, energy: str = "fast", downsample: int = 1,
-                 search_radius_rad: float = 0.5, predictor: str = "ar", predictor_order: int = 1,
-                 prior_eta: float = 0.0, prior_file: str | None = None, energy_fn: Callable | None = None,
-                 **config) -> Tracker:
-    """A :class:`Tracker` from flat settings (the estimator node's parameters).
-
-    ``optimizer, evals, params, seed, energy, downsample, search_radius_rad, predictor,
-    predictor_order, prior_eta, prior_file`` map onto :class:`TrackerConfig` fields (``prior_file``
-    ``""`` = none); further ``config`` keywords are passed to it as they are. ``energy_fn``: a data
-    term object (see :class:`Tracker`).
-    """
-    cfg = TrackerConfig(optimizer=optimizer, evals_per_frame=evals, optimizer_params=dict(params or {}), seed=seed,
-                        energy_method=energy, downsample=downsample, search_radius_rad=search_radius_rad,
-                        predictor=predictor, predictor_order=predictor_order, prior_eta=prior_eta,
-                        prior_file=prior_file or None, **config)
-    return Tracker(model, cameras, cfg, energy=energy_fn)
+def make_tracker(model, cameras: Sequence, *, energy_fn: Callable | None = None, **config) -> Tracker:
+    """A :class:`Tracker` from flat settings: ``config`` keywords are :class:`TrackerConfig` fields (the
+    estimator node's parameters carry the same names); ``energy_fn``: a data term object (see
+    :class:`Tracker`)."""
+    return Tracker(model, cameras, TrackerConfig(**config), energy=energy_fn)

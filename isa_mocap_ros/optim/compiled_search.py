@@ -8,7 +8,7 @@ a fifth of a tracked frame's time went there. :func:`run_hisa` runs the same alg
 call per partition: the same compiled helpers (:mod:`isa_mocap_ros.optim._fast`,
 :mod:`~isa_mocap_ros.optim._fast_so3`), the same energy kernels, the same random draws from the same
 ``numpy.random.Generator`` (numba draws from its state exactly as numpy does), in the same order — so
-the result is the protocol's, bit for bit (``test/test_fast_search.py`` checks estimates, best
+the result is the protocol's, bit for bit (``test/test_compiled_search.py`` checks estimates, best
 particles, energies, diagnostics and the generator's state afterwards). What it covers, and the
 tracker checks before using it (:func:`supported`): inner ISA with multinomial replacement (kernels
 S1/S2/S3, either variance reading) and the adaptive schedule, the fast energy, no prior, no initial
@@ -100,13 +100,13 @@ def supported(opt, energy, prior_active: bool) -> bool:
     from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
     from isa_mocap_ros.optim import Hierarchical
 
-    if prior_active or type(energy) is not SilhouetteEnergy or energy.method != "fast" or energy._frame is None:
+    if prior_active or type(energy) is not SilhouetteEnergy or energy.method != "fast" or not energy.has_masks:
         return False
     if type(opt) is not Hierarchical or getattr(opt, "inner_name", None) != "isa" or opt.n_iter != 0:
         return False
     p = opt.params
     return (set(p) <= _PARAMS and p.get("kernel", "s1") in _KERNELS and p.get("schedule") == "adaptive"
-            and p.get("resampling", "multinomial") == "multinomial" and opt._initial_population is None
+            and p.get("resampling", "multinomial") == "multinomial" and opt.initial_population is None
             and opt.init == "normal" and opt.max_iter is None
             and p.get("variance", VARIANCE_READINGS[0]) in VARIANCE_READINGS
             and p.get("c_scale", C_SCALES[0]) in C_SCALES)
@@ -212,7 +212,7 @@ def _embed(xbase, idx, Xs):  # pragma: no cover - compiled
 def _kernel(X, kargs, n_chunks, out):  # pragma: no cover - compiled only (see the overload below)
     """``silhouette_batch`` or ``silhouette_restricted`` of ``X`` with their arguments ``kargs`` (between
     the poses and ``n_chunks``), told apart by the number of arguments when numba compiles the caller."""
-    raise NotImplementedError("_fast_search._kernel is for compiled code only")
+    raise NotImplementedError("compiled_search._kernel is for compiled code only")
 
 
 _N_BATCH = _k.silhouette_batch.py_func.__code__.co_argcount - 3          # without X, n_chunks, out
@@ -320,7 +320,7 @@ class HisaRun:
     def advance(self, to: int | None = None) -> "HisaRun":
         """Run the partitions up to (not including) ``to`` (default: all)."""
         energy, opt = self.energy, self.opt
-        threads8 = 8 * energy._threads
+        threads8 = 8 * energy.threads
         stop = len(self.parts) if to is None else min(int(to), len(self.parts))
         while self.k < stop:
             k = self.k
@@ -331,9 +331,9 @@ class HisaRun:
             args = (self.xbase, idx, x0, np.ascontiguousarray(opt.spread[idx]), lo, hi, self.shares[k], self.n,
                     opt.rng, self.target, self.kernel, self.c, self.rho, self.population, self.blocks[k], self.best,
                     self.best_x, self.stats, self.g, self.n_evals, threads8)
-            x, gens, used, nb, self.X = _partition(*args, energy._kernel_args() if rest.full else rest._args)
+            x, gens, used, nb, self.X = _partition(*args, energy.kernel_args() if rest.full else rest.kernel_args())
             if gens < 0:
-                raise rest._violation(self.X, np.flatnonzero(np.any(self.X != rest.x_base, axis=1)))
+                raise rest.violation(self.X, np.flatnonzero(np.any(self.X != rest.x_base, axis=1)))
             energy.n_evals += used
             self.xbase[idx] = x
             self.g += gens
@@ -353,6 +353,29 @@ class HisaRun:
                       n_nonfinite=self.bad)
 
 
+def search(opt, energy, max_evals: int, *, extra_terms: bool = False, paused: bool = False):
+    """The entry point: ``minimize(opt, energy, max_evals=max_evals)`` compiled, or None when this path does
+    not cover ``opt`` and ``energy`` (then run it through the optimizer protocol, :func:`~.minimize`).
+
+    An unbound :class:`~isa_mocap_ros.optim.Hierarchical` over ISA on the fast
+    :class:`~isa_mocap_ros.energy.silhouette.SilhouetteEnergy` (:func:`supported`; ``extra_terms``: the
+    energy is not the whole objective, a prior or keypoint term is added in Python, so not covered) runs
+    compiled per partition; with ``paused`` it is returned as a :class:`HisaRun` stopped before its first
+    partition (``advance()``, ``result()``: the first frame's pruned runs). A flat
+    :class:`~isa_mocap_ros.optim.Isa` (:func:`supported_flat`) on any batch energy runs with compiled
+    generations (:func:`run_isa`). The numbers are the protocol's, bit for bit."""
+    from isa_mocap_ros.optim import Hierarchical
+
+    if type(opt) is Hierarchical:
+        if not supported(opt, energy, extra_terms):
+            return None
+        run = HisaRun(opt, energy, max_evals)
+        return run if paused else run.advance().result()
+    if paused or extra_terms or not supported_flat(opt):
+        return None
+    return run_isa(opt, energy, max_evals)
+
+
 def run_hisa(opt, energy, max_evals: int) -> Result:
     """``minimize(opt, energy, max_evals=max_evals)`` for what :func:`supported` accepts (:class:`HisaRun`)."""
     return HisaRun(opt, energy, max_evals).advance().result()
@@ -364,8 +387,8 @@ def supported_flat(opt) -> bool:
     from isa_mocap_ros.optim.schedules import AdaptiveEss
 
     blocks = opt.rotation_blocks if isinstance(opt, Isa) else ()
-    return (type(opt) is Isa and opt.n_iter == 0 and opt._fused and isinstance(opt.schedule, AdaptiveEss)
-            and opt.kernel in _KERNELS and opt._initial_population is None and opt.init == "normal"
+    return (type(opt) is Isa and opt.n_iter == 0 and opt.fused and isinstance(opt.schedule, AdaptiveEss)
+            and opt.kernel in _KERNELS and opt.initial_population is None and opt.init == "normal"
             and opt.max_iter is None and len(blocks) <= 1
             and all(list(b) == list(range(b[0], b[0] + 3)) for b in blocks))
 

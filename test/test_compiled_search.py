@@ -1,4 +1,4 @@
-"""The compiled h-isa search (tracking/_fast_search.py) gives the optimizer protocol's numbers, bit for bit."""
+"""The compiled h-isa search (optim/compiled_search.py) gives the optimizer protocol's numbers, bit for bit."""
 import dataclasses
 
 import numpy as np
@@ -8,7 +8,7 @@ from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
 from isa_mocap_ros.optim import make_optimizer, minimize
 from isa_mocap_ros.optim._rotations import rotation_mean as rotation_mean_py
 from isa_mocap_ros.tracking import Tracker, TrackerConfig
-from isa_mocap_ros.tracking import _fast_search
+from isa_mocap_ros.optim import compiled_search
 
 from walk_scene import walk_scene
 
@@ -59,8 +59,8 @@ def test_compiled_hisa_equals_the_protocol(scene, params, budget):
     ref = minimize(ref_opt, _Restrictable(energy), max_evals=budget)
     n_ref = energy.n_evals
     opt = _hier(model, x, 5, **params)
-    assert _fast_search.supported(opt, energy, False)
-    got = _fast_search.run_hisa(opt, energy, budget)
+    assert compiled_search.supported(opt, energy, False)
+    got = compiled_search.search(opt, energy, budget)           # the entry point the tracker calls
     assert energy.n_evals == 2 * n_ref
     for name in ("x", "best_x", "population"):
         np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
@@ -101,21 +101,29 @@ def test_compiled_rotation_mean_equals_numpy():
         r = np.ascontiguousarray(centre + 0.1 * rng.standard_normal((n, 3)))
         w = rng.random(n)
         w /= w.sum()
-        np.testing.assert_array_equal(_fast_search.rotation_mean(r, w, 20, 1e-12), rotation_mean_py(r, w))
+        np.testing.assert_array_equal(compiled_search.rotation_mean(r, w, 20, 1e-12), rotation_mean_py(r, w))
 
 
 def test_what_the_compiled_search_does_not_cover_runs_through_the_protocol(scene):
     model, cams, walk, masks = scene
     energy = SilhouetteEnergy(model, cams, masks[2], rng=np.random.default_rng(3))
     x = walk[1]
-    assert _fast_search.supported(_hier(model, x, 0), energy, False)
-    assert not _fast_search.supported(_hier(model, x, 0), energy, True)                     # prior on
-    assert not _fast_search.supported(_hier(model, x, 0, schedule="polynomial"), energy, False)
-    assert not _fast_search.supported(_hier(model, x, 0, resampling="systematic"), energy, False)
+    assert compiled_search.supported(_hier(model, x, 0), energy, False)
+    assert not compiled_search.supported(_hier(model, x, 0), energy, True)                     # prior on
+    assert not compiled_search.supported(_hier(model, x, 0, schedule="polynomial"), energy, False)
+    assert not compiled_search.supported(_hier(model, x, 0, resampling="systematic"), energy, False)
     exact = SilhouetteEnergy(model, cams, masks[2], method="exact")
-    assert not _fast_search.supported(_hier(model, x, 0), exact, False)
+    assert not compiled_search.supported(_hier(model, x, 0), exact, False)
     flat = make_optimizer("isa", x, 0.05, rng=np.random.default_rng(0))
-    assert not _fast_search.supported(flat, energy, False)
+    assert not compiled_search.supported(flat, energy, False)
+    # the entry point answers None for each of these: the caller runs the protocol
+    assert compiled_search.search(_hier(model, x, 0), energy, 900, extra_terms=True) is None
+    assert compiled_search.search(_hier(model, x, 0, schedule="polynomial"), energy, 900) is None
+    assert compiled_search.search(_hier(model, x, 0), exact, 900) is None
+    seeded = make_optimizer("isa", x, 0.05, rng=np.random.default_rng(0), initial_population=np.tile(x, (100, 1)))
+    assert compiled_search.search(seeded, energy, 900) is None
+    assert compiled_search.search(flat, energy, 900, paused=True) is None
+    assert isinstance(compiled_search.search(_hier(model, x, 0), energy, 900, paused=True), compiled_search.HisaRun)
 
 
 def test_cached_code_depends_on_the_kernels_it_calls():
@@ -127,7 +135,7 @@ def test_cached_code_depends_on_the_kernels_it_calls():
     from isa_mocap_ros.energy import _silhouette_kernel
     from isa_mocap_ros.optim import _fast, _fast_so3
 
-    for fn in (_fast_search._partition, _fast_search.rotation_mean):
+    for fn in (compiled_search._partition, compiled_search.rotation_mean):
         locator = fn._cache._impl.locator
         assert type(locator).__name__ == "_DependentLocator"
         h = hashlib.sha256()
@@ -157,8 +165,8 @@ def test_compiled_flat_isa_equals_the_protocol(params, budget):
                    rotation_blocks=((3, 4, 5),), **params)
     ref_opt, opt = make(11), make(11)
     ref = minimize(ref_opt, energy, max_evals=budget)
-    assert _fast_search.supported_flat(opt)
-    got = _fast_search.run_isa(opt, energy, budget)
+    assert compiled_search.supported_flat(opt)
+    got = compiled_search.search(opt, energy, budget)
     for name in ("x", "best_x", "population", "weights"):
         np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
     for name in ("energy", "best_energy", "n_evals", "n_iter", "reason", "n_nonfinite"):
@@ -167,4 +175,4 @@ def test_compiled_flat_isa_equals_the_protocol(params, budget):
     np.testing.assert_array_equal([dataclasses.astuple(h) for h in got.history],
                                   [dataclasses.astuple(h) for h in ref.history])
     assert opt.rng.bit_generator.state == ref_opt.rng.bit_generator.state
-    assert not _fast_search.supported_flat(Isa(np.zeros(6), 0.1, rng=np.random.default_rng(0), schedule="polynomial"))
+    assert not compiled_search.supported_flat(Isa(np.zeros(6), 0.1, rng=np.random.default_rng(0), schedule="polynomial"))
