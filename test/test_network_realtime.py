@@ -75,7 +75,9 @@ def test_real_time_run_mends_a_backwards_first_heading(tmp_path, rosenv, capsule
     s = json.loads((out / "summary.json").read_text())
     # measured: 24.5 / 25.4 mm (4-11 sets dropped); lost for good without the hold: 310 mm
     assert s["mpjpe_mm"] < 60.0, s
-    # the start-up's drops (initialization + heading check) are counted, and within all the drops
-    assert 1 <= s["dropped_while_initializing"] <= s["dropped_frames"], s
+    # the start-up's drops (initialization + heading check) are counted within all the drops; whether there
+    # are any depends on the machine (a replay slowed to this machine's speed, rate 0.21 on a loaded one,
+    # dropped none), so their count is checked by test_run_report's _first_gap test, not here
+    assert 0 <= s["dropped_while_initializing"] <= s["dropped_frames"], s
     # sets that waited for the tracker went without the contour stage (27-88 of 145 on an idle machine, session 17)
     assert 0 <= s["frames_without_contour_stage"] <= s["frames_processed"], s
