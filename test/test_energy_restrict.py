@@ -7,7 +7,7 @@ import pytest
 
 from isa_mocap_ros.body import capsule_endpoints, make_model
 from isa_mocap_ros.energy import EnergyError, SilhouetteEnergy
-from isa_mocap_ros.energy.silhouette import RestrictedSilhouetteEnergy
+from isa_mocap_ros.energy.restricted import RestrictedSilhouetteEnergy
 from isa_mocap_ros.optim import Hierarchical, minimize
 from isa_mocap_ros.vision import default_rig, look_at, render_mask
 
