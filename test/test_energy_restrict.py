@@ -129,6 +129,8 @@ def test_contract_and_bad_input(scene):
         f(X[:1])
     with pytest.raises(EnergyError, match="masks"):
         SilhouetteEnergy(model, cams).restrict(x0, cols)
+    with pytest.raises(EnergyError, match="energy: expected a SilhouetteEnergy, received object"):
+        RestrictedSilhouetteEnergy(object(), x0, cols)
 
 
 def test_batched_and_one_by_one_agree(scene):
