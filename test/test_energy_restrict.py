@@ -7,7 +7,7 @@ import pytest
 
 from isa_mocap_ros.body import capsule_endpoints, make_model
 from isa_mocap_ros.energy import EnergyError, SilhouetteEnergy
-from isa_mocap_ros.energy.silhouette import RestrictedSilhouetteEnergy
+from isa_mocap_ros.energy.restricted import RestrictedSilhouetteEnergy
 from isa_mocap_ros.optim import Hierarchical, minimize
 from isa_mocap_ros.vision import default_rig, look_at, render_mask
 
@@ -129,6 +129,8 @@ def test_contract_and_bad_input(scene):
         f(X[:1])
     with pytest.raises(EnergyError, match="masks"):
         SilhouetteEnergy(model, cams).restrict(x0, cols)
+    with pytest.raises(EnergyError, match="energy: expected a SilhouetteEnergy, received object"):
+        RestrictedSilhouetteEnergy(object(), x0, cols)
 
 
 def test_batched_and_one_by_one_agree(scene):

@@ -35,7 +35,8 @@ from scipy.spatial import cKDTree
 
 from ..body import BodyModel, capsule_endpoints, forward_kinematics
 from ..vision import Camera, capsule_data, render_labels_at, render_mask
-from .silhouette import EnergyError, _check_cameras, _check_model, _check_poses, _mask_problem
+from ._checks import EnergyError, _check_cameras, _check_model, _check_poses
+from .silhouette import _mask_problem
 
 __all__ = ["CorrespondenceEnergy", "plucker_lines", "model_contour_points", "capsule_frames"]
 

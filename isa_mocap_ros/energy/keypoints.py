@@ -36,7 +36,7 @@ from ..body import BodyModel, joint_positions
 from ..vision import Camera
 from ..vision.landmarks import LANDMARK_NAMES, N_LANDMARKS
 from .correspondence import plucker_lines
-from .silhouette import EnergyError, _check_cameras, _check_model, _check_poses
+from ._checks import EnergyError, _check_cameras, _check_model, _check_poses
 
 __all__ = ["LANDMARK_TO_JOINT", "KeypointEnergy", "geman_mcclure"]
 

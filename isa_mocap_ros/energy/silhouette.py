@@ -32,6 +32,8 @@ import numpy as np
 from ..body import BodyModel, capsule_endpoints
 from ..vision import Camera, render_mask
 from . import _silhouette_kernel as _k
+from ._checks import EnergyError, _check_cameras, _check_model, _check_poses
+from .restricted import RestrictedSilhouetteEnergy
 
 __all__ = ["EnergyError", "SilhouetteEnergy", "RestrictedSilhouetteEnergy", "exact_view_energy",
            "kinematic_tables"]
@@ -44,11 +46,6 @@ _N_BINS = 32
 #: vertical strips (x quantiles) of the foreground sample: a capsule tests only the strips its box meets
 #: (1: measured fastest for one person at 384 points; 2 and 4 cost more in run overhead than they save)
 _N_STRIPS = 1
-_NO_ROWS = np.zeros(0, np.int64)
-
-
-class EnergyError(ValueError):
-    """Bad input to an energy (names the argument, the expected and the received value)."""
 
 
 # ---------------------------------------------------------------------- helpers
@@ -69,35 +66,6 @@ def kinematic_tables(model: BodyModel) -> tuple[np.ndarray, ...]:
         ptr[j + 1] = len(dofs)
     return (np.asarray(model.parents, dtype=np.int64), np.ascontiguousarray(model.offsets, dtype=np.float64), ptr,
             np.array(dofs, dtype=np.int64), np.array(axes, dtype=np.int64))
-
-
-def _check_model(model: Any) -> BodyModel:
-    if not isinstance(model, BodyModel):
-        raise EnergyError(f"model: expected a BodyModel, received {type(model).__name__}")
-    return model
-
-
-def _check_cameras(cameras: Any) -> tuple[Camera, ...]:
-    cams = tuple(getattr(cameras, "cameras", cameras)) if cameras is not None else ()
-    if not cams or not all(isinstance(c, Camera) for c in cams):
-        raise EnergyError(f"cameras: expected a non-empty sequence of Camera, received {cameras!r}")
-    return cams
-
-
-def _check_poses(model: BodyModel, X: Any) -> tuple[np.ndarray, np.ndarray]:
-    """``X`` as ``(n, D)`` float64 and the ``(n,)`` mask of finite rows."""
-    try:
-        X = np.asarray(X, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise EnergyError(f"X: expected a numeric array of shape (n, {model.dof}), received {X!r}") from exc
-    if X.ndim == 1:
-        X = X[None]
-    if X.ndim != 2 or X.shape[1] != model.dof:
-        raise EnergyError(f"X: expected shape (n, {model.dof}) for model {model.name}, received shape {X.shape}")
-    X = np.ascontiguousarray(X)
-    if np.isfinite(X.sum()):                  # one reduction for the usual all-finite batch
-        return X, np.ones(X.shape[0], bool)
-    return X, np.all(np.isfinite(X), axis=1)
 
 
 def _foreground(mask: np.ndarray) -> np.ndarray:
@@ -524,169 +492,3 @@ class SilhouetteEnergy:
                 f"used={self.n_views_used}, downsample={self.downsample}, n_template={self.n_template}, "
                 f"n_mask_points={self.n_mask_points})")
 
-
-class RestrictedSilhouetteEnergy:
-    """:class:`SilhouetteEnergy` restricted to poses equal to a base pose outside some coordinates
-    (:meth:`SilhouetteEnergy.restrict`); ``f(X (n, D)) -> (n,)``, the same values as the full energy.
-
-    The *moving* capsules are those with an end joint whose position depends on one of ``coords``
-    through the kinematic tree; the others are *fixed*. Computed once here, per view: the fixed
-    capsules' projections and boxes, their term-1 template points that lie in their own hull, in no
-    earlier fixed capsule's hull and in the image (count, foreground sum, the points themselves), and
-    the foreground sample points no fixed capsule covers. Per pose: forward kinematics and projection
-    of the moving joints and capsules only; term 1 in full for the moving capsules, and for a fixed one
-    only its stored points against the *earlier moving* capsules whose boxes meet its own (usually none:
-    its stored sums); term 2 from the stored count plus the uncovered points the moving capsules cover.
-
-    Falls back to the full kernel (still checking the contract) when it would not pay or is not
-    implemented: ``method="exact"``, a root coordinate (0-5) in ``coords``, or every capsule moving
-    (:attr:`full` is then True).
-
-    Contract: every finite row of ``X`` must equal ``x_base`` (exactly) outside ``coords``; a row that
-    does not raises :class:`EnergyError` (checked per row in the kernel, cheaply, never skipped). Rows
-    with NaN or inf give ``+inf``, as the full energy. Evaluations count in the parent's ``n_evals``.
-    Calling it after the parent's :meth:`~SilhouetteEnergy.set_masks` raises :class:`EnergyError`.
-
-    Attributes
-    ----------
-    energy : SilhouetteEnergy
-        The parent.
-    x_base : (D,) ndarray
-    coords : (k,) int ndarray
-        Sorted.
-    moving_capsules : (m,) int ndarray
-        Capsule indices that move (processing order).
-    full : bool
-        True when evaluating with the full kernel (see above).
-    """
-
-    def __init__(self, energy: SilhouetteEnergy, x_base: Any, coords: Any) -> None:
-        if not isinstance(energy, SilhouetteEnergy):
-            raise EnergyError(f"energy: expected a SilhouetteEnergy, received {type(energy).__name__}")
-        model = energy.model
-        D = model.dof
-        if energy._frame is None:
-            raise EnergyError("masks: expected masks to be set (constructor or set_masks) before restricting, "
-                              "received none")
-        try:
-            x = np.array(x_base, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise EnergyError(f"x_base: expected a numeric array of shape ({D},), received {x_base!r}") from exc
-        if x.shape != (D,) or not np.isfinite(x).all():
-            raise EnergyError(f"x_base: expected a finite array of shape ({D},), received shape {x.shape}"
-                              + ("" if x.shape != (D,) else " with non-finite values"))
-        try:
-            idx = np.asarray(coords)
-        except (TypeError, ValueError) as exc:
-            raise EnergyError(f"coords: expected integer indices in [0, {D}), received {coords!r}") from exc
-        if idx.ndim != 1 or (idx.size and not np.issubdtype(idx.dtype, np.integer)):
-            raise EnergyError(f"coords: expected a 1-D sequence of integer indices in [0, {D}), received {coords!r}")
-        idx = idx.astype(np.int64)
-        if idx.size and (idx.min() < 0 or idx.max() >= D):
-            raise EnergyError(f"coords: expected indices in [0, {D}), received {idx.tolist()}")
-        if np.unique(idx).size != idx.size:
-            raise EnergyError(f"coords: expected no repeated index, received {idx.tolist()}")
-        self.energy = energy
-        self.x_base = x
-        self.coords = np.sort(idx)
-        self._frame = energy._frame
-        key = tuple(self.coords.tolist())
-        st = energy._restrict_cache.get(key)
-        if st is None:
-            st = energy._restrict_cache[key] = _restriction_structure(energy, self.coords)
-        (self._fixed, self._fixed_mask, self._fk_joints, self._cam_joints, self.moving_capsules, self._mov_ci,
-         self._moving_ci, moving, structural_full) = st
-        self.full = energy.method != "fast" or structural_full
-        if self.full:
-            return
-        fr = self._frame
-        stage = _k.restrict_prepare(
-            x, *energy._kin, energy._caps, energy._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"], fr["cam_D"],
-            fr["cam_hasd"], fr["cov"], fr["cov_wh"], energy._order, energy._tmpl_a, energy._tmpl_s,
-            energy._tmpl_ptr, energy._tmpl_na, fr["fg_x"], fr["fg_y"], fr["fg_n"], fr["fg_tab"], fr["fg_bins"],
-            fr["fg_xr"], moving)
-        # the kernel's arguments between X and (n_chunks, out)
-        self._args = (x, self._fixed, self._fk_joints, self._cam_joints, self.moving_capsules, self._mov_ci,
-                      self._moving_ci, *energy._kin, energy._caps, energy._radii, fr["cam_R"], fr["cam_t"],
-                      fr["cam_K"], fr["cam_D"], fr["cam_hasd"], fr["cov"], fr["cov_wh"], energy._order,
-                      energy._tmpl_a, energy._tmpl_s, energy._tmpl_ptr, energy._tmpl_na, fr["fg_n"], fr["fg_tab"],
-                      fr["fg_bins"], fr["fg_xr"], fr["fg_area"], fr["view_w"], *stage)
-
-    def kernel_args(self) -> tuple:
-        """The arguments of the restricted kernel between the poses and ``(n_chunks, out)`` (for the
-        tracker's compiled search)."""
-        return self._args
-
-    def violation(self, X: np.ndarray, rows: np.ndarray) -> EnergyError:
-        """The error for rows ``rows`` of ``X`` that move coordinates outside :attr:`coords`."""
-        return self._violation(X, rows)
-
-    def _violation(self, X: np.ndarray, rows: np.ndarray) -> EnergyError:
-        i = int(rows[0])
-        d = int(np.flatnonzero((X[i] != self.x_base) & self._fixed_mask)[0])
-        return EnergyError(f"X: expected rows equal to x_base outside coords {self.coords.tolist()}, received row "
-                           f"{i} with coordinate {d} = {X[i, d]!r} (x_base: {self.x_base[d]!r}); "
-                           f"{rows.size} such row(s)")
-
-    def __call__(self, X: Any) -> np.ndarray:
-        """Energies ``(n,)`` of poses ``X (n, D)`` equal to ``x_base`` outside ``coords``."""
-        en = self.energy
-        X, ok = _check_poses(en.model, X)
-        if en._frame is not self._frame:
-            raise EnergyError("masks: expected the masks this restriction was made for, received new ones "
-                              "(set_masks was called since): restrict again")
-        if self.full:       # the full kernel is right for any pose: nothing to check
-            return en(X)
-        n = X.shape[0]
-        en.n_evals += n
-        if ok.all():
-            out = self._fast(X)
-            bad = np.flatnonzero(out < 0.0) if out.min(initial=0.0) < 0.0 else _NO_ROWS
-        else:
-            out = np.full(n, np.inf)
-            rows = np.flatnonzero(ok)
-            bad = _NO_ROWS
-            if rows.size:
-                sub = self._fast(np.ascontiguousarray(X[rows]))
-                out[rows] = sub
-                bad = rows[sub < 0.0]
-        if bad.size:
-            raise self._violation(X, bad)
-        return out
-
-    def _fast(self, X: np.ndarray) -> np.ndarray:
-        out = np.empty(X.shape[0])
-        _k.silhouette_restricted(X, *self._args, max(1, min(X.shape[0], 8 * self.energy._threads)), out)
-        return out
-
-    def __repr__(self) -> str:
-        return (f"RestrictedSilhouetteEnergy(coords={self.coords.tolist()}, moving_capsules="
-                f"{self.moving_capsules.tolist()}, full={self.full})")
-
-
-
-def _restriction_structure(energy: SilhouetteEnergy, coords: np.ndarray) -> tuple:
-    """What a restriction to ``coords`` (sorted) depends on besides the base pose and the masks (cached
-    per energy): fixed coordinates (indices, mask), joints to recompute (rotating or moving), joints
-    to project (moving), moving capsules (processing order) and their processing positions, the
-    processing positions' moving flags, the capsules' moving flags, and whether only the full kernel
-    applies (a root coordinate, or every capsule moving)."""
-    D = energy.model.dof
-    fixed = np.ones(D, bool)
-    fixed[coords] = False
-    parents, _, ptr, dofs, _ = energy._kin
-    J = parents.size
-    rot = np.zeros(J, bool)         # a coordinate of the joint or of an ancestor
-    moved = np.zeros(J, bool)       # an ancestor rotates
-    for j in range(1, J):
-        rot[j] = rot[parents[j]] or not fixed[dofs[ptr[j]:ptr[j + 1]]].all()
-        moved[j] = rot[parents[j]] or moved[parents[j]]
-    caps, order = energy._caps, energy._order
-    moving = np.ascontiguousarray(moved[caps[:, 0]] | moved[caps[:, 1]])
-    pos = np.empty(len(order), np.int64)
-    pos[order] = np.arange(len(order))
-    mov_caps = np.array([c for c in order if moving[c]], dtype=np.int64)
-    full = bool(np.any(coords < 6)) or bool(moving.all())
-    return (np.flatnonzero(fixed).astype(np.int64), fixed, np.flatnonzero(rot | moved).astype(np.int64),
-            np.flatnonzero(moved).astype(np.int64), mov_caps, np.ascontiguousarray(pos[mov_caps]),
-            np.ascontiguousarray(moving[order]), moving, full)

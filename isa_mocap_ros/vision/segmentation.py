@@ -67,23 +67,21 @@ keeps those present in the learning frames out of the background.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import cv2
-import numba
 import numpy as np
 
+from .segmentation_config import LEARN_FROM, METHODS, ROBUST, VOTES, SegmentationConfig, SegmentationError  # noqa: F401
 from .stable_background import estimate_background
 
 from .robust_mode import (_robust_background_numba, _robust_background_numpy, _robust_finish_numba,  # noqa: F401
                           _robust_finish_numpy, _robust_pairs_numba, _robust_pairs_numpy)
+# the per-pixel kernels (numpy reference and numba) live in ._segmentation_kernels; the names tests use
+# are re-exported here
+from ._segmentation_kernels import (_KERNELS, _agree_numba, _agree_numpy, _fill_from_reliable,  # noqa: F401
+                                    _fill_numpy, _window_sum)
 
 __all__ = ["SegmentationError", "SegmentationConfig", "BackgroundSegmenter", "clean_mask"]
 
-METHODS = ("colour", "mog2", "knn")
-ROBUST = ("auto", "on", "off")
-VOTES = ("field", "window")
-LEARN_FROM = ("frames", "stable")
 #: learning frames kept for the robust background estimate (evenly spread over ``learn_frames``)
 ROBUST_MAX_SAMPLES = 25
 _VOTE_SHARE = 0.5
@@ -96,176 +94,6 @@ FIELD_PERSON_AGREE = 0.85
 #: ``vote="field"``: share of person pixels that match the background model (same measurement:
 #: 0.005-0.012)
 FIELD_PERSON_MATCH = 0.01
-
-
-class SegmentationError(ValueError):
-    """Bad configuration or a bad image given to the segmentation."""
-
-
-@dataclass(frozen=True)
-class SegmentationConfig:
-    """Settings of :class:`BackgroundSegmenter` (fixed; the segmenter holds the changing state).
-
-    Attributes
-    ----------
-    method : {"colour", "mog2", "knn"}
-        Background model (see the module docstring).
-    learn_frames : int
-        Number of first images used only to learn the background (an all-zero mask is returned for
-        them). Ignored by ``"colour"`` when a clean plate is given.
-    threshold : float
-        ``"colour"``: foreground when the normalised colour distance ``d`` exceeds this many
-        per-pixel standard deviations. ``"mog2"``: its ``varThreshold`` is ``threshold**2``
-        (the same squared Mahalanobis distance).
-    min_std : float
-        Floor of the per-pixel standard deviation, in intensity levels (uint8 units).
-    initial_std : float
-        Per-pixel standard deviation assumed when the model starts from a clean plate (one image
-        carries no noise statistics); the running update refines it.
-    std_smoothing_px : int
-        Side of the box filter applied to the learnt variance image (0 or 1: none). Ten frames
-        give a noisy per-pixel variance; averaging over a small neighbourhood steadies it.
-    update_rate : float
-        Running update rate ``rho`` in [0, 1] of the model outside the foreground (0: frozen).
-        ``"mog2"``/``"knn"`` get it as OpenCV's ``learningRate`` after the learning phase.
-    update_margin_px : int
-        The foreground is dilated by this many pixels before it is excluded from the update, so
-        the silhouette's fringe does not leak into the background.
-    max_foreground_fraction : float
-        When the raw foreground covers more than this fraction of the image, the frame is taken
-        as a global change (lighting, exposure, a bumped camera) rather than a person, and the
-        ``"colour"`` model is updated at every pixel; otherwise a selective update could never
-        learn such a change. The mask of that frame is still returned as computed.
-    shadow_suppression : bool
-        Return shadows (darker, same chromaticity) as background. ``"mog2"``/``"knn"``: OpenCV's
-        ``detectShadows``.
-    shadow_min_brightness, shadow_max_brightness : float
-        Brightness-distortion range ``alpha`` of a shadow (``"colour"`` only).
-    shadow_chroma_threshold : float
-        Largest chromaticity distortion ``CD`` of a shadow, in per-pixel standard deviations.
-    open_kernel, close_kernel : int
-        Sizes (pixels, elliptic element) of the morphological opening and closing; 0 or 1 skips.
-    min_blob_area_px : int
-        Connected foreground components (8-connected) with fewer pixels are removed.
-    history : int
-        OpenCV's ``history`` for ``"mog2"``/``"knn"``.
-    knn_dist2_threshold : float
-        OpenCV's ``dist2Threshold`` for ``"knn"`` (squared intensity distance).
-    kernel : {"numba", "numpy"}
-        Implementation of the ``"colour"`` per-pixel steps: a compiled single pass (default) or
-        the plain numpy reference (same results up to float32 rounding).
-    robust : {"auto", "on", "off"}
-        ``"colour"`` only: outlier-robust mode for images with impulsive pixel noise (ISA
-        §13.4.2) or other outliers in the learning frames (module docstring, "Robust mode").
-        ``"auto"`` switches it on when more than ``robust_detect_fraction`` of the learning
-        samples disagree with the robust background estimate; ``"on"`` / ``"off"`` force it.
-    robust_detect_fraction : float
-        ``robust="auto"``: the fraction of outlying learning samples above which the robust mode
-        is used (clean camera images: well below 1 %; 50 % pixel noise: ~0.5).
-    robust_radius : float
-        Robust background estimate: two samples of a pixel agree when every channel differs by at
-        most this many intensity levels.
-    vote : {"field", "window"}
-        Robust mode's per-frame decision (module docstring, "Robust mode"): ``"field"`` (default)
-        weighs three kinds of pixel evidence (matches the background; differs and agrees in colour
-        with a differing neighbour; differs alone) by their measured likelihoods and smooths them
-        with a mean-field Markov random field; ``"window"`` is the earlier Gaussian-window share
-        of differing pixels.
-    vote_sigma_px : float
-        ``vote="window"``: standard deviation of the Gaussian window of the neighbourhood vote,
-        pixels (0 = automatic from the measured outlier fraction: 1.4 px at 50 % pixel noise,
-        2.2 px at 70 %).
-    field_coupling : float
-        ``vote="field"``: coupling ``J`` of each pixel to its 8 neighbours in the mean-field
-        iteration (0: no smoothing, every pixel decided by its own evidence).
-    field_iterations : int
-        ``vote="field"``: mean-field iterations (synchronous; deterministic).
-    learn_from : {"frames", "stable"}
-        ``"colour"`` only. ``"frames"``: the ``learn_frames`` first images are the background samples
-        (they must show the empty scene). ``"stable"``: the person may be in them -- they are buffered,
-        and per pixel the frames where the background shows are found
-        (:func:`~isa_mocap_ros.vision.stable_background.estimate_background`: temporal mode, person
-        region, the clean plate if given as an image of the empty scene); the model then learns from
-        ``learn_frames`` background frames drawn from those.
-    """
-
-    method: str = "colour"
-    learn_frames: int = 10
-    threshold: float = 4.0
-    min_std: float = 2.0
-    initial_std: float = 5.0
-    std_smoothing_px: int = 5
-    update_rate: float = 0.02
-    update_margin_px: int = 3
-    max_foreground_fraction: float = 0.5
-    shadow_suppression: bool = False
-    shadow_min_brightness: float = 0.4
-    shadow_max_brightness: float = 1.0
-    shadow_chroma_threshold: float = 3.0
-    open_kernel: int = 3
-    close_kernel: int = 3
-    min_blob_area_px: int = 50
-    history: int = 200
-    knn_dist2_threshold: float = 400.0
-    kernel: str = "numba"
-    robust: str = "auto"
-    robust_detect_fraction: float = 0.05
-    robust_radius: float = 20.0
-    vote: str = "field"
-    vote_sigma_px: float = 0.0
-    field_coupling: float = 0.3
-    field_iterations: int = 8
-    learn_from: str = "frames"
-
-    def __post_init__(self) -> None:
-        if self.method not in METHODS:
-            raise SegmentationError(f"method: expected one of {METHODS}, got {self.method!r}")
-        if self.kernel not in ("numba", "numpy"):
-            raise SegmentationError(f"kernel: expected 'numba' or 'numpy', got {self.kernel!r}")
-        if self.robust not in ROBUST:
-            raise SegmentationError(f"robust: expected one of {ROBUST}, got {self.robust!r}")
-        if not (0.0 < self.robust_detect_fraction < 1.0):
-            raise SegmentationError("robust_detect_fraction: expected a number in (0, 1), got "
-                                    f"{self.robust_detect_fraction!r}")
-        if not (np.isfinite(self.robust_radius) and self.robust_radius >= 0):
-            raise SegmentationError(f"robust_radius: expected a finite number >= 0, got {self.robust_radius!r}")
-        if self.learn_from not in LEARN_FROM:
-            raise SegmentationError(f"learn_from: expected one of {LEARN_FROM}, got {self.learn_from!r}")
-        if self.learn_from == "stable" and self.learn_frames < 3:
-            raise SegmentationError(f"learn_frames: learn_from 'stable' needs at least 3, got {self.learn_frames}")
-        if self.learn_from == "stable" and self.method != "colour":
-            raise SegmentationError(f"learn_from: 'stable' needs method 'colour', got method {self.method!r}")
-        if self.vote not in VOTES:
-            raise SegmentationError(f"vote: expected one of {VOTES}, got {self.vote!r}")
-        if not (np.isfinite(self.field_coupling) and 0.0 <= self.field_coupling <= 10.0):
-            raise SegmentationError(f"field_coupling: expected a number in [0, 10], got {self.field_coupling!r}")
-        _check_int("field_iterations", self.field_iterations, 0)
-        if not (np.isfinite(self.vote_sigma_px) and 0.0 <= self.vote_sigma_px <= 50.0):
-            raise SegmentationError(f"vote_sigma_px: expected a number in [0, 50], got {self.vote_sigma_px!r}")
-        _check_int("learn_frames", self.learn_frames, 1)
-        for name in ("threshold", "min_std", "initial_std", "shadow_chroma_threshold",
-                     "knn_dist2_threshold"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
-                raise SegmentationError(f"{name}: expected a finite number > 0, got {value!r}")
-        if not (0.0 <= self.update_rate <= 1.0):
-            raise SegmentationError(f"update_rate: expected a number in [0, 1], got {self.update_rate!r}")
-        if not (0.0 < self.max_foreground_fraction <= 1.0):
-            raise SegmentationError("max_foreground_fraction: expected a number in (0, 1], got "
-                                    f"{self.max_foreground_fraction!r}")
-        if not (0.0 <= self.shadow_min_brightness < self.shadow_max_brightness):
-            raise SegmentationError(
-                "shadow_min_brightness, shadow_max_brightness: expected 0 <= min < max, got "
-                f"{self.shadow_min_brightness!r}, {self.shadow_max_brightness!r}")
-        for name in ("std_smoothing_px", "update_margin_px", "open_kernel", "close_kernel",
-                     "min_blob_area_px"):
-            _check_int(name, getattr(self, name), 0)
-        _check_int("history", self.history, 1)
-
-
-def _check_int(name: str, value, lowest: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lowest:
-        raise SegmentationError(f"{name}: expected an integer >= {lowest}, got {value!r}")
 
 
 def _ellipse(size: int) -> np.ndarray:
@@ -307,130 +135,6 @@ def clean_mask(mask: np.ndarray, *, open_kernel: int = 3, close_kernel: int = 3,
             if not keep[1:].all():  # else nothing to remove: out is already 255 exactly on the labels > 0
                 out = np.take(np.where(keep, np.uint8(255), np.uint8(0)), labels)
     return out
-
-
-# --------------------------------------------------------------------------- colour-model kernels
-# Two implementations of the same per-pixel steps: a plain numpy reference and a single-pass numba
-# kernel (the default, ~10x faster); test/test_segmentation.py checks that they agree.
-
-def _foreground_numpy(img, mu, var, min_var, thr2, shadow, a_lo, a_hi, cd2_max):
-    """Raw foreground (H, W) uint8 0/1: ``d^2 = sum_c (I-mu)^2 / s^2 > thr2``, minus shadows."""
-    imgf = img.astype(np.float32)
-    inv_var = 1.0 / np.maximum(var, min_var)
-    diff = imgf - mu
-    d2 = np.einsum("hwc,hwc->hw", diff * diff, inv_var)          # d^2 = sum_c (I-mu)^2 / s^2
-    fg = d2 > thr2
-    if shadow:
-        num = np.einsum("hwc,hwc->hw", imgf * mu, inv_var)
-        den = np.maximum(np.einsum("hwc,hwc->hw", mu * mu, inv_var), np.float32(1e-6))
-        alpha = num / den                                           # brightness distortion
-        r = imgf - alpha[:, :, None] * mu
-        cd2 = np.einsum("hwc,hwc->hw", r * r, inv_var)              # chromaticity distortion^2
-        fg &= ~((alpha >= a_lo) & (alpha <= a_hi) & (cd2 < cd2_max))
-    return fg.view(np.uint8)
-
-
-def _update_numpy(img, mu, var, frozen, rho):
-    """In place, where ``frozen == 0``: ``mu += rho (I - mu)``, ``s^2 += rho ((I - mu)^2 - s^2)``."""
-    diff = img.astype(np.float32) - mu
-    where = (frozen == 0)[:, :, None]
-    np.add(mu, rho * diff, out=mu, where=where)
-    np.add(var, rho * (diff * diff - var), out=var, where=where)
-
-
-@numba.njit(cache=True, nogil=True)
-def _foreground_numba(img, mu, var, min_var, thr2, shadow, a_lo, a_hi, cd2_max):  # pragma: no cover
-    H, W, C = img.shape
-    out = np.zeros((H, W), np.uint8)
-    for y in range(H):
-        for x in range(W):
-            d2 = np.float32(0.0)
-            num = np.float32(0.0)
-            den = np.float32(0.0)
-            for c in range(C):
-                iv = np.float32(1.0) / max(var[y, x, c], min_var)
-                i = np.float32(img[y, x, c])
-                m = mu[y, x, c]
-                d = i - m
-                d2 += d * d * iv
-                num += i * m * iv
-                den += m * m * iv
-            out[y, x] = d2 > thr2   # stored without a branch: under pixel noise it is a coin flip
-            if shadow and d2 > thr2:
-                alpha = num / max(den, np.float32(1e-6))
-                if alpha >= a_lo and alpha <= a_hi:
-                    cd2 = np.float32(0.0)
-                    for c in range(C):
-                        iv = np.float32(1.0) / max(var[y, x, c], min_var)
-                        r = np.float32(img[y, x, c]) - alpha * mu[y, x, c]
-                        cd2 += r * r * iv
-                    if cd2 < cd2_max:
-                        out[y, x] = 0
-    return out
-
-
-@numba.njit(cache=True, nogil=True)
-def _update_numba(img, mu, var, frozen, rho):  # pragma: no cover
-    H, W, C = img.shape
-    for y in range(H):
-        for x in range(W):
-            if frozen[y, x] == 0:
-                for c in range(C):
-                    d = np.float32(img[y, x, c]) - mu[y, x, c]
-                    mu[y, x, c] += rho * d
-                    var[y, x, c] += rho * (d * d - var[y, x, c])
-
-
-def _agree_numpy(img, fg, radius):
-    """``(H, W)`` uint8: 1 where ``fg`` is set and one of the 8 neighbours is set too with every
-    colour channel within ``radius`` levels (two random colours rarely agree: ~0.4 % at 20 levels)."""
-    H, W = fg.shape
-    im = img.astype(np.int16)
-    D = fg > 0
-    out = np.zeros((H, W), bool)
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            if dy == 0 and dx == 0:
-                continue
-            ys, ye, xs, xe = max(0, dy), H + min(0, dy), max(0, dx), W + min(0, dx)
-            a, b = im[ys:ye, xs:xe], im[ys - dy:ye - dy, xs - dx:xe - dx]
-            ok = (np.abs(a - b).max(axis=2) <= radius) & D[ys:ye, xs:xe] & D[ys - dy:ye - dy, xs - dx:xe - dx]
-            out[ys:ye, xs:xe] |= ok
-    return out.astype(np.uint8)
-
-
-@numba.njit(cache=True, nogil=True)
-def _agree_numba(img, fg, radius):  # pragma: no cover - compiled
-    # agreement is symmetric: each pair of 8-neighbours is tested once (its forward half: right,
-    # down-left, down, down-right) and marks both pixels
-    H, W, C = img.shape
-    out = np.zeros((H, W), np.uint8)
-    for y in range(H):
-        for x in range(W):
-            if fg[y, x] == 0:
-                continue
-            for k in range(4):
-                dy = 0 if k == 0 else 1
-                dx = 1 if k == 0 else k - 2
-                yy, xx = y + dy, x + dx
-                if yy >= H or xx < 0 or xx >= W or fg[yy, xx] == 0:
-                    continue
-                if out[y, x] and out[yy, xx]:
-                    continue
-                ok = True
-                for c in range(C):
-                    if abs(np.int32(img[y, x, c]) - np.int32(img[yy, xx, c])) > radius:
-                        ok = False
-                        break
-                if ok:
-                    out[y, x] = 1
-                    out[yy, xx] = 1
-    return out
-
-
-#: per kernel: foreground, model update, robust pairs (one new sample), robust finish, colour agreement
-_KERNELS = {"numpy": (_foreground_numpy, _update_numpy, _robust_pairs_numpy, _robust_finish_numpy, _agree_numpy),
-            "numba": (_foreground_numba, _update_numba, _robust_pairs_numba, _robust_finish_numba, _agree_numba)}
 
 
 class BackgroundSegmenter:
@@ -794,12 +498,6 @@ class BackgroundSegmenter:
 _FIELD_KERNEL = np.array([[1, 1, 1], [1, 0, 1], [1, 1, 1]], np.float32)
 
 
-def _window_sum(a: np.ndarray, sigma: float) -> np.ndarray:
-    """Gaussian-weighted window sum (truncated at 2.5 sigma)."""
-    k = 2 * int(np.ceil(2.5 * sigma)) + 1
-    return cv2.GaussianBlur(a, (k, k), sigma, borderType=cv2.BORDER_REFLECT)
-
-
 def _sample_indices(k: int) -> set[int]:
     """Indices of the learning images kept for the robust estimate (at most ROBUST_MAX_SAMPLES)."""
     return set(np.unique(np.rint(np.linspace(0, k - 1, min(k, ROBUST_MAX_SAMPLES))).astype(int)).tolist())
@@ -817,53 +515,3 @@ def _auto_sigma(f: float, z: float | None = None) -> float:
     s = np.sqrt(z * z * f / (np.pi * max(1.0 - f, 1e-3)))
     return float(min(max(s, 0.5), 5.0))
 
-
-def _fill_from_reliable(arr: np.ndarray, reliable: np.ndarray, side: int, *, smooth: bool = False) -> np.ndarray:
-    """Box mean of ``arr`` over reliable pixels; used at unreliable pixels (everywhere if ``smooth``).
-
-    The box sums are OpenCV's; the rest is :func:`_fill_numpy`'s arithmetic, compiled
-    (:func:`_fill_numba`, the same float32 operations: the same bits; ~4x less time)."""
-    shape = arr.shape
-    a = np.ascontiguousarray(arr.reshape(shape[0], shape[1], -1), dtype=np.float32)
-    r = reliable.astype(np.float32)
-    num = cv2.boxFilter(_masked(a, r), -1, (side, side), normalize=False).reshape(a.shape)
-    den = cv2.boxFilter(r, -1, (side, side), normalize=False)
-    return _fill_numba(a, r, np.ascontiguousarray(num), den, smooth).reshape(shape)
-
-
-def _fill_numpy(a, r, num, den, smooth):
-    """The reference of :func:`_fill_numba` (what :func:`_fill_from_reliable` computed in numpy)."""
-    den = den[:, :, None]
-    mean = np.where(den > 0, num / np.maximum(den, 1e-6), a)
-    out = mean if smooth else np.where(r[:, :, None] > 0, a, mean)
-    return out.astype(np.float32)
-
-
-@numba.njit(cache=True, nogil=True)
-def _masked(a, r):  # pragma: no cover - compiled
-    """``a * r[:, :, None]`` (float32)."""
-    H, W, C = a.shape
-    out = np.empty_like(a)
-    for y in range(H):
-        for x in range(W):
-            for c in range(C):
-                out[y, x, c] = a[y, x, c] * r[y, x]
-    return out
-
-
-@numba.njit(cache=True, nogil=True)
-def _fill_numba(a, r, num, den, smooth):  # pragma: no cover - compiled
-    H, W, C = a.shape
-    out = np.empty_like(a)
-    tiny = np.float32(1e-6)
-    for y in range(H):
-        for x in range(W):
-            dn = den[y, x]
-            for c in range(C):
-                if not smooth and r[y, x] > 0:
-                    out[y, x, c] = a[y, x, c]
-                elif dn > 0:
-                    out[y, x, c] = num[y, x, c] / max(dn, tiny)
-                else:
-                    out[y, x, c] = a[y, x, c]
-    return out
