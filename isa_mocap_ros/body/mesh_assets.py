@@ -214,7 +214,7 @@ def convert(src: Path, dst: Path) -> Path:
     if "CC0" not in licence:
         raise AssetError(f"{src / 'LICENSE.md'}: expected the CC0 licence of the MakeHuman assets")
     dst.parent.mkdir(parents=True, exist_ok=True)
-    tmp = dst.with_suffix(".tmp.npz")
+    tmp = dst.with_name(f"{dst.stem}.{os.getpid()}.tmp.npz")   # own file: test workers may convert at once
     np.savez_compressed(
         tmp, format=np.int32(_FORMAT), verts=verts.astype(np.float32),
         tris_body=_triangles(groups["body"]), tris_skirt=_triangles(groups.get("helper-skirt", [])),
