@@ -107,7 +107,7 @@ def _bench_ackley(quick: bool, ctx: dict) -> dict:
 
 
 def _bench_adapters(quick: bool, ctx: dict) -> dict:
-    from isa_mocap_ros.bench import adapters as bench_adapters
+    from msg_adapters import bench as bench_adapters
 
     return {"rows": json_of(bench_adapters, ["--number", "5", "--repeat", "2"] if quick else [])}
 
