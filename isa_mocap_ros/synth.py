@@ -329,13 +329,13 @@ class SceneRenderer:
             Per view: 255 where the body is (before the distortions), else 0.
         """
         images, masks = [], []
-        E = None if pose is None else self.endpoints(pose)
+        body = None if pose is None else self._body(pose)
         for i, cam in enumerate(self.rig.cameras):
-            if E is None:
+            if body is None:
                 img = self.backgrounds[i].copy()
                 mask = np.zeros((cam.height, cam.width), np.uint8)
             else:
-                img, mask = render(cam, E, self.model.capsule_radii, self.colors, background=self.backgrounds[i])
+                img, mask = self._draw(cam, body, self.backgrounds[i])
             if self.noise > 0 or self.occluders > 0:
                 rng = frame_rng(self.seed, frame, i)
                 if self.noise > 0:
@@ -345,6 +345,14 @@ class SceneRenderer:
             images.append(img)
             masks.append(mask)
         return images, masks
+
+    def _body(self, pose):
+        """What :meth:`_draw` needs of one pose: its capsule end points."""
+        return self.endpoints(pose)
+
+    def _draw(self, cam, body, background: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Image and exact silhouette of ``body`` (:meth:`_body`) in one view over ``background``."""
+        return render(cam, body, self.model.capsule_radii, self.colors, background=background)
 
     def reference_masks(self, pose) -> list[np.ndarray]:
         """:func:`render_mask` of ``pose`` in every view (for checks)."""
@@ -378,27 +386,14 @@ class MeshSceneRenderer(SceneRenderer):
 
         return pose_mesh(self.clip.mesh, self.clip.driver, j, plan=self._plan)
 
-    def render(self, pose, frame: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """As :meth:`SceneRenderer.render`, ``pose`` being the clip frame index (or None: empty)."""
+    def _body(self, pose):
+        """The posed vertices of clip frame ``pose`` (an index)."""
+        return self.posed(int(pose))[0]
+
+    def _draw(self, cam, body, background: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         from .vision.raster import render_mesh
 
-        V = None if pose is None else self.posed(int(pose))[0]
-        images, masks = [], []
-        for i, cam in enumerate(self.rig.cameras):
-            if V is None:
-                img = self.backgrounds[i].copy()
-                mask = np.zeros((cam.height, cam.width), np.uint8)
-            else:
-                img, mask = render_mesh(cam, V, self.clip.mesh.tris, self.colors, background=self.backgrounds[i])
-            if self.noise > 0 or self.occluders > 0:
-                rng = frame_rng(self.seed, frame, i)
-                if self.noise > 0:
-                    img = pixel_noise(img, self.noise, rng=rng)
-                if self.occluders > 0:
-                    img = occluders(img, self.occluders, rng=rng)
-            images.append(img)
-            masks.append(mask)
-        return images, masks
+        return render_mesh(cam, body, self.clip.mesh.tris, self.colors, background=background)
 
     def reference_masks(self, pose) -> list[np.ndarray]:
         from .vision.raster import mesh_mask
