@@ -46,17 +46,7 @@ def plot_sequence(path: Path, model, poses: np.ndarray, truth_model, truth_poses
         ax[i].set_ylabel(f"{side} knee (deg)")
         ax[i].legend(loc="upper right", fontsize=8)
         ax[i].set_title(f"{side} knee flexion, RMSE {np.sqrt(np.mean(np.square(err[:, i]))):.2f} deg", fontsize=9)
-    ax[2].plot(times_s, fe, "b-")
-    ax[2].set_ylabel("mean joint error (mm)")
-    ax[2].set_xlabel("time (s)")
-    ax[2].set_title(f"Eq. 20 per frame: mean {fe.mean():.1f} mm, max {fe.max():.1f} mm", fontsize=9)
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return _error_panel_and_save(fig, ax[2], times_s, fe, "Eq. 20 per frame", title, path)
 
 
 def score(model, seq, poses_by_stamp: dict) -> dict | None:
@@ -127,11 +117,18 @@ def plot_marker_score(path: Path, model, poses: np.ndarray, truth_names, truth_m
             ax[i].plot(times_s, ke, "r--", lw=1.5, label="estimate")
             ax[i].legend(loc="upper right", fontsize=8)
         ax[i].set_ylabel(f"{side} knee (deg)")
-    fe = sc["frame_errors_mm"]
-    ax[2].plot(times_s, fe, "b-")
-    ax[2].set_ylabel("mean joint error (mm)")
-    ax[2].set_xlabel("time (s)")
-    ax[2].set_title(f"Eq. 20 per frame (by marker name): mean {fe.mean():.1f} mm, max {fe.max():.1f} mm", fontsize=9)
+    return _error_panel_and_save(fig, ax[2], times_s, sc["frame_errors_mm"], "Eq. 20 per frame (by marker name)",
+                                 title, path)
+
+
+def _error_panel_and_save(fig, ax, times_s, fe, what: str, title: str | None, path) -> Path:
+    """The per-frame error panel of the knee plots, then the figure saved to ``path`` and closed."""
+    import matplotlib.pyplot as plt
+
+    ax.plot(times_s, fe, "b-")
+    ax.set_ylabel("mean joint error (mm)")
+    ax.set_xlabel("time (s)")
+    ax.set_title(f"{what}: mean {fe.mean():.1f} mm, max {fe.max():.1f} mm", fontsize=9)
     if title:
         fig.suptitle(title)
     fig.tight_layout()
