@@ -127,3 +127,18 @@ def cmu_walk() -> Path:
     if not CMU_WALK.exists():
         pytest.skip(f"CMU motion file not found at {CMU_WALK} (set ISA_MOCAP_SHARED to the shared/ folder)")
     return CMU_WALK
+
+
+def joint_states_by_stamp(bag: Path) -> dict:
+    """``/mocap/joint_states`` of a recorded bag: positions (an array) by header stamp (ns)."""
+    import numpy as np
+
+    import msg_adapters as ma
+    from isa_mocap_ros.bag import BagReader
+
+    out = {}
+    with BagReader(bag) as r:
+        for m in r.messages(["/mocap/joint_states"]):
+            msg = ma.from_cdr(m.data, m.type)
+            out[ma.stamp_to_ns(msg.header)] = np.array(msg.position)
+    return out

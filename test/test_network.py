@@ -15,6 +15,7 @@ import pytest
 
 import msg_adapters as ma
 from isa_mocap_ros.bag import BagReader
+from conftest import joint_states_by_stamp
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.timeout(600)]
 REPO = Path(__file__).resolve().parents[1]
@@ -23,13 +24,6 @@ CLI = [sys.executable, "-m", "isa_mocap_ros.cli.main"]
 SETTINGS = ["--optimizer", "isa", "--evals", "300", "--seed", "3"]
 
 
-def _joint_states(bag: Path) -> dict[int, np.ndarray]:
-    out = {}
-    with BagReader(bag) as r:
-        for m in r.messages(["/mocap/joint_states"]):
-            msg = ma.from_cdr(m.data, m.type)
-            out[ma.stamp_to_ns(msg.header)] = np.array(msg.position)
-    return out
 
 
 def _run(out: Path, rosenv: dict) -> dict:
@@ -85,7 +79,7 @@ def test_run_processes_every_frame_set_and_writes_the_summary(runs):
 
 def test_two_lockstep_runs_give_identical_joint_states(runs):
     base, _ = runs
-    a, b = _joint_states(base / "run0" / "estimates"), _joint_states(base / "run1" / "estimates")
+    a, b = joint_states_by_stamp(base / "run0" / "estimates"), joint_states_by_stamp(base / "run1" / "estimates")
     assert a.keys() == b.keys() and len(a) > 0
     for s in a:
         assert np.array_equal(a[s], b[s]), s
@@ -93,7 +87,7 @@ def test_two_lockstep_runs_give_identical_joint_states(runs):
 
 def test_network_equals_the_offline_tracker(runs):
     base, _ = runs
-    node, offline = _joint_states(base / "run0" / "estimates"), _joint_states(base / "track" / "estimates")
+    node, offline = joint_states_by_stamp(base / "run0" / "estimates"), joint_states_by_stamp(base / "track" / "estimates")
     assert node.keys() == offline.keys()
     for s in node:
         assert np.array_equal(node[s], offline[s]), (s, np.abs(node[s] - offline[s]).max())

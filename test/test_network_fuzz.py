@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import msg_adapters as ma
 from isa_mocap_ros.bag import BagReader
+from conftest import joint_states_by_stamp
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.timeout(600)]
 HERE = Path(__file__).parent
@@ -31,13 +31,6 @@ CLI = [sys.executable, "-m", "isa_mocap_ros.cli.main"]
 SETTINGS = ["--optimizer", "isa", "--evals", "300", "--seed", "3"]
 
 
-def _joint_states(bag: Path) -> dict[int, np.ndarray]:
-    out = {}
-    with BagReader(bag) as r:
-        for m in r.messages(["/mocap/joint_states"]):
-            msg = ma.from_cdr(m.data, m.type)
-            out[ma.stamp_to_ns(msg.header)] = np.array(msg.position)
-    return out
 
 
 def test_a_fuzzer_on_every_input_topic_changes_no_estimate(spawn, rosenv, tmp_path):
@@ -67,7 +60,7 @@ def test_a_fuzzer_on_every_input_topic_changes_no_estimate(spawn, rosenv, tmp_pa
     print(f"mean joint error: network under the fuzzer {s['mpjpe_mm']:.3f} mm, offline {offline['mpjpe_mm']:.3f} mm")
     assert abs(s["mpjpe_mm"] - offline["mpjpe_mm"]) <= 1.0
     # lockstep is deterministic: nothing the fuzzer sent got into a result
-    node, ref = _joint_states(tmp_path / "run" / "estimates"), _joint_states(tmp_path / "track" / "estimates")
+    node, ref = joint_states_by_stamp(tmp_path / "run" / "estimates"), joint_states_by_stamp(tmp_path / "track" / "estimates")
     assert node.keys() == ref.keys()
     for stamp in node:
         assert np.array_equal(node[stamp], ref[stamp]), (stamp, np.abs(node[stamp] - ref[stamp]).max())
