@@ -66,6 +66,10 @@ def register(sub) -> None:
     p.add_argument("--prior", default=None, metavar="NPZ", help="Parzen prior file (with --prior-eta)")
     p.add_argument("--prior-eta", type=float, default=0.0, help="prior weight (0 = off)")
     p.add_argument("--energy", choices=("fast", "exact"), default="fast", help="silhouette energy method")
+    p.add_argument("--silhouette-core-px", type=float, default=None, metavar="PX",
+                   help="silhouette energy: a foreground pixel d px from the background counts min(1, d/PX) in "
+                        "the term of foreground the model misses (the rim of clothes and soft tissue asks less "
+                        "to be covered; <= 1: Eq. 4 as printed; default: the tracker's default)")
     p.add_argument("--gate-margin-px", type=int, default=None, metavar="PX",
                    help="mask gate: keep only foreground components within PX pixels of the predicted silhouette "
                         "(0 = off; default: the tracker's default)")
@@ -263,6 +267,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                   energy=args.energy, prior_eta=args.prior_eta, keypoint_weight=kp_weight)
     if args.predictor:
         cfg_kw["predictor"] = args.predictor
+    if getattr(args, "silhouette_core_px", None) is not None:
+        cfg_kw["silhouette_core_px"] = args.silhouette_core_px
     if getattr(args, "gate_margin_px", None) is not None:
         cfg_kw["gate_margin_px"] = args.gate_margin_px
     if getattr(args, "no_hull", False):
@@ -391,6 +397,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                      "stride": stride, "shape": shape_arg,
                      "optimizer_params": cfg.params(), "model_dof": model.dof, "seed": args.seed,
                      "gate_margin_px": cfg.gate_margin_px, "hull_filter": cfg.hull_filter,
+                     "silhouette_core_px": cfg.silhouette_core_px,
                      "view_weights": cfg.view_weights,
                      "init_confirm_frames": cfg.init_confirm_frames,
                      "partition_order": list(cfg.partition_order),

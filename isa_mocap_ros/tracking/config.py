@@ -154,6 +154,8 @@ class TrackerConfig:
         Fast energy's sample size: model-template points per view (640).
     n_mask_points : int
         Fast energy's sample size: foreground pixels per view (384).
+    silhouette_core_px : float
+        Term 2 of Eq. 4 counts a foreground pixel by min(1, d / this), d its distance to the background, px: clothes and soft tissue at the silhouette's rim ask less to be covered (0 = Eq. 4 as printed).
     seed : int
         Seed of every per-frame stream ``default_rng([seed, frame, ...])`` (0).
     init_yaw_steps : int
@@ -235,6 +237,7 @@ class TrackerConfig:
     downsample: int = 1
     n_model_points: int = 640
     n_mask_points: int = 384
+    silhouette_core_px: float = 0.0
     seed: int = 0
     init_yaw_steps: int = 24
     init_refine_evals: int = 400
@@ -300,6 +303,7 @@ class TrackerConfig:
         _check_number("downsample", self.downsample, lo=1, integer=True)
         _check_number("n_model_points", self.n_model_points, lo=1, integer=True)
         _check_number("n_mask_points", self.n_mask_points, lo=0, integer=True)
+        _check_number("silhouette_core_px", self.silhouette_core_px, lo=0.0)
         _check_number("seed", self.seed, lo=0, integer=True)
         _check_number("init_yaw_steps", self.init_yaw_steps, lo=4, integer=True)
         _check_number("init_refine_evals", self.init_refine_evals, lo=0, integer=True)

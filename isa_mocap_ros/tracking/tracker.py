@@ -109,6 +109,7 @@ class Tracker:
 
             energy = SilhouetteEnergy(model, cams, None, method=config.energy, downsample=config.downsample,
                                       n_model_points=config.n_model_points, n_mask_points=config.n_mask_points,
+                                      core_px=config.silhouette_core_px,
                                       rng=np.random.default_rng([config.seed, 2**32 - 1]))
         if not (callable(energy) and hasattr(energy, "set_masks")):
             raise TrackerError(f"energy: expected an object with set_masks() and __call__, received "
