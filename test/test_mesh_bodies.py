@@ -261,3 +261,14 @@ def test_score_markers_reports_the_offset_removed_error(tmp_path):
     assert sc["per_marker_mm"]["left_shoulder"] == pytest.approx(70.0, abs=1e-6)
     assert sc["offset_removed_mpjpe_mm"] < 0.5 < sc["mpjpe_mm"]
     assert sc["per_marker_offset_mm"]["left_shoulder"][2] == pytest.approx(70.0, abs=0.5)
+
+
+def test_heading_error_sees_a_body_tracked_backwards():
+    from isa_mocap_ros.eval.metrics import heading_errors_deg
+
+    T = np.zeros((3, 2, 3))
+    T[:, 0, 1], T[:, 1, 1] = 0.1, -0.1              # left hip at +y, right at -y
+    P = T.copy()
+    P[1, :, 1] *= -1                                 # frame 1: the hips swapped (facing backwards)
+    P[2, 0, :2], P[2, 1, :2] = [0.1, 0.0], [-0.1, 0.0]  # frame 2: turned 90° (left hip at +x)
+    assert np.allclose(heading_errors_deg(P, T, 0, 1), [0.0, 180.0, 90.0])

@@ -12,7 +12,7 @@ from __future__ import annotations
 #: times ROS message conversion and so lives beside the adapters (only ``msg_adapters``, ``nodes`` and
 #: ``cli`` import ROS)
 BENCHES: list[str] = ["ackley", "adapters", "render", "energy", "compare", "robustness", "speed", "keypoints",
-                      "mesh_baseline"]
+                      "mesh_baseline", "mesh"]
 _ELSEWHERE = {"adapters": "msg_adapters.bench"}
 
 

@@ -23,7 +23,7 @@ import numpy as np
 __all__ = ["MetricsError", "joint_errors_mm", "frame_errors_mm", "mpjpe_mm", "max_frame_error_mm",
            "knee_rmse_deg", "knee_errors_deg", "per_joint_angle_rmse_deg", "angle_difference",
            "shared_markers", "marker_positions", "score_markers", "knee_flexion_from_points",
-           "body_frames", "offset_removed_errors_mm"]
+           "body_frames", "offset_removed_errors_mm", "heading_errors_deg"]
 
 
 class MetricsError(ValueError):
@@ -87,6 +87,17 @@ def body_frames(true_joints, left_hip: int, right_hip: int) -> np.ndarray:
             last = np.column_stack([x, np.cross([0.0, 0.0, 1.0], x), [0.0, 0.0, 1.0]])
         R[f] = last
     return R
+
+
+def heading_errors_deg(pred_joints, true_joints, left_hip: int, right_hip: int) -> np.ndarray:
+    """Per frame, the angle ``(F,)`` in degrees (0-180) between the estimated and the true horizontal hip
+    axes (right hip to left hip): near 180° the body is tracked facing backwards (a silhouette seen from the
+    front looks nearly like one seen from the back)."""
+    P, T = _pair(pred_joints, true_joints)
+    a = (P[:, left_hip] - P[:, right_hip])[:, :2]
+    b = (T[:, left_hip] - T[:, right_hip])[:, :2]
+    c = np.sum(a * b, axis=1) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-12)
+    return np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
 
 
 def offset_removed_errors_mm(pred_joints, true_joints, frames=None) -> tuple[np.ndarray, np.ndarray]:
@@ -308,7 +319,9 @@ def score_markers(model, poses, truth_names, truth_markers) -> dict:
         and the same error with each joint's mean offset in the body removed
         (:func:`offset_removed_errors_mm`, body axes from the true hips, else the world axes):
         ``offset_removed_mpjpe_mm``, ``offset_removed_max_frame_error_mm``, ``offset_removed_frame_errors_mm``
-        (F,), ``per_marker_offset_mm`` (name -> [lateral, forward, up] mean offset, mm).
+        (F,), ``per_marker_offset_mm`` (name -> [lateral, forward, up] mean offset, mm); with both hips,
+        ``heading_errors_deg`` (F,) (:func:`heading_errors_deg`) and ``backwards_share`` (the share of frames
+        whose heading is more than 90° off).
     """
     X = _poses("poses", poses, model.dof)
     T = _points("truth_markers", truth_markers)
@@ -329,6 +342,9 @@ def score_markers(model, poses, truth_names, truth_markers) -> dict:
            "knee_rmse_deg": float("nan"), "knee_errors_deg": None}
     hips = [shared.index(n) for n in ("left_hip", "right_hip") if n in shared]
     B = body_frames(Pt, *hips) if len(hips) == 2 else None
+    if len(hips) == 2:
+        he = heading_errors_deg(Pe, Pt, *hips)
+        out.update(heading_errors_deg=he, backwards_share=float(np.mean(he > 90.0)))
     je0, off = offset_removed_errors_mm(Pe, Pt, B)
     fe0 = je0.mean(axis=1)
     out.update(offset_removed_mpjpe_mm=float(fe0.mean()), offset_removed_max_frame_error_mm=float(fe0.max()),

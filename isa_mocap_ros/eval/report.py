@@ -81,6 +81,8 @@ def score(model, seq, poses_by_stamp: dict) -> dict | None:
         out["offset_removed_mpjpe_mm"] = sc["offset_removed_mpjpe_mm"]
         out["offset_removed_max_frame_error_mm"] = sc["offset_removed_max_frame_error_mm"]
         out["per_marker_offset_mm"] = sc["per_marker_offset_mm"]
+        if "backwards_share" in sc:
+            out["backwards_share"] = sc["backwards_share"]
         out.update(scored_by="markers", stamps=stamps, worst_frame_stamp_ns=int(stamps[sc["worst_frame"]]))
         return out
     if not seq.has_truth:
