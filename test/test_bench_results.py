@@ -47,6 +47,11 @@ def test_all_quick_writes_the_page(tmp_path):
             "render, robustness, speed") in md2
     assert "## Robustness" in md2 and "## Silhouette energy speed" in md2
     assert main(["bench", "all", "--quick", "--only", "nope", "--results", str(page)]) == 2
+    # --render runs nothing: every section from the saved results
+    assert main(["bench", "all", "--render", "--results", str(page), "--out", str(tmp_path / "work")]) == 0
+    md3 = page.read_text()
+    assert "--render" in md3 and ("not re-run this time (last saved results shown): ackley, adapters, compare, energy, "
+                                  "mesh, mesh_baseline, render, robustness, speed") in md3
 
 
 def test_findings_and_targets_from_data():

@@ -128,6 +128,12 @@ def render_markdown(res: dict) -> str:
     if d["name"] == "mesh quick":
         L += ["> **Smoke run** (`isa-mocap bench mesh --quick`): the numbers say nothing about the tracker.", ""]
     seq = d["sequences"][0]
+    full = (list(seeds) == list(br.DEFAULT_SEEDS) and list(d["conditions"]) == list(CONDITIONS)
+            and round(seq["duration_s"] * seq["fps"]) == FRAMES and len(d["sequences"]) == len(SUBJECTS))
+    if d["name"] != "mesh quick" and not full:
+        L += [f"> **Reduced run** (`{res.get('command', 'isa-mocap bench mesh')}`): fewer seeds, conditions or frames "
+              f"than the design ({len(SUBJECTS)} subjects x {len(CONDITIONS)} conditions x 8 seeds, {FRAMES} frames); "
+              "`make bench` runs it in full.", ""]
     L += [f"Skinned human meshes (MakeHuman/MPFB2), generated walk, {round(seq['duration_s'] * seq['fps'])} frames, "
           f"4 views {seq['width']}x{seq['height']}; shape calibrated from the images, automatic initialization, "
           f"{d['optimizer']} {d['evals']} evaluations per frame, tracker seeds {', '.join(map(str, seeds))}; every "

@@ -1,6 +1,6 @@
 """``isa-mocap bench all``: run every benchmark and regenerate the results page (``docs/RESULTS.md``).
 
-``isa-mocap bench all [--quick] [--results PATH] [--out DIR] [--jobs N] [--only A,B]``. Runs, in
+``isa-mocap bench all [--quick] [--results PATH] [--out DIR] [--jobs N] [--only A,B] [--render]``. Runs, in
 order, ackley, adapters, render, energy, compare, robustness, speed, mesh_baseline (mesh bodies vs
 capsules, reduced) and mesh (the headline: mesh subjects, automatic shape and initialization) with their default designs (compare and robustness on mesh bodies since issue 32)
 (``--quick``: their ``--quick`` variants), then writes
@@ -14,7 +14,8 @@ Work files (the comparison's resumable ``cells.jsonl``, the robustness bags) go 
 (default ``out/bench``; with ``--quick`` a temporary directory): ``bench all --resume`` continues an
 interrupted comparison from its ``cells.jsonl`` (without it, the previous cells are moved to
 ``cells.jsonl.prev`` so results of older code never mix with new ones); the robustness bags are
-cached there by their parameters. ``--only`` runs a subset; the page then shows the
+cached there by their parameters. ``--render`` runs nothing and rewrites the page from the saved
+results. ``--only`` runs a subset; the page then shows the
 other benches' last saved raw results when ``results/<bench>.json`` exists (and says so).
 """
 from __future__ import annotations
@@ -61,6 +62,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resume", action="store_true",
                    help="continue the comparison of the last run in --out (its cells.jsonl) instead of starting anew; "
                         "only with unchanged code")
+    p.add_argument("--render", action="store_true",
+                   help="run nothing: rewrite the page from the saved results (PATH's folder/results/<bench>.json), "
+                        "e.g. after one bench was run alone with --json there")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -479,6 +483,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"isa-mocap bench all: error: --only: expected names of {', '.join(ORDER)}, received {bad}",
                   file=sys.stderr)
             return 2
+    if getattr(args, "render", False):
+        only = ()
     page = Path(args.results) if args.results else default_results_path()
     fig_dir = page.parent / "results"
     tmp = None
@@ -526,7 +532,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"== bench {name}: {d['_seconds']:.0f} s", file=sys.stderr, flush=True)
         figs = figures(data, fig_dir)
         cmd = "isa-mocap bench all" + (" --quick" if args.quick else "") + (f" --only {args.only}" if args.only else "") \
-            + (f" --jobs {args.jobs}" if args.jobs != 2 else "") + (" --resume" if args.resume else "") + (f" --results {args.results}" if args.results else "")
+            + (f" --jobs {args.jobs}" if args.jobs != 2 else "") + (" --resume" if args.resume else "") \
+            + (" --render" if getattr(args, "render", False) else "") + (f" --results {args.results}" if args.results else "")
         meta = {"command": cmd, "quick": bool(args.quick), "machine": machine(), "commit": commit,
                 "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
                 "seconds": time.perf_counter() - t_all}
