@@ -18,6 +18,7 @@ def test_quick_runs_the_automatic_path_and_scores_it(tmp_path, capsys):
     assert run["frames"] == 6 and run["init"] != "ground truth"
     for k in ("mpjpe_mm", "offset_removed_mpjpe_mm", "knee_rmse_deg", "max_frame_error_mm", "backwards_share"):
         assert np.isfinite(run[k]), k
+    assert np.isfinite(run["offset_removed_knee_rmse_deg"])
     assert run["offset_removed_mpjpe_mm"] <= run["mpjpe_mm"]
     (c,) = res["conditions"]
     assert c["per_subject"]["average_man"]["mpjpe_mm"] == pytest.approx(run["mpjpe_mm"])

@@ -272,3 +272,23 @@ def test_heading_error_sees_a_body_tracked_backwards():
     P[1, :, 1] *= -1                                 # frame 1: the hips swapped (facing backwards)
     P[2, 0, :2], P[2, 1, :2] = [0.1, 0.0], [-0.1, 0.0]  # frame 2: turned 90° (left hip at +x)
     assert np.allclose(heading_errors_deg(P, T, 0, 1), [0.0, 180.0, 90.0])
+
+
+def test_offset_removed_knee_angle_drops_a_hip_defined_elsewhere():
+    """A truth whose hips sit 5 cm further forward: every frame's 3-D knee angle carries a bias of
+    definition; the knee angle with the offsets removed does not."""
+    from isa_mocap_ros.body import joint_positions, make_model
+    from isa_mocap_ros.body.motion import generate_motion
+    from isa_mocap_ros.eval import score_markers
+    from isa_mocap_ros.eval.metrics import body_frames
+
+    model = make_model(39)
+    X = generate_motion("walk", model, duration_s=1.0, fps=30, rng=np.random.default_rng(3))
+    names = [model.joint_names[j] for j in model.markers]
+    T = joint_positions(model, X)[:, model.markers].copy()
+    B = body_frames(T, names.index("left_hip"), names.index("right_hip"))
+    for h in ("left_hip", "right_hip"):
+        T[:, names.index(h)] += 0.05 * B[:, :, 1]
+    sc = score_markers(model, X, names, T)
+    assert sc["knee_rmse_deg"] > 2.0
+    assert sc["offset_removed_knee_rmse_deg"] < 0.05

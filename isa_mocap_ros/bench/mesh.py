@@ -90,11 +90,13 @@ def summarize(runs: list[dict]) -> dict:
                          "mpjpe_mm": float(np.mean([r["mpjpe_mm"] for r in q])),
                          "offset_removed_mpjpe_mm": float(np.mean([r["offset_removed_mpjpe_mm"] for r in q])),
                          "knee_rmse_deg": float(np.mean([r["knee_rmse_deg"] for r in q])),
+                         "offset_removed_knee_rmse_deg": float(np.mean([r.get("offset_removed_knee_rmse_deg", np.nan)
+                                                                        for r in q])),
                          "max_frame_error_mm": float(max(r["max_frame_error_mm"] for r in q)),
                          "mpjpe_range_mm": [float(min(r["mpjpe_mm"] for r in q)), float(max(r["mpjpe_mm"] for r in q))],
                          "backwards_runs": int(sum(r["backwards_share"] > 0.5 for r in q))}
         mean = {k: float(np.mean([v[k] for v in per.values()]))
-                for k in ("mpjpe_mm", "offset_removed_mpjpe_mm", "knee_rmse_deg")}
+                for k in ("mpjpe_mm", "offset_removed_mpjpe_mm", "knee_rmse_deg", "offset_removed_knee_rmse_deg")}
         mean["max_frame_error_mm"] = float(max(v["max_frame_error_mm"] for v in per.values()))
         mean["backwards_runs"] = int(sum(v["backwards_runs"] for v in per.values()))
         out["conditions"].append({"condition": cond, "label": br._cond(cond)[1], "per_subject": per, **mean})
@@ -139,15 +141,17 @@ def render_markdown(res: dict) -> str:
           f"{d['optimizer']} {d['evals']} evaluations per frame, tracker seeds {', '.join(map(str, seeds))}; every "
           "frame scored against the mesh skeleton's joint centres. *Offset removed*: each joint's mean offset in the "
           "body removed (the two skeletons' joint definitions differ; decision 012).", "",
-          "| condition | subject | mean joint error | offset removed | knee RMSE | worst frame (worst run) | "
-          "runs backwards |", "|---|---|---|---|---|---|---|"]
+          "| condition | subject | mean joint error | offset removed | knee RMSE | offset removed | worst frame (worst run) | "
+          "runs backwards |", "|---|---|---|---|---|---|---|---|"]
     for c in res["conditions"]:
         for s, v in c["per_subject"].items():
             L.append(f"| {c['label']} | {s} | {v['mpjpe_mm']:.1f} mm ({v['mpjpe_range_mm'][0]:.1f}-"
                      f"{v['mpjpe_range_mm'][1]:.1f}) | {v['offset_removed_mpjpe_mm']:.1f} mm | {v['knee_rmse_deg']:.2f}° | "
+                     f"{_fmt(v.get('offset_removed_knee_rmse_deg'), '{:.2f}')}° | "
                      f"{v['max_frame_error_mm']:.1f} mm | {v['backwards_runs']} of {v['runs']} |")
         L.append(f"| {c['label']} | **mean** | **{c['mpjpe_mm']:.1f} mm** | **{c['offset_removed_mpjpe_mm']:.1f} mm** | "
-                 f"**{c['knee_rmse_deg']:.2f}°** | {c['max_frame_error_mm']:.1f} mm | {c['backwards_runs']} |")
+                 f"**{c['knee_rmse_deg']:.2f}°** | **{_fmt(c.get('offset_removed_knee_rmse_deg'), '{:.2f}')}°** | "
+                 f"{c['max_frame_error_mm']:.1f} mm | {c['backwards_runs']} |")
     L += ["", "| target (issue 33) | measured (per subject) | status |", "|---|---|---|"]
     for t in res["targets"]:
         m = "not run" if t["measured"] is None else ", ".join(f"{s} {_fmt(v, '{:.2f}')}" for s, v in t["measured"].items())

@@ -240,6 +240,7 @@ def track_condition(bag: Path, out: Path, design: RobustDesign, seed: int | None
         extra = {"offset_removed_mpjpe_mm": acc["offset_removed_mpjpe_mm"],
                  "offset_removed_max_frame_error_mm": acc["offset_removed_max_frame_error_mm"],
                  "backwards_share": acc.get("backwards_share", float("nan")),
+                 "offset_removed_knee_rmse_deg": acc.get("offset_removed_knee_rmse_deg", float("nan")),
                  "per_marker_offset_mm": acc["per_marker_offset_mm"]}
     return {**extra, "seed": int(s["seed"]), "gate_margin_px": s.get("gate_margin_px"),
             "frames": acc["frames"], "mpjpe_mm": acc["mpjpe_mm"], "max_frame_error_mm": acc["max_frame_error_mm"],

@@ -450,7 +450,9 @@ def run(args: argparse.Namespace) -> int:
                  ("knee-angle RMSE", f"{s['knee_rmse_deg']:.2f} deg")]
         if "offset_removed_mpjpe_mm" in s:
             rows.append(("each joint's mean offset removed", f"{s['offset_removed_mpjpe_mm']:.1f} mm "
-                                                            f"(max frame {s['offset_removed_max_frame_error_mm']:.1f} mm)"))
+                                                            f"(max frame {s['offset_removed_max_frame_error_mm']:.1f} mm"
+                                                            + (f", knee {s['offset_removed_knee_rmse_deg']:.2f} deg)"
+                                                               if "offset_removed_knee_rmse_deg" in s else ")")))
     else:
         rows.append(("accuracy", "no ground truth in the bag"))
     print("track: accuracy\n" + _table(rows))

@@ -81,8 +81,9 @@ def score(model, seq, poses_by_stamp: dict) -> dict | None:
         out["offset_removed_mpjpe_mm"] = sc["offset_removed_mpjpe_mm"]
         out["offset_removed_max_frame_error_mm"] = sc["offset_removed_max_frame_error_mm"]
         out["per_marker_offset_mm"] = sc["per_marker_offset_mm"]
-        if "backwards_share" in sc:
-            out["backwards_share"] = sc["backwards_share"]
+        for k in ("backwards_share", "offset_removed_knee_rmse_deg"):
+            if k in sc:
+                out[k] = sc[k]
         out.update(scored_by="markers", stamps=stamps, worst_frame_stamp_ns=int(stamps[sc["worst_frame"]]))
         return out
     if not seq.has_truth:
