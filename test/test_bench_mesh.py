@@ -33,6 +33,7 @@ def test_design_and_targets():
     assert d.seeds == tuple(range(8)) and d.evals == 1500 and d.optimizer == "h-isa"
     assert d.shape == "auto" and d.init == "auto" and d.conditions == ("clean", "noise70", "occluders35")
     assert round(d.sequences[0].duration_s * 30) == 60
+    assert dict(bm.make_design("default", tracker=[("keypoint_weight", 1.0)]).tracker) == {"keypoint_weight": 1.0}
     with pytest.raises(ValueError, match="subjects"):
         bm.make_design("default", subjects=("giant",))
     with pytest.raises(ValueError, match="conditions"):

@@ -51,8 +51,10 @@ _QUICK_CALIB = (("calib_frames", 4), ("calib_rounds", 2), ("calib_evals", 120))
 
 
 def make_design(kind: str = "default", *, seeds=None, frames: int | None = None, subjects=None,
-                conditions=None) -> br.RobustDesign:
-    """``"default"`` (3 subjects x 3 conditions x seeds 0-7, 60 frames) or ``"quick"`` (the smoke test)."""
+                conditions=None, tracker=()) -> br.RobustDesign:
+    """``"default"`` (3 subjects x 3 conditions x seeds 0-7, 60 frames) or ``"quick"`` (the smoke test);
+    ``tracker``: ``track`` options beyond the defaults, (name, value) pairs (e.g. ``("keypoint_weight", 1.0)``)."""
+    tracker = tuple((str(k), v) for k, v in tracker)
     subjects = tuple(subjects or (SUBJECTS[1:2] if kind == "quick" else SUBJECTS))
     conditions = tuple(conditions or (("clean",) if kind == "quick" else CONDITIONS))
     bad = [s for s in subjects if s not in ("slim_woman", "average_man", "heavy_man", "random")]
@@ -66,7 +68,7 @@ def make_design(kind: str = "default", *, seeds=None, frames: int | None = None,
                      for s in subjects)
         seeds = tuple(seeds or (0,))
         return br.RobustDesign("mesh quick", seqs, conditions, "h-isa", 300, seeds[0], "auto", seeds=seeds,
-                               shape="auto", calib=_QUICK_CALIB)
+                               shape="auto", calib=_QUICK_CALIB, tracker=tracker)
     if kind != "default":
         raise ValueError(f"kind: expected 'quick' or 'default', received {kind!r}")
     n = int(frames or FRAMES)
@@ -74,7 +76,8 @@ def make_design(kind: str = "default", *, seeds=None, frames: int | None = None,
         raise ValueError(f"frames: expected an integer >= 2, received {frames!r}")
     seqs = tuple(br.RobustSequence(s, "walk", duration_s=n / 30.0, subject=s) for s in subjects)
     seeds = tuple(seeds or br.DEFAULT_SEEDS)
-    return br.RobustDesign("mesh", seqs, conditions, "h-isa", 1500, seeds[0], "auto", seeds=seeds, shape="auto")
+    return br.RobustDesign("mesh", seqs, conditions, "h-isa", 1500, seeds[0], "auto", seeds=seeds, shape="auto",
+                           tracker=tracker)
 
 
 def summarize(runs: list[dict]) -> dict:
@@ -138,7 +141,8 @@ def render_markdown(res: dict) -> str:
               "`make bench` runs it in full.", ""]
     L += [f"Skinned human meshes (MakeHuman/MPFB2), generated walk, {round(seq['duration_s'] * seq['fps'])} frames, "
           f"4 views {seq['width']}x{seq['height']}; shape calibrated from the images, automatic initialization, "
-          f"{d['optimizer']} {d['evals']} evaluations per frame, tracker seeds {', '.join(map(str, seeds))}; every "
+          f"{d['optimizer']} {d['evals']} evaluations per frame, tracker seeds {', '.join(map(str, seeds))}"
+          + "".join(f", {k} {v}" for k, v in d.get("tracker") or ()) + "; every "
           "frame scored against the mesh skeleton's joint centres. *Offset removed*: each joint's mean offset in the "
           "body removed (the two skeletons' joint definitions differ; decision 012).", "",
           "| condition | subject | mean joint error | offset removed | knee RMSE | offset removed | worst frame (worst run) | "
@@ -166,6 +170,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frames", type=int, default=None, metavar="N", help=f"frames per run (default {FRAMES})")
     p.add_argument("--subjects", default=None, metavar="A,B", help=f"mesh subjects (default {','.join(SUBJECTS)})")
     p.add_argument("--conditions", default=None, metavar="A,B", help=f"conditions (default {','.join(CONDITIONS)})")
+    p.add_argument("--keypoint-weight", type=float, default=None, metavar="W",
+                   help="track with the learned-keypoint term (docs/keypoints.md; default off)")
+    p.add_argument("--keypoint-every", type=int, default=None, metavar="K",
+                   help="with --keypoint-weight: keypoints on the initialized and every K-th frame (default 0)")
+    p.add_argument("--silhouette-core-px", type=float, default=None, metavar="PX",
+                   help="the tracker's silhouette_core_px (docs/energy.md; default the tracker's)")
     p.add_argument("--jobs", type=int, default=2, metavar="N", help="worker processes (default 2)")
     p.add_argument("--cache", default=None, metavar="DIR", help="rendered bags (default OUT/cache)")
     p.add_argument("--out", default=None, metavar="DIR", help="work directory (default: a temporary one)")
@@ -179,8 +189,10 @@ def _names(v):
 def run(args: argparse.Namespace) -> int:
     try:
         seeds = None if args.seeds is None else tuple(int(x) for x in _names(args.seeds))
+        tracker = tuple((k, getattr(args, k)) for k in ("keypoint_weight", "keypoint_every", "silhouette_core_px")
+                        if getattr(args, k, None) is not None)
         design = make_design("quick" if args.quick else "default", seeds=seeds, frames=args.frames,
-                             subjects=_names(args.subjects), conditions=_names(args.conditions))
+                             subjects=_names(args.subjects), conditions=_names(args.conditions), tracker=tracker)
         if args.jobs < 1:
             raise ValueError(f"--jobs: expected an integer >= 1, received {args.jobs}")
     except ValueError as exc:
