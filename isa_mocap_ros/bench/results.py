@@ -291,7 +291,7 @@ def md_mesh(d: dict) -> str:
     from isa_mocap_ros.bench.mesh import render_markdown
 
     return "`isa-mocap bench mesh` (module docstring; limits: docs/shape_calibration.md, docs/tracking.md).\n\n" \
-        + render_markdown(d)
+        + render_markdown(d) + "\n"
 
 
 def md_speed(d: dict) -> str:
