@@ -292,7 +292,9 @@ class SilhouetteEnergy:
         self.n_evals = 0
         self._used: list[int] = []
         self._frame: dict | None = None
-        self._restrict_cache: dict = {}     # coords -> what a restriction depends on besides pose and masks
+        # coords -> what a restriction depends on besides pose and masks (RestrictedSilhouetteEnergy's cache;
+        # its presence marks an energy that restricted.py can restrict, which does not import this module)
+        self.restriction_cache: dict = {}
         if masks is not None:
             self.set_masks(masks)
 
