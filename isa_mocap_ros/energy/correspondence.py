@@ -36,7 +36,7 @@ from scipy.spatial import cKDTree
 from ..body import BodyModel, capsule_endpoints, forward_kinematics
 from ..vision import Camera, capsule_data, render_labels_at, render_mask
 from ._checks import EnergyError, _check_cameras, _check_model, _check_poses
-from .silhouette import _mask_problem
+from .silhouette import mask_problem
 
 __all__ = ["CorrespondenceEnergy", "plucker_lines", "model_contour_points", "capsule_frames", "mask_contour_pixels",
            "capsule_contour_points"]
@@ -195,7 +195,7 @@ class CorrespondenceEnergy:
         self.skipped_views: list[tuple[int, str]] = []
         frames, local, dirs, moms = [], [], [], []
         for v, (mask, cam) in enumerate(zip(masks, self.cameras)):
-            problem = _mask_problem(mask, cam)
+            problem = mask_problem(mask, cam)
             if problem is not None:
                 self.skipped_views.append((v, problem))
                 continue
