@@ -34,6 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
+from isa_mocap_ros.eval.compare import SequenceSpec
+
 from . import robustness as br
 
 SUBJECTS = ("slim_woman", "average_man", "heavy_man")
@@ -64,8 +66,8 @@ def make_design(kind: str = "default", *, seeds=None, frames: int | None = None,
     if not conditions or any(c not in known for c in conditions):
         raise ValueError(f"conditions: expected some of {', '.join(known)}, received {list(conditions)}")
     if kind == "quick":
-        seqs = tuple(br.RobustSequence(s, "walk", duration_s=6 / 30, width=160, height=120, subject=s)
-                     for s in subjects)
+        seqs = tuple(SequenceSpec(s, "walk", duration_s=6 / 30, **{**br.SEQUENCE_DEFAULTS, "width": 160, "height": 120},
+                                  subject=s) for s in subjects)
         seeds = tuple(seeds or (0,))
         return br.RobustDesign("mesh quick", seqs, conditions, "h-isa", 300, seeds[0], "auto", seeds=seeds,
                                shape="auto", calib=_QUICK_CALIB, tracker=tracker)
@@ -74,7 +76,7 @@ def make_design(kind: str = "default", *, seeds=None, frames: int | None = None,
     n = int(frames or FRAMES)
     if n < 2:
         raise ValueError(f"frames: expected an integer >= 2, received {frames!r}")
-    seqs = tuple(br.RobustSequence(s, "walk", duration_s=n / 30.0, subject=s) for s in subjects)
+    seqs = tuple(SequenceSpec(s, "walk", duration_s=n / 30.0, **br.SEQUENCE_DEFAULTS, subject=s) for s in subjects)
     seeds = tuple(seeds or br.DEFAULT_SEEDS)
     return br.RobustDesign("mesh", seqs, conditions, "h-isa", 1500, seeds[0], "auto", seeds=seeds, shape="auto",
                            tracker=tracker)
