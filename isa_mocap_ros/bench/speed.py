@@ -240,7 +240,7 @@ def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path, lockstep:
     s = json.loads((out / "summary.json").read_text())
     bag_fps = _bag_fps(bag)
     keep = ("frame_sets_played", "frames_processed", "frames_estimated", "fps", "latency_ms_p50", "latency_ms_p95",
-            "dropped_frames", "dropped_while_initializing", "frames_without_contour_stage", "init_ms", "tracker_ms_p50", "tracker_ms_p95", "mpjpe_mm", "knee_rmse_deg", "evals_per_frame", "optimizer")
+            "dropped_frames", "dropped_while_initializing", "frames_without_contour_stage", "budget_lowered", "track_resets", "init_ms", "tracker_ms_p50", "tracker_ms_p95", "mpjpe_mm", "knee_rmse_deg", "evals_per_frame", "optimizer")
     r = {"mode": mode, "busy_core": bool(busy),
          "body_shape": str(out / "body.yaml") if (out / "body.yaml").is_file() else (None if shape == "auto" else shape), **{k: s.get(k) for k in keep}, "bag_fps": bag_fps,
          "wall_seconds": round(wall, 1)}

@@ -391,7 +391,7 @@ class Tracker:
 
 
     def step(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1,
-             contour_stage: bool = True, keypoints: Sequence | None = None) -> FrameResult:
+             contour_stage: bool = True, keypoints: Sequence | None = None, evals: int | None = None) -> FrameResult:
         """Track one frame (see the module docstring). Never raises on bad masks, predictions or keypoints.
 
         Parameters
@@ -411,11 +411,16 @@ class Tracker:
         keypoints : sequence of ``(uv (33, 2), confidence (33,))`` or None
             Per camera BlazePose landmarks; with ``config.keypoint_weight > 0`` they add the keypoint term
             to this frame's energy (the heading check's rival's too, so both are scored alike).
+        evals : int, optional
+            This frame's evaluation budget instead of ``config.evals`` (the estimator node's lowered budget
+            under load, :mod:`.load`); the stages size their shares from it.
 
         Returns
         -------
         FrameResult
         """
+        if evals is not None and (isinstance(evals, bool) or not isinstance(evals, (int, np.integer)) or evals < 1):
+            raise TrackerError(f"evals: expected an integer >= 1 or None, received {evals!r}")
         term, note = objective.keypoint_energy(self, keypoints)
         rival = self.heading_check.rival
         self._keypoint_term = term
@@ -423,7 +428,7 @@ class Tracker:
             rival._keypoint_term = term
         try:
             res = self._step_frame(masks, frame_index, prediction=prediction, frames_elapsed=frames_elapsed,
-                                   contour_stage=contour_stage)
+                                   contour_stage=contour_stage, evals=evals)
         finally:
             self._keypoint_term = None
             if rival is not None:
@@ -431,12 +436,13 @@ class Tracker:
         return res if note is None else dataclasses.replace(res, notes=res.notes + (note,))
 
     def _step_frame(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1,
-                    contour_stage: bool = True) -> FrameResult:
+                    contour_stage: bool = True, evals: int | None = None) -> FrameResult:
         """The frame without its keypoint term (set by :meth:`step`)."""
         t0 = time.perf_counter()
         rival = self.heading_check.rival
         self._contour_now = bool(contour_stage)
-        res = self._step(masks, frame_index, FrameBudget(self.config.evals, self._contour_now),
+        res = self._step(masks, frame_index, FrameBudget(self.config.evals if evals is None else int(evals),
+                                                         self._contour_now),
                          prediction=prediction, frames_elapsed=frames_elapsed)
         if self.heading_check.own_prediction_frames > 0:
             self.heading_check.own_prediction_frames -= 1
