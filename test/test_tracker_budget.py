@@ -15,7 +15,7 @@ def scene():
 
 def _steps(scene, evals, contour=True):
     model, cams, walk, masks = scene
-    tr = Tracker(model, cams, TrackerConfig(evals=1500, seed=3))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(evals=1500, seed=3))
     tr.initialize(pose=walk[0])
     return [tr.step(masks[k], k, evals=evals, contour_stage=contour) for k in (1, 2)]
 
@@ -33,7 +33,7 @@ def test_a_lowered_budget_is_spent_instead_of_the_configured_one(scene):
 @pytest.mark.parametrize("bad", [0, -5, 2.5, True, "500"])
 def test_bad_budget(scene, bad):
     model, cams, walk, masks = scene
-    tr = Tracker(model, cams, TrackerConfig(evals=300, seed=3))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(evals=300, seed=3))
     tr.initialize(pose=walk[0])
     with pytest.raises(TrackerError, match="evals: expected an integer >= 1 or None"):
         tr.step(masks[1], 1, evals=bad)
