@@ -90,7 +90,7 @@ G32_CA_LEN = 9             # cos * L, -1 when one disc holds the other
 G32_RA2, G32_RB2 = 10, 11  # squared radii
 G32_COLS = 12
 
-__all__ = ["fk_positions_batch", "silhouette_batch", "project_capsules", "inside_points", "Body", "Views", "Template",
+__all__ = ["fk_positions_batch", "silhouette_batch", "silhouette_batch_serial", "project_capsules", "inside_points", "Body", "Views", "Template",
            "Foreground", "Restriction", "Stage"]
 
 
@@ -654,6 +654,90 @@ def _t2_runs(c, box, v, n_strips, fg_x, fg_y, fg_tab, fg_bins, fg_xr, fg_ms, fla
 DETERMINISTIC_FASTMATH = {"contract", "nnan", "ninf", "nsz", "arcp", "afn"}
 
 
+@numba.njit(cache=True, inline="always", fastmath=DETERMINISTIC_FASTMATH)
+def _batch_rows(X, lo, hi, body, views, tmpl, fg, out):  # pragma: no cover - compiled
+    """:func:`silhouette_batch` of the rows ``lo:hi`` of ``X`` (one work unit, with its own scratch)."""
+    parents, offsets, ptr, dofs, axes, caps, radii = body
+    cam_R, cam_t, cam_K, cam_D, cam_hasd, cov, cov_wh, view_w = views
+    order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na = tmpl
+    fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_xr, fg_area = fg
+    J = parents.shape[0]
+    C = caps.shape[0]
+    V = cam_R.shape[0]
+    zero = np.float32(0.0)
+    n_strips = fg_tab.shape[0] // V
+    fg_ms = fg_x.shape[0] // fg_tab.shape[0]
+    wsum = 0.0
+    for v in range(V):
+        wsum += view_w[v]
+    R = np.empty((J, 3, 3))
+    P = np.empty((J, 3))
+    CP = np.empty((J, 4))
+    G = np.empty((C, G_COLS))
+    G32 = np.empty((C, G32_COLS), np.float32)
+    box = np.empty((C, 4))
+    EB = np.zeros((11, C + 8))     # the capsules in processing order (whole vectors)
+    S = np.zeros((4, C + 8))
+    OK = np.zeros(C + 8, np.int64)
+    NEAR = np.empty(C, np.int64)
+    flag = np.empty(max(1, fg_x.shape[0]), np.float32)
+    kmax = _scratch_len(tmpl_ptr)
+    PX = np.zeros(kmax + 8, np.float32)     # a point's frame coordinates: along, across
+    PY = np.zeros(kmax + 8, np.float32)
+    IDX = np.empty(kmax, np.int32)     # a point's pixel, zpix when not counted
+    zpix = np.int32(cov.shape[1] - 1)
+    for i in range(lo, hi):
+        _fk_one(X[i], parents, offsets, ptr, dofs, axes, R, P)
+        total = 0.0
+        for v in range(V):
+            _to_camera(P, cam_R, cam_t, v, CP)
+            _project_caps(CP, caps, radii, G)
+            for c in range(C):
+                _clip_cap(G, c, v, cam_K, cov_wh, cam_hasd)
+                _cap_box(G, G32, box, c)
+            for ci in range(C):     # boxes and hulls in processing order, for the overlap candidates
+                _eb_set(EB, ci, G, box, order[ci])
+            # term 1: model silhouette points not on foreground. Points of capsule c in its
+            # bounding rectangle; kept if inside c's hull and in no earlier capsule's hull
+            num = 0.0
+            den = 0.0
+            for ci in range(C):
+                c = order[ci]
+                if G[c, G_VALID] == 0.0:
+                    continue
+                _t1_points(ci, c, v, G, G32, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na,
+                           cam_K, cov_wh, cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK, True)
+                nk = tmpl_ptr[c + 1] - tmpl_ptr[c]
+                cnt, fsum = _t1_count(c, v, nk, G, PX, PY, IDX, zpix, cam_K, cam_D, cam_hasd, cov, cov_wh)
+                w = _t1_weight(G, c, nk)
+                den += w * cnt
+                num += w * (cnt - fsum)
+            t1 = num / den if den > 0.0 else 1.0
+            if fg_n[v] == 0:
+                # term 2 from the same points: |F minus M| / |F| = 1 - (integral of F over M) / |F|
+                t2 = 1.0 - (den - num) / fg_area[v]
+                t2 = min(1.0, max(0.0, t2))
+            else:
+                # term 2: foreground points not covered by the model; the points are sorted by y,
+                # so a capsule's box meets a contiguous run of them in each strip
+                r0 = v * n_strips
+                for k in range(n_strips * fg_ms):
+                    flag[numba.uint64(r0 * fg_ms + k)] = zero
+                for ci in range(C):
+                    c = order[ci]
+                    if G[c, G_VALID] == 0.0:
+                        continue
+                    _t2_runs(c, box, v, n_strips, fg_x, fg_y, fg_tab, fg_bins, fg_xr, fg_ms, flag, G32)
+                # the padding is never inside a hull: count whole strips (an integer count of the
+                # 0/1 flags, vectorized: the same value as their sum in order)
+                hit = 0
+                for k in range(n_strips * fg_ms):
+                    hit += flag[numba.uint64(r0 * fg_ms + k)] != zero
+                t2 = 1.0 - float(hit) / fg_n[v]
+            total += view_w[v] * (0.5 * t1 + 0.5 * t2)
+        out[i] = total / wsum
+
+
 @numba.njit(parallel=True, cache=True, fastmath=DETERMINISTIC_FASTMATH)
 def silhouette_batch(X, body, views, tmpl, fg, n_chunks, out):  # pragma: no cover - compiled
     """Fast Eq. 5 for poses ``X (n, D)`` into ``out (n,)``.
@@ -665,89 +749,20 @@ def silhouette_batch(X, body, views, tmpl, fg, n_chunks, out):  # pragma: no cov
     n_chunks : int, work units of the parallel loop
     out : (n,) float64
     """
-    parents, offsets, ptr, dofs, axes, caps, radii = body
-    cam_R, cam_t, cam_K, cam_D, cam_hasd, cov, cov_wh, view_w = views
-    order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na = tmpl
-    fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_xr, fg_area = fg
     n = X.shape[0]
-    J = parents.shape[0]
-    C = caps.shape[0]
-    V = cam_R.shape[0]
-    zero = np.float32(0.0)
-    n_strips = fg_tab.shape[0] // V
-    fg_ms = fg_x.shape[0] // fg_tab.shape[0]
-    wsum = 0.0
-    for v in range(V):
-        wsum += view_w[v]
     for chunk in numba.prange(n_chunks):
-        lo = chunk * n // n_chunks
-        hi = (chunk + 1) * n // n_chunks
-        R = np.empty((J, 3, 3))
-        P = np.empty((J, 3))
-        CP = np.empty((J, 4))
-        G = np.empty((C, G_COLS))
-        G32 = np.empty((C, G32_COLS), np.float32)
-        box = np.empty((C, 4))
-        EB = np.zeros((11, C + 8))     # the capsules in processing order (whole vectors)
-        S = np.zeros((4, C + 8))
-        OK = np.zeros(C + 8, np.int64)
-        NEAR = np.empty(C, np.int64)
-        flag = np.empty(max(1, fg_x.shape[0]), np.float32)
-        kmax = _scratch_len(tmpl_ptr)
-        PX = np.zeros(kmax + 8, np.float32)     # a point's frame coordinates: along, across
-        PY = np.zeros(kmax + 8, np.float32)
-        IDX = np.empty(kmax, np.int32)     # a point's pixel, zpix when not counted
-        zpix = np.int32(cov.shape[1] - 1)
-        for i in range(lo, hi):
-            _fk_one(X[i], parents, offsets, ptr, dofs, axes, R, P)
-            total = 0.0
-            for v in range(V):
-                _to_camera(P, cam_R, cam_t, v, CP)
-                _project_caps(CP, caps, radii, G)
-                for c in range(C):
-                    _clip_cap(G, c, v, cam_K, cov_wh, cam_hasd)
-                    _cap_box(G, G32, box, c)
-                for ci in range(C):     # boxes and hulls in processing order, for the overlap candidates
-                    _eb_set(EB, ci, G, box, order[ci])
-                # term 1: model silhouette points not on foreground. Points of capsule c in its
-                # bounding rectangle; kept if inside c's hull and in no earlier capsule's hull
-                num = 0.0
-                den = 0.0
-                for ci in range(C):
-                    c = order[ci]
-                    if G[c, G_VALID] == 0.0:
-                        continue
-                    _t1_points(ci, c, v, G, G32, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na,
-                               cam_K, cov_wh, cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK, True)
-                    nk = tmpl_ptr[c + 1] - tmpl_ptr[c]
-                    cnt, fsum = _t1_count(c, v, nk, G, PX, PY, IDX, zpix, cam_K, cam_D, cam_hasd, cov, cov_wh)
-                    w = _t1_weight(G, c, nk)
-                    den += w * cnt
-                    num += w * (cnt - fsum)
-                t1 = num / den if den > 0.0 else 1.0
-                if fg_n[v] == 0:
-                    # term 2 from the same points: |F minus M| / |F| = 1 - (integral of F over M) / |F|
-                    t2 = 1.0 - (den - num) / fg_area[v]
-                    t2 = min(1.0, max(0.0, t2))
-                else:
-                    # term 2: foreground points not covered by the model; the points are sorted by y,
-                    # so a capsule's box meets a contiguous run of them in each strip
-                    r0 = v * n_strips
-                    for k in range(n_strips * fg_ms):
-                        flag[numba.uint64(r0 * fg_ms + k)] = zero
-                    for ci in range(C):
-                        c = order[ci]
-                        if G[c, G_VALID] == 0.0:
-                            continue
-                        _t2_runs(c, box, v, n_strips, fg_x, fg_y, fg_tab, fg_bins, fg_xr, fg_ms, flag, G32)
-                    # the padding is never inside a hull: count whole strips (an integer count of the
-                    # 0/1 flags, vectorized: the same value as their sum in order)
-                    hit = 0
-                    for k in range(n_strips * fg_ms):
-                        hit += flag[numba.uint64(r0 * fg_ms + k)] != zero
-                    t2 = 1.0 - float(hit) / fg_n[v]
-                total += view_w[v] * (0.5 * t1 + 0.5 * t2)
-            out[i] = total / wsum
+        _batch_rows(X, chunk * n // n_chunks, (chunk + 1) * n // n_chunks, body, views, tmpl, fg, out)
+
+
+@numba.njit(cache=True, fastmath=DETERMINISTIC_FASTMATH)
+def silhouette_batch_serial(X, body, views, tmpl, fg, n_chunks, out):  # pragma: no cover - compiled
+    """:func:`silhouette_batch` on the calling thread, for a few poses (a parallel launch costs more than
+    a pose; the same operations, so the same bits); ``n_chunks`` is ignored."""
+    _batch_rows(X, 0, X.shape[0], body, views, tmpl, fg, out)
+
+
+#: Batches of fewer poses than this go to :func:`silhouette_batch_serial` (:class:`.silhouette.SilhouetteEnergy`).
+SERIAL_BELOW = 8
 
 
 # ---------------------------------------------------------------------- restricted evaluation

@@ -464,7 +464,10 @@ class SilhouetteEnergy:
     def _fast(self, X: np.ndarray) -> np.ndarray:
         out = np.empty(X.shape[0])
         n_chunks = max(1, min(X.shape[0], 8 * self._threads))
-        _k.silhouette_batch(X, *self._kernel_args(), n_chunks, out)
+        # a few poses (a stage's final pose, the contour stage's pair) on this thread: a parallel launch
+        # costs more than they do (the same bits either way)
+        kernel = _k.silhouette_batch_serial if X.shape[0] < _k.SERIAL_BELOW else _k.silhouette_batch
+        kernel(X, *self._kernel_args(), n_chunks, out)
         return out
 
     def restrict(self, x_base: Any, coords: Any) -> "RestrictedSilhouetteEnergy":
