@@ -287,8 +287,11 @@ def collect(args: argparse.Namespace) -> dict:
             shape = "auto"          # calibrated by the first run; the others track with the same shape file
             for label, lockstep, busy in modes:
                 print(f"bench speed: node network on {nbag.name}, {label} ...", file=sys.stderr, flush=True)
-                r = network_speed(nbag, mode=label, optimizer=args.optimizer, work=work, lockstep=lockstep,
-                                  busy=busy, shape=shape)
+                try:
+                    r = network_speed(nbag, mode=label, optimizer=args.optimizer, work=work, lockstep=lockstep,
+                                      busy=busy, shape=shape)
+                except Exception as exc:  # noqa: BLE001 - one failed run is a row saying so, not a lost bench
+                    r = {"mode": label, "busy_core": busy, "error": f"{type(exc).__name__}: {exc}"}
                 if shape == "auto" and r.get("body_shape"):
                     shape = str(shutil.copy(r["body_shape"], work / "body.yaml"))
                 rows.append(r)
