@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 from geometry_msgs.msg import PolygonStamped
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 import msg_adapters as ma
@@ -49,6 +49,12 @@ def test_node_publishes_landmarks_every_k_frames(model_file, rosenv, spawn, tmp_
     with ros_node(rosenv, "kp_test") as (node, ex):
         img_pubs = [node.create_publisher(Image, f"/mocap/cam{v}/image_raw", qos.RELIABLE) for v in range(2)]
         mask_pubs = [node.create_publisher(Image, f"/mocap/cam{v}/mask", qos.RELIABLE) for v in range(2)]
+        info_pubs = [node.create_publisher(CameraInfo, f"/mocap/cam{v}/camera_info", qos.RELIABLE) for v in range(2)]
+        K = np.array([[250.0, 0, 240], [0, 250.0, 180], [0, 0, 1]])
+        intr = ma.Intrinsics(K=K, D=np.zeros(5), P=np.hstack([K, np.zeros((3, 1))]), R=np.eye(3), width=480, height=360)
+
+        def info(v, stamp):       # the camera's: an image is taken when a camera_info of its stamp agrees
+            info_pubs[v].publish(ma.intrinsics_to_camera_info(intr, stamp_ns=stamp, frame_id=f"cam{v}_optical_frame"))
         got: list[dict[int, PolygonStamped]] = [{}, {}]
         skipped: list[list[int]] = [[], []]
         for v in range(2):
@@ -56,7 +62,7 @@ def test_node_publishes_landmarks_every_k_frames(model_file, rosenv, spawn, tmp_
                                      lambda m, v=v: got[v].__setitem__(ma.stamp_to_ns(m.header), m), qos.RELIABLE)
             node.create_subscription(Header, f"/mocap/cam{v}/keypoints_skipped",
                                      lambda m, v=v: skipped[v].append(ma.stamp_to_ns(m)), qos.RELIABLE)
-        assert spin_until(ex, lambda: all(p.get_subscription_count() > 0 for p in img_pubs + mask_pubs)
+        assert spin_until(ex, lambda: all(p.get_subscription_count() > 0 for p in img_pubs + mask_pubs + info_pubs)
                           and all(node.count_publishers(f"/mocap/cam{v}/keypoints") for v in range(2)), 30)
         stamps = []
         for f in range(4):
@@ -69,6 +75,7 @@ def test_node_publishes_landmarks_every_k_frames(model_file, rosenv, spawn, tmp_
                 mk = ma.array_to_image(masks[v], "mono8")
                 mk.header = im.header
                 first, second = (mask_pubs, img_pubs) if f == 2 else (img_pubs, mask_pubs)   # either order pairs
+                info(v, stamp)
                 first[v].publish(mk if f == 2 else im)
                 spin_until(ex, lambda: False, 0.05)
                 second[v].publish(im if f == 2 else mk)
@@ -81,15 +88,17 @@ def test_node_publishes_landmarks_every_k_frames(model_file, rosenv, spawn, tmp_
             im.header = ma.make_header(stamp, f"cam{v}_optical_frame")
             mk = ma.array_to_image(mask, "mono8")
             mk.header = im.header
+            info(v, stamp)
             img_pubs[v].publish(im)
             spin_until(ex, lambda: False, 0.05)
             mask_pubs[v].publish(mk)
-        assert spin_until(ex, lambda: all(stamp in sk for sk in skipped), 30), proc.output()
-        assert proc.wait_for_output("cam1 frame at", 30), proc.output()
+        assert spin_until(ex, lambda: stamp in skipped[0], 30), proc.output()
+        assert proc.wait_for_output("cam1/mask dropped: frame 'cam1_optical_frame', 10x10, is not the view's", 30), \
+            proc.output()
     # the first frame and every 2nd after (0 and 2) per view, with the image's header; 1 and 3 skipped
     for v in range(2):
         assert sorted(got[v]) == [stamps[0], stamps[2]]
-        assert skipped[v] == [stamps[1], stamps[3], stamp]
+        assert skipped[v] == [stamps[1], stamps[3]] + ([stamp] if v == 0 else [])
         assert got[v][stamps[0]].header.frame_id == f"cam{v}_optical_frame"
         for f in (0, 2):
             uv, conf = ma.polygon_to_keypoints(got[v][stamps[f]])

@@ -186,6 +186,8 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
         # Tracker.step of the set the automatic initialization ran on (nan: initialized otherwise)
         "init_ms": float(diag.get("init_ms", "nan")),
         "bad_inputs": int(diag.get("bad_inputs", 0) or 0), "wall_seconds": round(wall_seconds, 1),
+        # frame sets tracked with keypoints (run --keypoints; the estimator's last 1 Hz figure)
+        "keypoint_sets": int(diag.get("keypoint_sets", 0) or 0),
     }
     seq = read_sequence(bag, want_images=True, want_masks=False)
     # of those, the sets of the start-up: the first run of sets without an estimate after the first

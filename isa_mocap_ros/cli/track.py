@@ -330,7 +330,11 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
             looked = True
             kp_views[0] += 1
             lm = detect_in_mask(detector, img, m)       # bag images are rgb8 (camera node, synth)
-            out.append(None if lm is None else ma.polygon_to_keypoints(ma.keypoints_to_polygon(lm.uv, lm.confidence)))
+            if lm is None:
+                out.append(None)
+                continue
+            wire = ma.to_cdr(ma.keypoints_to_polygon(lm.uv, lm.confidence))     # float32 on the wire
+            out.append(ma.polygon_to_keypoints(ma.from_cdr(wire, "geometry_msgs/msg/PolygonStamped")))
         if looked:
             kp_seconds.append(time.perf_counter() - t0)
         return out if any(o is not None for o in out) else None

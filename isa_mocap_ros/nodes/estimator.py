@@ -86,7 +86,8 @@ EXPECTED_NOTES = ("initialized automatically", "heading check", "initialization 
                   "no usable view and no estimate yet", "contour stage: stopped", "limb stage: ",
                   "prediction: the external one follows the estimates from before the heading check")
 _EXPECTED_NOTE_PATTERNS = (re.compile(r"view \d+: empty mask \(nobody in view\)"),
-                           re.compile(r"(pelvis|torso|limb|refinement|contour) stage skipped"))
+                           re.compile(r"(pelvis|torso|limb|refinement|contour) stage skipped"),
+                           re.compile(r"keypoints: (\d+ in \d+ views|none usable)"))
 
 
 def note_is_expected(note: str) -> bool:
@@ -364,7 +365,7 @@ class EstimatorNode(Node):
 
     def _skipped_cb(self, v: int):
         def cb(msg: Header) -> None:
-            self._store_keypoints(v, ma.stamp_to_ns(msg.header), None, f"cam{v}/keypoints_skipped")
+            self._store_keypoints(v, ma.stamp_to_ns(msg), None, f"cam{v}/keypoints_skipped")
         return cb
 
     def _store_keypoints(self, v: int, stamp: int, kp, topic: str) -> None:

@@ -22,8 +22,12 @@ picked, or dropped as bad) gets its header on ``cam<i>/keypoints_skipped`` (``st
 pair gets exactly one message on one of the two topics, so an estimator in lockstep knows, per frame and
 view, whether keypoints come, without a second copy of the schedule.
 
-Bad input (undecodable image, unsupported encoding, a mask of another size than its image) is dropped
-for that view with one rate-limited log line.
+Input checks as the segmentation node's (:mod:`isa_mocap_ros.intake`): an image is taken only when a
+``cam<i>/camera_info`` of its stamp agrees with it (or it agrees with the view's camera and its stamp lies
+within ``max_stamp_gap_s`` of the view's stream), and a mask only when its frame id and size are the view's
+camera's and its stamp is near the stream; so stray images and masks (another size, frame, a far stamp)
+neither get detected on nor move the schedule. Bad input (undecodable image, unsupported encoding, a mask
+of another size than its image, the checks above) is dropped for that view with one rate-limited log line.
 """
 from __future__ import annotations
 
@@ -34,10 +38,11 @@ from collections import OrderedDict, deque
 import numpy as np
 from geometry_msgs.msg import PolygonStamped
 from rclpy.node import Node
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 import msg_adapters as ma
+from isa_mocap_ros.intake import Setting, ViewGate
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, run_node
 from isa_mocap_ros.vision.errors import VisionError
@@ -67,6 +72,9 @@ class KeypointNode(Node):
                                  lo=1.0, hi=4.0)
         model_path = declare(self, "model_path", "", "landmark model file ('' = the cache of `make models`)")
         threads = declare(self, "threads", 1, "interpreter threads", lo=1, hi=64)
+        gap_s = declare(self, "max_stamp_gap_s", 5.0, "an image or mask farther than this from the view's stream in "
+                        "time is dropped unless its own camera_info comes with it (0 = no check)", lo=0.0, hi=1e9)
+        self.gates = [ViewGate(f"cam{v}", max_gap_ns=int(gap_s * 1e9)) for v in range(self.n_views)]
         try:
             self.detector = PoseLandmarker(model_path or None, num_threads=threads)
         except ModelUnavailable as exc:           # run_node prints a ValueError as one line, exit 2
@@ -90,6 +98,8 @@ class KeypointNode(Node):
                                      qos_overriding_options=QOS_OVERRIDES)
             self.create_subscription(Image, f"cam{i}/mask", self._pair_cb(i, "mask"), qos.SENSOR_DATA,
                                      qos_overriding_options=QOS_OVERRIDES)
+            self.create_subscription(CameraInfo, f"cam{i}/camera_info", self._info_cb(i), qos.SENSOR_DATA,
+                                     qos_overriding_options=QOS_OVERRIDES)
         self.get_logger().info(f"keypoints: {self.n_views} views, every {self.every_k} frame(s) after the first "
                                f"{self.dense_frames} with a person, model "
                                f"{self.detector.model_path}")
@@ -98,21 +108,57 @@ class KeypointNode(Node):
         """Callback of ``cam<v>/image_raw`` (kind "image") or ``cam<v>/mask``: the second of the pair of
         one stamp to arrive (either order) runs the detection; an unpaired message waits among the last
         :data:`_KEEP` of its kind, then ages out (counted in :attr:`unpaired`)."""
-        mine = (self.images if kind == "image" else self.masks)[v]
-        other = (self.masks if kind == "image" else self.images)[v]
 
         def cb(msg: Image) -> None:
             stamp = ma.stamp_to_ns(msg.header)
-            partner = other.pop(stamp, None)
-            if partner is None:
-                mine[stamp] = msg
-                while len(mine) > _KEEP:
-                    mine.popitem(last=False)
-                    self.unpaired[v] += 1
+            gate = self.gates[v]
+            if kind == "image":        # through the view's gate: taken when a camera_info agrees (_info_cb)
+                self._settle(v, *gate.add_image(stamp, Setting(msg.header.frame_id, msg.width, msg.height,
+                                                               msg.encoding), msg))
                 return
-            image, mask = (msg, partner) if kind == "image" else (partner, msg)
-            self._detect(v, stamp, image, mask)
+            known = gate.setting       # None: waits for an image of its stamp like any mask
+            why = None if known is None else (
+                   gate.window.far(stamp) or (f"frame {msg.header.frame_id!r}, {msg.width}x{msg.height}, is not the "
+                                              f"view's camera's ({known.frame_id!r}, {known.width}x{known.height})"
+                                              if (msg.header.frame_id, msg.width, msg.height)
+                                              != (known.frame_id, known.width, known.height) else None))
+            if why is not None:
+                self.problems.report(f"mask{v}", f"cam{v}/mask dropped: {why}")
+                return
+            self._pair(v, kind, stamp, msg)
         return cb
+
+    def _info_cb(self, v: int):
+        def cb(msg: CameraInfo) -> None:
+            try:
+                stamp = ma.stamp_to_ns(msg.header)
+                intr = ma.camera_info_to_intrinsics(msg)
+            except ma.AdapterError as exc:
+                self.problems.report(f"info{v}:{exc.field}", f"cam{v}/camera_info dropped: {exc}")
+                return
+            self._settle(v, *self.gates[v].add_info(stamp, Setting(msg.header.frame_id, intr.width, intr.height),
+                                                    intr))
+        return cb
+
+    def _settle(self, v: int, accepted, rejected) -> None:
+        for r in rejected:
+            self.problems.report(f"info{v}:gate" if r.kind == "camera_info" else f"image{v}:{r.kind}", r.text)
+        for a in accepted:
+            self._pair(v, "image", a.stamp_ns, a.payload)
+
+    def _pair(self, v: int, kind: str, stamp: int, msg: Image) -> None:
+        """Pair a taken image or mask with the other of its stamp (either order; see :meth:`_pair_cb`)."""
+        mine = (self.images if kind == "image" else self.masks)[v]
+        other = (self.masks if kind == "image" else self.images)[v]
+        partner = other.pop(stamp, None)
+        if partner is None:
+            mine[stamp] = msg
+            while len(mine) > _KEEP:
+                mine.popitem(last=False)
+                self.unpaired[v] += 1
+            return
+        image, mask = (msg, partner) if kind == "image" else (partner, msg)
+        self._detect(v, stamp, image, mask)
 
     def _detect(self, v: int, stamp: int, image: Image, mask_msg: Image) -> None:
         t0 = time.perf_counter()
