@@ -21,7 +21,7 @@ reference better with left and right exchanged).
 
 A third kind, ``track``, tracks capsule renders (``isa-mocap synth`` with exact masks, 4 views at
 320x240, 10 empty frames, ``--track-s`` seconds of each motion, bag seeds ``--seeds``) with
-``isa-mocap track``'s code and the automatic initialization, three ways: without the keypoint term, with
+``isa-mocap track``'s code and the automatic initialization (tracker seed = bag seed), three ways: without the keypoint term, with
 it on the initialized frame only, and on that frame and every ``--every``-th frame (weight
 ``--weight``). Scored per run: mean joint error (Eq. 20), frames tracked facing backwards (estimate's
 heading more than 90 degrees from the truth's), leg swaps (frames whose left/right knee and ankle fit
@@ -306,7 +306,7 @@ def _heading(x: np.ndarray) -> float:
     return float(np.arctan2(f[1], f[0]))
 
 
-def _track_one(bag: Path, out: Path, *, weight: float, every: int, shape: str = "truth") -> dict:
+def _track_one(bag: Path, out: Path, *, weight: float, every: int, shape: str = "truth", seed: int = 0) -> dict:
     """``isa-mocap track`` of one bag (h-isa 1500, exact masks, automatic initialization) and its scores:
     mean joint error (Eq. 20), frames facing backwards (torso heading more than 90 degrees from the truth's;
     the run is *backwards* when most frames are), leg-swap frames (the estimated left knee and ankle lie
@@ -315,7 +315,7 @@ def _track_one(bag: Path, out: Path, *, weight: float, every: int, shape: str = 
     from isa_mocap_ros.eval import marker_positions, shared_markers
 
     ns = argparse.Namespace(
-        bag=str(bag), out=str(out), optimizer="h-isa", evals=1500, params=None, model=None, seed=0, frames=None,
+        bag=str(bag), out=str(out), optimizer="h-isa", evals=1500, params=None, model=None, seed=seed, frames=None,
         start=0, use_masks=True, learn_frames=None, shape=shape, init="auto", predictor=None, prior=None,
         prior_eta=0.0, energy="fast", overwrite=True, no_progress=True, keypoint_weight=weight, keypoint_every=every,
         calib_frames=None, calib_rounds=None, calib_evals=None)
@@ -371,12 +371,12 @@ def bench_track(args) -> dict:
             if not (bag / "metadata.yaml").is_file():
                 write_bag(argparse.Namespace(
                     motion=src, out=str(bag), views=None, width=None, height=None, fps=30.0, model=39,
-                    start_s=1.0 if motion == "cmu" else 0.0, duration_s=args.track_s, empty_frames=10, noise=0.0,
+                    start_s=1.0 if motion == "cmu" or motion.endswith(".bvh") else 0.0, duration_s=args.track_s, empty_frames=10, noise=0.0,
                     occluders=0, rig=None, seed=seed, bvh_scale=args.bvh_scale if motion.endswith(".bvh") else None, masks=True,
                     compression="zstd", chunk_mb=32.0, overwrite=True, no_progress=True, body=body, subject=subject or "average_man", skirt=False))
             for name, (w, k) in configs.items():
                 r = _track_one(bag, cache / f"{bag.name}_{name.replace(' ', '_')}", weight=w, every=k,
-                               shape=getattr(args, "shape", "truth"))
+                               shape=getattr(args, "shape", "truth"), seed=seed)
                 out.setdefault(name, {})[f"{label} s{seed}"] = r
                 print(f"  {label} seed {seed} {name:8s} mpjpe {r['mpjpe_mm']:7.1f} mm  backwards {r['backwards']:3d}"
                       f"/{r['frames']}  leg swaps {r['leg_swaps']:3d}  keypoint frames {r['keypoint_frames']:3d}"
