@@ -78,7 +78,7 @@ def test_tracker_with_and_without_the_compiled_search(scene, init):
     model, cams, walk, masks = scene
     out = []
     for compiled in (True, False):
-        tr = Tracker(model, cams, TrackerConfig(seed=4))
+        tr = Tracker(model, cams, TrackerConfig.from_flat(seed=4))
         tr._compiled_search = compiled
         first = []
         if init == "given":

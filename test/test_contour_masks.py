@@ -14,7 +14,7 @@ def test_contour_stage_sees_the_filtered_masks():
         m = np.array(m, copy=True)
         m[:12, :12] = 255                   # a blob far from the person: the mask gate removes it
         occluded.append(m)
-    tr = Tracker(model, cams, TrackerConfig(seed=0, init_confirm_frames=0))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=0, init_confirm_frames=0))
     tr.initialize(pose=walk[0])
     seen = []
     fit = tr._contour.set_masks

@@ -227,7 +227,7 @@ def test_tracker_restricted_total_energy_adds_the_prior(scene):
 
     model, cams, x0, masks = scene
     prior = ParzenPrior(generate_motion("walk", model, duration_s=1.0, fps=30, rng=np.random.default_rng(5)))
-    tr = Tracker(model, cams, TrackerConfig(optimizer="h-isa", evals=600, prior_eta=0.01), prior=prior)
+    tr = Tracker(model, cams, TrackerConfig.from_flat(optimizer="h-isa", evals=600, prior_eta=0.01), prior=prior)
     tr.initialize(pose=x0)
     frame_masks.set_masks(tr, list(masks), [], 0)
     cols = model.partitions["left_arm"]
@@ -249,7 +249,7 @@ def test_tracker_steps_are_the_same_with_and_without_restriction(scene, monkeypa
     frames = [[render_mask(c, capsule_endpoints(model, x)[0], model.capsule_radii) for c in cams] for x in walk]
 
     def track():
-        tr = Tracker(model, cams, TrackerConfig(optimizer="h-isa", evals=850, seed=2))
+        tr = Tracker(model, cams, TrackerConfig.from_flat(optimizer="h-isa", evals=850, seed=2))
         tr.initialize(pose=walk[0])
         return tr, [tr.step(frames[k], k) for k in (1, 2)]
 

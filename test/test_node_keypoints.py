@@ -80,7 +80,7 @@ def test_node_publishes_landmarks_every_k_frames(model_file, rosenv, spawn, tmp_
                 spin_until(ex, lambda: False, 0.05)
                 second[v].publish(im if f == 2 else mk)
             spin_until(ex, lambda: False, 0.05)
-        assert spin_until(ex, lambda: all(len(g) >= 2 for g in got), 60), (got, proc.output())
+        assert spin_until(ex, lambda: all(len(g) >= 2 for g in got), 120), (got, proc.output())
         # an empty mask: "looked, nobody"; a mask of the wrong size: dropped with a log line
         stamp = stamps[-1] + 10 * 33_333_333
         for v, mask in ((0, np.zeros((360, 480), np.uint8)), (1, np.zeros((10, 10), np.uint8))):

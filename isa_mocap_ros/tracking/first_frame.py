@@ -27,7 +27,7 @@ def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int
     frame_index : int
         Frame key of the initialization's random stream.
     keypoints : sequence of (uv, confidence) or None, optional
-        As for :meth:`Tracker.step`: with ``config.keypoint_weight > 0`` the grid and refinement also
+        As for :meth:`Tracker.step`: with ``config.keypoints.keypoint_weight > 0`` the grid and refinement also
         score the keypoint term.
 
     Returns
@@ -63,8 +63,8 @@ def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int
     tr._keypoint_term = objective.keypoint_energy(tr, keypoints)[0]
     try:
         res = initial_pose(tr.model, tr.cameras, usable, init_energy_fn(tr, usable, frame_index),
-                           rng=frame_rng(cfg.seed, frame_index, 1), n_yaw=cfg.init_yaw_steps,
-                           refine_evals=cfg.init_refine_evals)
+                           rng=frame_rng(cfg.search.seed, frame_index, 1), n_yaw=cfg.first_frame.init_yaw_steps,
+                           refine_evals=cfg.first_frame.init_refine_evals)
     except InitError as exc:
         raise TrackerError(f"masks: automatic initialization failed: {exc}") from None
     finally:
@@ -78,7 +78,7 @@ def init_energy_fn(tr, usable: list, frame_index: int):
     """The energy the automatic initialization scores its grid with (see ``__init__``)."""
     if tr._init_energy is None:
         return tr.total_energy
-    tr._init_energy.rng = frame_rng(tr.config.seed, frame_index, 4)
+    tr._init_energy.rng = frame_rng(tr.config.search.seed, frame_index, 4)
     try:
         tr._init_energy.set_masks(usable)
     except ValueError:
@@ -93,16 +93,16 @@ def init_energy_fn(tr, usable: list, frame_index: int):
 def initial_runs(tr, starts: list, frame_index: int, notes: list[str], budget: FrameBudget,
                   stream: tuple = ()) -> tuple[list, int]:
     """The automatically initialized frame's search from every start (heading candidate), pruned
-    to ``config.init_keep`` runs at the checkpoint (see :class:`TrackerConfig`): the list of
+    to ``config.first_frame.init_keep`` runs at the checkpoint (see :class:`TrackerConfig`): the list of
     ``(start index, result, start)`` of the runs that ended, and the evaluations of all runs.
     Raises the optimizer's errors."""
     cfg = tr.config
     runs = []
     for j, pred in enumerate(starts):
         if stream:          # the heading re-check's runs: their own streams
-            rng = frame_rng(cfg.seed, frame_index, *stream, j)
+            rng = frame_rng(cfg.search.seed, frame_index, *stream, j)
         else:
-            rng = frame_rng(cfg.seed, frame_index) if j == 0 else frame_rng(cfg.seed, frame_index, 3, j)
+            rng = frame_rng(cfg.search.seed, frame_index) if j == 0 else frame_rng(cfg.search.seed, frame_index, 3, j)
         opt, evals, _, _ = tr._search(pred, rng, budget, INIT_SPREAD_SCALE, notes if j == 0 else None,
                                         stages=False)
         run = compiled_search.search(opt, tr.energy, evals, extra_terms=tr._python_terms(), paused=True) \
@@ -117,7 +117,7 @@ def initial_runs(tr, starts: list, frame_index: int, notes: list[str], budget: F
         shares = getattr(opt, "shares", None)
         runs.append((j, opt, pred, shares[0] if shares else evals // 6))
     n_pruned = 0
-    if 0 < cfg.init_keep < len(runs):
+    if 0 < cfg.first_frame.init_keep < len(runs):
         for _, opt, _, checkpoint in runs:
             if checkpoint is None:
                 opt.advance(1)
@@ -126,8 +126,8 @@ def initial_runs(tr, starts: list, frame_index: int, notes: list[str], budget: F
                 if opt.n_evals >= checkpoint:
                     break
         ranked = sorted(runs, key=lambda r: r[1].best_energy)      # stable: ties keep the start order
-        n_pruned = sum(r[1].n_evals for r in ranked[cfg.init_keep:])
-        runs = sorted(ranked[:cfg.init_keep], key=lambda r: r[0])
+        n_pruned = sum(r[1].n_evals for r in ranked[cfg.first_frame.init_keep:])
+        runs = sorted(ranked[:cfg.first_frame.init_keep], key=lambda r: r[0])
     out = []
     for j, opt, pred, checkpoint in runs:
         if checkpoint is None:
@@ -140,11 +140,11 @@ def initial_runs(tr, starts: list, frame_index: int, notes: list[str], budget: F
 
 
 def polish(tr, x: np.ndarray, energy: float, frame_index: int, stream: int, notes, budget: FrameBudget):
-    """``config.init_polish``'s search of the initialized frame's pose ``x`` (energy ``energy``) as a tracked
-    frame, every stage, stream ``[seed, frame, stream]``: ``(result or None if the optimizer refused, the
+    """``config.first_frame.init_polish``'s search of the initialized frame's pose ``x`` (energy ``energy``) as a
+    tracked frame, every stage, stream ``[seed, frame, stream]``: ``(result or None if the optimizer refused, the
     lower-energy pose of the two, its energy)``; a refusal is noted in ``notes`` (when given)."""
     try:
-        res = tr._optimize(x, frame_rng(tr.config.seed, frame_index, stream), budget, notes=notes)
+        res = tr._optimize(x, frame_rng(tr.config.search.seed, frame_index, stream), budget, notes=notes)
     except ValueError as exc:
         if notes is not None:
             notes.append(f"initialization polish failed: {exc}")
@@ -155,7 +155,7 @@ def polish(tr, x: np.ndarray, energy: float, frame_index: int, stream: int, note
 
 def polish_winner(tr, x: np.ndarray, energy: float, res, frame_index: int, notes: list[str],
                   budget: FrameBudget):
-    """``config.init_polish``: the first frame's winner searched once more as a tracked frame (all stages)
+    """``config.first_frame.init_polish``: the first frame's winner searched once more as a tracked frame (all stages)
     from itself, and the heading check's rival (``heading_check.rival_start``) alike; the heading that
     fits better after it leads (the check still tracks both). Returns ``(x, energy, result, evaluations)``
     of the frame."""
@@ -182,9 +182,9 @@ def polish_winner(tr, x: np.ndarray, energy: float, res, frame_index: int, notes
 
 
 def pick_rival(tr, runs: list, winner, x: np.ndarray, energy: float):
-    """The heading check's rival among the initialized frame's runs (``config.init_confirm_frames``):
+    """The heading check's rival among the initialized frame's runs (``config.heading.init_confirm_frames``):
     the lowest-energy run heading more than 90° away from the winner's estimate ``x``, if its
-    energy is within ``config.init_confirm_ratio`` of ``energy``; else None."""
+    energy is within ``config.heading.init_confirm_ratio`` of ``energy``; else None."""
     from .init import _wrap, _yaw_of
 
     if not tr._has_heading or not np.isfinite(energy):
@@ -198,6 +198,6 @@ def pick_rival(tr, runs: list, winner, x: np.ndarray, energy: float):
         if abs(float(_wrap(_yaw_of(xr[3:6]) - yaw))) > np.pi / 2 and np.isfinite(er) \
                 and (best is None or er < best[1]):
             best = (xr, er)
-    if best is None or best[1] > tr.config.init_confirm_ratio * max(energy, 0.0):
+    if best is None or best[1] > tr.config.heading.init_confirm_ratio * max(energy, 0.0):
         return None
     return best[0], best[1], energy

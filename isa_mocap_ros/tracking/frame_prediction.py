@@ -40,7 +40,7 @@ def predict(tr, external, notes: list[str]) -> np.ndarray:
             p = None
     if p is None:
         try:
-            ahead = min(tr.track.elapsed or 1, tr.config.max_frames_ahead)
+            ahead = min(tr.track.elapsed or 1, tr.config.prediction.max_frames_ahead)
             p = np.asarray(tr.predictor.predict(**frames_kwargs(ahead)), dtype=float)
         except ValueError as exc:      # PredictionError: empty history (cannot happen once initialized)
             notes.append(f"prediction: {exc}; using the last estimate")
@@ -56,10 +56,10 @@ def predict(tr, external, notes: list[str]) -> np.ndarray:
         idx = list(blk)
         p = p.copy() if p is external else p
         p[idx] = nearest_rotvec(p[idx], tr.track.last[idx])
-    gain = np.full(D, cfg.joint_velocity_gain)
+    gain = np.full(D, cfg.prediction.joint_velocity_gain)
     gain[:6] = ROOT_VELOCITY_GAIN
     out = tr.track.last + gain * (p - tr.track.last)        # damped extrapolation
-    if tr.track.elapsed > cfg.max_frames_ahead or (tr.track.elapsed > 1 and motion_unknown(tr)):
+    if tr.track.elapsed > cfg.prediction.max_frames_ahead or (tr.track.elapsed > 1 and motion_unknown(tr)):
         recentre(tr, out, notes)
     return out
 

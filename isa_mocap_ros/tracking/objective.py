@@ -21,14 +21,14 @@ class TotalEnergy:
 
 def keypoint_energy(tr, keypoints) -> tuple[object, str | None]:
     """The frame's :class:`~isa_mocap_ros.energy.KeypointEnergy` (or None) and a note on it."""
-    if keypoints is None or tr.config.keypoint_weight <= 0:
+    if keypoints is None or tr.config.keypoints.keypoint_weight <= 0:
         return None, None
     from isa_mocap_ros.energy import KeypointEnergy
     try:
-        term = KeypointEnergy(tr.model, tr.cameras, keypoints, sigma_m=tr.config.keypoint_sigma_m)
+        term = KeypointEnergy(tr.model, tr.cameras, keypoints, sigma_m=tr.config.keypoints.keypoint_sigma_m)
     except ValueError as exc:
         return None, f"keypoints ignored: {exc}"
     if term.n_correspondences == 0:
         return None, "keypoints: none usable (no detection above the confidence floor)"
     return term, (f"keypoints: {term.n_correspondences} in {len(set(term.views.tolist()))} views, "
-                  f"weight {tr.config.keypoint_weight:g}")
+                  f"weight {tr.config.keypoints.keypoint_weight:g}")

@@ -19,9 +19,9 @@ from .config import CONTOUR_KEEP_TOLERANCE, TrackerError, _whole_generations
 
 def fit_contours(tr, x, *, iterations: int | None = None, extra_iterations: int | None = None):
     """The contour stage on pose ``x`` under the current masks (:class:`~.contour.ContourFit`):
-    ``config.contour_iterations`` (or ``iterations``) steps over all coordinates, then
-    ``config.contour_extra_iterations`` (or ``extra_iterations``) over the coordinates of
-    ``config.contour_extra_partitions`` alone, from that pose's contour points (rendered again);
+    ``config.stages.contour_iterations`` (or ``iterations``) steps over all coordinates, then
+    ``config.stages.contour_extra_iterations`` (or ``extra_iterations``) over the coordinates of
+    ``config.stages.contour_extra_partitions`` alone, from that pose's contour points (rendered again);
     returns ``(pose, its energy, evaluations charged, ContourFitInfo)`` (the info of both fits
     together). The fitted pose replaces ``x`` unless its silhouette energy is more than
     :data:`CONTOUR_KEEP_TOLERANCE` above ``x``'s (both evaluated in one batch: a mask contour bent by an
@@ -29,7 +29,7 @@ def fit_contours(tr, x, *, iterations: int | None = None, extra_iterations: int 
     taken over all coordinates, ``(k + 1)`` per iteration over ``k`` of them, + 2."""
     if tr.track.masks_now is None:
         raise TrackerError("fit_contours: no masks yet (call step first)")
-    iterations = tr.config.contour_iterations if iterations is None else iterations
+    iterations = tr.config.stages.contour_iterations if iterations is None else iterations
     extra = plan.contour_extra(tr) if extra_iterations is None else extra_iterations
     x = np.asarray(x, dtype=np.float64)
     tr._contour.set_masks(tr.track.masks_now)
@@ -137,7 +137,7 @@ def propose_limbs(tr, x, *, n: int, rng: np.random.Generator, limbs: Sequence[st
                   hinge_only: Sequence[str] = (), last=None) -> tuple[np.ndarray, float, int, list[str]]:
     """The limb stage on pose ``x`` under the current masks (:class:`~.limbs.LimbMove`): ``n``
     twist-and-hinge proposals per limb (hinge proposals only for the limbs in ``hinge_only``) and,
-    given the previous frame's pose ``last``, the ``config.limb_extrapolations`` proposals,
+    given the previous frame's pose ``last``, the ``config.stages.limb_extrapolations`` proposals,
     evaluated in one batch with ``x`` itself; each limb whose best proposal has a lower energy than
     ``x`` takes that proposal's angles.
 
@@ -152,8 +152,8 @@ def propose_limbs(tr, x, *, n: int, rng: np.random.Generator, limbs: Sequence[st
     if int(n) < 1 or not chosen:
         return x, float(tr.total_energy(x[None, :])[0]), 1, []
     n = int(n)
-    factors = tr.config.limb_extrapolations if last is not None else ()
-    w = tr.config.limb_hinge_window_deg
+    factors = tr.config.stages.limb_extrapolations if last is not None else ()
+    w = tr.config.stages.limb_hinge_window_deg
     window = np.deg2rad(w) if 0 < w < 180 else None
     batches = [tr._limbs.draw(x, limb, n, rng, twist=limb.name not in hinge_only, window=window)
                for limb in chosen]

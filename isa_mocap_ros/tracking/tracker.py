@@ -43,9 +43,9 @@ __all__ = ["TrackerError", "TrackerConfig", "FrameResult", "FrameBudget", "Track
 
 
 def _make_predictor(config: TrackerConfig):
-    if config.predictor == "ar":
-        return ArPredictor(order=config.predictor_order)
-    if config.predictor == "constant_pose":
+    if config.prediction.predictor == "ar":
+        return ArPredictor(order=config.prediction.predictor_order)
+    if config.prediction.predictor == "constant_pose":
         return ConstantPosePredictor()
     return ConstantVelocityPredictor()
 
@@ -60,18 +60,18 @@ class Tracker:
         One per view, in view order.
     config : TrackerConfig
     prior : ParzenPrior, optional
-        Used when ``config.prior_eta > 0`` (else ``config.prior_file`` is loaded).
+        Used when ``config.objective.prior_eta > 0`` (else ``config.objective.prior_file`` is loaded).
     energy : object, optional
         Data term with ``set_masks(masks)`` and ``__call__(X (n, D)) -> (n,)``; default
         :class:`~isa_mocap_ros.energy.silhouette.SilhouetteEnergy` with the config's method and
         downsampling.
     predictor : object, optional
         With ``update(x)``, ``predict()``, ``reset()`` (e.g. :class:`.published.PublishedPredictor`
-        to reproduce the node network's numbers); default from ``config.predictor``.
+        to reproduce the node network's numbers); default from ``config.prediction.predictor``.
 
     Examples
     --------
-    >>> tracker = Tracker(model, rig.cameras, TrackerConfig(seed=1))      # doctest: +SKIP
+    >>> tracker = Tracker(model, rig.cameras, TrackerConfig.from_flat(seed=1))      # doctest: +SKIP
     >>> tracker.initialize(masks=first_masks)                              # doctest: +SKIP
     >>> for k, masks in enumerate(frames):                                 # doctest: +SKIP
     ...     r = tracker.step(masks, k); print(r.x[:3], r.energy, r.notes)
@@ -91,14 +91,14 @@ class Tracker:
         self.cameras = cams
         self.config = config
         self.prior = None
-        if config.prior_eta > 0:
-            if prior is None and config.prior_file:
+        if config.objective.prior_eta > 0:
+            if prior is None and config.objective.prior_file:
                 from isa_mocap_ros.energy.prior import ParzenPrior
 
-                prior = ParzenPrior.load(config.prior_file)
+                prior = ParzenPrior.load(config.objective.prior_file)
             if prior is None:
-                raise TrackerError("prior: expected a ParzenPrior (prior= or config.prior_file) when prior_eta > 0, "
-                                   "received none")
+                raise TrackerError("prior: expected a ParzenPrior (prior= or config.objective.prior_file) when "
+                                   "prior_eta > 0, received none")
             if getattr(prior, "n_dof", model.dof) != model.dof:
                 raise TrackerError(f"prior: expected a prior over {model.dof}-DOF poses, received one over "
                                    f"{prior.n_dof}")
@@ -107,9 +107,10 @@ class Tracker:
         from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
         if energy is None:
 
-            energy = SilhouetteEnergy(model, cams, None, method=config.energy, downsample=config.downsample,
-                                      n_model_points=config.n_model_points, n_mask_points=config.n_mask_points,
-                                      rng=np.random.default_rng([config.seed, 2**32 - 1]))
+            obj = config.objective
+            energy = SilhouetteEnergy(model, cams, None, method=obj.energy, downsample=obj.downsample,
+                                      n_model_points=obj.n_model_points, n_mask_points=obj.n_mask_points,
+                                      rng=np.random.default_rng([config.search.seed, 2**32 - 1]))
         if not (callable(energy) and hasattr(energy, "set_masks")):
             raise TrackerError(f"energy: expected an object with set_masks() and __call__, received "
                                f"{type(energy).__name__}")
@@ -117,9 +118,10 @@ class Tracker:
         # the automatic initialization's grid scores rough standing poses: with the fine sample
         # sizes it picked a heading 180 deg off on bags/demo, with the library's coarse ones not
         self._init_energy = None
-        if own_energy and config.energy == "fast":
-            self._init_energy = SilhouetteEnergy(model, cams, None, method="fast", downsample=config.downsample,
-                                                 rng=np.random.default_rng([config.seed, 2**32 - 2]))
+        if own_energy and config.objective.energy == "fast":
+            self._init_energy = SilhouetteEnergy(model, cams, None, method="fast",
+                                                 downsample=config.objective.downsample,
+                                                 rng=np.random.default_rng([config.search.seed, 2**32 - 2]))
         # what the frame carries to the next (last estimate, predictor, masks, root history, clock)
         self.track = TrackState(_make_predictor(config) if predictor is None else predictor)
         self._pelvis_reaim = ReaimMove(model, [0]) if "root" in model.partitions else None
@@ -128,22 +130,23 @@ class Tracker:
         self._torso = ReaimMove(model, torso_joints) if torso_joints else None
         self._flat_generations: dict[int, int] = {}     # _flat_generation's cache
         self._limbs = LimbMove(model)
-        self._contour = ContourFit(model, self.cameras, n_points=config.contour_points,
-                                   max_px=config.contour_max_px)
-        self._contour_extra_coords = _partition_coords(model, config.contour_extra_partitions)
-        missing = [k for k in model.partitions if k not in config.partition_order]
+        self._contour = ContourFit(model, self.cameras, n_points=config.stages.contour_points,
+                                   max_px=config.stages.contour_max_px)
+        self._contour_extra_coords = _partition_coords(model, config.stages.contour_extra_partitions)
+        missing = [k for k in model.partitions if k not in config.search.partition_order]
         if missing:
             raise TrackerError(f"partition_order: expected every partition of model {model.name} "
                                f"({', '.join(model.partitions)}), missing {', '.join(missing)}")
-        self._partitions = [np.asarray(model.partitions[k]) for k in config.partition_order if k in model.partitions]
+        self._partitions = [np.asarray(model.partitions[k]) for k in config.search.partition_order
+                            if k in model.partitions]
         self.frames = 0
         self._contour_now = True               # step(contour_stage=...) of the frame being tracked
-        # the heading check after an automatic initialization (config.init_confirm_frames)
+        # the heading check after an automatic initialization (config.heading.init_confirm_frames)
         self.heading_check = HeadingCheckState()
         # h-isa on the fast energy runs compiled per partition (optim/compiled_search.py, the same
         # numbers as the optimizer protocol); False: always through the protocol (tests compare both)
         self._compiled_search = True
-        # the keypoint term of the frame being tracked (config.keypoint_weight; set by step/initialize)
+        # the keypoint term of the frame being tracked (config.keypoints.keypoint_weight; set by step/initialize)
         self._keypoint_term = None
 
     # ------------------------------------------------------------------ state
@@ -189,7 +192,7 @@ class Tracker:
         return 3 in {len(b) for b in self.model.rotation_blocks}
 
     def _prior_active(self) -> bool:
-        return self.prior is not None and self.config.prior_eta > 0
+        return self.prior is not None and self.config.objective.prior_eta > 0
 
     def _python_terms(self) -> bool:
         """Whether a term beside the silhouette energy is active (prior, keypoints): the search then
@@ -198,10 +201,10 @@ class Tracker:
 
     def _add_terms(self, X: np.ndarray, E: np.ndarray) -> np.ndarray:
         """``E`` plus the prior ``−η ln p`` (13.33) and the frame's weighted keypoint term, if active."""
-        if self.prior is not None and self.config.prior_eta > 0:
-            E = E + self.prior.energy(X, eta=self.config.prior_eta)
+        if self.prior is not None and self.config.objective.prior_eta > 0:
+            E = E + self.prior.energy(X, eta=self.config.objective.prior_eta)
         if self._keypoint_term is not None:
-            E = E + self.config.keypoint_weight * self._keypoint_term(X)
+            E = E + self.config.keypoints.keypoint_weight * self._keypoint_term(X)
         return E
 
     def total_energy(self, X) -> np.ndarray:
@@ -242,8 +245,8 @@ class Tracker:
     def search_box(self, center) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Bounds ``(lo, hi)`` and initial spreads ``(D,)`` around a (clipped) prediction."""
         cfg, m = self.config, self.model
-        radius = np.full(m.dof, cfg.search_radius_rad)
-        radius[:3] = cfg.root_translation_radius_m
+        radius = np.full(m.dof, cfg.search.search_radius_rad)
+        radius[:3] = cfg.search.root_translation_radius_m
         radius[3:6] = ROOT_ROTATION_RADIUS_RAD
         spread = np.full(m.dof, JOINT_SPREAD_RAD)
         spread[:3] = ROOT_TRANSLATION_SPREAD_M
@@ -267,12 +270,12 @@ class Tracker:
         lo, hi, spread = self.search_box(pred)
         base = spread * spread_scale
         spread = base.copy()              # the motion term widens the main search's spreads only
-        if stages and cfg.spread_velocity_gain > 0 and self.track.last is not None:
-            moved = cfg.spread_velocity_gain * np.abs(pred[6:] - self.track.last[6:])
+        if stages and cfg.search.spread_velocity_gain > 0 and self.track.last is not None:
+            moved = cfg.search.spread_velocity_gain * np.abs(pred[6:] - self.track.last[6:])
             spread[6:] = np.sqrt(spread[6:] ** 2 + moved ** 2)
         x0 = np.clip(pred, lo, hi)
-        params = cfg.params()
-        if inner_optimizer(cfg.optimizer) is not None:
+        params = cfg.search.params()
+        if inner_optimizer(cfg.search.optimizer) is not None:
             params.setdefault("partitions", self._partitions)
             # whole generations (not on the automatically initialized frame, whose runs from the heading
             # candidates keep the proportional split their pruning and heading choice were measured with)
@@ -280,12 +283,12 @@ class Tracker:
         elif "initial_population" not in params:
             # first generation: the prediction itself plus draws around it (so the estimate
             # can never be worse than the prediction by the energy's own measure)
-            n = make_optimizer(cfg.optimizer, x0, spread, rng=np.random.default_rng(0), bounds=(lo, hi),
+            n = make_optimizer(cfg.search.optimizer, x0, spread, rng=np.random.default_rng(0), bounds=(lo, hi),
                                **params).generation_size
             P = np.clip(x0 + rng.standard_normal((n, x0.size)) * spread, lo, hi)
             P[0] = x0
             params["initial_population"] = P
-        opt = make_optimizer(cfg.optimizer, x0, spread, rng=rng, bounds=(lo, hi),
+        opt = make_optimizer(cfg.search.optimizer, x0, spread, rng=rng, bounds=(lo, hi),
                              rotation_blocks=self.model.rotation_blocks, **params)
         share = plan.pelvis_share(self, notes, budget) if stages else None
         torso = plan.torso_share(self, notes, budget) if stages else None
@@ -296,30 +299,30 @@ class Tracker:
         if torso is not None:
             # the torso stage never starves the main search: two generations per partition stay
             need = 2 * (sum(plan.flat_generation(self, len(p)) for p in self._partitions)
-                        if inner_optimizer(cfg.optimizer) is not None else opt.generation_size)
+                        if inner_optimizer(cfg.search.optimizer) is not None else opt.generation_size)
             if budget < need:
                 if notes is not None:
                     notes.append(f"torso stage skipped: with its share ({torso} evaluations) the main search would "
                                  f"keep {budget}, fewer than two generations per partition ({need})")
                 budget += torso
                 torso = None
-        if inner_optimizer(cfg.optimizer) is None:
+        if inner_optimizer(cfg.search.optimizer) is None:
             budget = _whole_generations(budget, opt.generation_size)     # (hierarchical: its split does this)
         return opt, budget, (share, torso, limbs, contour), (lo, hi, spread, base)
 
     def _optimize(self, pred: np.ndarray, rng: np.random.Generator, budget: FrameBudget, spread_scale: float = 1.0,
                   notes=None, stages: bool = True):
         """One optimizer run of the frame budget around ``pred`` (raises the optimizer's errors), then
-        the pelvis stage (``config.pelvis_fraction`` of the budget), the torso stage
-        (``config.torso_fraction``), the limb stage (``config.limb_proposals``) and the contour stage
-        (``config.contour_iterations``), each also given what the searches before it left unspent
+        the pelvis stage (``config.stages.pelvis_fraction`` of the budget), the torso stage
+        (``config.stages.torso_fraction``), the limb stage (``config.stages.limb_proposals``) and the contour stage
+        (``config.stages.contour_iterations``), each also given what the searches before it left unspent
         (they run whole generations; the limb stage takes the rest as more proposals, so a frame
         leaves fewer evaluations unspent than it has limbs in the stage);
         ``spread_scale`` multiplies the initial spreads (the first frame starts from a rough pose);
         skipped stages are noted in ``notes``. The heading candidates' searches of the automatically
         initialized frame have no stage (``stages=False``): from a rough standing pose the pelvis stage
         turned the pelvis against the legs (bags/demo: 270-340 mm on the first frames, measured); its
-        polish (``config.init_polish``) then searches the winner with every stage."""
+        polish (``config.first_frame.init_polish``) then searches the winner with every stage."""
         from isa_mocap_ros.optim import minimize
 
         opt, budget, stage_shares, (lo, hi, spread, base) = self._search(pred, rng, budget, spread_scale, notes,
@@ -409,7 +412,7 @@ class Tracker:
             ``contour_iterations=0``): what the estimator node does in real time with a frame set that
             waited too long (its ``catch_up_ms``; the stage is the costliest in time per evaluation).
         keypoints : sequence of ``(uv (33, 2), confidence (33,))`` or None
-            Per camera BlazePose landmarks; with ``config.keypoint_weight > 0`` they add the keypoint term
+            Per camera BlazePose landmarks; with ``config.keypoints.keypoint_weight > 0`` they add the keypoint term
             to this frame's energy (the heading check's rival's too, so both are scored alike).
 
         Returns
@@ -436,7 +439,7 @@ class Tracker:
         t0 = time.perf_counter()
         rival = self.heading_check.rival
         self._contour_now = bool(contour_stage)
-        res = self._step(masks, frame_index, FrameBudget(self.config.evals, self._contour_now),
+        res = self._step(masks, frame_index, FrameBudget(self.config.search.evals, self._contour_now),
                          prediction=prediction, frames_elapsed=frames_elapsed)
         if self.heading_check.own_prediction_frames > 0:
             self.heading_check.own_prediction_frames -= 1
@@ -448,7 +451,7 @@ class Tracker:
                 heading.start_rival(self, frame_index)
                 return dataclasses.replace(res, notes=res.notes + (
                     f"heading check started: a run heading the other way ended {e_rival:.4g} (winner {e_win:.4g}); both "
-                    f"tracked for up to {self.config.init_confirm_frames} frames",))
+                    f"tracked for up to {self.config.heading.init_confirm_frames} frames",))
             return res
         if rival is None:
             return heading.recheck_heading(self, res, frame_index, frames_elapsed, t0)
@@ -483,10 +486,10 @@ class Tracker:
         # the mask gate and the visual-hull filter around the prediction (made here when they run)
         usable, gated_pred = frame_masks.filter_masks(self, usable, prediction, notes)
         weights = None
-        if cfg.view_weights and self.track.last is not None and any(m is not None for m in usable):
+        if cfg.objective.view_weights and self.track.last is not None and any(m is not None for m in usable):
             if gated_pred is None:
                 gated_pred = frame_prediction.predict(self, prediction, notes)
-            # Eq. 5's view weights (config.view_weights): the share of the predicted body each view sees
+            # Eq. 5's view weights (config.objective.view_weights): the share of the predicted body each view sees
             weights = visible_shares(self.model, self.cameras, gated_pred)
         views = frame_masks.set_masks(self, usable, notes, frame_index, weights)
         if views == 0:
@@ -498,9 +501,11 @@ class Tracker:
         initialized = False
         if self.track.last is None:
             try:
-                res0 = initial_pose(self.model, self.cameras, usable, first_frame.init_energy_fn(self, usable, frame_index),
-                                    rng=frame_rng(cfg.seed, frame_index, 1), n_yaw=cfg.init_yaw_steps,
-                                    refine_evals=cfg.init_refine_evals)
+                res0 = initial_pose(self.model, self.cameras, usable,
+                                    first_frame.init_energy_fn(self, usable, frame_index),
+                                    rng=frame_rng(cfg.search.seed, frame_index, 1),
+                                    n_yaw=cfg.first_frame.init_yaw_steps,
+                                    refine_evals=cfg.first_frame.init_refine_evals)
             except InitError as exc:
                 notes.append(f"automatic initialization failed: {exc}")
                 return FrameResult(x=None, energy=float("nan"), n_evals=0, spread=float("nan"),
@@ -511,13 +516,13 @@ class Tracker:
             starts = [c[0] for c in res0.candidates] or [res0.x]
         else:
             starts = [gated_pred if gated_pred is not None else frame_prediction.predict(self, prediction, notes)]
-        # the first frame optimizes from every initialization candidate (pruned to config.init_keep
+        # the first frame optimizes from every initialization candidate (pruned to config.first_frame.init_keep
         # runs part-way) and keeps the lowest energy
         try:
             if initialized:
                 runs, n = first_frame.initial_runs(self, starts, frame_index, notes, budget)
             else:
-                res = self._optimize(starts[0], frame_rng(cfg.seed, frame_index), budget, notes=notes)
+                res = self._optimize(starts[0], frame_rng(cfg.search.seed, frame_index), budget, notes=notes)
                 runs, n = [(0, res, starts[0])], res.n_evals
         except ValueError as exc:
             # a configuration the optimizer rejects (budget below one generation, bad parameter):
@@ -532,10 +537,10 @@ class Tracker:
             notes.append(f"initialized automatically ({len(starts)} heading candidates, {len(runs)} searched to the "
                          f"end, grid best yaw {np.rad2deg(res0.yaw):.0f} deg {res0.variant}, {n_evals} evaluations)")
         x, energy = self._final_pose(res)
-        if initialized and cfg.init_confirm_frames > 0:
+        if initialized and cfg.heading.init_confirm_frames > 0:
             self.heading_check.rival_start = first_frame.pick_rival(self, runs, res, x, energy)
-        if initialized and cfg.init_polish:
-            # config.init_polish: the winner (and the heading check's rival) searched once more, from itself
+        if initialized and cfg.first_frame.init_polish:
+            # config.first_frame.init_polish: the winner (and the heading check's rival) searched once more, from itself
             x, energy, res, n = first_frame.polish_winner(self, x, energy, res, frame_index, notes, budget)
             n_evals += n
         if res.n_nonfinite:
@@ -552,4 +557,4 @@ def make_tracker(model, cameras: Sequence, *, energy_fn: Callable | None = None,
     """A :class:`Tracker` from flat settings: ``config`` keywords are :class:`TrackerConfig` fields (the
     estimator node's parameters carry the same names); ``energy_fn``: a data term object (see
     :class:`Tracker`)."""
-    return Tracker(model, cameras, TrackerConfig(**config), energy=energy_fn)
+    return Tracker(model, cameras, TrackerConfig.from_flat(**config), energy=energy_fn)
