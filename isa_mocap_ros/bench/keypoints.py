@@ -11,6 +11,8 @@ Two kinds of sequence (docs/keypoints.md):
   the error includes the peer's own error and its keypoint definitions (not anatomical joint centres).
   Two crops: upright, and turned so the reference's hip-to-shoulder direction points up
   (``upright_angle``, as a predicted pose would give).
+* ``mesh``: skinned-mesh renders (the three subjects, generated walk, jog, wave; flat-shaded triangles, not
+  real images), against the mesh skeleton's joint centres projected; crop around the exact mask;
 * ``synth``: capsule renders of the tracking model (flat-shaded, ``isa_mocap_ros.synth``; the
   default 4-camera rig at ``--width`` x ``--height``), generated motions and the CMU walk if present;
   the reference is the exact joint centres projected; the crop is the square around the exact mask.
@@ -69,7 +71,7 @@ _LEGS = ("hip", "knee", "ankle")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--kinds", default="real,synth", help="comma-separated: real, synth, track, init, cost (default real,synth)")
+    p.add_argument("--kinds", default="real,synth", help="comma-separated: real, synth, mesh, track, init, cost (default real,synth)")
     p.add_argument("--step", type=int, default=5, help="every STEP-th frame (default 5)")
     p.add_argument("--data", default=str(_REAL), help="the Pose2Sim demo folder")
     p.add_argument("--width", type=int, default=640, help="synthetic image width (default 640)")
@@ -212,6 +214,38 @@ def bench_real(det: PoseLandmarker, root: Path, step: int, *, aligned: bool) -> 
             k += 1
         cap.release()
         out[f"cam0{v + 1}"] = tally.summary()
+    return out
+
+
+def bench_synth_mesh(det: PoseLandmarker, width: int, height: int, step: int, seconds: float,
+                     subjects: list[str]) -> dict:
+    """The detector on skinned-mesh renders (flat-shaded triangles, ``MeshSceneRenderer``; the default 4-camera
+    rig): per subject and motion, against the mesh skeleton's joint centres projected; crop around the exact
+    mask."""
+    from isa_mocap_ros.body.mesh import MESH_MARKERS
+    from isa_mocap_ros.synth import MeshSceneRenderer, make_clip
+    from isa_mocap_ros.vision import default_rig
+
+    rig = default_rig(width=width, height=height)
+    names = list(_JOINT_TO_LM.values())
+    li = [LANDMARK_NAMES.index(n) for n in names]
+    mi = [MESH_MARKERS.index(j) for j in _JOINT_TO_LM]
+    out = {}
+    for subject in subjects:
+        for motion in ("walk", "jog", "wave"):
+            clip = make_clip(motion, dof=39, fps=30.0, duration_s=seconds, seed=0, body="mesh", subject=subject)
+            renderer = MeshSceneRenderer(clip, rig, seed=0)
+            tally = _Tally(names)
+            for f in range(0, clip.n_frames, step):
+                images, masks = renderer.render(f, f)
+                J = renderer.posed(f)[1]
+                for cam, img, mask in zip(rig.cameras, images, masks):
+                    box = box_from_mask(mask)
+                    if box is None:
+                        continue
+                    lm, ms = _detect(det, img, box, bgr=False)
+                    tally.add(lm.uv[li], cam.project(J[mi]), box[2], lm.score, ms)
+            out[f"mesh {subject} {motion}"] = tally.summary()
     return out
 
 
@@ -465,7 +499,7 @@ def _print(kind: str, res: dict) -> None:
 
 def run(args: argparse.Namespace) -> int:
     kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
-    bad = [k for k in kinds if k not in ("real", "synth", "track", "init", "cost")]
+    bad = [k for k in kinds if k not in ("real", "synth", "mesh", "track", "init", "cost")]
     if bad or args.step < 1:
         print(f"isa-mocap bench keypoints: error: --kinds {bad} / --step {args.step}: expected real, synth and "
               "a step >= 1", file=sys.stderr)
@@ -477,7 +511,7 @@ def run(args: argparse.Namespace) -> int:
         results["init"] = bench_init(args)
     if "cost" in kinds:
         results["cost"] = bench_cost(args)
-    det = PoseLandmarker() if {"real", "synth"} & set(kinds) else None
+    det = PoseLandmarker() if {"real", "synth", "mesh"} & set(kinds) else None
     if "real" in kinds:
         root = Path(args.data)
         if not (root / "balancing").is_dir():
@@ -488,6 +522,9 @@ def run(args: argparse.Namespace) -> int:
             results["real aligned crop"] = bench_real(det, root, args.step, aligned=True)
     if "synth" in kinds:
         results["synth"] = bench_synth(det, args.width, args.height, args.step, args.synth_s)
+    if "mesh" in kinds:
+        results["mesh renders"] = bench_synth_mesh(det, args.width, args.height, args.step, args.synth_s,
+                                                   [x.strip() for x in args.subjects.split(",") if x.strip()])
     if args.json:
         print(json.dumps(results, indent=1))
     else:
