@@ -36,6 +36,16 @@ do), on the frames the keypoint node's schedule picks (the dense start, then eve
 with a person of each view, exact crop from the recorded mask or the segmented image), and from those the
 average CPU time per frame set at that rate.
 
+A sixth kind, ``peer``, tracks an imported real recording with reference markers (``--peer-bag``, made by
+``isa-mocap import ... --reference FILE.trc``) without and with the term (``isa-mocap track``'s defaults:
+automatic shape and initialization, segmented images; a run folder in ``--cache`` that holds a
+``summary.json`` is scored as it is) and scores the estimates against the peer's 3-D keypoints *here* (the
+project's scorer for the reference topic is issue 34's): per frame, the mean distance of our 12 limb joint
+centres (shoulders, elbows, wrists, hips, knees, ankles) from the peer's keypoints of the same names
+(:data:`_TRC_TO_JOINT`; a peer's keypoints are not joint centres, so the figure has a floor), the frames facing
+backwards (our left-to-right hip direction more than 90 degrees, in the ground plane, from the peer's) and the
+leg swaps (our left knee and ankle closer to the peer's right ones, summed over both legs).
+
 A fourth kind, ``init``, isolates the heading decision: every ``--init-every``-th frame of each motion
 and seed is rendered (320x240, 4 views) and handed to a fresh tracker as its first frame (the automatic
 initialization and the heading candidates' runs), without and with keypoints detected on those images;
@@ -62,6 +72,11 @@ _TRC_TO_LM = {"RShoulder": "right_shoulder", "LShoulder": "left_shoulder", "RElb
               "LElbow": "left_elbow", "RWrist": "right_wrist", "LWrist": "left_wrist", "RHip": "right_hip",
               "LHip": "left_hip", "RKnee": "right_knee", "LKnee": "left_knee", "RAnkle": "right_ankle",
               "LAnkle": "left_ankle", "RHeel": "right_heel", "LHeel": "left_heel", "Nose": "nose"}
+# Pose2Sim TRC keypoint -> our joint (the peer kind)
+_TRC_TO_JOINT = {"RShoulder": "right_shoulder", "LShoulder": "left_shoulder", "RElbow": "right_elbow",
+                 "LElbow": "left_elbow", "RWrist": "right_wrist", "LWrist": "left_wrist", "RHip": "right_hip",
+                 "LHip": "left_hip", "RKnee": "right_knee", "LKnee": "left_knee", "RAnkle": "right_ankle",
+                 "LAnkle": "left_ankle"}
 # model joint -> BlazePose landmark (synthetic ground truth)
 _JOINT_TO_LM = {"left_shoulder": "left_shoulder", "right_shoulder": "right_shoulder", "left_elbow": "left_elbow",
                 "right_elbow": "right_elbow", "left_wrist": "left_wrist", "right_wrist": "right_wrist",
@@ -71,7 +86,7 @@ _LEGS = ("hip", "knee", "ankle")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--kinds", default="real,synth", help="comma-separated: real, synth, mesh, track, init, cost (default real,synth)")
+    p.add_argument("--kinds", default="real,synth", help="comma-separated: real, synth, mesh, track, init, cost, peer (default real,synth)")
     p.add_argument("--step", type=int, default=5, help="every STEP-th frame (default 5)")
     p.add_argument("--data", default=str(_REAL), help="the Pose2Sim demo folder")
     p.add_argument("--width", type=int, default=640, help="synthetic image width (default 640)")
@@ -97,6 +112,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cache", default="out/bench_keypoints", help="track kind: bags and tracking output folder")
     p.add_argument("--bvh-scale", type=float, default=None, help="track kind: metres per unit of BVH files given "
                    "in --motions (the CMU clips of data/mocap/cmu: 0.056444)")
+    p.add_argument("--peer-bag", default=None, help="peer kind: an imported real recording with reference markers")
     p.add_argument("--cost-bag", default=None, help="cost kind: bag to time the detector on (default: the shipped "
                    "demo bag)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
@@ -334,6 +350,57 @@ def _print_cost(res: dict) -> None:
           f"{res['cpu_ms_per_invoke_median']:.1f} ms; CPU per frame set {res['cpu_ms_per_frame_set']:.1f} ms on average")
 
 
+def peer_scores(bag: Path, run_dir: Path) -> dict:
+    """Our estimates in ``run_dir/estimates`` against the peer's keypoints in ``bag`` (the peer kind)."""
+    from isa_mocap_ros.body import joint_positions
+    from isa_mocap_ros.cli.run_report import published_model, read_estimates
+    from isa_mocap_ros.cli.track import read_sequence
+
+    seq = read_sequence(bag, want_images=True, want_masks=False)
+    model = published_model(run_dir / "estimates")
+    est = read_estimates(run_dir / "estimates", model)["poses"]
+    names = [n for n in _TRC_TO_JOINT if n in seq.truth_marker_names]
+    mi = [seq.truth_marker_names.index(n) for n in names]
+    ji = [model.joint_names.index(_TRC_TO_JOINT[n]) for n in names]
+    err, back, swaps = [], 0, 0
+    for f in seq.frames:
+        if f.truth_markers is None or int(f.stamp_ns) not in est:
+            continue
+        P = joint_positions(model, np.asarray(est[int(f.stamp_ns)])[None])[0][ji]
+        R = np.asarray(f.truth_markers)[mi]
+        ok = np.all(np.isfinite(R), axis=1)
+        err.append(float(np.linalg.norm(P[ok] - R[ok], axis=1).mean() * 1e3))
+        k = {n: i for i, n in enumerate(names)}
+        hp, hr = P[k["LHip"]] - P[k["RHip"]], R[k["LHip"]] - R[k["RHip"]]
+        back += bool(hp[:2] @ hr[:2] < 0)
+        straight = sum(np.linalg.norm(P[k[s + j]] - R[k[s + j]]) for s in "LR" for j in ("Knee", "Ankle"))
+        crossed = sum(np.linalg.norm(P[k[s + j]] - R[k[o + j]]) for s, o in ("LR", "RL") for j in ("Knee", "Ankle"))
+        swaps += bool(crossed < straight)
+    e = np.array(err)
+    return dict(frames=len(e), mean_mm=float(e.mean()), median_mm=float(np.median(e)), max_mm=float(e.max()),
+                backwards=back, leg_swaps=swaps, markers=names)
+
+
+def bench_peer(args) -> dict:
+    from isa_mocap_ros.cli.track import track_bag
+
+    if not args.peer_bag:
+        raise SystemExit("isa-mocap bench keypoints: --kinds peer needs --peer-bag BAG (isa-mocap import ... --reference)")
+    bag = Path(args.peer_bag)
+    out = {}
+    for name, w in (("off", 0.0), (f"every {args.every}", args.weight)):
+        run_dir = Path(args.cache) / f"{bag.name}_{name.replace(' ', '_')}"
+        if not (run_dir / "summary.json").is_file():
+            track_bag(argparse.Namespace(
+                bag=str(bag), out=str(run_dir), optimizer="h-isa", evals=1500, params=None, model=None, seed=0,
+                frames=None, start=0, use_masks=False, learn_frames=None, shape="auto", init="auto", predictor=None,
+                prior=None, prior_eta=0.0, energy="fast", overwrite=True, no_progress=True, keypoint_weight=w,
+                keypoint_every=args.every, calib_frames=None, calib_rounds=None, calib_evals=None))
+        out[name] = peer_scores(bag, run_dir)
+        print(f"  peer {bag.name} {name}: {out[name]}", file=sys.stderr, flush=True)
+    return out
+
+
 def _heading(x: np.ndarray) -> float:
     from isa_mocap_ros.geometry import exp_so3
     f = exp_so3(np.asarray(x[3:6], float)) @ [1.0, 0.0, 0.0]
@@ -499,7 +566,7 @@ def _print(kind: str, res: dict) -> None:
 
 def run(args: argparse.Namespace) -> int:
     kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
-    bad = [k for k in kinds if k not in ("real", "synth", "mesh", "track", "init", "cost")]
+    bad = [k for k in kinds if k not in ("real", "synth", "mesh", "track", "init", "cost", "peer")]
     if bad or args.step < 1:
         print(f"isa-mocap bench keypoints: error: --kinds {bad} / --step {args.step}: expected real, synth and "
               "a step >= 1", file=sys.stderr)
@@ -511,6 +578,8 @@ def run(args: argparse.Namespace) -> int:
         results["init"] = bench_init(args)
     if "cost" in kinds:
         results["cost"] = bench_cost(args)
+    if "peer" in kinds:
+        results["peer"] = bench_peer(args)
     det = PoseLandmarker() if {"real", "synth", "mesh"} & set(kinds) else None
     if "real" in kinds:
         root = Path(args.data)
@@ -529,5 +598,7 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(results, indent=1))
     else:
         for kind, res in results.items():
-            {"track": _print_track, "init": _print_init, "cost": _print_cost}.get(kind, lambda r: _print(kind, r))(res)
+            {"track": _print_track, "init": _print_init, "cost": _print_cost,
+             "peer": lambda r: print("\n== peer ==\n" + "\n".join(f"{k}: {v}" for k, v in r.items()))}.get(
+                kind, lambda r: _print(kind, r))(res)
     return 0
