@@ -2,7 +2,7 @@
 node processes over DDS, the keypoint node among them) while a fuzzer publishes malformed and far keypoint
 messages and skip notices (``test/fuzzer.py keypoints``; its other kinds are test_network_fuzz's), against the offline `isa-mocap track --keypoint-weight`
 with the same settings: the estimates are identical bit for bit, so the estimator took each frame set's
-keypoints (the keypoint node's schedule: the dense start, then every 4th frame) and nothing the fuzzer sent.
+keypoints (the keypoint node's schedule: the dense start, then every 6th frame) and nothing the fuzzer sent.
 """
 from __future__ import annotations
 
@@ -54,11 +54,11 @@ def test_lockstep_run_with_keypoints_equals_offline_track_under_a_fuzzer(model_f
                                 *SETTINGS], capture_output=True, text=True, timeout=400)
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
     offline = json.loads((tmp_path / "track" / "summary.json").read_text())
-    # 12 frames with a person: the first 4 and every 4th after (frames 4 and 8 of them), 4 views each
-    assert offline["keypoint_frames"] == 6 and offline["keypoint_detections"] == 24, offline
+    # 12 frames with a person: the first 4 and every 6th after (frame 6 of them), 4 views each
+    assert offline["keypoint_frames"] == 5 and offline["keypoint_detections"] == 20, offline
 
     # the keypoint node's messages were recorded (beside the fuzzer's: malformed, or far from the frames):
-    # 6 frames x 4 views, the schedule's frames
+    # 5 frames x 4 views, the schedule's frames
     with BagReader(FIXTURE) as r:
         frames = {ma.header_stamp_ns_from_cdr(m.data) for m in r.messages(["/mocap/cam0/image_raw"])}
     kp = []
@@ -71,7 +71,7 @@ def test_lockstep_run_with_keypoints_equals_offline_track_under_a_fuzzer(model_f
                 continue
             if ma.stamp_to_ns(msg.header) in frames:
                 kp.append(msg)
-    assert len({ma.stamp_to_ns(m.header) for m in kp}) == 6 and len(kp) == 24
+    assert len({ma.stamp_to_ns(m.header) for m in kp}) == 5 and len(kp) == 20
     node, ref = joint_states_by_stamp(tmp_path / "run" / "estimates"), joint_states_by_stamp(tmp_path / "track" / "estimates")
     assert node.keys() == ref.keys() and len(node) == 12
     for stamp in node:

@@ -98,8 +98,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seeds", default="0,1,2", help="track kind: bag seeds (default 0,1,2)")
     p.add_argument("--track-s", type=float, default=3.0, help="track kind: seconds of each motion (default 3)")
     p.add_argument("--weight", type=float, default=1.0, help="track kind: keypoint weight (default 1)")
-    p.add_argument("--every", type=int, default=4, help="track kind: after the dense start, every K-th frame with a "
-                   "person (default 4, the keypoint node's)")
+    p.add_argument("--every", type=int, default=6, help="track, cost, peer kinds: after the dense start, every K-th "
+                   "frame with a person (default 6, the keypoint node's)")
     p.add_argument("--body", choices=("capsules", "mesh"), default="capsules",
                    help="track kind: render the generated motions as capsules (the control, default) or meshes")
     p.add_argument("--subjects", default="slim_woman,average_man,heavy_man",

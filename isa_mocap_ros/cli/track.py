@@ -85,9 +85,9 @@ def register(sub) -> None:
     p.add_argument("--keypoint-weight", type=float, default=0.0, metavar="W",
                    help="weight of the learned-keypoint term (BlazePose landmarks on the images, cropped around "
                         "the mask; docs/keypoints.md); 0 = off (default)")
-    p.add_argument("--keypoint-every", type=int, default=4, metavar="K",
+    p.add_argument("--keypoint-every", type=int, default=6, metavar="K",
                    help="with --keypoint-weight: after the dense start, detect keypoints on every K-th frame with a "
-                        "person of each view (0 = the dense start only; default 4, the keypoint node's "
+                        "person of each view (0 = the dense start only; default 6, the keypoint node's "
                         "every_k_frames)")
     p.add_argument("--keypoint-dense", type=int, default=None, metavar="N",
                    help="with --keypoint-weight: detect on each view's first N frames with a person (the "
@@ -204,7 +204,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         has_mask_topics = any(t.endswith("/mask") and t.startswith(f"{TOPIC}/cam") for t in probe.topics)
     use_masks = bool(args.use_masks and has_mask_topics)
     kp_weight = float(getattr(args, "keypoint_weight", 0.0) or 0.0)
-    kp_every = int(getattr(args, "keypoint_every", 4))
+    kp_every = int(getattr(args, "keypoint_every", 6))
     from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, KeypointSchedule, detect_in_mask
     kp_dense = getattr(args, "keypoint_dense", None)
     kp_dense = DENSE_FRAMES if kp_dense is None else int(kp_dense)

@@ -124,7 +124,7 @@ class EstimatorNode(Node):
         self.backlog = declare(self, "backlog", 1, "real time: frame sets kept waiting while the tracker is busy "
                                "(the newest; older ones are dropped)", lo=1, hi=100)
         self.use_prediction = declare(self, "use_prediction", True, "use prediction/joint_states when it arrives")
-        self.keypoint_wait_s = declare(self, "keypoint_wait_s", 5.0, "lockstep, keypoint_weight > 0: longest wait "
+        self.keypoint_wait_s = declare(self, "keypoint_wait_s", 10.0, "lockstep, keypoint_weight > 0: longest wait "
                                        "for a view's keypoints (or the keypoint node's skip notice) of a frame set",
                                        lo=0.0, hi=600.0)
         self.keypoint_realtime_wait_s = declare(

@@ -62,7 +62,7 @@ class KeypointNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("keypoints", **kwargs)
         self.n_views = declare(self, "views", 4, "number of camera views (cam0 .. cam<views-1>)", lo=1, hi=64)
-        self.every_k = declare(self, "every_k_frames", 4, "after the dense start, detect on every k-th frame "
+        self.every_k = declare(self, "every_k_frames", 6, "after the dense start, detect on every k-th frame "
                                "with a person of each view (1 = all)", lo=1, hi=10000)
         self.dense_frames = declare(self, "dense_frames", DENSE_FRAMES, "detect on each view's first frames with "
                                     "a person (the automatic initialization and its heading check)", lo=0, hi=10000)
