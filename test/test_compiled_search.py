@@ -79,7 +79,7 @@ def test_tracker_with_and_without_the_compiled_search(scene, init):
     out = []
     for compiled in (True, False):
         tr = Tracker(model, cams, TrackerConfig.from_flat(seed=4))
-        tr._compiled_search = compiled
+        tr.use_compiled_search = compiled
         first = []
         if init == "given":
             tr.initialize(pose=walk[0])

@@ -147,8 +147,10 @@ def test_stage_budget_skip_note_and_off(scene):
 def test_not_on_the_automatically_initialized_frame(scene, monkeypatch):
     model, cams, walk, truth, masks = scene
     calls = []
-    orig = Tracker.propose_limbs
-    monkeypatch.setattr(Tracker, "propose_limbs", lambda self, *a, **k: calls.append(1) or orig(self, *a, **k))
+    from isa_mocap_ros.tracking import stages
+
+    orig = stages.propose_limbs
+    monkeypatch.setattr(stages, "propose_limbs", lambda *a, **k: calls.append(1) or orig(*a, **k))
     # not in the heading candidates' searches; init_polish's search of the winner (and of a heading check's
     # rival) is a tracked frame's, with every stage
     for polish in (False, True):

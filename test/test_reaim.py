@@ -258,14 +258,16 @@ def test_bad_config(kw, match):
         TrackerConfig.from_flat(**kw)
 
 
-def test_flat_algorithms_have_no_torso_stage(scene):
+def test_flat_algorithms_have_no_torso_stage(scene, monkeypatch):
     """Like the refinement stage: a flat search moves torso and arms together already."""
+    from isa_mocap_ros.tracking import stages
+
     model, cams, walk, masks = scene
     calls = []
+    orig = stages.refit_torso
     for name in ("isa", "pso", "h-pso"):
         tr = Tracker(model, cams, TrackerConfig.from_flat(optimizer=name, evals=1500, seed=1))
-        orig = tr.refit_torso
-        tr.refit_torso = lambda *a, _n=name, **k: calls.append(_n) or orig(*a, **k)
+        monkeypatch.setattr(stages, "refit_torso", lambda *a, _n=name, **k: calls.append(_n) or orig(*a, **k))
         tr.initialize(pose=walk[0])
         r = tr.step(masks[1], 1)
         assert not r.fell_back and not any("torso" in n for n in r.notes)

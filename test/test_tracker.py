@@ -132,7 +132,7 @@ def test_a_frame_without_the_contour_stage(scene):
     assert a.energy == b.energy and a.n_evals == b.n_evals
     assert light.config.stages.contour_iterations == 3
     stage = []
-    light._contour.fit = lambda x, **kw: stage.append(1) or (x, ContourFitInfo(0, (), ()))
+    light.contour_fit.fit = lambda x, **kw: stage.append(1) or (x, ContourFitInfo(0, (), ()))
     light.step(masks[2], 2)
     assert stage
 
@@ -156,8 +156,8 @@ def _heading_runs(scene, monkeypatch, *, wrong_first: bool, external=None, **cfg
         orig = first_frame.initial_runs
         yaw = _yaw_of(walk[0][3:6])
 
-        def runs(tr, starts, frame_index, notes, budget, stream=()):
-            out, n = orig(tr, starts, frame_index, notes, budget, stream)
+        def runs(tr, ctx, starts, notes, budget, stream=()):
+            out, n = orig(tr, ctx, starts, notes, budget, stream)
             if stream:                                  # the heading re-check's runs are left alone
                 return out, n
             return [(j, dataclasses.replace(r, energy=1.4 * r.energy, best_energy=1.4 * r.best_energy)
@@ -314,7 +314,7 @@ def test_travel_reads_the_root_motion(scene320_two_views):
     tr.initialize(pose=walk[0])
     assert tr.travel() is None                                  # one estimate: no travel
     for x in walk[1:T.TRAVEL_FRAMES + 1]:
-        tr._accept(x)
+        tr.accept(x)
     direction, dist, span = tr.travel()
     assert span == T.TRAVEL_FRAMES and dist == pytest.approx(np.hypot(*(walk[T.TRAVEL_FRAMES][:2] - walk[0][:2])))
     assert heading.off_travel(direction, walk[T.TRAVEL_FRAMES]) < 20.0            # the generated walk moves forwards
@@ -333,7 +333,7 @@ def test_travel_reads_the_root_motion(scene320_two_views):
     still = Tracker(model, cams, TrackerConfig.from_flat(seed=0))
     still.initialize(pose=walk[0])
     for _ in range(T.TRAVEL_FRAMES):
-        still._accept(walk[0])                                   # standing: no travel
+        still.accept(walk[0])                                   # standing: no travel
     assert still.travel() is None
     with pytest.raises(TrackerError, match="heading_travel_cue"):
         TrackerConfig.from_flat(heading_travel_cue=1)

@@ -25,7 +25,7 @@ def test_the_hierarchy_follows_partition_order():
         model = make_model(dof)
         cfg = TrackerConfig() if order is None else TrackerConfig.from_flat(partition_order=order)
         tr = Tracker(model, cams, cfg)
-        opt = tr._search(model.rest_pose(), frame_rng(0, 0), FrameBudget(tr.config.search.evals), stages=False)[0]
+        opt = tr.plan_search(model.rest_pose(), frame_rng(0, 0), FrameBudget(tr.config.search.evals), stages=False)[0]
         assert isinstance(opt, Hierarchical)
         assert [p.tolist() for p in opt.partitions] == [list(model.partitions[k]) for k in expect]
 

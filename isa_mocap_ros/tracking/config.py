@@ -18,7 +18,7 @@ from .limbs import LIMBS
 
 __all__ = ["TrackerError", "TrackerConfig", "SearchConfig", "PredictionConfig", "ObjectiveConfig", "KeypointConfig",
            "FirstFrameConfig", "HeadingConfig", "StageConfig", "MaskConfig", "LEAVES", "FrameResult", "DEFAULT_PARAMS",
-           "PREDICTORS", "frame_rng", "field_docs"]
+           "PREDICTORS", "frame_rng", "field_docs", "whole_generations", "partition_coords"]
 
 PREDICTORS = ("ar", "constant_pose", "constant_velocity")
 #: Initial standard deviation of the joint angles around the prediction, rad.
@@ -76,7 +76,7 @@ class TrackerError(ValueError):
     """Bad tracker configuration or argument (names the argument, the expected and the received value)."""
 
 
-def _whole_generations(evals: int, generation: int) -> int:
+def whole_generations(evals: int, generation: int) -> int:
     """``evals`` rounded down to whole generations (unchanged below one generation: the optimizer's error
     names it). The tracker's searches never end on a truncated generation, whose few rows would make a
     weighted-mean estimate (ISA, APF) that of a few random particles (``docs/tracking.md``, "Whole
@@ -107,7 +107,7 @@ def _partition_names(name: str, value, example: str, *, empty: bool) -> tuple:
     return tuple(value)
 
 
-def _partition_coords(model, names) -> np.ndarray:
+def partition_coords(model, names) -> np.ndarray:
     """Sorted coordinate indices of the partitions ``names`` the model has (the others ignored)."""
     return np.array(sorted(int(i) for k in names if k in model.partitions for i in model.partitions[k]),
                     dtype=np.int64)

@@ -1,7 +1,8 @@
 """The heading check: a standing silhouette looks nearly the same from the front and from the back, so
 a rival hypothesis heading the other way is tracked beside the track for a few frames and the energy
 sums decide (``TrackerConfig.heading.init_confirm_frames``); re-checks when more views see the person, after an
-undecided check, or when the track travels backwards (the travel cue, ``heading_travel_cue``).
+undecided check, or when the track travels backwards (the travel cue, ``heading_travel_cue``). The functions
+take the tracker and its frame (:class:`~.frame_context.FrameContext`).
 """
 from __future__ import annotations
 
@@ -58,7 +59,7 @@ def travel(tr, min_periods: float = 0.0) -> tuple[float, float, float] | None:
     root's horizontal travel over the last estimates, or None when they span fewer than ``min_periods``
     periods (or none), the root moved less than :data:`TRAVEL_MIN_M_PER_FRAME` per period, or the model
     has no 3-DOF root rotation."""
-    if len(tr.track.roots) < 2 or not tr._has_heading:
+    if len(tr.track.roots) < 2 or not tr.has_heading:
         return None
     (ta, xa, ya), (tb, xb, yb) = tr.track.roots[0], tr.track.roots[-1]
     span, dist = tb - ta, math.hypot(xb - xa, yb - ya)
@@ -88,7 +89,7 @@ def travel_recheck_due(tr) -> tuple[float, float, float] | None:
     return (off, t[1], t[2]) if off > TRAVEL_BACKWARDS_DEG else None
 
 
-def recheck_heading(tr, res: FrameResult, frame_index: int, frames_elapsed: float, t0: float) -> FrameResult:
+def recheck_heading(tr, ctx, res: FrameResult, frames_elapsed: float) -> FrameResult:
     """The heading re-check (``TrackerConfig.heading.init_confirm_frames``): on a tracked frame where more
     views use the person's foreground than when the heading was last checked (or an undecided
     check's re-check is due, or the travel cue finds the track moving backwards,
@@ -96,13 +97,13 @@ def recheck_heading(tr, res: FrameResult, frame_index: int, frames_elapsed: floa
     other way (at the estimate's root position, the automatic initialization's spreads, pruned as
     :meth:`_initial_runs` does); when the lowest-energy run's estimate heads more than 90° away and
     its energy is within ``init_confirm_ratio`` of this frame's, it becomes the rival of a heading
-    check as after the initialization."""
+    check as after the initialization. ``ctx``: the tracker's frame; ``res``: its result."""
     from .init import _wrap, _yaw_of, standing_poses
 
     cfg = tr.config
     due = tr.heading_check.recheck_at is not None and tr.frames >= tr.heading_check.recheck_at
     if cfg.heading.init_confirm_frames <= 0 or res.fell_back or res.initialized or frames_elapsed != 1 \
-            or not np.isfinite(res.energy) or not tr._has_heading:
+            or not np.isfinite(res.energy) or not tr.has_heading:
         return res
     more_views = res.views_used > tr.heading_check.views
     travel = None if due or more_views else travel_recheck_due(tr)
@@ -123,39 +124,40 @@ def recheck_heading(tr, res: FrameResult, frame_index: int, frames_elapsed: floa
     else:
         head = f"heading re-check: {res.views_used} views see the person ({before} when the heading was checked)"
     try:
-        runs, n = first_frame.initial_runs(tr, list(starts), frame_index, None, FrameBudget(cfg.search.evals),
-                                           stream=(5,))
+        runs, n = first_frame.initial_runs(tr, ctx, list(starts), None, FrameBudget(cfg.search.evals), stream=(5,))
     except ValueError as exc:
-        return dataclasses.replace(res, time_s=time.perf_counter() - t0,
+        return dataclasses.replace(res, time_s=time.perf_counter() - ctx.t0,
                                    notes=res.notes + (f"{head}; its search failed ({exc}); kept this heading",))
-    xr, er = min((tr._final_pose(r) for _, r, _ in runs), key=lambda t: t[1])
+    xr, er = min((tr.final_pose(r) for _, r, _ in runs), key=lambda t: t[1])
     turned = abs(float(_wrap(_yaw_of(xr[3:6]) - yaw))) > np.pi / 2
     if turned and np.isfinite(er) and er <= cfg.heading.init_confirm_ratio * max(res.energy, 0.0):
         tr.heading_check.rival_start = (xr, er, res.energy)
-        start_rival(tr, frame_index)
+        start_rival(tr, ctx.frame_index)
         note = (f"{head}: a run heading the other way ended {er:.4g} (estimate {res.energy:.4g}); both tracked for "
                 f"up to {cfg.heading.init_confirm_frames} frames")
     else:
         note = (f"{head}: a run heading the other way ended {er:.4g}"
                 f"{'' if turned else ' turned back'} (estimate {res.energy:.4g}); kept this heading")
-    return dataclasses.replace(res, n_evals=res.n_evals + n, time_s=time.perf_counter() - t0,
+    return dataclasses.replace(res, n_evals=res.n_evals + n, time_s=time.perf_counter() - ctx.t0,
                                notes=res.notes + (note,))
 
 
-def confirm_heading(tr, res: FrameResult, masks, frame_index: int, frames_elapsed: float,
-                     t0: float) -> FrameResult:
-    """One frame of the heading check: step the rival on the same masks, add both energies, decide
-    (see ``TrackerConfig.heading.init_confirm_frames``); the frame's result (the rival's when it wins)."""
+def confirm_heading(tr, ctx, res: FrameResult, masks, frames_elapsed: float) -> FrameResult:
+    """One frame of the heading check: step the rival on the same masks (its own frame context, with the
+    tracker's plan and keypoint term), add both energies, decide (see
+    ``TrackerConfig.heading.init_confirm_frames``); the frame's result (the rival's when it wins). ``ctx``:
+    the tracker's frame; ``res``: its result."""
     cfg = tr.config
     rival = tr.heading_check.rival
-    other = rival._step(masks, frame_index, FrameBudget(tr.config.search.evals, tr._contour_now), prediction=None,
-                        frames_elapsed=frames_elapsed)
+    other = rival.track_frame(masks, rival.frame_context(ctx.frame_index, ctx.budget,
+                                                         keypoint_term=ctx.objective.keypoint_term),
+                              frames_elapsed=frames_elapsed)
     n_evals = res.n_evals + other.n_evals
     if res.fell_back and other.fell_back:       # nothing to compare this frame
-        return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0)
+        return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - ctx.t0)
     if res.fell_back != other.fell_back or not (np.isfinite(res.energy) and np.isfinite(other.energy)):
         tr.heading_check.rival = None
-        return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0, notes=res.notes + (
+        return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - ctx.t0, notes=res.notes + (
             "heading check ended: no decision (only one hypothesis could be tracked); kept this one",))
     c = tr.heading_check.confirm
     c[0] += 1
@@ -183,10 +185,10 @@ def confirm_heading(tr, res: FrameResult, masks, frame_index: int, frames_elapse
             # kept for want of evidence: the rival may still have been converging; once more later
             tr.heading_check.recheck_at = tr.frames + UNDECIDED_RECHECK_FRAMES
             sums += f"; undecided, re-checked in {UNDECIDED_RECHECK_FRAMES} frames"
-        return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0,
+        return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - ctx.t0,
                                    notes=res.notes + (f"heading check decided: kept the initial heading ({sums})",))
     if not last:
-        return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0)
+        return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - ctx.t0)
     # the rival wins: its track (estimate, predictor, masks, root history) becomes this tracker's; external predictions were made from this tracker's
     # estimates, so they are ignored while the predictor's history still holds any of them
     tr.heading_check.rival = None
@@ -197,6 +199,6 @@ def confirm_heading(tr, res: FrameResult, masks, frame_index: int, frames_elapse
     tr.track = rival.track
     cap = getattr(tr.predictor, "capacity", None)
     tr.heading_check.own_prediction_frames = (int(cap) if cap is not None else cfg.prediction.predictor_order + 1) - 1
-    return dataclasses.replace(other, n_evals=n_evals, time_s=time.perf_counter() - t0, notes=other.notes + (
+    return dataclasses.replace(other, n_evals=n_evals, time_s=time.perf_counter() - ctx.t0, notes=other.notes + (
         f"heading check decided: switched to the other heading ({sums}); the frames before were estimated facing "
         "the wrong way",))

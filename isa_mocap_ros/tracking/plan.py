@@ -49,7 +49,7 @@ def limb_stage(tr, notes, pred, budget: FrameBudget) -> tuple[list[str], list[st
     ``pred`` (``limb_fold_deg``, while each keeps ``limb_proposals`` within the tenth); a folded
     limb gets twist-and-hinge proposals even if it is in ``limb_hinge_limbs``."""
     cfg = tr.config
-    have = {limb.name for limb in tr._limbs.limbs}
+    have = {limb.name for limb in tr.limb_move.limbs}
     limbs = [name for name in cfg.stages.limb_proposal_limbs if name in have]
     if cfg.stages.limb_proposals <= 0:
         return [], [], 0
@@ -62,7 +62,7 @@ def limb_stage(tr, notes, pred, budget: FrameBudget) -> tuple[list[str], list[st
     folded = set()
     if pred is not None and 0 < cfg.stages.limb_fold_deg < 180:
         fold = np.deg2rad(cfg.stages.limb_fold_deg)
-        for limb in tr._limbs.limbs:
+        for limb in tr.limb_move.limbs:
             if abs(float(pred[limb.hinge_dof])) <= fold:
                 continue
             if limb.name in limbs:
@@ -95,17 +95,17 @@ def flat_generation(tr, d: int) -> int:
     only, so it is computed once per ``d``)."""
     from isa_mocap_ros.optim import make_optimizer
 
-    if d not in tr._flat_generations:
+    if d not in tr.generation_sizes:
         name, params = flat_algorithm(tr)
-        tr._flat_generations[d] = make_optimizer(name, np.zeros(d), np.ones(d), rng=np.random.default_rng(0),
+        tr.generation_sizes[d] = make_optimizer(name, np.zeros(d), np.ones(d), rng=np.random.default_rng(0),
                                                    **params).generation_size
-    return tr._flat_generations[d]
+    return tr.generation_sizes[d]
 
 
 def pelvis_share(tr, notes, budget: FrameBudget) -> int | None:
     """Evaluations of the pelvis stage, or None (off, no root children, or below one generation + 1)."""
     cfg = tr.config
-    if cfg.stages.pelvis_fraction <= 0 or tr._pelvis_reaim is None or not tr._pelvis_reaim.ops:
+    if cfg.stages.pelvis_fraction <= 0 or tr.pelvis_reaim is None or not tr.pelvis_reaim.ops:
         return None
     share = int(budget.evals * cfg.stages.pelvis_fraction)
     n = flat_generation(tr, 6)
@@ -123,10 +123,10 @@ def torso_share(tr, notes, budget: FrameBudget) -> int | None:
     from isa_mocap_ros.optim import inner_optimizer
 
     cfg = tr.config
-    if cfg.stages.torso_fraction <= 0 or tr._torso is None or inner_optimizer(cfg.search.optimizer) is None:
+    if cfg.stages.torso_fraction <= 0 or tr.torso_reaim is None or inner_optimizer(cfg.search.optimizer) is None:
         return None
     share = int(budget.evals * cfg.stages.torso_fraction)
-    n = flat_generation(tr, tr._torso.coords.size)
+    n = flat_generation(tr, tr.torso_reaim.coords.size)
     if share - 2 < n:       # the start's and the result's energies
         if notes is not None:
             notes.append(f"torso stage skipped: its share ({share} evaluations) is below one generation "
@@ -137,7 +137,7 @@ def torso_share(tr, notes, budget: FrameBudget) -> int | None:
 
 def contour_extra(tr) -> int:
     """The contour stage's extra iterations on ``contour_extra_partitions`` (0 without such partitions)."""
-    return tr.config.stages.contour_extra_iterations if tr._contour_extra_coords.size else 0
+    return tr.config.stages.contour_extra_iterations if tr.contour_extra_coords.size else 0
 
 
 def contour_share(tr, notes, budget: FrameBudget) -> int | None:
@@ -149,7 +149,7 @@ def contour_share(tr, notes, budget: FrameBudget) -> int | None:
     if cfg.stages.contour_iterations <= 0 or not budget.contour:
         return None
     share = cfg.stages.contour_iterations * (tr.model.dof + 1) \
-        + contour_extra(tr) * (tr._contour_extra_coords.size + 1) + 2
+        + contour_extra(tr) * (tr.contour_extra_coords.size + 1) + 2
     if 4 * share > budget.evals:
         if notes is not None:
             notes.append(f"contour stage skipped: its share ({share} evaluations) is above a quarter of the "
