@@ -33,7 +33,10 @@ def model_file():
 
 
 def test_node_publishes_landmarks_every_k_frames(model_file, rosenv, spawn, tmp_path):
-    params = {"views": 2, "every_k_frames": 2, "dense_frames": 1}
+    # reliable inputs, as `isa-mocap run --lockstep` sets them (sensor-data QoS drops messages on a loaded machine)
+    params = {"views": 2, "every_k_frames": 2, "dense_frames": 1,
+              "qos_overrides": {f"/mocap/cam{v}/{t}": {"subscription": {"reliability": "reliable"}}
+                                for v in range(2) for t in ("image_raw", "mask", "camera_info")}}
     path = tmp_path / "kp.yaml"
     path.write_text(yaml.safe_dump({"/mocap/keypoints": {"ros__parameters": params}}))
     proc = spawn("keypoints", *NODE, "--params-file", str(path))
@@ -125,4 +128,5 @@ def test_run_starts_the_keypoint_node_only_when_asked_and_records_its_topic():
     assert spec.exec == "keypoints_node" and params["views"] == "2"
     # lockstep: image and mask subscriptions reliable, as the segmentation's and the estimator's
     assert params["qos_overrides./mocap/cam1/mask.subscription.reliability"] == "reliable"
+    assert params["qos_overrides./mocap/cam1/camera_info.subscription.reliability"] == "reliable"
     assert "/mocap/cam*/keypoints" in RECORDED

@@ -104,7 +104,7 @@ def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
         est.append(("keypoint_weight", repr(float(getattr(args, "keypoint_weight", 1.0)))))
         if args.lockstep:
             kp_params += [(f"qos_overrides.{NS}/cam{v}/{t}.subscription.reliability", "reliable")
-                          for v in range(n_views) for t in ("image_raw", "mask")]
+                          for v in range(n_views) for t in ("image_raw", "mask", "camera_info")]
         kp = [NodeSpec(exec="keypoints_node", name="keypoints", params=tuple(kp_params), nice=nice, **common)]
     return kp + [
         NodeSpec(exec="segmentation_node", name="segmentation", params=tuple(seg), nice=nice, **common),
