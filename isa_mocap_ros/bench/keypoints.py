@@ -354,20 +354,34 @@ def peer_scores(bag: Path, run_dir: Path) -> dict:
     """Our estimates in ``run_dir/estimates`` against the peer's keypoints in ``bag`` (the peer kind)."""
     from isa_mocap_ros.body import joint_positions
     from isa_mocap_ros.cli.run_report import published_model, read_estimates
-    from isa_mocap_ros.cli.track import read_sequence
 
-    seq = read_sequence(bag, want_images=True, want_masks=False)
+    import yaml
+
+    import msg_adapters as ma
+    from isa_mocap_ros.bag import BagReader
+
+    # the import's reference (isa-mocap import --reference): names in the latched YAML, points per frame
+    marker_names: list[str] = []
+    markers: dict[int, np.ndarray] = {}
+    with BagReader(bag) as r:
+        for m in r.messages(["/mocap/ground_truth/reference", "/mocap/ground_truth/markers"]):
+            msg = ma.from_cdr(m.data, m.type)
+            if m.topic.endswith("/reference"):
+                marker_names = list(yaml.safe_load(msg.data)["marker_names"])
+            else:
+                markers[ma.stamp_to_ns(msg.header)] = np.array([(p.position.x, p.position.y, p.position.z)
+                                                                for p in msg.poses])
     model = published_model(run_dir / "estimates")
     est = read_estimates(run_dir / "estimates", model)["poses"]
-    names = [n for n in _TRC_TO_JOINT if n in seq.truth_marker_names]
-    mi = [seq.truth_marker_names.index(n) for n in names]
+    names = [n for n in _TRC_TO_JOINT if n in marker_names]
+    mi = [marker_names.index(n) for n in names]
     ji = [model.joint_names.index(_TRC_TO_JOINT[n]) for n in names]
     err, back, swaps = [], 0, 0
-    for f in seq.frames:
-        if f.truth_markers is None or int(f.stamp_ns) not in est:
+    for stamp in sorted(markers):
+        if stamp not in est:
             continue
-        P = joint_positions(model, np.asarray(est[int(f.stamp_ns)])[None])[0][ji]
-        R = np.asarray(f.truth_markers)[mi]
+        P = joint_positions(model, np.asarray(est[stamp])[None])[0][ji]
+        R = markers[stamp][mi]
         ok = np.all(np.isfinite(R), axis=1)
         err.append(float(np.linalg.norm(P[ok] - R[ok], axis=1).mean() * 1e3))
         k = {n: i for i, n in enumerate(names)}
