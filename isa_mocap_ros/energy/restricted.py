@@ -55,11 +55,11 @@ class RestrictedSilhouetteEnergy:
     """
 
     def __init__(self, energy: SilhouetteEnergy, x_base: Any, coords: Any) -> None:
-        if not hasattr(energy, "_restrict_cache"):      # a SilhouetteEnergy (not imported: see above)
+        if not isinstance(getattr(energy, "restriction_cache", None), dict):   # SilhouetteEnergy's public marker
             raise EnergyError(f"energy: expected a SilhouetteEnergy, received {type(energy).__name__}")
         model = energy.model
         D = model.dof
-        if energy._frame is None:
+        if not energy.has_masks:
             raise EnergyError("masks: expected masks to be set (constructor or set_masks) before restricting, "
                               "received none")
         try:
@@ -85,26 +85,19 @@ class RestrictedSilhouetteEnergy:
         self.coords = np.sort(idx)
         self._frame = energy._frame
         key = tuple(self.coords.tolist())
-        st = energy._restrict_cache.get(key)
+        st = energy.restriction_cache.get(key)
         if st is None:
-            st = energy._restrict_cache[key] = _restriction_structure(energy, self.coords)
+            st = energy.restriction_cache[key] = _restriction_structure(energy, self.coords)
         (self._fixed, self._fixed_mask, self._fk_joints, self._cam_joints, self.moving_capsules, self._mov_ci,
          self._moving_ci, moving, structural_full) = st
         self.full = energy.method != "fast" or structural_full
         if self.full:
             return
-        fr = self._frame
-        stage = _k.restrict_prepare(
-            x, *energy._kin, energy._caps, energy._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"], fr["cam_D"],
-            fr["cam_hasd"], fr["cov"], fr["cov_wh"], energy._order, energy._tmpl_a, energy._tmpl_s,
-            energy._tmpl_ptr, energy._tmpl_na, fr["fg_x"], fr["fg_y"], fr["fg_n"], fr["fg_tab"], fr["fg_bins"],
-            fr["fg_xr"], moving)
+        body, views, tmpl, fg = energy.kernel_args()
+        stage = _k.Stage(*_k.restrict_prepare(x, body, views, tmpl, fg, moving))
         # the kernel's arguments between X and (n_chunks, out)
-        self._args = (x, self._fixed, self._fk_joints, self._cam_joints, self.moving_capsules, self._mov_ci,
-                      self._moving_ci, *energy._kin, energy._caps, energy._radii, fr["cam_R"], fr["cam_t"],
-                      fr["cam_K"], fr["cam_D"], fr["cam_hasd"], fr["cov"], fr["cov_wh"], energy._order,
-                      energy._tmpl_a, energy._tmpl_s, energy._tmpl_ptr, energy._tmpl_na, fr["fg_n"], fr["fg_tab"],
-                      fr["fg_bins"], fr["fg_xr"], fr["fg_area"], fr["view_w"], *stage)
+        self._args = (_k.Restriction(x, self._fixed, self._fk_joints, self._cam_joints, self.moving_capsules,
+                                     self._mov_ci, self._moving_ci), body, views, tmpl, fg, stage)
 
     def kernel_args(self) -> tuple:
         """The arguments of the restricted kernel between the poses and ``(n_chunks, out)`` (for the

@@ -87,7 +87,7 @@ def _view_weights(weights: Any, n_views: int) -> np.ndarray:
     return w
 
 
-def _mask_problem(mask: Any, camera: Camera) -> str | None:
+def mask_problem(mask: Any, camera: Camera) -> str | None:
     """Why ``mask`` cannot be used for ``camera`` (None: usable)."""
     if mask is None:
         return "no mask (view missing)"
@@ -137,7 +137,7 @@ def exact_view_energy(model: BodyModel, camera: Camera, mask: Any, X: Any) -> np
     model = _check_model(model)
     if not isinstance(camera, Camera):
         raise EnergyError(f"camera: expected a Camera, received {type(camera).__name__}")
-    problem = _mask_problem(mask, camera)
+    problem = mask_problem(mask, camera)
     if problem is not None:
         raise EnergyError(f"mask: expected a non-empty ({camera.height}, {camera.width}) uint8 mask, "
                           f"received {problem}")
@@ -286,13 +286,18 @@ class SilhouetteEnergy:
         # bigger capsules first: their points need no overlap test, and they own the shared area
         self._order = np.argsort(-np.diff(self._tmpl_ptr), kind="stable").astype(np.int64)
         self.n_template = int(self._tmpl_ptr[-1])
+        # the kernels' argument bundles that do not change with the masks
+        self._body = _k.Body(*self._kin, self._caps, self._radii)
+        self._template_args = _k.Template(self._order, self._tmpl_a, self._tmpl_s, self._tmpl_ptr, self._tmpl_na)
         self._small = tuple(c.scaled(1.0 / self.downsample) for c in self.cameras)
         self.skipped_views: list[tuple[int, str]] = []
         self.n_views_used = 0
         self.n_evals = 0
         self._used: list[int] = []
         self._frame: dict | None = None
-        self._restrict_cache: dict = {}     # coords -> what a restriction depends on besides pose and masks
+        # coords -> what a restriction depends on besides pose and masks (RestrictedSilhouetteEnergy's cache;
+        # its presence marks an energy that restricted.py can restrict, which does not import this module)
+        self.restriction_cache: dict = {}
         if masks is not None:
             self.set_masks(masks)
 
@@ -329,7 +334,7 @@ class SilhouetteEnergy:
                               f"view), received {len(masks)}")
         skipped, used = [], []
         for v, (m, cam) in enumerate(zip(masks, self.cameras)):
-            problem = _mask_problem(m, cam)
+            problem = mask_problem(m, cam)
             if problem is None:
                 used.append(v)
             else:
@@ -347,6 +352,9 @@ class SilhouetteEnergy:
         frame: dict = {"F": F, "n_fg": {v: int(np.count_nonzero(F[v])) for v in used}, "view_w": view_w}
         if self.method == "fast":
             frame.update(self._fast_frame(used, F))
+            # the kernels' argument bundles of these masks (_k.Views, _k.Foreground)
+            frame["views"] = _k.Views(*(frame[k] for k in _k.Views._fields))
+            frame["fg"] = _k.Foreground(*(frame[k] for k in _k.Foreground._fields))
         self._frame = frame
         self._threads = numba.get_num_threads()      # per set_masks: the call costs ~20 µs
         self.skipped_views, self._used, self.n_views_used = skipped, used, len(used)
@@ -450,17 +458,18 @@ class SilhouetteEnergy:
 
     def _kernel_args(self) -> tuple:
         """The arguments of :func:`~._silhouette_kernel.silhouette_batch` between the poses and
-        ``n_chunks`` for the current masks (also what the tracker's compiled search passes it)."""
+        ``n_chunks`` for the current masks, its bundles ``(Body, Views, Template, Foreground)`` (also
+        what the tracker's compiled search passes it)."""
         fr = self._frame
-        return (*self._kin, self._caps, self._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"], fr["cam_D"],
-                fr["cam_hasd"], fr["cov"], fr["cov_wh"], self._order, self._tmpl_a, self._tmpl_s, self._tmpl_ptr,
-                self._tmpl_na, fr["fg_x"], fr["fg_y"], fr["fg_n"], fr["fg_tab"], fr["fg_bins"], fr["fg_xr"],
-                fr["fg_area"], fr["view_w"])
+        return self._body, fr["views"], self._template_args, fr["fg"]
 
     def _fast(self, X: np.ndarray) -> np.ndarray:
         out = np.empty(X.shape[0])
         n_chunks = max(1, min(X.shape[0], 8 * self._threads))
-        _k.silhouette_batch(X, *self._kernel_args(), n_chunks, out)
+        # a few poses (a stage's final pose, the contour stage's pair) on this thread: a parallel launch
+        # costs more than they do (the same bits either way)
+        kernel = _k.silhouette_batch_serial if X.shape[0] < _k.SERIAL_BELOW else _k.silhouette_batch
+        kernel(X, *self._kernel_args(), n_chunks, out)
         return out
 
     def restrict(self, x_base: Any, coords: Any) -> "RestrictedSilhouetteEnergy":
