@@ -16,13 +16,15 @@ the received shape for bad input.
 """
 from __future__ import annotations
 
+import warnings
 from typing import Mapping
 
 import numpy as np
 
 __all__ = ["MetricsError", "joint_errors_mm", "frame_errors_mm", "mpjpe_mm", "max_frame_error_mm",
            "knee_rmse_deg", "knee_errors_deg", "per_joint_angle_rmse_deg", "angle_difference",
-           "shared_markers", "marker_positions", "score_markers", "knee_flexion_from_points"]
+           "shared_markers", "marker_positions", "score_markers", "knee_flexion_from_points",
+           "joint_offsets_m", "joint_errors_offset_removed_mm"]
 
 
 class MetricsError(ValueError):
@@ -39,6 +41,60 @@ def _points(name: str, value) -> np.ndarray:
         raise MetricsError(f"{name}: expected finite positions, received {a[f, m].tolist()} at frame {f}, "
                            f"marker {m}")
     return a
+
+
+def _points_missing(name: str, value) -> np.ndarray:
+    """As :func:`_points`, but NaN marks a missing point (a peer's marker file); inf is still refused."""
+    a = np.asarray(value, dtype=float)
+    if a.ndim != 3 or a.shape[-1] != 3 or a.shape[0] < 1 or a.shape[1] < 1:
+        raise MetricsError(f"{name}: expected joint positions of shape (F, M, 3) with F, M >= 1, "
+                           f"received shape {a.shape}")
+    if np.any(np.isinf(a)):
+        f, m, _ = np.argwhere(np.isinf(a))[0]
+        raise MetricsError(f"{name}: expected finite positions or NaN (missing), received {a[f, m].tolist()} at "
+                           f"frame {f}, marker {m}")
+    return a
+
+
+def joint_offsets_m(pred_joints, true_joints) -> np.ndarray:
+    """Each joint's mean offset ``(M, 3)`` (metres) of the estimate from the reference over the frames:
+    ``o_i = mean_f (x̂_fi − x_fi)``, frames where the reference point is missing (NaN) left out (NaN
+    for a joint missing in every frame).
+
+    A peer's keypoints (e.g. Pose2Sim's, from 2-D detectors) are not anatomical joint centres: a
+    keypoint sits at a roughly constant offset from the joint centre of the same name.
+    """
+    P = _points("pred_joints", pred_joints)
+    T = _points_missing("true_joints", true_joints)
+    if P.shape != T.shape:
+        raise MetricsError(f"true_joints: expected the shape of pred_joints {P.shape}, received {T.shape}")
+    D = P - T
+    ok = np.all(np.isfinite(D), axis=-1)
+    n = ok.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        o = np.where(ok[..., None], D, 0.0).sum(axis=0) / n[:, None]
+    o[n == 0] = np.nan
+    return o
+
+
+def joint_errors_offset_removed_mm(pred_joints, true_joints) -> np.ndarray:
+    """Euclidean error ``(F, M)`` in millimetres after removing each joint's mean offset
+    (:func:`joint_offsets_m`): ``‖x̂_fi − x_fi − o_i‖``, NaN where the reference point is missing.
+
+    What remains is the error that changes over the frames (the motion), not the constant
+    difference between two definitions of a joint (a keypoint vs a joint centre). The shared
+    measure for a peer's keypoints and for joints defined differently than the model's.
+
+    Examples
+    --------
+    >>> T = np.zeros((2, 1, 3)); P = T.copy(); P[:, 0, 2] = 0.05   # constant 50 mm offset
+    >>> joint_errors_offset_removed_mm(P, T).tolist()
+    [[0.0], [0.0]]
+    """
+    P = _points("pred_joints", pred_joints)
+    T = _points_missing("true_joints", true_joints)
+    o = joint_offsets_m(P, T)
+    return 1e3 * np.linalg.norm(P - T - o[None], axis=-1)
 
 
 def _pair(pred_joints, true_joints) -> tuple[np.ndarray, np.ndarray]:
@@ -220,12 +276,15 @@ def knee_flexion_from_points(hip, knee, ankle) -> np.ndarray:
 
 
 def score_markers(model, poses, truth_names, truth_markers) -> dict:
-    """Accuracy of pose estimates against ground-truth joint centres matched BY NAME.
+    """Accuracy of pose estimates against ground-truth joint centres (or a peer's keypoints) matched BY NAME.
 
     Needs no ground-truth model: the estimate's joint centres come from ``model`` (the tracking
     model, with the shape it tracked with) by forward kinematics; every ground-truth marker whose
-    name is one of ``model``'s marker joints is compared (Eq. 20 per frame, then the mean). Knee
-    angles are measured in 3-D on both sides (:func:`knee_flexion_from_points`: thigh vs shank).
+    name is one of ``model``'s marker joints is compared (Eq. 20 per frame, then the mean). A
+    missing reference point (NaN) is left out of its frame's mean. Knee angles are measured in 3-D
+    on both sides (:func:`knee_flexion_from_points`: thigh vs shank). The same figures are also
+    given with each joint's mean offset removed (:func:`joint_errors_offset_removed_mm`; keys
+    ending ``_offset_removed``), the measure for a reference whose points are not joint centres.
 
     Parameters
     ----------
@@ -233,9 +292,10 @@ def score_markers(model, poses, truth_names, truth_markers) -> dict:
     poses : (F, D) array_like
         Estimates.
     truth_names : sequence of str
-        Names of the ground-truth markers (the bag's ``model.marker_joints``).
+        Names of the ground-truth markers (the bag's ``model.marker_joints``, or a reference's names
+        mapped to the model's joints).
     truth_markers : (F, M, 3) array_like
-        Ground-truth joint centres, metres, in ``truth_names`` order.
+        Ground-truth joint centres, metres, in ``truth_names`` order (NaN = missing).
 
     Returns
     -------
@@ -243,10 +303,14 @@ def score_markers(model, poses, truth_names, truth_markers) -> dict:
         ``frames``, ``mpjpe_mm``, ``median_frame_error_mm``, ``max_frame_error_mm``,
         ``worst_frame`` (index into the F frames), ``knee_rmse_deg`` (NaN without hips, knees and
         ankles on both sides), ``markers`` (names compared), ``frame_errors_mm`` (F,),
-        ``per_marker_mm`` (name -> mean), ``knee_errors_deg`` ((F, 2) estimate - truth, left/right).
+        ``per_marker_mm`` (name -> mean), ``knee_errors_deg`` ((F, 2) estimate - truth, left/right);
+        with the offsets removed ``mpjpe_offset_removed_mm``, ``max_frame_error_offset_removed_mm``,
+        ``worst_frame_offset_removed``, ``frame_errors_offset_removed_mm`` (F,),
+        ``per_marker_offset_removed_mm`` (name -> mean) and ``offsets_mm`` (name -> length of the
+        joint's mean offset).
     """
     X = _poses("poses", poses, model.dof)
-    T = _points("truth_markers", truth_markers)
+    T = _points_missing("truth_markers", truth_markers)
     names = list(truth_names)
     if T.ndim != 3 or T.shape[0] != X.shape[0] or T.shape[1] != len(names):
         raise MetricsError(f"truth_markers: expected shape ({X.shape[0]}, {len(names)}, 3), received {T.shape}")
@@ -256,17 +320,31 @@ def score_markers(model, poses, truth_names, truth_markers) -> dict:
         raise MetricsError(f"truth_names: expected some of the model's markers {mine}, received {names}")
     Pe = marker_positions(model, X, joints=shared)
     Pt = T[:, [names.index(n) for n in shared]]
-    je = joint_errors_mm(Pe, Pt)
-    fe = je.mean(axis=1)
-    out = {"frames": int(X.shape[0]), "mpjpe_mm": float(fe.mean()), "median_frame_error_mm": float(np.median(fe)),
-           "max_frame_error_mm": float(fe.max()), "worst_frame": int(np.argmax(fe)), "markers": shared,
-           "frame_errors_mm": fe, "per_marker_mm": {n: float(v) for n, v in zip(shared, je.mean(axis=0))},
+    if np.all(np.isnan(Pt).any(axis=-1).all(axis=1)):
+        raise MetricsError("truth_markers: expected some reference points, received NaN (missing) in every frame")
+    je = 1e3 * np.linalg.norm(Pe - Pt, axis=-1)
+    jr = joint_errors_offset_removed_mm(Pe, Pt)
+    off = joint_offsets_m(Pe, Pt)
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)       # mean of a frame / joint with nothing to compare
+        fe, fr = np.nanmean(je, axis=1), np.nanmean(jr, axis=1)
+        pm, pr = np.nanmean(je, axis=0), np.nanmean(jr, axis=0)
+    scored = np.isfinite(fe)
+    out = {"frames": int(X.shape[0]), "mpjpe_mm": float(fe[scored].mean()),
+           "median_frame_error_mm": float(np.median(fe[scored])),
+           "max_frame_error_mm": float(fe[scored].max()), "worst_frame": int(np.nanargmax(fe)), "markers": shared,
+           "frame_errors_mm": fe, "per_marker_mm": {n: float(v) for n, v in zip(shared, pm)},
+           "mpjpe_offset_removed_mm": float(fr[scored].mean()),
+           "max_frame_error_offset_removed_mm": float(fr[scored].max()),
+           "worst_frame_offset_removed": int(np.nanargmax(fr)), "frame_errors_offset_removed_mm": fr,
+           "per_marker_offset_removed_mm": {n: float(v) for n, v in zip(shared, pr)},
+           "offsets_mm": {n: float(1e3 * np.linalg.norm(v)) for n, v in zip(shared, off)},
            "knee_rmse_deg": float("nan"), "knee_errors_deg": None}
     sides = [s for s in ("left", "right") if all(f"{s}_{j}" in shared for j in ("hip", "knee", "ankle"))]
     if sides:
         def ang(P, s):
             return knee_flexion_from_points(*(P[:, shared.index(f"{s}_{j}")] for j in ("hip", "knee", "ankle")))
         ke = np.stack([np.rad2deg(ang(Pe, s) - ang(Pt, s)) for s in sides], axis=1)
-        out["knee_rmse_deg"] = float(np.sqrt(np.mean(ke ** 2)))
+        out["knee_rmse_deg"] = float(np.sqrt(np.nanmean(ke ** 2)))
         out["knee_errors_deg"] = ke
     return out
