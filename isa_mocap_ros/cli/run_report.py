@@ -139,6 +139,8 @@ def summary_rows(summary: dict) -> list[tuple[str, object]]:
         if "max_frame_error_offset_removed_mm" in summary:
             acc.append(("  joint offsets removed (mm)", summary["max_frame_error_offset_removed_mm"]))
         acc.append(("knee RMSE (deg)", summary.get("knee_rmse_deg")))
+        if summary.get("frames_facing_backwards") is not None:
+            acc.append(("frames facing backwards", summary["frames_facing_backwards"]))
     else:
         acc = [("accuracy", summary.get("accuracy", "no ground truth"))]
     return acc + [("frames estimated", summary.get("frames_estimated")), ("frames/s", summary["fps"]),

@@ -559,6 +559,9 @@ def run(args: argparse.Namespace) -> int:
             rows.append(("  offsets removed", f"{s['max_frame_error_offset_removed_mm']:.1f} mm (frame "
                                               f"{s['worst_frame_offset_removed_index']})"))
         rows.append(("knee-angle RMSE", f"{s['knee_rmse_deg']:.2f} deg"))
+        if s.get("frames_facing_backwards") is not None:
+            rows.append(("frames facing backwards", f"{s['frames_facing_backwards']} (heading error max "
+                                                    f"{s['max_heading_error_deg']:.0f} deg)"))
     else:
         rows.append(("accuracy", "no ground truth in the bag"))
     print("track: accuracy\n" + _table(rows))

@@ -307,7 +307,9 @@ def score_markers(model, poses, truth_names, truth_markers) -> dict:
         with the offsets removed ``mpjpe_offset_removed_mm``, ``max_frame_error_offset_removed_mm``,
         ``worst_frame_offset_removed``, ``frame_errors_offset_removed_mm`` (F,),
         ``per_marker_offset_removed_mm`` (name -> mean) and ``offsets_mm`` (name -> length of the
-        joint's mean offset).
+        joint's mean offset); ``heading_error_deg`` (F,) the angle between the horizontal left-right
+        axes (hips, and shoulders when scored) of estimate and reference and ``frames_facing_backwards``
+        the frames where it exceeds 90 deg (both None without left and right hips or shoulders).
     """
     X = _poses("poses", poses, model.dof)
     T = _points_missing("truth_markers", truth_markers)
@@ -340,6 +342,18 @@ def score_markers(model, poses, truth_names, truth_markers) -> dict:
            "per_marker_offset_removed_mm": {n: float(v) for n, v in zip(shared, pr)},
            "offsets_mm": {n: float(1e3 * np.linalg.norm(v)) for n, v in zip(shared, off)},
            "knee_rmse_deg": float("nan"), "knee_errors_deg": None}
+    # heading: the horizontal left-right axis (hips, plus shoulders when scored) of the estimate against
+    # the reference's, world z up (DESIGN §3); more than 90 deg apart = the body faces backwards
+    pairs = [(f"left_{j}", f"right_{j}") for j in ("hip", "shoulder") if f"left_{j}" in shared and f"right_{j}" in shared]
+    out["heading_error_deg"], out["frames_facing_backwards"] = None, None
+    if pairs:
+        def lateral(P):
+            v = sum(P[:, shared.index(a)] - P[:, shared.index(b)] for a, b in pairs)[:, :2]
+            return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)
+        a, b = lateral(Pe), lateral(Pt)
+        hd = np.degrees(np.arccos(np.clip(np.sum(a * b, axis=1), -1.0, 1.0)))
+        out["heading_error_deg"] = hd
+        out["frames_facing_backwards"] = int(np.sum(hd > 90.0))
     sides = [s for s in ("left", "right") if all(f"{s}_{j}" in shared for j in ("hip", "knee", "ankle"))]
     if sides:
         def ang(P, s):

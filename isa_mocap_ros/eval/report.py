@@ -85,6 +85,9 @@ def score(model, seq, poses_by_stamp: dict) -> dict | None:
         out.update(scored_by="markers", stamps=stamps, worst_frame_stamp_ns=int(stamps[sc["worst_frame"]]),
                    worst_frame_index=int(sc["worst_frame"]),
                    worst_frame_offset_removed_index=int(sc["worst_frame_offset_removed"]))
+        if sc["frames_facing_backwards"] is not None:
+            out["frames_facing_backwards"] = sc["frames_facing_backwards"]
+            out["max_heading_error_deg"] = float(np.nanmax(sc["heading_error_deg"]))
         if sc["knee_errors_deg"] is not None:
             ke = np.asarray(sc["knee_errors_deg"], float)
             out["knee_mean_abs_error_deg"] = float(np.nanmean(np.abs(ke)))

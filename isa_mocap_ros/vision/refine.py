@@ -38,8 +38,8 @@ def _disk(r: int) -> np.ndarray:
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
 
 
-def refine_mask(image: np.ndarray, mask: np.ndarray, prior: np.ndarray, *, margin: float = 0.08,
-                core: float = 0.02, iterations: int = 3) -> np.ndarray:
+def refine_mask(image: np.ndarray, mask: np.ndarray, prior: np.ndarray, *, margin: float = 0.12,
+                core: float = 0.02, iterations: int = 2, max_side: int = 200, keep: bool = True) -> np.ndarray:
     """Refine ``mask`` with a graph cut seeded by the model silhouette ``prior``.
 
     Parameters
@@ -56,6 +56,12 @@ def refine_mask(image: np.ndarray, mask: np.ndarray, prior: np.ndarray, *, margi
         is foreground, both as fractions of the silhouette's bounding-box height.
     iterations : int
         GrabCut iterations (colour model re-estimation and cut).
+    max_side : int
+        The cut runs on the crop scaled down to at most this many pixels on its longer side (the
+        result is scaled back up): the cost then no longer grows with the image size.
+    keep : bool
+        Keep every foreground pixel of ``mask`` inside the dilated silhouette (the cut only adds
+        what the background subtraction missed there); by default the cut decides those too.
 
     Returns
     -------
@@ -99,10 +105,23 @@ def refine_mask(image: np.ndarray, mask: np.ndarray, prior: np.ndarray, *, margi
     if not (has_fg and has_bg):              # GrabCut needs samples of both colour models
         return out
     crop = np.ascontiguousarray(img[y0:y1, x0:x1])
+    h, w = lab.shape
+    s = min(1.0, float(max_side) / max(h, w))
+    if s < 1.0:                              # nearest for the labels, area averaging for the colours
+        size = (max(2, int(round(w * s))), max(2, int(round(h * s))))
+        crop = cv2.resize(crop, size, interpolation=cv2.INTER_AREA)
+        lab = cv2.resize(lab, size, interpolation=cv2.INTER_NEAREST)
     bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
     cv2.setRNGSeed(0)                        # GrabCut's k-means initialisation: deterministic
     cv2.grabCut(crop, lab, None, bgd, fgd, int(iterations), cv2.GC_INIT_WITH_MASK)
-    cut = (lab == cv2.GC_FGD) | (lab == cv2.GC_PR_FGD)
+    cut = ((lab == cv2.GC_FGD) | (lab == cv2.GC_PR_FGD)).astype(np.uint8)
+    if s < 1.0:
+        cut = cv2.resize(cut * 255, (w, h), interpolation=cv2.INTER_LINEAR) >= 128
+    else:
+        cut = cut > 0
+    cut &= near
+    if keep:
+        cut |= near & f
     out[:] = 0
     out[y0:y1, x0:x1][cut] = 255
     return out
