@@ -54,7 +54,7 @@ def register(sub) -> None:
     p.add_argument("--use-masks", action="store_true", help="use /mocap/cam<i>/mask when the bag has it")
     p.add_argument("--learn-frames", type=int, default=None, metavar="K",
                    help="frames the segmenter learns the background from (default: the bag's empty frames, "
-                        "else 10)")
+                        "else the frames before its first reference marker, else 10)")
     p.add_argument("--shape", default="auto", metavar="auto|default|truth|FILE",
                    help="body shape of the tracking model: 'auto' (default) calibrates it from the silhouettes of "
                         "the first frames (isa-mocap calibrate); 'default' = config/body/default.yaml; FILE = a "
@@ -325,7 +325,10 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     learn = 0
     segmenters = None
     if not use_masks:
-        learn = args.learn_frames if args.learn_frames is not None else (seq.empty_frames or 10)
+        # default: the bag's empty frames, else (an imported recording) the frames before its first
+        # reference marker, as `isa-mocap run` counts them, else 10
+        before_markers = next((f.index for f in seq.frames if f.truth_markers is not None), 0)
+        learn = args.learn_frames if args.learn_frames is not None else (seq.empty_frames or before_markers or 10)
         if learn < 1:
             raise ValueError(f"--learn-frames: expected an integer >= 1, received {learn}")
         segmenters = [BackgroundSegmenter(SegmentationConfig(learn_frames=learn)) for _ in seq.cameras]
