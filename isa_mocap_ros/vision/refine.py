@@ -11,7 +11,8 @@ max-flow) whose labels are seeded by the model's silhouette and the background-s
   sure background (nothing of the person can be there if the pose is roughly right);
 * inside the silhouette eroded by ``core`` (same unit): probably foreground, sure foreground
   where the background subtraction agrees;
-* the band between: what the background subtraction says, as "probably".
+* the band between: what the background subtraction says, as "probably"; the foreground the
+  background subtraction found within the band is kept (``keep``), the cut adds to it.
 
 The cut then decides the uncertain pixels from colour and contrast: the dark shorts over the dark
 treadmill of the Pose2Sim demo come back where the model's legs are, and a second person or an
@@ -60,8 +61,10 @@ def refine_mask(image: np.ndarray, mask: np.ndarray, prior: np.ndarray, *, margi
         The cut runs on the crop scaled down to at most this many pixels on its longer side (the
         result is scaled back up): the cost then no longer grows with the image size.
     keep : bool
-        Keep every foreground pixel of ``mask`` inside the dilated silhouette (the cut only adds
-        what the background subtraction missed there); by default the cut decides those too.
+        Keep every foreground pixel of ``mask`` inside the dilated silhouette, so the cut only adds
+        what the background subtraction missed there (default; on the Pose2Sim demo's first 12
+        frames it covered 0.88 of the reference keypoints against 0.74 when the cut decides those
+        pixels too, which cuts off limbs the previous estimate has not followed yet).
 
     Returns
     -------
