@@ -30,7 +30,7 @@ UNITS_TO_M = {"m": 1.0, "mm": 1e-3, "cm": 1e-2}
 #: outputs triangulated, not joint centres: a keypoint sits at a roughly constant offset from the joint
 #: (the scorer reports the error with each joint's mean offset removed as well). ``Neck`` is the
 #: detector's point between the shoulders (our ``neck``: the base of the neck); ``Head`` its point on
-#: the head (our ``head``: the base of the skull, the head joint). Toes, heels, the nose and the
+#: the head (our ``head``: the centre of the head). Toes, heels, the nose and the
 #: mid-hip ``Hip`` have no marker joint in our models and are not scored.
 POSE2SIM_TO_JOINTS = {
     "RHip": "right_hip", "RKnee": "right_knee", "RAnkle": "right_ankle",
