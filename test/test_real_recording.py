@@ -37,6 +37,29 @@ def demo_bag(tmp_path_factory):
     return out
 
 
+def test_reference_topic_names_the_markers_without_a_model_description():
+    """No recording needed: the reference YAML's names, mapped; a bad YAML is a note, not an error."""
+    import yaml
+
+    from isa_mocap_ros.sequence import SequenceBuilder
+
+    def build(text):
+        b = SequenceBuilder()
+        b.add_camera_info(0, K=np.diag([100.0, 100.0, 1.0]), D=np.zeros(5), width=8, height=8)
+        b.add_extrinsics(0, np.eye(3), np.zeros(3))
+        b.add_image(0, 5, np.zeros((8, 8, 3), np.uint8))
+        b.add_truth_markers(5, np.zeros((3, 3)))
+        b.set_reference_yaml(text)
+        return b.build()
+
+    seq = build(yaml.safe_dump({"marker_names": ["LKnee", "Nose", "RWrist"]}))
+    assert seq.truth_marker_names == ("left_knee", "Nose", "right_wrist") and seq.has_marker_truth
+    seq = build("marker_names: [a, b")
+    assert not seq.has_marker_truth and any("reference: not YAML" in n for n in seq.notes), seq.notes
+    seq = build(yaml.safe_dump({"marker_names": "LKnee"}))
+    assert any("expected a list of strings 'marker_names'" in n for n in seq.notes), seq.notes
+
+
 def test_reference_names_are_mapped_to_our_joints(demo_bag):
     from isa_mocap_ros.cli.track import read_sequence
     from isa_mocap_ros.eval.trc import POSE2SIM_TO_JOINTS
