@@ -8,15 +8,15 @@ foreground and background as Gaussian mixtures, a contrast-sensitive smoothness 
 max-flow) whose labels are seeded by the model's silhouette and the background-subtraction mask:
 
 * outside the model's silhouette dilated by ``margin`` (a fraction of the silhouette's height):
-  sure background (nothing of the person can be there if the pose is roughly right);
+  sure background for the cut's colour models; the mask there is left as it is (``drop_far``
+  removes it instead);
 * inside the silhouette eroded by ``core`` (same unit): probably foreground, sure foreground
   where the background subtraction agrees;
 * the band between: what the background subtraction says, as "probably"; the foreground the
   background subtraction found within the band is kept (``keep``), the cut adds to it.
 
 The cut then decides the uncertain pixels from colour and contrast: the dark shorts over the dark
-treadmill of the Pose2Sim demo come back where the model's legs are, and a second person or an
-object outside the model's neighbourhood is removed. The model is only a prior: a wrong pose
+treadmill of the Pose2Sim demo come back where the model's legs are. The model is only a prior: a wrong pose
 gives a mask biased towards it, which is why the refinement is an option of the tracker's input
 (``isa-mocap track --refine-masks``), measured with and without (docs/real_cameras.md).
 
@@ -40,7 +40,8 @@ def _disk(r: int) -> np.ndarray:
 
 
 def refine_mask(image: np.ndarray, mask: np.ndarray, prior: np.ndarray, *, margin: float = 0.12,
-                core: float = 0.02, iterations: int = 2, max_side: int = 200, keep: bool = True) -> np.ndarray:
+                core: float = 0.02, iterations: int = 2, max_side: int = 200, keep: bool = True,
+                drop_far: bool = False) -> np.ndarray:
     """Refine ``mask`` with a graph cut seeded by the model silhouette ``prior``.
 
     Parameters
@@ -65,6 +66,11 @@ def refine_mask(image: np.ndarray, mask: np.ndarray, prior: np.ndarray, *, margi
         what the background subtraction missed there (default; on the Pose2Sim demo's first 12
         frames it covered 0.88 of the reference keypoints against 0.74 when the cut decides those
         pixels too, which cuts off limbs the previous estimate has not followed yet).
+    drop_far : bool
+        Also remove the foreground beyond the dilated silhouette. Off by default: on the demo a limb
+        the previous estimate had lost was then removed from every later mask, and the track never
+        came back to it (the tracker's own mask gate and visual-hull filter remove far foreground
+        without that feedback).
 
     Returns
     -------
@@ -102,7 +108,8 @@ def refine_mask(image: np.ndarray, mask: np.ndarray, prior: np.ndarray, *, margi
     lab[kern] = cv2.GC_PR_FGD
     lab[kern & f] = cv2.GC_FGD
     out = np.where(fg, 255, 0).astype(np.uint8)
-    out[y0:y1, x0:x1][~near] = 0            # far from the model: not the person
+    if drop_far:
+        out[y0:y1, x0:x1][~near] = 0        # far from the model: not the person
     has_fg = np.any((lab == cv2.GC_FGD) | (lab == cv2.GC_PR_FGD))
     has_bg = np.any((lab == cv2.GC_BGD) | (lab == cv2.GC_PR_BGD))
     if not (has_fg and has_bg):              # GrabCut needs samples of both colour models
@@ -125,6 +132,9 @@ def refine_mask(image: np.ndarray, mask: np.ndarray, prior: np.ndarray, *, margi
     cut &= near
     if keep:
         cut |= near & f
-    out[:] = 0
-    out[y0:y1, x0:x1][cut] = 255
+    if drop_far:
+        out[:] = 0
+    win = out[y0:y1, x0:x1]
+    win[near] = 0                            # inside the dilated silhouette the cut decides
+    win[cut] = 255
     return out
