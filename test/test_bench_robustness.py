@@ -18,7 +18,7 @@ def test_quick_json(tmp_path, capsys):
     assert res["design"]["seeds"] == [0] and res["design"]["gate_margin_px"] is None
     for r in res["runs"]:
         assert r["sequence"] == "walk" and r["frames"] == 5          # 6 frames, the ground-truth first one not scored
-        assert r["seed"] == 0 and r["gate_margin_px"] == TrackerConfig().gate_margin_px   # the tracker's default
+        assert r["seed"] == 0 and r["gate_margin_px"] == TrackerConfig().masks.gate_margin_px   # the tracker's default
         assert np.isfinite(r["knee_rmse_deg"]) and np.isfinite(r["mpjpe_mm"])
         assert len(r["knee_est_deg"]) == len(r["t_s"]) == r["frames"]
     # one cached bag per condition, tracked with `isa-mocap track`'s code (its summary.json is there)

@@ -78,8 +78,8 @@ def test_tracker_with_and_without_the_compiled_search(scene, init):
     model, cams, walk, masks = scene
     out = []
     for compiled in (True, False):
-        tr = Tracker(model, cams, TrackerConfig(seed=4))
-        tr._compiled_search = compiled
+        tr = Tracker(model, cams, TrackerConfig.from_flat(seed=4))
+        tr.use_compiled_search = compiled
         first = []
         if init == "given":
             tr.initialize(pose=walk[0])

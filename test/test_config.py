@@ -6,7 +6,7 @@ from pathlib import Path
 
 import yaml
 
-from isa_mocap_ros.tracking.tracker import TrackerConfig
+from isa_mocap_ros.tracking.config import LEAVES, TrackerConfig
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -15,11 +15,11 @@ def test_estimator_section_matches_tracker_defaults():
     """The estimator's parameters named as TrackerConfig fields hold the fields' defaults (the names are
     the fields' own: the node declares them from the dataclass)."""
     est = yaml.safe_load((REPO / "config" / "pipeline.yaml").read_text())["/mocap/estimator"]["ros__parameters"]
-    tc = TrackerConfig()
-    shown = {k: v for k, v in est.items() if k in TrackerConfig.__dataclass_fields__}
+    tc = TrackerConfig().flat()
+    shown = {k: v for k, v in est.items() if k in LEAVES}
     assert len(shown) >= 30                          # the settings a user tunes are listed there
-    want = {k: (list(getattr(tc, k)) if isinstance(getattr(tc, k), tuple) else getattr(tc, k)) for k in shown}
-    want["optimizer_params"] = yaml.safe_dump(dict(tc.optimizer_params), default_flow_style=True).strip()
+    want = {k: (list(tc[k]) if isinstance(tc[k], tuple) else tc[k]) for k in shown}
+    want["optimizer_params"] = yaml.safe_dump(dict(tc["optimizer_params"]), default_flow_style=True).strip()
     assert shown == want
 
 
@@ -39,6 +39,6 @@ def test_every_section_is_a_node_with_parameters():
 def test_deleted_settings_are_gone_everywhere():
     """Settings that only selected variants measured worse were deleted with their code (issue #31)."""
     est = yaml.safe_load((REPO / "config" / "pipeline.yaml").read_text())["/mocap/estimator"]["ros__parameters"]
-    names = {f for f in TrackerConfig.__dataclass_fields__}
+    names = set(LEAVES)
     for gone in ("pelvis_move", "refine_fraction", "refine_partitions", "hull_misses", "init_confirm_share"):
         assert gone not in est and gone not in names

@@ -14,16 +14,16 @@ def test_contour_stage_sees_the_filtered_masks():
         m = np.array(m, copy=True)
         m[:12, :12] = 255                   # a blob far from the person: the mask gate removes it
         occluded.append(m)
-    tr = Tracker(model, cams, TrackerConfig(seed=0, init_confirm_frames=0))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=0, init_confirm_frames=0))
     tr.initialize(pose=walk[0])
     seen = []
-    fit = tr._contour.set_masks
+    fit = tr.contour_fit.set_masks
 
     def record(ms):
         seen.append([None if m is None else np.array(m, copy=True) for m in ms])
         return fit(ms)
 
-    tr._contour.set_masks = record
+    tr.contour_fit.set_masks = record
     r = tr.step(occluded, 1)
     assert not r.fell_back and seen, "the contour stage did not run"
     for v, m in enumerate(seen[-1]):

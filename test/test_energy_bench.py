@@ -18,8 +18,9 @@ def test_bench_energy_quick_json(capsys):
     assert list(out) == ["views", "dof", "batch", "fast_evals_per_s", "exact_evals_per_s", "ratio", "exact_batch",
                          "n_model_points", "n_template", "n_mask_points", "downsample", "threads"]
     tc = TrackerConfig()                 # measured with the tracker's sample sizes
-    assert (out["n_model_points"], out["n_mask_points"], out["downsample"]) == (tc.n_model_points, tc.n_mask_points,
-                                                                                tc.downsample)
+    obj = tc.objective
+    assert (out["n_model_points"], out["n_mask_points"], out["downsample"]) == (obj.n_model_points, obj.n_mask_points,
+                                                                                obj.downsample)
     assert out["n_template"] >= out["n_model_points"]
     assert out["views"] == 4 and out["dof"] == 39 and out["batch"] == 64 and out["exact_batch"] == 4
     assert out["fast_evals_per_s"] > 0 and out["exact_evals_per_s"] > 0

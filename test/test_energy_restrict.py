@@ -227,9 +227,11 @@ def test_tracker_restricted_total_energy_adds_the_prior(scene):
 
     model, cams, x0, masks = scene
     prior = ParzenPrior(generate_motion("walk", model, duration_s=1.0, fps=30, rng=np.random.default_rng(5)))
-    tr = Tracker(model, cams, TrackerConfig(optimizer="h-isa", evals=600, prior_eta=0.01), prior=prior)
+    tr = Tracker(model, cams, TrackerConfig.from_flat(optimizer="h-isa", evals=600, prior_eta=0.01), prior=prior)
     tr.initialize(pose=x0)
-    frame_masks.set_masks(tr, list(masks), [], 0)
+    ctx = tr.frame_context(0)
+    ctx.masks = list(masks)
+    frame_masks.set_masks(tr, ctx)
     cols = model.partitions["left_arm"]
     X = np.repeat(x0[None], 6, axis=0)
     X[:, cols] += np.random.default_rng(6).normal(0, 0.2, (6, len(cols)))
@@ -240,6 +242,7 @@ def test_tracker_restricted_total_energy_adds_the_prior(scene):
 
 def test_tracker_steps_are_the_same_with_and_without_restriction(scene, monkeypatch):
     from isa_mocap_ros.tracking import Tracker, TrackerConfig
+    from isa_mocap_ros.tracking.objective import TotalEnergy
 
     model, cams, x0, masks = scene
     walk = [x0.copy() for _ in range(3)]
@@ -249,7 +252,7 @@ def test_tracker_steps_are_the_same_with_and_without_restriction(scene, monkeypa
     frames = [[render_mask(c, capsule_endpoints(model, x)[0], model.capsule_radii) for c in cams] for x in walk]
 
     def track():
-        tr = Tracker(model, cams, TrackerConfig(optimizer="h-isa", evals=850, seed=2))
+        tr = Tracker(model, cams, TrackerConfig.from_flat(optimizer="h-isa", evals=850, seed=2))
         tr.initialize(pose=walk[0])
         return tr, [tr.step(frames[k], k) for k in (1, 2)]
 
@@ -258,7 +261,7 @@ def test_tracker_steps_are_the_same_with_and_without_restriction(scene, monkeypa
     monkeypatch.setattr(SilhouetteEnergy, "restrict", lambda self, x, c: calls.append(1) or orig(self, x, c))
     tr, with_ = track()
     assert len(calls) == 2 * (len(PARTS) + 1)  # once per partition and frame, and the torso stage's (from 830 with the contour stage)
-    monkeypatch.setattr(Tracker, "restricted_energy", lambda self, x, c: None)
+    monkeypatch.setattr(TotalEnergy, "restrict", lambda self, x, c: None)
     n = tr.energy.n_evals
     tr2, without = track()
     for a, b in zip(with_, without):

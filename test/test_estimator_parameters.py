@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from isa_mocap_ros.tracking.config import TrackerConfig, TrackerError, field_docs
+from isa_mocap_ros.tracking.config import LEAVES, TrackerConfig, TrackerError, field_docs
 
 pytestmark = pytest.mark.ros
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "pipeline.yaml"
@@ -39,7 +39,7 @@ def make_node(ros_domain):
 
 def test_every_field_has_a_one_line_doc():
     docs = field_docs()
-    assert list(docs) == [f.name for f in dataclasses.fields(TrackerConfig)]
+    assert list(docs) == list(LEAVES) == list(TrackerConfig().flat())
     assert all(d and "\n" not in d for d in docs.values())
 
     @dataclasses.dataclass(frozen=True)
@@ -63,11 +63,11 @@ def test_estimator_declares_one_parameter_per_field_with_its_doc_and_default(mak
     node = make_node()
     values = declare_config(node, TrackerConfig, field_docs(), skip=NOT_PARAMETERS)
     docs = field_docs()
-    names = [f.name for f in dataclasses.fields(TrackerConfig) if f.name not in NOT_PARAMETERS]
+    names = [name for name in LEAVES if name not in NOT_PARAMETERS]
     assert list(values) == names and len(names) == len(docs) - len(NOT_PARAMETERS)
     for name in names:
         assert docs[name] in node.describe_parameter(name).description
-    assert TrackerConfig(**values) == TrackerConfig()
+    assert TrackerConfig.from_flat(**values) == TrackerConfig()
 
 
 def test_overrides_reach_the_config_converted(make_node):
@@ -75,9 +75,9 @@ def test_overrides_reach_the_config_converted(make_node):
 
     node = make_node(evals=200, optimizer_params="{n_particles: 50, kernel: s2}", limb_extrapolations=[0.0],
                      partition_order=["root", "torso", "left_arm", "right_arm", "left_leg", "right_leg"])
-    cfg = TrackerConfig(**declare_config(node, TrackerConfig, field_docs()))
-    assert cfg.evals == 200 and dict(cfg.optimizer_params) == {"n_particles": 50, "kernel": "s2"}
-    assert cfg.limb_extrapolations == () and cfg.partition_order[:2] == ("root", "torso")
+    cfg = TrackerConfig.from_flat(**declare_config(node, TrackerConfig, field_docs()))
+    assert cfg.search.evals == 200 and dict(cfg.search.optimizer_params) == {"n_particles": 50, "kernel": "s2"}
+    assert cfg.stages.limb_extrapolations == () and cfg.search.partition_order[:2] == ("root", "torso")
     bad = make_node(optimizer_params="[1, 2]")
     with pytest.raises(ValueError, match=r"parameter optimizer_params: expected a YAML/JSON mapping"):
         declare_config(bad, TrackerConfig, field_docs())
@@ -88,6 +88,5 @@ def test_pipeline_yaml_estimator_section_gives_the_default_tracker(make_node):
     from isa_mocap_ros.nodes.common import declare_config
 
     est = yaml.safe_load(CONFIG.read_text())["/mocap/estimator"]["ros__parameters"]
-    fields = {f.name for f in dataclasses.fields(TrackerConfig)}
-    node = make_node(**{k: v for k, v in est.items() if k in fields})
-    assert TrackerConfig(**declare_config(node, TrackerConfig, field_docs())) == TrackerConfig()
+    node = make_node(**{k: v for k, v in est.items() if k in LEAVES})
+    assert TrackerConfig.from_flat(**declare_config(node, TrackerConfig, field_docs())) == TrackerConfig()

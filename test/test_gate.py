@@ -130,8 +130,8 @@ def test_bad_input(scene, kw, match):
 @pytest.mark.parametrize("bad", [-1, 1.5, True, None])
 def test_config_validation(bad):
     with pytest.raises(TrackerError, match="gate_margin_px"):
-        TrackerConfig(gate_margin_px=bad)
-    assert TrackerConfig().gate_margin_px >= 0
+        TrackerConfig.from_flat(gate_margin_px=bad)
+    assert TrackerConfig().masks.gate_margin_px >= 0
 
 
 def test_tracker_with_occluder_blobs_tracks_better_with_the_gate():
@@ -155,7 +155,7 @@ def test_tracker_with_occluder_blobs_tracks_better_with_the_gate():
         for j, margin in enumerate((0, 5)):
             # (the contour stage off: it follows contours the blobs bend, docs/tracking.md "The contour stage")
             # (the visual-hull filter off: the gate alone; test_hull.py has the filter alone)
-            tr = Tracker(model, cams, TrackerConfig(evals=600, seed=seed, gate_margin_px=margin,
+            tr = Tracker(model, cams, TrackerConfig.from_flat(evals=600, seed=seed, gate_margin_px=margin,
                                                     contour_iterations=0, hull_filter=False))
             tr.initialize(pose=walk[0])
             out[margin] = [tr.step(masks[k], k) for k in range(1, n)]
@@ -170,7 +170,7 @@ def test_tracker_with_occluder_blobs_tracks_better_with_the_gate():
 def test_view_left_empty_by_the_gate_is_skipped(scene):
     """A view whose only foreground is a far blob is skipped like an empty view; all views far: fall back."""
     model, cams, walk, masks = scene
-    tr = Tracker(model, cams, TrackerConfig(evals=300, seed=1, gate_margin_px=4))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(evals=300, seed=1, gate_margin_px=4))
     tr.initialize(pose=walk[0])
     m = list(masks[1])
     blob = np.zeros_like(m[2])

@@ -165,13 +165,13 @@ def test_bad_masks_and_box_are_named(scene):
 
 def test_tracker_config_checks_the_hull_settings():
     with pytest.raises(TrackerError, match="hull_dilate_px"):
-        TrackerConfig(hull_dilate_px=-1)
+        TrackerConfig.from_flat(hull_dilate_px=-1)
     with pytest.raises(TrackerError, match="hull_keep_px"):
-        TrackerConfig(hull_keep_px=-1)
+        TrackerConfig.from_flat(hull_keep_px=-1)
     with pytest.raises(TrackerError, match="hull_pad_m"):
-        TrackerConfig(hull_pad_m=0.0)
+        TrackerConfig.from_flat(hull_pad_m=0.0)
     with pytest.raises(TrackerError, match="hull_filter"):
-        TrackerConfig(hull_filter="yes")
+        TrackerConfig.from_flat(hull_filter="yes")
 
 
 def test_tracker_hands_the_energy_the_filtered_masks(scene):
@@ -184,7 +184,7 @@ def test_tracker_hands_the_energy_the_filtered_masks(scene):
     m[0][added] = 255
     seen = {}
     for on in (True, False):
-        tr = Tracker(model, cams, TrackerConfig(evals=300, hull_filter=on, hull_keep_px=0,
+        tr = Tracker(model, cams, TrackerConfig.from_flat(evals=300, hull_filter=on, hull_keep_px=0,
                                                 contour_iterations=0, contour_extra_iterations=0, limb_proposals=0))
         tr.initialize(pose=poses[0])
         res = tr.step(m, 1)
@@ -215,7 +215,7 @@ def test_tracker_with_occluder_blobs_tracks_better_with_the_filter_alone():
     err = np.zeros((3, 2))
     for seed in range(3):
         for j, on in enumerate((False, True)):
-            tr = Tracker(model, cams, TrackerConfig(evals=600, seed=seed, gate_margin_px=0,
+            tr = Tracker(model, cams, TrackerConfig.from_flat(evals=600, seed=seed, gate_margin_px=0,
                                                     contour_iterations=0, hull_filter=on))
             tr.initialize(pose=walk[0])
             out = [tr.step(masks[k], k) for k in range(1, n)]

@@ -15,7 +15,7 @@ from isa_mocap_ros.tracking.tracker import frame_rng
 
 def _limb_stage_of(tr, notes, pred):
     """The limb stage's plan on a full frame budget."""
-    return plan.limb_stage(tr, notes, pred, FrameBudget(tr.config.evals))
+    return plan.limb_stage(tr, notes, pred, FrameBudget(tr.config.search.evals))
 from isa_mocap_ros.vision import default_rig, render_mask
 
 
@@ -102,7 +102,7 @@ def test_stage_reopens_a_folded_arm(scene):
     wrist_err = lambda x: float(np.linalg.norm(joint_positions(model, x[None])[0, w]
                                                - joint_positions(model, truth[None])[0, w]))
     assert wrist_err(trapped) > 0.2
-    tr = Tracker(model, cams, TrackerConfig(seed=1))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=1))
     tr.initialize(pose=trapped)
     tr.step(masks, 3)                                       # sets the masks
     e0 = tr.total_energy(trapped[None])[0]
@@ -114,7 +114,7 @@ def test_stage_reopens_a_folded_arm(scene):
         fixed += changed == ["right_arm"] and wrist_err(x) < 0.06
     assert fixed == 3
     # the hierarchy's own search, from the trapped pose with the same number of evaluations, stays folded
-    tr = Tracker(model, cams, TrackerConfig(seed=1, evals=402, pelvis_fraction=0.0, limb_proposals=0))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=1, evals=402, pelvis_fraction=0.0, limb_proposals=0))
     tr.initialize(pose=trapped)
     r = tr.step(masks, 4, prediction=trapped)
     assert wrist_err(r.x) > 0.15
@@ -122,21 +122,21 @@ def test_stage_reopens_a_folded_arm(scene):
 
 def test_stage_budget_skip_note_and_off(scene):
     model, cams, walk, truth, masks = scene
-    for cfg, note in [(TrackerConfig(evals=700, seed=1), False),        # (14 + 3) x 4 + 2 = 70
-                      (TrackerConfig(evals=330, seed=1, pelvis_fraction=0.0), False),   # 4 + 3 per limb
-                      (TrackerConfig(evals=700, seed=1, limb_proposals=0), False)]:
+    for cfg, note in [(TrackerConfig.from_flat(evals=700, seed=1), False),        # (14 + 3) x 4 + 2 = 70
+                      (TrackerConfig.from_flat(evals=330, seed=1, pelvis_fraction=0.0), False),   # 4 + 3 per limb
+                      (TrackerConfig.from_flat(evals=700, seed=1, limb_proposals=0), False)]:
         tr = Tracker(model, cams, cfg)
         tr.initialize(pose=walk[2])
         r = tr.step(masks, 3)
         # whole generations: the limb stage (last) takes the rest as proposals, < 4 left; without it < 30
-        slack = 4 if cfg.limb_proposals and not note else 30
-        assert cfg.evals - slack < r.n_evals <= cfg.evals and not r.fell_back
+        slack = 4 if cfg.stages.limb_proposals and not note else 30
+        assert cfg.search.evals - slack < r.n_evals <= cfg.search.evals and not r.fell_back
         assert not any(n.startswith("limb stage skipped") for n in r.notes)
     # drawn proposals per limb: limb_proposals, or as many as fit in a tenth of the budget beside the 3
     # extrapolated ones; below 4 no stage
     for evals, limbs, n in [(1500, LIMBS, 16), (700, LIMBS, 14), (500, LIMBS, 9), (330, LIMBS, 4),
                             (330, ("left_arm", "right_arm"), 12), (290, LIMBS, 0), (170, LIMBS, 0)]:
-        tr = Tracker(model, cams, TrackerConfig(evals=evals, seed=1, limb_proposal_limbs=limbs))
+        tr = Tracker(model, cams, TrackerConfig.from_flat(evals=evals, seed=1, limb_proposal_limbs=limbs))
         notes = []
         got = _limb_stage_of(tr, notes, truth)
         assert got == ((list(limbs), [v for v in limbs if v.endswith("_leg")], n) if n else ([], [], 0))
@@ -147,13 +147,15 @@ def test_stage_budget_skip_note_and_off(scene):
 def test_not_on_the_automatically_initialized_frame(scene, monkeypatch):
     model, cams, walk, truth, masks = scene
     calls = []
-    orig = Tracker.propose_limbs
-    monkeypatch.setattr(Tracker, "propose_limbs", lambda self, *a, **k: calls.append(1) or orig(self, *a, **k))
+    from isa_mocap_ros.tracking import stages
+
+    orig = stages.propose_limbs
+    monkeypatch.setattr(stages, "propose_limbs", lambda *a, **k: calls.append(1) or orig(*a, **k))
     # not in the heading candidates' searches; init_polish's search of the winner (and of a heading check's
     # rival) is a tracked frame's, with every stage
     for polish in (False, True):
         calls.clear()
-        tr = Tracker(model, cams, TrackerConfig(seed=1, evals=600, init_refine_evals=50, init_yaw_steps=8,
+        tr = Tracker(model, cams, TrackerConfig.from_flat(seed=1, evals=600, init_refine_evals=50, init_yaw_steps=8,
                                                 init_polish=polish))
         r = tr.step(masks, 0)
         polished = 1 + any(n.startswith("heading check started") for n in r.notes)
@@ -174,7 +176,7 @@ def test_not_on_the_automatically_initialized_frame(scene, monkeypatch):
                                        ({"limb_hinge_window_deg": float("nan")}, "limb_hinge_window_deg")])
 def test_bad_settings(kw, match):
     with pytest.raises(TrackerError, match=match):
-        TrackerConfig(**kw)
+        TrackerConfig.from_flat(**kw)
 
 
 def test_a_leg_folded_in_the_prediction_joins_the_stage(scene):
@@ -191,7 +193,7 @@ def test_a_leg_folded_in_the_prediction_joins_the_stage(scene):
     assert ankle_err(folded) > 0.3
     out = {}
     for fold in (130.0, 0.0):
-        tr = Tracker(model, cams, TrackerConfig(seed=1, limb_fold_deg=fold, limb_proposal_limbs=("left_arm",
+        tr = Tracker(model, cams, TrackerConfig.from_flat(seed=1, limb_fold_deg=fold, limb_proposal_limbs=("left_arm",
                                                                                                  "right_arm")))
         tr.initialize(pose=folded)
         r = tr.step(masks, 3, prediction=folded)
@@ -201,18 +203,18 @@ def test_a_leg_folded_in_the_prediction_joins_the_stage(scene):
     assert out[130.0] < 0.1 < out[0.0]
     # not folded: with the arms-only stage the legs stay out
     arms = dict(limb_proposal_limbs=("left_arm", "right_arm"))
-    tr = Tracker(model, cams, TrackerConfig(seed=1, **arms))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=1, **arms))
     tr.initialize(pose=truth)
     assert _limb_stage_of(tr, [], truth) == (["left_arm", "right_arm"], [], 16)
     notes = []
     assert _limb_stage_of(tr, notes, folded) == (["left_arm", "right_arm", "right_leg"], [], 16) and len(notes) == 1
     # the folded leg joins only while the stage stays within a tenth of the budget (16 x 3 + 2 = 50 > 40)
-    tr = Tracker(model, cams, TrackerConfig(seed=1, evals=400, **arms))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=1, evals=400, **arms))
     notes = []
     assert _limb_stage_of(tr, notes, folded) == (["left_arm", "right_arm"], [], 16) and notes == []
-    assert _limb_stage_of(Tracker(model, cams, TrackerConfig(seed=1, limb_proposals=0)), notes, folded) == ([], [], 0)
+    assert _limb_stage_of(Tracker(model, cams, TrackerConfig.from_flat(seed=1, limb_proposals=0)), notes, folded) == ([], [], 0)
     # the default stage has the legs with hinge proposals; a folded one gets the twist too (no note: it is in)
-    tr = Tracker(model, cams, TrackerConfig(seed=1))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=1))
     notes = []
     assert _limb_stage_of(tr, notes, truth) == (list(LIMBS), ["left_leg", "right_leg"], 16)
     assert _limb_stage_of(tr, notes, folded) == (list(LIMBS), ["left_leg"], 16) and notes == []
@@ -236,7 +238,7 @@ def test_knee_proposals_follow_a_knee_beyond_the_search_box(scene, off_deg, wind
     out = {}
     for limbs in (LIMBS, ("left_arm", "right_arm")):
         # (the contour stage off: it would mend the knee too; this is the limb stage's test)
-        tr = Tracker(model, cams, TrackerConfig(seed=1, limb_proposal_limbs=limbs, contour_iterations=0,
+        tr = Tracker(model, cams, TrackerConfig.from_flat(seed=1, limb_proposal_limbs=limbs, contour_iterations=0,
                                                 limb_hinge_window_deg=window))
         tr.initialize(pose=off)
         r = tr.step(masks, 3, prediction=off)
@@ -245,7 +247,7 @@ def test_knee_proposals_follow_a_knee_beyond_the_search_box(scene, off_deg, wind
     assert out[LIMBS] < 0.06 and out[LIMBS] < 0.7 * out[("left_arm", "right_arm")], out
     assert off_deg < 60 or out[("left_arm", "right_arm")] > 0.15, out    # 70 deg: beyond the search box
     # the stage itself: hinge proposals only change the knee
-    tr = Tracker(model, cams, TrackerConfig(seed=1, limb_hinge_window_deg=window))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=1, limb_hinge_window_deg=window))
     tr.initialize(pose=off)
     tr.step(masks, 3, prediction=off)
     x, e, n, changed = tr.propose_limbs(off, n=16, rng=frame_rng(1, 3), limbs=["right_leg"], hinge_only=["right_leg"])
@@ -274,7 +276,7 @@ def test_extrapolated_proposals_carry_a_limb_along_its_motion(scene):
     keep = [k for k in range(model.dof) if k not in leg.dofs]
     np.testing.assert_array_equal(X[:, keep], np.repeat(half[None, keep], 3, 0))
     assert np.all(X >= model.lower) and np.all(X <= model.upper)
-    tr = Tracker(model, cams, TrackerConfig(seed=1))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=1))
     tr.initialize(pose=half)
     tr.step(masks, 3, prediction=half)                          # sets the masks
     # one drawn proposal (a knee alone cannot reach the truth: the hip is off too) and the extrapolations
@@ -286,6 +288,6 @@ def test_extrapolated_proposals_carry_a_limb_along_its_motion(scene):
     _, _, n, _ = tr.propose_limbs(half, n=1, rng=frame_rng(1, 3), limbs=["right_leg"], hinge_only=["right_leg"])
     assert n == 1 + 2
     # off
-    tr = Tracker(model, cams, TrackerConfig(seed=1, limb_extrapolations=()))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=1, limb_extrapolations=()))
     assert _limb_stage_of(tr, [], truth) == (list(LIMBS), ["left_leg", "right_leg"], 16)
     assert plan.limb_share(tr, 4, 16) == 66

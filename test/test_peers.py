@@ -79,7 +79,7 @@ def test_tracker_style_arguments_and_registry():
     register_peers()
     assert OPTIMIZERS["pycma"] is PycmaEs and OPTIMIZERS["scipy-de"] is ScipyDe
     from isa_mocap_ros.tracking import TrackerConfig
-    assert TrackerConfig(optimizer="pycma").optimizer == "pycma"
+    assert TrackerConfig.from_flat(optimizer="pycma").search.optimizer == "pycma"
     d = 9
     lo, hi = np.full(d, -0.5), np.full(d, 0.5)
     lo[2], hi[2] = 0.1, 0.1 + 1e-6                 # the tracker's sliver for a prediction on a limit

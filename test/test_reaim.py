@@ -187,7 +187,7 @@ def test_reaim_stage_puts_the_hip_centres_back(scene):
     root[3:6] = log_so3(exp_so3(truth[3:6]) @ exp_so3(np.array([0.0, 0.0, np.deg2rad(12.0)])))
     trapped = ReaimMove(model, [0])(truth, root[None])[0]
     assert 15.0 < _hip_error_mm(model, trapped, truth) < 25.0
-    tr = Tracker(model, cams, TrackerConfig(seed=1))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=1))
     tr.initialize(pose=trapped)
     tr.step(masks[3], 3)                                  # sets the masks of frame 3
     e0 = tr.total_energy(trapped[None])[0]
@@ -203,12 +203,12 @@ def test_reaim_stage_puts_the_hip_centres_back(scene):
 def test_torso_stage_budget_replacement_and_skip_note(scene):
     model, cams, walk, masks = scene
     # the torso stage runs from 830 evaluations with the contour stage's share (161, session 17)
-    tr = Tracker(model, cams, TrackerConfig(evals=900, seed=1))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(evals=900, seed=1))
     tr.initialize(pose=walk[0])
     r = tr.step(masks[1], 1)
     # whole generations: what a search leaves goes to the next stage, the limb stage's 4 limbs take the rest
     assert 896 < r.n_evals <= 900 and not any("torso" in n for n in r.notes)
-    tr = Tracker(model, cams, TrackerConfig(evals=700, seed=1, torso_fraction=0.04))   # 28 < 30 + 2
+    tr = Tracker(model, cams, TrackerConfig.from_flat(evals=700, seed=1, torso_fraction=0.04))   # 28 < 30 + 2
     tr.initialize(pose=walk[0])
     r = tr.step(masks[1], 1)
     assert 696 < r.n_evals <= 700 and not r.fell_back
@@ -240,7 +240,7 @@ def test_models_without_a_torso_skip_the_stage():
     walk = generate_motion("walk", model, duration_s=0.1, fps=30, rng=np.random.default_rng(1))
     masks = [[render_mask(c, capsule_endpoints(model, x)[0], model.capsule_radii) for c in rig.cameras]
              for x in walk]
-    tr = Tracker(model, rig.cameras, TrackerConfig(evals=600, seed=1))
+    tr = Tracker(model, rig.cameras, TrackerConfig.from_flat(evals=600, seed=1))
     tr.initialize(pose=walk[0])
     r = tr.step(masks[1], 1)
     assert 600 - 30 < r.n_evals <= 600 and not r.fell_back        # no limb stage to take the rest
@@ -255,17 +255,19 @@ def test_models_without_a_torso_skip_the_stage():
                                         "pelvis_fraction \\+ torso_fraction: expected below 1")])
 def test_bad_config(kw, match):
     with pytest.raises(TrackerError, match=match):
-        TrackerConfig(**kw)
+        TrackerConfig.from_flat(**kw)
 
 
-def test_flat_algorithms_have_no_torso_stage(scene):
+def test_flat_algorithms_have_no_torso_stage(scene, monkeypatch):
     """Like the refinement stage: a flat search moves torso and arms together already."""
+    from isa_mocap_ros.tracking import stages
+
     model, cams, walk, masks = scene
     calls = []
+    orig = stages.refit_torso
     for name in ("isa", "pso", "h-pso"):
-        tr = Tracker(model, cams, TrackerConfig(optimizer=name, evals=1500, seed=1))
-        orig = tr.refit_torso
-        tr.refit_torso = lambda *a, _n=name, **k: calls.append(_n) or orig(*a, **k)
+        tr = Tracker(model, cams, TrackerConfig.from_flat(optimizer=name, evals=1500, seed=1))
+        monkeypatch.setattr(stages, "refit_torso", lambda *a, _n=name, **k: calls.append(_n) or orig(*a, **k))
         tr.initialize(pose=walk[0])
         r = tr.step(masks[1], 1)
         assert not r.fell_back and not any("torso" in n for n in r.notes)

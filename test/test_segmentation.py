@@ -213,9 +213,9 @@ def test_wrong_size_dtype_and_shape_raise(scene):
 
 
 def test_bad_config_raises():
-    with pytest.raises(SegmentationError, match=r"method: expected one of .*got 'gmm'"):
+    with pytest.raises(SegmentationError, match=r"method: expected one of .*received 'gmm'"):
         SegmentationConfig(method="gmm")
-    with pytest.raises(SegmentationError, match=r"learn_frames: expected an integer >= 1, got 0"):
+    with pytest.raises(SegmentationError, match=r"learn_frames: expected an integer >= 1, received 0"):
         SegmentationConfig(learn_frames=0)
     with pytest.raises(SegmentationError, match=r"update_rate"):
         SegmentationConfig(update_rate=1.5)
@@ -455,7 +455,7 @@ def test_robust_background_numba_agrees_with_numpy(channels):
 
 
 def test_robust_config_is_checked():
-    with pytest.raises(SegmentationError, match=r"robust: expected one of .*got 'yes'"):
+    with pytest.raises(SegmentationError, match=r"robust: expected one of .*received 'yes'"):
         SegmentationConfig(robust="yes")
     with pytest.raises(SegmentationError, match=r"robust_detect_fraction"):
         SegmentationConfig(robust_detect_fraction=0.0)
@@ -463,7 +463,7 @@ def test_robust_config_is_checked():
         SegmentationConfig(robust_radius=-1.0)
     with pytest.raises(SegmentationError, match=r"vote_sigma_px"):
         SegmentationConfig(vote_sigma_px=float("nan"))
-    with pytest.raises(SegmentationError, match=r"vote: expected one of .*got 'median'"):
+    with pytest.raises(SegmentationError, match=r"vote: expected one of .*received 'median'"):
         SegmentationConfig(vote="median")
     with pytest.raises(SegmentationError, match=r"field_coupling"):
         SegmentationConfig(field_coupling=-0.1)

@@ -34,7 +34,7 @@ def test_tracks_a_tiny_walk(scene):
     """Bound measured: ~15-25 mm mean per frame at 160x120 / 800 evaluations (ISA, default settings);
     checked against 45 mm, and against the error of simply keeping the first pose."""
     model, cams, walk, masks = scene
-    _, out = _track(scene, TrackerConfig(evals=800, seed=3))  # default optimizer: h-isa
+    _, out = _track(scene, TrackerConfig.from_flat(evals=800, seed=3))  # default optimizer: h-isa
     est = np.array([r.x for r in out])
     err = frame_errors_mm(marker_positions(model, est), marker_positions(model, walk[1:]))
     still = frame_errors_mm(marker_positions(model, np.repeat(walk[:1], N_FRAMES - 1, 0)),
@@ -48,19 +48,19 @@ def test_tracks_a_tiny_walk(scene):
 
 
 def test_same_seed_same_estimates(scene):
-    cfg = TrackerConfig(evals=300, seed=7)
+    cfg = TrackerConfig.from_flat(evals=300, seed=7)
     _, a = _track(scene, cfg)
     _, b = _track(scene, cfg)
     for ra, rb in zip(a, b):
         np.testing.assert_array_equal(ra.x, rb.x)
         assert ra.energy == rb.energy
-    _, c = _track(scene, TrackerConfig(evals=300, seed=8))
+    _, c = _track(scene, TrackerConfig.from_flat(evals=300, seed=8))
     assert any(not np.array_equal(ra.x, rc.x) for ra, rc in zip(a, c))
 
 
 def test_automatic_initialization_on_first_step(scene):
     model, cams, walk, masks = scene
-    tr = Tracker(model, cams, TrackerConfig(evals=300, init_refine_evals=200, seed=1))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(evals=300, init_refine_evals=200, seed=1))
     assert not tr.initialized
     r = tr.step(masks[0], 0)
     assert r.initialized and r.x is not None and tr.initialized
@@ -75,7 +75,7 @@ def test_initialization_prunes_candidate_runs_part_way(scene):
     model, cams, walk, masks = scene
 
     def first(keep):
-        tr = Tracker(model, cams, TrackerConfig(evals=300, init_refine_evals=100, seed=2, init_keep=keep))
+        tr = Tracker(model, cams, TrackerConfig.from_flat(evals=300, init_refine_evals=100, seed=2, init_keep=keep))
         r = tr.step(masks[0], 0)
         assert r.initialized
         return r
@@ -102,7 +102,7 @@ def test_initialization_polish_searches_the_winner_once_more(scene):
     model, cams, walk, masks = scene
 
     def first(polish):
-        tr = Tracker(model, cams, TrackerConfig(evals=300, init_refine_evals=100, seed=2,
+        tr = Tracker(model, cams, TrackerConfig.from_flat(evals=300, init_refine_evals=100, seed=2,
                                                 init_polish=polish))
         r = tr.step(masks[0], 0)
         assert r.initialized and not r.fell_back
@@ -122,7 +122,7 @@ def test_a_frame_without_the_contour_stage(scene):
     model, cams, walk, masks = scene
 
     def tracker(**kw):
-        tr = Tracker(model, cams, TrackerConfig(evals=1000, seed=4, **kw))
+        tr = Tracker(model, cams, TrackerConfig.from_flat(evals=1000, seed=4, **kw))
         tr.initialize(pose=walk[0])
         return tr
 
@@ -130,9 +130,9 @@ def test_a_frame_without_the_contour_stage(scene):
     a, b = light.step(masks[1], 1, contour_stage=False), off.step(masks[1], 1)
     np.testing.assert_array_equal(a.x, b.x)
     assert a.energy == b.energy and a.n_evals == b.n_evals
-    assert light.config.contour_iterations == 3
+    assert light.config.stages.contour_iterations == 3
     stage = []
-    light._contour.fit = lambda x, **kw: stage.append(1) or (x, ContourFitInfo(0, (), ()))
+    light.contour_fit.fit = lambda x, **kw: stage.append(1) or (x, ContourFitInfo(0, (), ()))
     light.step(masks[2], 2)
     assert stage
 
@@ -156,15 +156,15 @@ def _heading_runs(scene, monkeypatch, *, wrong_first: bool, external=None, **cfg
         orig = first_frame.initial_runs
         yaw = _yaw_of(walk[0][3:6])
 
-        def runs(tr, starts, frame_index, notes, budget, stream=()):
-            out, n = orig(tr, starts, frame_index, notes, budget, stream)
+        def runs(tr, ctx, starts, notes, budget, stream=()):
+            out, n = orig(tr, ctx, starts, notes, budget, stream)
             if stream:                                  # the heading re-check's runs are left alone
                 return out, n
             return [(j, dataclasses.replace(r, energy=1.4 * r.energy, best_energy=1.4 * r.best_energy)
                      if abs(_wrap(_yaw_of(r.x[3:6]) - yaw)) < np.pi / 2 else r, p) for j, r, p in out], n
         monkeypatch.setattr(first_frame, "initial_runs", runs)
     # init_confirm_ratio 1.5: here the right and the wrong heading end 29 % apart on the first frame
-    tr = Tracker(model, cams, TrackerConfig(**{"seed": 0, "init_confirm_ratio": 1.5, **cfg}))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(**{"seed": 0, "init_confirm_ratio": 1.5, **cfg}))
     out = [tr.step(masks[0], 0)]
     out += [tr.step(masks[k], k, prediction=(external or {}).get(k)) for k in range(1, len(masks))]
     monkeypatch.undo()
@@ -213,7 +213,7 @@ def test_heading_recheck_when_views_join(scene320_long, monkeypatch):
                                    init_confirm_frames=2)
     assert [r.views_used for r in on] == [2, 2, 2] + [4] * 6
     # what the estimator node asks before a frame, to keep the frames after it in sequence
-    probe = Tracker(model, cams, TrackerConfig(seed=0, init_confirm_ratio=1.0))   # no check after the first frame
+    probe = Tracker(model, cams, TrackerConfig.from_flat(seed=0, init_confirm_ratio=1.0))   # no check after the first frame
     assert not probe.heading_recheck_pending(masks[3])          # nothing tracked yet
     probe.step(two[0], 0)
     assert not probe.heading_recheck_pending(two[1]) and probe.heading_recheck_pending(masks[3])
@@ -229,7 +229,7 @@ def test_heading_recheck_when_views_join(scene320_long, monkeypatch):
     for a, b in zip(off[:3], on[:3]):
         np.testing.assert_array_equal(a.x, b.x)
     # a given pose's heading is not re-checked
-    tr = Tracker(model, cams, TrackerConfig(seed=0))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=0))
     tr.initialize(pose=walk[2])
     assert not any(n.startswith("heading") for n in tr.step(masks[3], 3).notes)
 
@@ -309,12 +309,12 @@ def test_travel_reads_the_root_motion(scene320_two_views):
     from isa_mocap_ros.tracking import config as T
 
     model, cams, walk, _ = scene320_two_views
-    tr = Tracker(model, cams, TrackerConfig(seed=0))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=0))
     assert tr.travel() is None                                  # nothing tracked yet
     tr.initialize(pose=walk[0])
     assert tr.travel() is None                                  # one estimate: no travel
     for x in walk[1:T.TRAVEL_FRAMES + 1]:
-        tr._accept(x)
+        tr.accept(x)
     direction, dist, span = tr.travel()
     assert span == T.TRAVEL_FRAMES and dist == pytest.approx(np.hypot(*(walk[T.TRAVEL_FRAMES][:2] - walk[0][:2])))
     assert heading.off_travel(direction, walk[T.TRAVEL_FRAMES]) < 20.0            # the generated walk moves forwards
@@ -330,20 +330,20 @@ def test_travel_reads_the_root_motion(scene320_two_views):
     assert tr.heading_recheck_pending([None] * len(cams))                    # the estimator holds the frames after
     tr.reset()
     assert tr.travel() is None
-    still = Tracker(model, cams, TrackerConfig(seed=0))
+    still = Tracker(model, cams, TrackerConfig.from_flat(seed=0))
     still.initialize(pose=walk[0])
     for _ in range(T.TRAVEL_FRAMES):
-        still._accept(walk[0])                                   # standing: no travel
+        still.accept(walk[0])                                   # standing: no travel
     assert still.travel() is None
     with pytest.raises(TrackerError, match="heading_travel_cue"):
-        TrackerConfig(heading_travel_cue=1)
+        TrackerConfig.from_flat(heading_travel_cue=1)
 
 
 def test_heading_check_ends_at_a_gap(scene320):
     # after a gap (real time: the sets that came during the initialization were dropped) both
     # hypotheses are still catching up: the check ends there without stepping the rival
     model, cams, walk, masks = scene320
-    tr = Tracker(model, cams, TrackerConfig(seed=0, init_confirm_ratio=1.5))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=0, init_confirm_ratio=1.5))
     assert not tr.checking_heading
     assert any("both tracked" in n for n in tr.step(masks[0], 0).notes)
     assert tr.checking_heading          # the estimator node keeps the next sets in sequence meanwhile
@@ -389,7 +389,7 @@ def test_heading_check_switches_from_a_wrong_first_heading(scene320, monkeypatch
 
 def test_fallbacks_never_raise_and_say_why(scene):
     model, cams, walk, masks = scene
-    tr = Tracker(model, cams, TrackerConfig(evals=200, seed=0))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(evals=200, seed=0))
     r = tr.step([None] * 4, 0)                           # nothing yet: no estimate
     assert r.x is None and r.fell_back and any("no estimate yet" in n for n in r.notes)
     tr.initialize(pose=walk[0])
@@ -430,7 +430,7 @@ def test_nan_from_own_predictor_falls_back_to_last_estimate(scene):
         def reset(self):
             pass
 
-    tr = Tracker(model, cams, TrackerConfig(evals=200), predictor=NanPredictor())
+    tr = Tracker(model, cams, TrackerConfig.from_flat(evals=200), predictor=NanPredictor())
     tr.initialize(pose=walk[0])
     r = tr.step(masks[1], 1)
     assert not r.fell_back and any("using the last estimate" in n for n in r.notes)
@@ -439,7 +439,7 @@ def test_nan_from_own_predictor_falls_back_to_last_estimate(scene):
 
 def test_search_box_respects_radius_and_limits(scene):
     model, cams, walk, _ = scene
-    tr = Tracker(model, cams, TrackerConfig(search_radius_rad=0.5, root_translation_radius_m=0.2))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(search_radius_rad=0.5, root_translation_radius_m=0.2))
     x = walk[0].copy()
     k = model.knee_dofs[0]
     x[k] = model.lower[k]                                # a prediction on a limit
@@ -457,7 +457,7 @@ def test_search_box_respects_radius_and_limits(scene):
     ({"search_radius_rad": -1.0}, "search_radius_rad: expected a finite number > 0"),
     ({"predictor": "kalman"}, "predictor: expected one of ar, constant_pose, constant_velocity"),
     ({"optimizer_params": {"bounds": 1}}, r"optimizer_params: expected algorithm parameters only"),
-    ({"energy": "slow"}, "energy: expected 'fast' or 'exact'"),
+    ({"energy": "slow"}, "energy: expected one of fast, exact, received 'slow'"),
     ({"seed": -1}, "seed: expected an integer >= 0"),
     ({"n_model_points": 0}, "n_model_points: expected an integer >= 1"),
     ({"n_mask_points": -1}, "n_mask_points: expected an integer >= 0"),
@@ -472,13 +472,13 @@ def test_search_box_respects_radius_and_limits(scene):
 ])
 def test_config_errors(kw, match):
     with pytest.raises(TrackerError, match=match):
-        TrackerConfig(**kw)
+        TrackerConfig.from_flat(**kw)
 
 
 def test_tracker_argument_errors(scene):
     model, cams, walk, masks = scene
     with pytest.raises(TrackerError, match="prior: expected a ParzenPrior"):
-        Tracker(model, cams, TrackerConfig(prior_eta=1.0))
+        Tracker(model, cams, TrackerConfig.from_flat(prior_eta=1.0))
     tr = Tracker(model, cams)
     with pytest.raises(TrackerError, match="frame_index: expected an integer >= 0"):
         tr.step(masks[0], -1)
@@ -501,7 +501,7 @@ def test_hierarchical_and_prior(scene):
 
     model, cams, walk, masks = scene
     prior = ParzenPrior(generate_motion("walk", model, duration_s=1.0, fps=30, rng=np.random.default_rng(5)))
-    tr = Tracker(model, cams, TrackerConfig(optimizer="h-cmaes", evals=600, prior_eta=0.01), prior=prior)
+    tr = Tracker(model, cams, TrackerConfig.from_flat(optimizer="h-cmaes", evals=600, prior_eta=0.01), prior=prior)
     tr.initialize(pose=walk[0])
     r = tr.step(masks[1], 1)
     assert not r.fell_back and 600 - 4 < r.n_evals <= 600       # < 4 limbs left unspent
@@ -512,7 +512,7 @@ def test_hierarchical_and_prior(scene):
 def test_energy_sample_sizes_reach_the_default_energy(scene):
     """The config's fast-energy sample sizes and downsampling are those of the energy it builds."""
     model, cams, _, _ = scene
-    cfg = TrackerConfig(n_model_points=200, n_mask_points=50, downsample=1)
+    cfg = TrackerConfig.from_flat(n_model_points=200, n_mask_points=50, downsample=1)
     en = Tracker(model, cams, cfg).energy
     assert en.downsample == 1
     assert en.n_mask_points == 50
@@ -539,7 +539,7 @@ def test_tracks_through_a_half_turn():
         truth[k, 3:6] = log_so3(turn @ R)
     masks = [[render_mask(c, capsule_endpoints(model, x)[0], model.capsule_radii) for c in rig.cameras]
              for x in truth]
-    tr = Tracker(model, rig.cameras, TrackerConfig(evals=800, seed=3))
+    tr = Tracker(model, rig.cameras, TrackerConfig.from_flat(evals=800, seed=3))
     tr.predictor = PublishedPredictor(model, tr.predictor)
     tr.initialize(pose=truth[0])
     out = [tr.step(masks[k], k) for k in range(1, len(truth))]
@@ -566,7 +566,7 @@ def test_spreads_grow_with_the_predicted_motion(scene, monkeypatch, gain):
         return real(name, x0, spread, **kw)
 
     monkeypatch.setattr(optim, "make_optimizer", spy)
-    cfg = TrackerConfig(evals=300, seed=1, spread_velocity_gain=gain, pelvis_fraction=0.0,
+    cfg = TrackerConfig.from_flat(evals=300, seed=1, spread_velocity_gain=gain, pelvis_fraction=0.0,
                         limb_proposals=0, joint_velocity_gain=0.5)
     tr = Tracker(model, cams, cfg)
     tr.initialize(pose=walk[0])
@@ -605,7 +605,7 @@ def test_own_prediction_looks_as_many_frames_ahead_as_have_passed(scene):
     prediction look further ahead (at most max_frames_ahead); the predictor learns per period."""
     model, cams, walk, masks = scene
     spy = _SpyPredictor()
-    tr = Tracker(model, cams, TrackerConfig(evals=300, seed=1, max_frames_ahead=4), predictor=spy)
+    tr = Tracker(model, cams, TrackerConfig.from_flat(evals=300, seed=1, max_frames_ahead=4), predictor=spy)
     tr.initialize(pose=walk[0])
     assert tr.step(masks[1], 1).fell_back is False                   # consecutive: the plain calls
     assert tr.step([None] * len(cams), 2).fell_back is True          # nothing seen: no update
@@ -619,11 +619,11 @@ def test_own_prediction_looks_as_many_frames_ahead_as_have_passed(scene):
     with pytest.raises(TrackerError, match="frames_elapsed"):
         tr.step(masks[4], 6, frames_elapsed="2")
     with pytest.raises(TrackerError, match="max_frames_ahead"):
-        TrackerConfig(max_frames_ahead=0.5)
+        TrackerConfig.from_flat(max_frames_ahead=0.5)
 
 
 def test_consecutive_frames_give_the_same_estimates_with_frames_elapsed_one(scene):
-    cfg = TrackerConfig(evals=300, seed=4)
+    cfg = TrackerConfig.from_flat(evals=300, seed=4)
     _, a = _track(scene, cfg)
     model, cams, walk, masks = scene
     tr = Tracker(model, cams, cfg)
@@ -637,7 +637,7 @@ def test_after_a_long_gap_the_root_follows_the_foreground(scene):
     """More than max_frames_ahead periods unseen (e.g. the automatic initialization in real time):
     the predicted root position moves with the triangulated foreground centroid, not the motion."""
     model, cams, walk, masks = scene
-    tr = Tracker(model, cams, TrackerConfig(evals=300, seed=2))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(evals=300, seed=2))
     tr.initialize(pose=walk[0])
     tr.step(masks[1], 1)
     far = walk[2].copy()
@@ -658,7 +658,7 @@ def test_after_a_gap_from_the_first_estimate_the_root_follows_the_foreground(sce
     initialization comes a few periods later): even a short gap moves the predicted root with the
     foreground; once the motion is known a short gap extrapolates it."""
     model, cams, walk, masks = scene
-    tr = Tracker(model, cams, TrackerConfig(evals=300, init_refine_evals=100, seed=2, init_confirm_frames=0))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(evals=300, init_refine_evals=100, seed=2, init_confirm_frames=0))
     assert tr.step(masks[0], 0).initialized                           # automatic: the masks say where it was
     far = walk[2].copy()
     far[0] += 0.15                                                   # 15 cm further than the walk's frame 2

@@ -1,4 +1,4 @@
-"""Tracker with the keypoint term (config.keypoint_weight): the keypoints decide the heading of the
+"""Tracker with the keypoint term (config.keypoints.keypoint_weight): the keypoints decide the heading of the
 automatic initialization, weight 0 changes nothing, bad keypoints are a note."""
 from __future__ import annotations
 
@@ -36,7 +36,7 @@ def _turned(model, x):
 
 def test_keypoints_decide_the_initial_heading(scene):
     model, cams, poses, masks = scene
-    cfg = TrackerConfig(evals=300, init_refine_evals=200, seed=1, keypoint_weight=1.0)
+    cfg = TrackerConfig.from_flat(evals=300, init_refine_evals=200, seed=1, keypoint_weight=1.0)
     truth = _heading(poses[0])
     right = Tracker(model, cams, cfg).step(masks[0], 0, keypoints=true_keypoints(model, cams, poses[0]))
     assert right.initialized and any(n.startswith("keypoints: 56 in 4 views") for n in right.notes)
@@ -50,8 +50,8 @@ def test_keypoints_decide_the_initial_heading(scene):
 def test_weight_zero_or_no_keypoints_change_nothing(scene):
     model, cams, poses, masks = scene
     kp = true_keypoints(model, cams, poses[0])
-    a = Tracker(model, cams, TrackerConfig(evals=300, init_refine_evals=200, seed=1)).step(masks[0], 0)
-    b = Tracker(model, cams, TrackerConfig(evals=300, init_refine_evals=200, seed=1)).step(
+    a = Tracker(model, cams, TrackerConfig.from_flat(evals=300, init_refine_evals=200, seed=1)).step(masks[0], 0)
+    b = Tracker(model, cams, TrackerConfig.from_flat(evals=300, init_refine_evals=200, seed=1)).step(
         masks[0], 0, keypoints=kp)
     np.testing.assert_array_equal(a.x, b.x)
     assert a.notes == b.notes
@@ -59,12 +59,12 @@ def test_weight_zero_or_no_keypoints_change_nothing(scene):
 
 def test_bad_keypoints_are_a_note_and_bad_weights_raise(scene):
     model, cams, poses, masks = scene
-    tr = Tracker(model, cams, TrackerConfig(evals=300, init_refine_evals=200, seed=1, keypoint_weight=1.0))
+    tr = Tracker(model, cams, TrackerConfig.from_flat(evals=300, init_refine_evals=200, seed=1, keypoint_weight=1.0))
     r = tr.step(masks[0], 0, keypoints=[None, (np.zeros((5, 2)), np.zeros(5)), None, None])
     assert r.initialized and any("keypoints ignored" in n and "keypoints[1]" in n for n in r.notes)
     r = tr.step(masks[1], 1, keypoints=[None] * 4)
     assert any("keypoints: none usable" in n for n in r.notes)
     with pytest.raises(TrackerError, match="keypoint_weight"):
-        TrackerConfig(keypoint_weight=-1.0)
+        TrackerConfig.from_flat(keypoint_weight=-1.0)
     with pytest.raises(TrackerError, match="keypoint_sigma_m"):
-        TrackerConfig(keypoint_sigma_m=0.0)
+        TrackerConfig.from_flat(keypoint_sigma_m=0.0)

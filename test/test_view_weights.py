@@ -58,7 +58,7 @@ def test_the_tracker_weighs_the_views_by_the_predicted_share(rig):
     masks = _masks(model, cams, side)
     cfg = dict(evals=200, contour_iterations=0, contour_extra_iterations=0, limb_proposals=0)
     for on in (True, False):
-        tr = Tracker(model, cams, TrackerConfig(view_weights=on, **cfg))
+        tr = Tracker(model, cams, TrackerConfig.from_flat(view_weights=on, **cfg))
         tr.initialize(pose=side)
         res = tr.step(masks, 1)
         assert not res.fell_back
@@ -82,7 +82,7 @@ def test_an_empty_mask_where_the_body_is_predicted_does_not_drop_the_frame(rig):
     masks = _masks(model, cams, x)
     masks[1] = np.zeros_like(masks[1])
     masks[2] = np.zeros_like(masks[2])
-    tr = Tracker(model, cams, TrackerConfig(evals=200, contour_iterations=0, contour_extra_iterations=0,
+    tr = Tracker(model, cams, TrackerConfig.from_flat(evals=200, contour_iterations=0, contour_extra_iterations=0,
                                             limb_proposals=0, gate_margin_px=0, hull_filter=False))
     tr.initialize(pose=side)
     res = tr.step(masks, 1)
@@ -97,7 +97,7 @@ def test_views_that_see_the_whole_body_change_nothing(rig):
     cfg = dict(evals=200, contour_iterations=0, contour_extra_iterations=0, limb_proposals=0)
     out = []
     for on in (True, False):
-        tr = Tracker(model, cams, TrackerConfig(view_weights=on, **cfg))
+        tr = Tracker(model, cams, TrackerConfig.from_flat(view_weights=on, **cfg))
         tr.initialize(pose=x)
         out.append([tr.step(masks, k).x for k in (1, 2)])
         np.testing.assert_array_equal(tr.energy._frame["view_w"], np.ones(4))
@@ -105,5 +105,5 @@ def test_views_that_see_the_whole_body_change_nothing(rig):
 
 
 def test_config_checks_view_weights():
-    with pytest.raises(TrackerError, match="view_weights: expected a bool"):
-        TrackerConfig(view_weights="yes")
+    with pytest.raises(TrackerError, match="view_weights: expected true or false"):
+        TrackerConfig.from_flat(view_weights="yes")

@@ -49,8 +49,9 @@ def run(args: argparse.Namespace) -> int:
     X = x0 + np.concatenate([rng.normal(0, 0.05, (args.batch, 6)),
                              rng.normal(0, 0.15, (args.batch, model.dof - 6))], axis=1)
     tc = TrackerConfig()        # the sample sizes the tracker evaluates with
-    fast = SilhouetteEnergy(model, rig, masks, downsample=tc.downsample, n_model_points=tc.n_model_points,
-                            n_mask_points=tc.n_mask_points, rng=np.random.default_rng(args.seed))
+    obj = tc.objective
+    fast = SilhouetteEnergy(model, rig, masks, downsample=obj.downsample, n_model_points=obj.n_model_points,
+                            n_mask_points=obj.n_mask_points, rng=np.random.default_rng(args.seed))
     exact = SilhouetteEnergy(model, rig, masks, method="exact")
     fast(X)
     exact(X[:1])
@@ -68,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     exact_rate = nb / t_exact
     out = {"views": args.views, "dof": args.dof, "batch": args.batch, "fast_evals_per_s": round(fast_rate, 1),
            "exact_evals_per_s": round(exact_rate, 1), "ratio": round(fast_rate / exact_rate, 1),
-           "exact_batch": nb, "n_model_points": tc.n_model_points, "n_template": fast.n_template,
+           "exact_batch": nb, "n_model_points": tc.objective.n_model_points, "n_template": fast.n_template,
            "n_mask_points": fast.n_mask_points, "downsample": fast.downsample, "threads": numba.get_num_threads()}
     if args.json:
         print(json.dumps(out))
@@ -76,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"silhouette energy, {args.views} views 320x240, {args.dof} DOF, batch {args.batch}, "
               f"{numba.get_num_threads()} threads")
         print(f"  fast  : {fast_rate:12.0f} evals/s  (median of {args.repeats}; tracker sample sizes: "
-              f"n_model_points {tc.n_model_points} -> template {fast.n_template} points, "
+              f"n_model_points {tc.objective.n_model_points} -> template {fast.n_template} points, "
               f"{fast.n_mask_points} foreground points per view, downsample {fast.downsample}; "
               f"fastest call {args.batch / min(times):.0f} evals/s)")
         print(f"  exact : {exact_rate:12.0f} evals/s  (measured on {nb} poses)")

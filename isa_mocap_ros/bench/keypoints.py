@@ -332,7 +332,7 @@ def bench_init(args) -> dict:
                 truth = _heading(clip.poses[f])
                 row = {"motion": motion, "seed": seed, "frame": f}
                 for name, w in (("off", 0.0), ("keypoints", args.weight)):
-                    tr = Tracker(model, rig.cameras, TrackerConfig(seed=seed, keypoint_weight=w))
+                    tr = Tracker(model, rig.cameras, TrackerConfig.from_flat(seed=seed, keypoint_weight=w))
                     r = tr.step(masks, f, keypoints=kp if w > 0 else None)
                     row[name] = float(np.rad2deg(abs(np.angle(np.exp(1j * (_heading(r.x) - truth))))))
                 rows.append(row)

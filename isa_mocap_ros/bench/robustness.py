@@ -102,7 +102,7 @@ class RobustDesign:
     notes: tuple = ()
     #: tracker seeds, one run each per sequence and condition (``seed`` is the first, for older readers)
     seeds: tuple = (0,)
-    #: the tracker's mask gate (``TrackerConfig.gate_margin_px``); None = the tracker's default
+    #: the tracker's mask gate (``TrackerConfig.masks.gate_margin_px``); None = the tracker's default
     gate_margin_px: int | None = None
     #: what the sequences show: ``mesh`` (default) or ``capsules`` (the control)
     body: str = "mesh"

@@ -363,7 +363,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         cfg_kw["init_confirm_frames"] = args.init_confirm_frames
     if getattr(args, "partition_order", None) is not None:
         cfg_kw["partition_order"] = tuple(v.strip() for v in args.partition_order.split(",") if v.strip())
-    cfg = TrackerConfig(**cfg_kw)
+    cfg = TrackerConfig.from_flat(**cfg_kw)
     calibration = None
     if shape_arg == "auto":
         from isa_mocap_ros.cli.shape_options import calibrate_sequence
@@ -372,7 +372,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         try:
             res, calibration = calibrate_sequence(
                 seq, args, dof=dof, use_masks=use_masks, learn=learn, first=first,
-                tracker_config=dataclasses.replace(cfg, prior_eta=0.0, keypoint_weight=0.0),
+                tracker_config=cfg.replace(prior_eta=0.0, keypoint_weight=0.0),
                 progress=None if args.no_progress else (lambda line: print(line, file=sys.stderr, flush=True)))
         except ShapeCalibrationError as exc:
             raise ValueError(f"--shape auto: {exc}; pass --shape default or a body-shape FILE") from None
@@ -495,11 +495,11 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                        truth_marker_names=tuple(seq.truth_marker_names), body=seq.body_kind)
     summary: dict = {"bag": str(bag_path), "out": str(out), "optimizer": args.optimizer, "evals_per_frame": args.evals,
                      "stride": stride, "shape": shape_arg,
-                     "optimizer_params": cfg.params(), "model_dof": model.dof, "seed": args.seed,
-                     "gate_margin_px": cfg.gate_margin_px, "hull_filter": cfg.hull_filter,
-                     "view_weights": cfg.view_weights,
-                     "init_confirm_frames": cfg.init_confirm_frames,
-                     "partition_order": list(cfg.partition_order),
+                     "optimizer_params": cfg.search.params(), "model_dof": model.dof, "seed": args.seed,
+                     "gate_margin_px": cfg.masks.gate_margin_px, "hull_filter": cfg.masks.hull_filter,
+                     "view_weights": cfg.objective.view_weights,
+                     "init_confirm_frames": cfg.heading.init_confirm_frames,
+                     "partition_order": list(cfg.search.partition_order),
                      "keypoint_weight": kp_weight, "keypoint_every": kp_every,
                      "keypoint_frames": len(kp_seconds),
                      "keypoint_ms_per_frame_set": float(np.mean(kp_seconds) * 1e3) if kp_seconds else None,

@@ -310,7 +310,7 @@ class SilhouetteEnergy:
 
         ``weights`` (one finite number >= 0 per camera, optional) turn Eq. 5's mean over the views
         into ``sum_v w_v f_v / sum_v w_v``; None (all ones) is Eq. 5 itself, to the bit. The tracker
-        uses them to count a view by the share of the body it sees (``TrackerConfig.view_weights``).
+        uses them to count a view by the share of the body it sees (``TrackerConfig.objective.view_weights``).
 
         Raises
         ------

@@ -236,7 +236,7 @@ def run_cell(cell: dict, cache_path: Path | str) -> dict:
     if n < 2:
         raise ValueError(f"cell {cell_key(cell)}: expected >= 2 frames, received {n}")
     model = make_model(int(cell["model"]), shape=shape)
-    cfg = TrackerConfig(optimizer=cell["algorithm"], evals=int(cell["budget"]), seed=int(cell["seed"]))
+    cfg = TrackerConfig.from_flat(optimizer=cell["algorithm"], evals=int(cell["budget"]), seed=int(cell["seed"]))
     tracker = Tracker(model, rig.cameras, cfg)
     tracker.initialize(pose=_project(truth[0], truth_model, model))
     est, energies, evals, fell = [], [], [], 0

@@ -25,7 +25,7 @@ box, the same energy and prior), and every row handed to the energy is one count
   spent. Bounds are required by scipy; without ``bounds`` the box ``x0 ± 5·spread`` is used.
 
 :func:`register_peers` adds both names to :data:`isa_mocap_ros.optim.OPTIMIZERS`, after which
-``make_optimizer("pycma", ...)``, ``TrackerConfig(optimizer="scipy-de")`` and
+``make_optimizer("pycma", ...)``, ``TrackerConfig.from_flat(optimizer="scipy-de")`` and
 ``make_tracker(..., optimizer="pycma")`` work. Nothing registers them on import: the CLI, the estimator
 node and the comparison call :func:`register_peers` (``optim`` never imports ``eval``).
 """

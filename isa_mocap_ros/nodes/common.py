@@ -73,14 +73,29 @@ def declare(node: Node, name: str, default: Any, description: str, *, lo: float 
                          f"{type(given).__name__} {given!r}{hint}") from None
 
 
-def declare_config(node: Node, cls, docs: Mapping[str, str], *, skip: tuple = ()) -> dict[str, Any]:
-    """Declare one parameter per field of the frozen config dataclass ``cls`` (name, default and
-    description from the dataclass: ``docs`` maps each field to its one-line doc), except the fields in
-    ``skip``; return the values as keyword arguments of ``cls``. The dataclass checks them (its error
-    names the field). A tuple field is a list parameter, read back as a tuple; a mapping field is a
-    YAML/JSON string parameter (``"{}"`` = empty), read back as a dict."""
-    values: dict[str, Any] = {}
+def config_leaves(cls) -> list[dataclasses.Field]:
+    """The settings of the frozen config dataclass ``cls`` in order: its fields, with each field whose default
+    is itself a config dataclass (a group, as :class:`~isa_mocap_ros.tracking.config.TrackerConfig`'s)
+    replaced by that group's settings."""
+    out = []
     for f in dataclasses.fields(cls):
+        factory = f.default_factory
+        if factory is not dataclasses.MISSING and isinstance(factory, type) and dataclasses.is_dataclass(factory):
+            out.extend(config_leaves(factory))
+        else:
+            out.append(f)
+    return out
+
+
+def declare_config(node: Node, cls, docs: Mapping[str, str], *, skip: tuple = ()) -> dict[str, Any]:
+    """Declare one parameter per setting of the frozen config dataclass ``cls`` (:func:`config_leaves`:
+    a group's settings are declared by their own names; name, default and description from the dataclass:
+    ``docs`` maps each setting to its one-line doc), except the settings in ``skip``; return the values by
+    setting name (``cls(**values)`` for a flat class, ``TrackerConfig.from_flat(**values)``). The dataclass
+    checks them (its error names the setting). A tuple setting is a list parameter, read back as a tuple; a
+    mapping setting is a YAML/JSON string parameter (``"{}"`` = empty), read back as a dict."""
+    values: dict[str, Any] = {}
+    for f in config_leaves(cls):
         if f.name in skip:
             continue
         default = f.default if f.default is not dataclasses.MISSING else f.default_factory()

@@ -132,7 +132,7 @@ class EstimatorNode(Node):
         self.hri_names = hri_joint_names(self.model, self.body_id)
         if sync not in ("exact", "approximate"):
             raise ValueError(f"sync must be 'exact' or 'approximate', got {sync!r}")
-        self.tracker_config = TrackerConfig(**settings)   # checks every setting (TrackerError names it)
+        self.tracker_config = TrackerConfig.from_flat(**settings)   # checks every setting (TrackerError names it)
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
                                       slop_ns=0 if sync == "exact" else int(slop_s * 1e9),
                                       max_wait_s=self.view_timeout_s, min_views=min(min_views, self.n_views))
@@ -192,8 +192,9 @@ class EstimatorNode(Node):
         self._worker = threading.Thread(target=self._work, name="estimator", daemon=True)
         self._worker.start()
         self.get_logger().info(
-            f"estimator: {self.model.name} ({self.model.dof} DOF), {self.tracker_config.optimizer} with "
-            f"{self.tracker_config.evals} evaluations per frame, {self.n_views} views, seed {self.tracker_config.seed}, {'lockstep' if self.lockstep else 'real time'}")
+            f"estimator: {self.model.name} ({self.model.dof} DOF), {self.tracker_config.search.optimizer} with "
+            f"{self.tracker_config.search.evals} evaluations per frame, {self.n_views} views, "
+            f"seed {self.tracker_config.search.seed}, {'lockstep' if self.lockstep else 'real time'}")
 
     # -- calibration and masks: checked before they reach the synchronizer (isa_mocap_ros.intake) ----------
     def _info_cb(self, v: int):
@@ -406,11 +407,11 @@ class EstimatorNode(Node):
                 if not self.lockstep and (self.tracker is None or not self.tracker.initialized):
                     # this set may initialize the tracker: keep the sets that follow it in sequence
                     # for the heading check (Tracker.checking_heading), not only the newest
-                    self.slot.hold(self.tracker_config.init_confirm_frames)
+                    self.slot.hold(self.tracker_config.heading.init_confirm_frames)
                 elif not self.lockstep and self.tracker.heading_recheck_pending(item[0].items):
                     # the same for a heading re-check (more views see the person): else its check ends at
                     # the gap after the re-check's own, longer frame
-                    self.slot.hold(self.tracker_config.init_confirm_frames)
+                    self.slot.hold(self.tracker_config.heading.init_confirm_frames)
                 frame_set, t_ready = item
                 prediction = None
                 if self.use_prediction and self._published_any:
@@ -552,7 +553,8 @@ class EstimatorNode(Node):
             "frames": self.frames_done, "dropped_frame_sets": self.slot.dropped,
             "frames_without_contour_stage": self.frames_caught_up,
             "sync_dropped_messages": self.sync.dropped, "bad_inputs": self.problems.total,
-            "optimizer": self.tracker_config.optimizer, "evals_per_frame": self.tracker_config.evals, "tracker_threads": self.threads_in_use,
+            "optimizer": self.tracker_config.search.optimizer, "evals_per_frame": self.tracker_config.search.evals,
+            "tracker_threads": self.threads_in_use,
             "energy": getattr(r, "energy", float("nan")), "evaluations": getattr(r, "n_evals", 0),
             "views_used": getattr(r, "views_used", 0),
             "latency_ms_p50": p50, "latency_ms_p95": p95,

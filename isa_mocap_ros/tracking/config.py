@@ -3,8 +3,8 @@ and the module constants its stages share. Pure: no ROS import.
 """
 from __future__ import annotations
 
+import dataclasses
 import inspect
-import math
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from types import MappingProxyType
@@ -12,9 +12,13 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from isa_mocap_ros.config_checks import check_bool, check_choice, check_number
+
 from .limbs import LIMBS
 
-__all__ = ["TrackerError", "TrackerConfig", "FrameResult", "DEFAULT_PARAMS", "PREDICTORS", "frame_rng", "field_docs"]
+__all__ = ["TrackerError", "TrackerConfig", "SearchConfig", "PredictionConfig", "ObjectiveConfig", "KeypointConfig",
+           "FirstFrameConfig", "HeadingConfig", "StageConfig", "MaskConfig", "LEAVES", "FrameResult", "DEFAULT_PARAMS",
+           "PREDICTORS", "frame_rng", "field_docs", "whole_generations", "partition_coords"]
 
 PREDICTORS = ("ar", "constant_pose", "constant_velocity")
 #: Initial standard deviation of the joint angles around the prediction, rad.
@@ -33,7 +37,7 @@ INIT_SPREAD_SCALE = 2.0
 #: Share of a view's foreground the mask gate may remove before ``FrameResult.notes`` says so.
 GATE_NOTE_SHARE = 0.25
 #: Frames after a heading check that kept the winner for want of evidence (the sums within
-#: ``init_confirm_margin``) until the heading is re-checked once (``TrackerConfig.init_confirm_frames``).
+#: ``init_confirm_margin``) until the heading is re-checked once (``TrackerConfig.heading.init_confirm_frames``).
 UNDECIDED_RECHECK_FRAMES = 10
 
 #: The heading check's **travel cue**: people walk and run forwards. Over the last ``TRAVEL_FRAMES`` frame
@@ -72,7 +76,7 @@ class TrackerError(ValueError):
     """Bad tracker configuration or argument (names the argument, the expected and the received value)."""
 
 
-def _whole_generations(evals: int, generation: int) -> int:
+def whole_generations(evals: int, generation: int) -> int:
     """``evals`` rounded down to whole generations (unchanged below one generation: the optimizer's error
     names it). The tracker's searches never end on a truncated generation, whose few rows would make a
     weighted-mean estimate (ISA, APF) that of a few random particles (``docs/tracking.md``, "Whole
@@ -85,13 +89,13 @@ def frame_rng(seed: int, frame_index: int, *extra: int) -> np.random.Generator:
     return np.random.default_rng([int(seed), int(frame_index), *map(int, extra)])
 
 
-def _check_number(name: str, value, *, lo: float | None = None, strict: bool = False, integer: bool = False):
-    ok_type = (int, np.integer) if integer else (int, float, np.integer, np.floating)
-    if isinstance(value, bool) or not isinstance(value, ok_type) or not math.isfinite(value) \
-            or (lo is not None and (value <= lo if strict else value < lo)):
-        kind = "an integer" if integer else "a finite number"
-        bound = "" if lo is None else f" {'>' if strict else '>='} {lo}"
-        raise TrackerError(f"{name}: expected {kind}{bound}, received {value!r}")
+def _number(name: str, value, *, lo: float | None = None, strict: bool = False, integer: bool = False,
+            hi: float | None = None, hi_open: bool = False) -> None:
+    check_number(name, value, lo=lo, lo_open=strict, hi=hi, hi_open=hi_open, integer=integer, error=TrackerError)
+
+
+def _bool(name: str, value) -> None:
+    check_bool(name, value, error=TrackerError)
 
 
 def _partition_names(name: str, value, example: str, *, empty: bool) -> tuple:
@@ -103,7 +107,7 @@ def _partition_names(name: str, value, example: str, *, empty: bool) -> tuple:
     return tuple(value)
 
 
-def _partition_coords(model, names) -> np.ndarray:
+def partition_coords(model, names) -> np.ndarray:
     """Sorted coordinate indices of the partitions ``names`` the model has (the others ignored)."""
     return np.array(sorted(int(i) for k in names if k in model.partitions for i in model.partitions[k]),
                     dtype=np.int64)
@@ -118,9 +122,8 @@ def _limb_names(name: str, value) -> tuple:
 
 
 @dataclass(frozen=True)
-class TrackerConfig:
-    """Fixed settings of a :class:`Tracker`: one line per setting (unit, default, why). The measurements
-    behind the defaults: ``docs/decisions/`` and ``docs/history/tracker_config.md``.
+class SearchConfig:
+    """The optimizer and its search box around the prediction.
 
     Attributes
     ----------
@@ -130,22 +133,89 @@ class TrackerConfig:
         Energy evaluations per frame, every stage included (EA-vs-PF: 500 / 1500 / 3000; default 1500).
     optimizer_params : mapping
         Keyword arguments of the optimizer over :data:`DEFAULT_PARAMS` (default none).
+    partition_order : tuple of str
+        Order of a hierarchical optimizer's partitions (arms before the torso; every partition of the model named).
     search_radius_rad : float
         Half-width of every joint angle's search box around the prediction, rad (EA-vs-PF: 0.5).
-    spread_velocity_gain : float
-        Joint ``j`` starts with spread ``sqrt(JOINT_SPREAD_RAD² + (k |p_j − x_j|)²)``: wider where the prediction moves (1.5; 0 = off).
     root_translation_radius_m : float
         Half-width of the root position's search box, m (0.25).
+    spread_velocity_gain : float
+        Joint ``j`` starts with spread ``sqrt(JOINT_SPREAD_RAD² + (k |p_j − x_j|)²)``: wider where the prediction moves (1.5; 0 = off).
+    seed : int
+        Seed of every per-frame stream ``default_rng([seed, frame, ...])`` (0).
+    """
+
+    optimizer: str = "h-isa"
+    evals: int = 1500
+    optimizer_params: Mapping[str, Any] = field(default_factory=dict)
+    partition_order: tuple = ("root", "left_arm", "right_arm", "torso", "left_leg", "right_leg")
+    search_radius_rad: float = 0.5
+    root_translation_radius_m: float = 0.25
+    spread_velocity_gain: float = 1.5
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        from isa_mocap_ros.optim import OPTIMIZERS
+
+        check_choice("optimizer", self.optimizer, OPTIMIZERS, error=TrackerError)
+        _number("evals", self.evals, lo=1, integer=True)
+        if not isinstance(self.optimizer_params, Mapping):
+            raise TrackerError(f"optimizer_params: expected a mapping, received {type(self.optimizer_params).__name__}")
+        bad = [k for k in self.optimizer_params if k in ("bounds", "rng", "rotation_blocks", "partitions", "x0",
+                                                         "spread")]
+        if bad:
+            raise TrackerError(f"optimizer_params: expected algorithm parameters only, received {bad} "
+                               "(set by the tracker)")
+        object.__setattr__(self, "optimizer_params", MappingProxyType(dict(self.optimizer_params)))
+        object.__setattr__(self, "partition_order", _partition_names(
+            "partition_order", self.partition_order, "root, left_arm, right_arm, torso, left_leg, right_leg",
+            empty=False))
+        for name in ("search_radius_rad", "root_translation_radius_m"):
+            _number(name, getattr(self, name), lo=0.0, strict=True)
+        _number("spread_velocity_gain", self.spread_velocity_gain, lo=0.0)
+        _number("seed", self.seed, lo=0, integer=True)
+
+    def params(self) -> dict:
+        """Optimizer keyword arguments: :data:`DEFAULT_PARAMS` of the optimizer, then ``optimizer_params``."""
+        out = dict(DEFAULT_PARAMS.get(self.optimizer, {}))
+        out.update(self.optimizer_params)
+        return out
+
+
+@dataclass(frozen=True)
+class PredictionConfig:
+    """The tracker's own prediction of the next pose (when no external one is given).
+
+    Attributes
+    ----------
     predictor : {"ar", "constant_pose", "constant_velocity"}
         The tracker's own predictor (``ar``: ISA 13.28).
     predictor_order : int
         AR order (1).
     joint_velocity_gain : float
         Damping ``g`` of the own prediction ``x_k + g (p − x_k)`` of the joints (0.5; 1 = undamped, 0 = constant pose; the root's: :data:`ROOT_VELOCITY_GAIN`).
-    prior_eta : float
-        Weight η of the Parzen prior ``−η ln p(x)`` (13.33); 0 = off (default).
-    prior_file : str
-        ``.npz`` of :meth:`ParzenPrior.save`, used when no ``prior=`` object is given ("" = none).
+    max_frames_ahead : float
+        The own prediction looks at most this many periods ahead; beyond, the root follows the foreground (5).
+    """
+
+    predictor: str = "ar"
+    predictor_order: int = 1
+    joint_velocity_gain: float = 0.5
+    max_frames_ahead: float = 5.0
+
+    def __post_init__(self) -> None:
+        check_choice("predictor", self.predictor, PREDICTORS, error=TrackerError)
+        _number("predictor_order", self.predictor_order, lo=1, integer=True)
+        _number("joint_velocity_gain", self.joint_velocity_gain, lo=0.0)
+        _number("max_frames_ahead", self.max_frames_ahead, lo=1.0)
+
+
+@dataclass(frozen=True)
+class ObjectiveConfig:
+    """The energy the searches minimise: silhouette term (EA-vs-PF Eq. 4-5) and Parzen prior (13.33).
+
+    Attributes
+    ----------
     energy : {"fast", "exact"}
         Silhouette energy: compiled sampled kernel (default) or the exact raster reference.
     downsample : int
@@ -154,8 +224,59 @@ class TrackerConfig:
         Fast energy's sample size: model-template points per view (640).
     n_mask_points : int
         Fast energy's sample size: foreground pixels per view (384).
-    seed : int
-        Seed of every per-frame stream ``default_rng([seed, frame, ...])`` (0).
+    view_weights : bool
+        Eq. 5's mean over views weighted by the share of the predicted body each view sees (True).
+    prior_eta : float
+        Weight η of the Parzen prior ``−η ln p(x)`` (13.33); 0 = off (default).
+    prior_file : str
+        ``.npz`` of :meth:`ParzenPrior.save`, used when no ``prior=`` object is given ("" = none).
+    """
+
+    energy: str = "fast"
+    downsample: int = 1
+    n_model_points: int = 640
+    n_mask_points: int = 384
+    view_weights: bool = True
+    prior_eta: float = 0.0
+    prior_file: str = ""
+
+    def __post_init__(self) -> None:
+        check_choice("energy", self.energy, ("fast", "exact"), error=TrackerError)
+        _number("downsample", self.downsample, lo=1, integer=True)
+        _number("n_model_points", self.n_model_points, lo=1, integer=True)
+        _number("n_mask_points", self.n_mask_points, lo=0, integer=True)
+        _bool("view_weights", self.view_weights)
+        _number("prior_eta", self.prior_eta, lo=0.0)
+        if not isinstance(self.prior_file, (str, Path)):
+            raise TrackerError(f"prior_file: expected a path ('' = none), received {self.prior_file!r}")
+
+
+@dataclass(frozen=True)
+class KeypointConfig:
+    """The 2-D keypoint term added on frames given keypoints (docs/keypoints.md).
+
+    Attributes
+    ----------
+    keypoint_weight : float
+        Weight of the keypoint term (:class:`~isa_mocap_ros.energy.KeypointEnergy`, 13.30-13.31) on frames given keypoints (0 = off; docs/keypoints.md).
+    keypoint_sigma_m : float
+        Scale of the keypoint term's Geman-McClure loss, m (> 0; 0.1).
+    """
+
+    keypoint_weight: float = 0.0
+    keypoint_sigma_m: float = 0.1
+
+    def __post_init__(self) -> None:
+        _number("keypoint_weight", self.keypoint_weight, lo=0.0)
+        _number("keypoint_sigma_m", self.keypoint_sigma_m, lo=0.0, strict=True)
+
+
+@dataclass(frozen=True)
+class FirstFrameConfig:
+    """The automatic initialization of the first frame (tracking/first_frame.py, docs/decisions/).
+
+    Attributes
+    ----------
     init_yaw_steps : int
         Headings of the automatic initialization's grid (24).
     init_refine_evals : int
@@ -164,6 +285,26 @@ class TrackerConfig:
         Heading-candidate runs kept after the first partition on the first frame (3; 0 = all run to the end).
     init_polish : bool
         The first frame's winner is searched once more from itself with every stage (True).
+    """
+
+    init_yaw_steps: int = 24
+    init_refine_evals: int = 400
+    init_keep: int = 3
+    init_polish: bool = True
+
+    def __post_init__(self) -> None:
+        _number("init_yaw_steps", self.init_yaw_steps, lo=4, integer=True)
+        _number("init_refine_evals", self.init_refine_evals, lo=0, integer=True)
+        _number("init_keep", self.init_keep, lo=0, integer=True)
+        _bool("init_polish", self.init_polish)
+
+
+@dataclass(frozen=True)
+class HeadingConfig:
+    """The heading check: a rival heading tracked beside the track for a few frames (tracking/heading.py).
+
+    Attributes
+    ----------
     init_confirm_frames : int
         Frames a rival heading is tracked beside the track in a heading check, re-checks included (3; 0 = no check).
     init_confirm_ratio : float
@@ -172,6 +313,26 @@ class TrackerConfig:
         Factor (>= 1) by which one hypothesis' energy sum must be lower to decide the check (1.1).
     heading_travel_cue : bool
         A track moving backwards (:data:`TRAVEL_FRAMES`) starts a re-check and decides a close one (True).
+    """
+
+    init_confirm_frames: int = 3
+    init_confirm_ratio: float = 1.25
+    init_confirm_margin: float = 1.1
+    heading_travel_cue: bool = True
+
+    def __post_init__(self) -> None:
+        _number("init_confirm_frames", self.init_confirm_frames, lo=0, integer=True)
+        _number("init_confirm_ratio", self.init_confirm_ratio, lo=1.0)
+        _number("init_confirm_margin", self.init_confirm_margin, lo=1.0)
+        _bool("heading_travel_cue", self.heading_travel_cue)
+
+
+@dataclass(frozen=True)
+class StageConfig:
+    """The stages after the main search: pelvis, torso, limb proposals, contour fit (tracking/stages.py).
+
+    Attributes
+    ----------
     pelvis_fraction : float
         Budget share of the pelvis stage: root re-fitted with the thighs re-aimed about the knees (0.15; 0 = off).
     torso_fraction : float
@@ -188,8 +349,6 @@ class TrackerConfig:
         A limb bent beyond this (deg) in the prediction gets twist-and-hinge proposals (130; 0 or >= 180 = never).
     limb_hinge_window_deg : float
         Hinge-only proposals are drawn within this many degrees of the pose's hinge (90; 0 or >= 180 = whole range).
-    partition_order : tuple of str
-        Order of a hierarchical optimizer's partitions (arms before the torso; every partition of the model named).
     contour_iterations : int
         Levenberg-Marquardt steps of the contour stage (ISA 13.30-13.31), each charged D + 1 evaluations (3; 0 = off).
     contour_extra_iterations : int
@@ -200,6 +359,56 @@ class TrackerConfig:
         Model contour points per view and contour iteration (200).
     contour_max_px : float
         Contour pairs farther apart than this are dropped, px (2.0).
+    """
+
+    pelvis_fraction: float = 0.15
+    torso_fraction: float = 0.13
+    limb_proposals: int = 16
+    limb_proposal_limbs: tuple = ("left_arm", "right_arm", "left_leg", "right_leg")
+    limb_hinge_limbs: tuple = ("left_leg", "right_leg")
+    limb_extrapolations: tuple = (1.0, 2.0, 3.0)
+    limb_fold_deg: float = 130.0
+    limb_hinge_window_deg: float = 90.0
+    contour_iterations: int = 3
+    contour_extra_iterations: int = 3
+    contour_extra_partitions: tuple = ("left_leg", "right_leg")
+    contour_points: int = 200
+    contour_max_px: float = 2.0
+
+    def __post_init__(self) -> None:
+        for name in ("pelvis_fraction", "torso_fraction"):
+            _number(name, getattr(self, name), lo=0.0)
+            if getattr(self, name) >= 1.0:
+                raise TrackerError(f"{name}: expected a share in [0, 1), received {getattr(self, name)!r}")
+        if self.pelvis_fraction + self.torso_fraction >= 1.0:
+            raise TrackerError(f"pelvis_fraction + torso_fraction: expected below 1 (the main search needs a share), "
+                               f"received {self.pelvis_fraction!r} + {self.torso_fraction!r}")
+        _number("limb_proposals", self.limb_proposals, lo=0, integer=True)
+        for name in ("limb_proposal_limbs", "limb_hinge_limbs"):
+            object.__setattr__(self, name, _limb_names(name, getattr(self, name)))
+        ext = self.limb_extrapolations
+        if isinstance(ext, (str, bytes)) or not isinstance(ext, Sequence) or not all(
+                isinstance(k, (int, float, np.integer, np.floating)) and not isinstance(k, bool)
+                and np.isfinite(k) and k >= 0 for k in ext):
+            raise TrackerError(f"limb_extrapolations: expected a sequence of positive factors ([0.0] = none), "
+                               f"received {ext!r}")
+        object.__setattr__(self, "limb_extrapolations", tuple(float(k) for k in ext if k > 0))
+        _number("limb_fold_deg", self.limb_fold_deg, lo=0.0)
+        _number("limb_hinge_window_deg", self.limb_hinge_window_deg, lo=0.0)
+        _number("contour_iterations", self.contour_iterations, lo=0, integer=True)
+        _number("contour_extra_iterations", self.contour_extra_iterations, lo=0, integer=True)
+        object.__setattr__(self, "contour_extra_partitions", _partition_names(
+            "contour_extra_partitions", self.contour_extra_partitions, "left_leg, right_leg", empty=True))
+        _number("contour_points", self.contour_points, lo=1, integer=True)
+        _number("contour_max_px", self.contour_max_px, lo=0.0, strict=True)
+
+
+@dataclass(frozen=True)
+class MaskConfig:
+    """What the tracker filters out of the masks before the energy sees them (tracking/frame_masks.py).
+
+    Attributes
+    ----------
     gate_margin_px : int
         Mask gate: foreground components farther than this from the predicted silhouette are dropped, px (10; 0 = off).
     hull_filter : bool
@@ -210,158 +419,119 @@ class TrackerConfig:
         Foreground within this many px of the predicted silhouette is kept unconfirmed (3).
     hull_pad_m : float
         Growth of the predicted joints' box in which the hull filter looks, m (0.35).
-    view_weights : bool
-        Eq. 5's mean over views weighted by the share of the predicted body each view sees (True).
-    keypoint_weight : float
-        Weight of the keypoint term (:class:`~isa_mocap_ros.energy.KeypointEnergy`, 13.30-13.31) on frames given keypoints (0 = off; docs/keypoints.md).
-    keypoint_sigma_m : float
-        Scale of the keypoint term's Geman-McClure loss, m (> 0; 0.1).
-    max_frames_ahead : float
-        The own prediction looks at most this many periods ahead; beyond, the root follows the foreground (5).
     """
 
-    optimizer: str = "h-isa"
-    evals: int = 1500
-    optimizer_params: Mapping[str, Any] = field(default_factory=dict)
-    search_radius_rad: float = 0.5
-    spread_velocity_gain: float = 1.5
-    root_translation_radius_m: float = 0.25
-    predictor: str = "ar"
-    predictor_order: int = 1
-    joint_velocity_gain: float = 0.5
-    prior_eta: float = 0.0
-    prior_file: str = ""
-    energy: str = "fast"
-    downsample: int = 1
-    n_model_points: int = 640
-    n_mask_points: int = 384
-    seed: int = 0
-    init_yaw_steps: int = 24
-    init_refine_evals: int = 400
-    init_keep: int = 3
-    init_polish: bool = True
-    init_confirm_frames: int = 3
-    init_confirm_ratio: float = 1.25
-    init_confirm_margin: float = 1.1
-    heading_travel_cue: bool = True
-    pelvis_fraction: float = 0.15
-    torso_fraction: float = 0.13
-    limb_proposals: int = 16
-    limb_proposal_limbs: tuple = ("left_arm", "right_arm", "left_leg", "right_leg")
-    limb_hinge_limbs: tuple = ("left_leg", "right_leg")
-    limb_extrapolations: tuple = (1.0, 2.0, 3.0)
-    limb_fold_deg: float = 130.0
-    limb_hinge_window_deg: float = 90.0
-    partition_order: tuple = ("root", "left_arm", "right_arm", "torso", "left_leg", "right_leg")
-    contour_iterations: int = 3
-    contour_extra_iterations: int = 3
-    contour_extra_partitions: tuple = ("left_leg", "right_leg")
-    contour_points: int = 200
-    contour_max_px: float = 2.0
     gate_margin_px: int = 10
     hull_filter: bool = True
     hull_dilate_px: int = 2
     hull_keep_px: int = 3
     hull_pad_m: float = 0.35
-    view_weights: bool = True
-    keypoint_weight: float = 0.0
-    keypoint_sigma_m: float = 0.1
-    max_frames_ahead: float = 5.0
 
     def __post_init__(self) -> None:
-        from isa_mocap_ros.optim import OPTIMIZERS
+        _number("gate_margin_px", self.gate_margin_px, lo=0, integer=True)
+        _bool("hull_filter", self.hull_filter)
+        _number("hull_dilate_px", self.hull_dilate_px, lo=0, integer=True)
+        _number("hull_keep_px", self.hull_keep_px, lo=0, integer=True)
+        _number("hull_pad_m", self.hull_pad_m, lo=0.0, strict=True)
 
-        if self.optimizer not in OPTIMIZERS:
-            raise TrackerError(f"optimizer: expected one of {', '.join(OPTIMIZERS)}, received {self.optimizer!r}")
-        _check_number("evals", self.evals, lo=1, integer=True)
-        if not isinstance(self.optimizer_params, Mapping):
-            raise TrackerError(f"optimizer_params: expected a mapping, received {type(self.optimizer_params).__name__}")
-        bad = [k for k in self.optimizer_params if k in ("bounds", "rng", "rotation_blocks", "partitions", "x0",
-                                                         "spread")]
-        if bad:
-            raise TrackerError(f"optimizer_params: expected algorithm parameters only, received {bad} "
-                               "(set by the tracker)")
-        object.__setattr__(self, "optimizer_params", MappingProxyType(dict(self.optimizer_params)))
-        for name in ("search_radius_rad", "root_translation_radius_m"):
-            _check_number(name, getattr(self, name), lo=0.0, strict=True)
-        _check_number("spread_velocity_gain", self.spread_velocity_gain, lo=0.0)
-        if self.predictor not in PREDICTORS:
-            raise TrackerError(f"predictor: expected one of {', '.join(PREDICTORS)}, received {self.predictor!r}")
-        _check_number("predictor_order", self.predictor_order, lo=1, integer=True)
-        _check_number("max_frames_ahead", self.max_frames_ahead, lo=1.0)
-        _check_number("keypoint_weight", self.keypoint_weight, lo=0.0)
-        _check_number("keypoint_sigma_m", self.keypoint_sigma_m, lo=0.0, strict=True)
-        _check_number("joint_velocity_gain", self.joint_velocity_gain, lo=0.0)
-        _check_number("prior_eta", self.prior_eta, lo=0.0)
-        if not isinstance(self.prior_file, (str, Path)):
-            raise TrackerError(f"prior_file: expected a path ('' = none), received {self.prior_file!r}")
-        if self.energy not in ("fast", "exact"):
-            raise TrackerError(f"energy: expected 'fast' or 'exact', received {self.energy!r}")
-        _check_number("downsample", self.downsample, lo=1, integer=True)
-        _check_number("n_model_points", self.n_model_points, lo=1, integer=True)
-        _check_number("n_mask_points", self.n_mask_points, lo=0, integer=True)
-        _check_number("seed", self.seed, lo=0, integer=True)
-        _check_number("init_yaw_steps", self.init_yaw_steps, lo=4, integer=True)
-        _check_number("init_refine_evals", self.init_refine_evals, lo=0, integer=True)
-        _check_number("init_keep", self.init_keep, lo=0, integer=True)
-        _check_number("init_confirm_frames", self.init_confirm_frames, lo=0, integer=True)
-        _check_number("init_confirm_ratio", self.init_confirm_ratio, lo=1.0)
-        _check_number("init_confirm_margin", self.init_confirm_margin, lo=1.0)
-        if not isinstance(self.heading_travel_cue, bool):
-            raise TrackerError(f"heading_travel_cue: expected a bool, received {self.heading_travel_cue!r}")
-        _check_number("pelvis_fraction", self.pelvis_fraction, lo=0.0)
-        if self.pelvis_fraction >= 1.0:
-            raise TrackerError(f"pelvis_fraction: expected a share in [0, 1), received {self.pelvis_fraction!r}")
-        _check_number("torso_fraction", self.torso_fraction, lo=0.0)
-        if self.torso_fraction >= 1.0:
-            raise TrackerError(f"torso_fraction: expected a share in [0, 1), received {self.torso_fraction!r}")
-        _check_number("limb_proposals", self.limb_proposals, lo=0, integer=True)
-        for name in ("limb_proposal_limbs", "limb_hinge_limbs"):
-            object.__setattr__(self, name, _limb_names(name, getattr(self, name)))
-        ext = self.limb_extrapolations
-        if isinstance(ext, (str, bytes)) or not isinstance(ext, Sequence) or not all(
-                isinstance(k, (int, float, np.integer, np.floating)) and not isinstance(k, bool)
-                and np.isfinite(k) and k >= 0 for k in ext):
-            raise TrackerError(f"limb_extrapolations: expected a sequence of positive factors ([0.0] = none), "
-                               f"received {ext!r}")
-        object.__setattr__(self, "limb_extrapolations", tuple(float(k) for k in ext if k > 0))
-        _check_number("limb_fold_deg", self.limb_fold_deg, lo=0.0)
-        _check_number("limb_hinge_window_deg", self.limb_hinge_window_deg, lo=0.0)
-        object.__setattr__(self, "partition_order", _partition_names(
-            "partition_order", self.partition_order, "root, left_arm, right_arm, torso, left_leg, right_leg",
-            empty=False))
-        _check_number("contour_iterations", self.contour_iterations, lo=0, integer=True)
-        _check_number("contour_extra_iterations", self.contour_extra_iterations, lo=0, integer=True)
-        object.__setattr__(self, "contour_extra_partitions", _partition_names(
-            "contour_extra_partitions", self.contour_extra_partitions, "left_leg, right_leg", empty=True))
-        if not isinstance(self.init_polish, (bool, np.bool_)):
-            raise TrackerError(f"init_polish: expected true or false, received {self.init_polish!r}")
-        _check_number("contour_points", self.contour_points, lo=1, integer=True)
-        _check_number("contour_max_px", self.contour_max_px, lo=0.0, strict=True)
-        if self.pelvis_fraction + self.torso_fraction >= 1.0:
-            raise TrackerError(f"pelvis_fraction + torso_fraction: expected below 1 (the main search needs a share), "
-                               f"received {self.pelvis_fraction!r} + {self.torso_fraction!r}")
-        _check_number("gate_margin_px", self.gate_margin_px, lo=0, integer=True)
-        if not isinstance(self.hull_filter, (bool, np.bool_)):
-            raise TrackerError(f"hull_filter: expected a bool, received {self.hull_filter!r}")
-        _check_number("hull_dilate_px", self.hull_dilate_px, lo=0, integer=True)
-        _check_number("hull_keep_px", self.hull_keep_px, lo=0, integer=True)
-        _check_number("hull_pad_m", self.hull_pad_m, lo=0.0, strict=True)
-        if not isinstance(self.view_weights, (bool, np.bool_)):
-            raise TrackerError(f"view_weights: expected a bool, received {self.view_weights!r}")
 
-    def params(self) -> dict:
-        """Optimizer keyword arguments: :data:`DEFAULT_PARAMS` of the optimizer, then ``optimizer_params``."""
-        out = dict(DEFAULT_PARAMS.get(self.optimizer, {}))
-        out.update(self.optimizer_params)
-        return out
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Fixed settings of a :class:`Tracker`, in groups: one frozen dataclass per concern, one line per
+    setting (unit, default, why). The measurements behind the defaults: ``docs/decisions/`` and
+    ``docs/history/tracker_config.md``.
+
+    The settings' names (the *leaves*) are unique across the groups: they are the estimator node's ROS
+    parameter names and ``config/pipeline.yaml``'s keys. :meth:`from_flat` builds a config from leaf names
+    (``TrackerConfig.from_flat(evals=600, seed=1)``), :meth:`replace` changes some, :meth:`flat` lists all.
+
+    Attributes
+    ----------
+    search : SearchConfig
+        The optimizer, its budget and search box.
+    prediction : PredictionConfig
+        The tracker's own prediction.
+    objective : ObjectiveConfig
+        The silhouette energy and the prior.
+    keypoints : KeypointConfig
+        The 2-D keypoint term.
+    first_frame : FirstFrameConfig
+        The automatic initialization.
+    heading : HeadingConfig
+        The heading check.
+    stages : StageConfig
+        The pelvis, torso, limb and contour stages.
+    masks : MaskConfig
+        The mask gate and the visual-hull filter.
+    """
+
+    search: SearchConfig = field(default_factory=SearchConfig)
+    prediction: PredictionConfig = field(default_factory=PredictionConfig)
+    objective: ObjectiveConfig = field(default_factory=ObjectiveConfig)
+    keypoints: KeypointConfig = field(default_factory=KeypointConfig)
+    first_frame: FirstFrameConfig = field(default_factory=FirstFrameConfig)
+    heading: HeadingConfig = field(default_factory=HeadingConfig)
+    stages: StageConfig = field(default_factory=StageConfig)
+    masks: MaskConfig = field(default_factory=MaskConfig)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            if not isinstance(getattr(self, f.name), _GROUPS[f.name]):
+                raise TrackerError(f"{f.name}: expected a {_GROUPS[f.name].__name__}, "
+                                   f"received {type(getattr(self, f.name)).__name__}")
+
+    @classmethod
+    def from_flat(cls, **settings) -> "TrackerConfig":
+        """The config with the leaf settings ``settings`` (e.g. ``evals=600``), the others at their defaults;
+        :class:`TrackerError` naming an unknown setting."""
+        return cls().replace(**settings)
+
+    def replace(self, **settings) -> "TrackerConfig":
+        """A copy with the leaf settings ``settings`` changed (each group checks its own)."""
+        groups: dict[str, dict[str, Any]] = {}
+        for name, value in settings.items():
+            if name not in LEAVES:
+                raise TrackerError(f"{name}: not a tracker setting (expected one of {', '.join(LEAVES)})")
+            groups.setdefault(LEAVES[name], {})[name] = value
+        return dataclasses.replace(self, **{g: dataclasses.replace(getattr(self, g), **kw)
+                                            for g, kw in groups.items()})
+
+    def flat(self) -> dict[str, Any]:
+        """Every leaf setting by name, in group order (the estimator's parameters)."""
+        return {name: getattr(getattr(self, group), name) for name, group in LEAVES.items()}
+
+
+#: The groups of :class:`TrackerConfig`: field name → its dataclass.
+_GROUPS: Mapping[str, type] = MappingProxyType({
+    "search": SearchConfig, "prediction": PredictionConfig, "objective": ObjectiveConfig,
+    "keypoints": KeypointConfig, "first_frame": FirstFrameConfig, "heading": HeadingConfig,
+    "stages": StageConfig, "masks": MaskConfig})
+
+
+def _leaves(groups: Mapping[str, type]) -> Mapping[str, str]:
+    out: dict[str, str] = {}
+    for group, cls in groups.items():
+        for f in fields(cls):
+            if f.name in out:
+                raise TrackerError(f"TrackerConfig: setting {f.name!r} in both {out[f.name]} and {group} "
+                                   "(leaf names are parameter names and must be unique)")
+            out[f.name] = group
+    return MappingProxyType(out)
+
+
+#: Every leaf setting of :class:`TrackerConfig` → the group holding it, in group order.
+LEAVES: Mapping[str, str] = _leaves(_GROUPS)
 
 
 def field_docs(cls=None) -> dict[str, str]:
-    """The one-line description of every field of the config dataclass ``cls`` (default
-    :class:`TrackerConfig`), read from its docstring's Attributes section (``name : type`` then one
-    indented line); :class:`TrackerError` naming the field when one has none."""
-    cls = TrackerConfig if cls is None else cls
+    """The one-line description of every setting of the config dataclass ``cls`` (default
+    :class:`TrackerConfig`: the leaves of all its groups), read from its docstring's Attributes section
+    (``name : type`` then one indented line); :class:`TrackerError` naming the field when one has none."""
+    if cls is None or cls is TrackerConfig:
+        out: dict[str, str] = {}
+        for group in _GROUPS.values():
+            out.update(field_docs(group))
+        return out
     lines = inspect.cleandoc(cls.__doc__ or "").splitlines()
     docs: dict[str, str] = {}
     for head, text in zip(lines, lines[1:]):

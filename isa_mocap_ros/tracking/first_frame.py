@@ -1,6 +1,7 @@
 """The first frame: the automatic initialization (:mod:`.init`), the frame's search from each heading
 candidate pruned to ``init_keep`` runs, the polish of the winner (``init_polish``) and the pick of a
-heading-check rival (``init_confirm_frames``).
+heading-check rival (``init_confirm_frames``). The functions take the tracker and the frame
+(:class:`~.frame_context.FrameContext`).
 """
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import numpy as np
 from isa_mocap_ros.optim import compiled_search
 
 from . import frame_masks, objective
-from .config import INIT_SPREAD_SCALE, TrackerError, frame_rng
+from .config import INIT_SPREAD_SCALE, TrackerError
 from .init import InitError, initial_pose
 from .plan import FrameBudget
 
@@ -27,7 +28,7 @@ def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int
     frame_index : int
         Frame key of the initialization's random stream.
     keypoints : sequence of (uv, confidence) or None, optional
-        As for :meth:`Tracker.step`: with ``config.keypoint_weight > 0`` the grid and refinement also
+        As for :meth:`Tracker.step`: with ``config.keypoints.keypoint_weight > 0`` the grid and refinement also
         score the keypoint term.
 
     Returns
@@ -50,74 +51,80 @@ def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int
             raise TrackerError(f"pose: expected shape ({tr.model.dof},), received {x.shape}")
         x = np.clip(x, tr.model.lower, tr.model.upper)
         tr.track.masks_now = None          # no frame: nothing to re-centre from later
-        tr._accept(x)
+        tr.accept(x)
         tr.heading_check.views = len(tr.cameras)     # a given pose's heading is not re-checked
         return None
     if masks is None:
         raise TrackerError("initialize: expected masks= or pose=, received neither")
     usable, notes = frame_masks.check_masks(tr, masks)
-    tr.track.masks_now = usable
-    if frame_masks.set_masks(tr, usable, notes, frame_index) == 0:
+    ctx = tr.frame_context(frame_index, keypoint_term=objective.keypoint_energy(tr, keypoints)[0])
+    ctx.notes, ctx.raw_masks = notes, usable
+    ctx.masks = tr.track.masks_now = usable
+    if frame_masks.set_masks(tr, ctx) == 0:
         raise TrackerError(f"masks: expected foreground in at least one view, received none ({'; '.join(notes)})")
-    cfg = tr.config
-    tr._keypoint_term = objective.keypoint_energy(tr, keypoints)[0]
     try:
-        res = initial_pose(tr.model, tr.cameras, usable, init_energy_fn(tr, usable, frame_index),
-                           rng=frame_rng(cfg.seed, frame_index, 1), n_yaw=cfg.init_yaw_steps,
-                           refine_evals=cfg.init_refine_evals)
+        res = initial_grid(tr, ctx)
     except InitError as exc:
         raise TrackerError(f"masks: automatic initialization failed: {exc}") from None
-    finally:
-        tr._keypoint_term = None
-    tr._accept(res.x)
+    tr.accept(res.x)
     tr.heading_check.views = res.views_used
     return res
 
 
-def init_energy_fn(tr, usable: list, frame_index: int):
-    """The energy the automatic initialization scores its grid with (see ``__init__``)."""
-    if tr._init_energy is None:
-        return tr.total_energy
-    tr._init_energy.rng = frame_rng(tr.config.seed, frame_index, 4)
+def initial_grid(tr, ctx):
+    """The automatic initialization (:func:`.init.initial_pose`) on the frame's masks ``ctx.masks``: root from
+    the masks' rays, heading × standing-pose grid, root refinements (stream 1); raises :class:`.init.InitError`."""
+    cfg = tr.config
+    return initial_pose(tr.model, tr.cameras, ctx.masks, init_energy_fn(tr, ctx), rng=ctx.rng(1),
+                        n_yaw=cfg.first_frame.init_yaw_steps, refine_evals=cfg.first_frame.init_refine_evals)
+
+
+def init_energy_fn(tr, ctx):
+    """The energy the automatic initialization scores its grid with: the tracker's coarse initialization energy
+    (``Tracker.init_energy``, foreground samples from stream 4) on the frame's masks plus the frame's other terms,
+    else the frame's objective."""
+    if tr.init_energy is None:
+        return ctx.objective
+    tr.init_energy.rng = ctx.rng(4)
     try:
-        tr._init_energy.set_masks(usable)
+        tr.init_energy.set_masks(ctx.masks)
     except ValueError:
-        return tr.total_energy
+        return ctx.objective
 
     def fn(X):
         X = np.atleast_2d(np.asarray(X, dtype=float))
-        return tr._add_terms(X, np.asarray(tr._init_energy(X), dtype=float))
+        return ctx.objective.add_terms(X, np.asarray(tr.init_energy(X), dtype=float))
     return fn
 
 
-def initial_runs(tr, starts: list, frame_index: int, notes: list[str], budget: FrameBudget,
-                  stream: tuple = ()) -> tuple[list, int]:
-    """The automatically initialized frame's search from every start (heading candidate), pruned
-    to ``config.init_keep`` runs at the checkpoint (see :class:`TrackerConfig`): the list of
+def initial_runs(tr, ctx, starts: list, notes: list[str] | None, budget: FrameBudget,
+                 stream: tuple = ()) -> tuple[list, int]:
+    """The automatically initialized frame's (``ctx``) search from every start (heading candidate), pruned
+    to ``config.first_frame.init_keep`` runs at the checkpoint (see :class:`TrackerConfig`): the list of
     ``(start index, result, start)`` of the runs that ended, and the evaluations of all runs.
     Raises the optimizer's errors."""
     cfg = tr.config
     runs = []
     for j, pred in enumerate(starts):
         if stream:          # the heading re-check's runs: their own streams
-            rng = frame_rng(cfg.seed, frame_index, *stream, j)
+            rng = ctx.rng(*stream, j)
         else:
-            rng = frame_rng(cfg.seed, frame_index) if j == 0 else frame_rng(cfg.seed, frame_index, 3, j)
-        opt, evals, _, _ = tr._search(pred, rng, budget, INIT_SPREAD_SCALE, notes if j == 0 else None,
-                                        stages=False)
-        run = compiled_search.search(opt, tr.energy, evals, extra_terms=tr._python_terms(), paused=True) \
-            if tr._compiled_search else None
+            rng = ctx.rng() if j == 0 else ctx.rng(3, j)
+        opt, evals, _, _ = tr.plan_search(pred, rng, budget, INIT_SPREAD_SCALE, notes if j == 0 else None,
+                                          stages=False)
+        run = compiled_search.search(opt, tr.energy, evals, extra_terms=ctx.objective.extra_terms, paused=True) \
+            if tr.use_compiled_search else None
         if run is not None:
             # compiled h-isa, bound; the pruning below advances it (the same numbers as the protocol)
             runs.append((j, run, pred, None))
             continue
         # bind + iterate + result() is minimize(), split at the checkpoint: the end of the first
         # partition (hierarchical optimizers, whose shares bind() sets) or a sixth of the budget
-        opt.bind(objective.TotalEnergy(tr), max_evals=evals)
+        opt.bind(ctx.objective, max_evals=evals)
         shares = getattr(opt, "shares", None)
         runs.append((j, opt, pred, shares[0] if shares else evals // 6))
     n_pruned = 0
-    if 0 < cfg.init_keep < len(runs):
+    if 0 < cfg.first_frame.init_keep < len(runs):
         for _, opt, _, checkpoint in runs:
             if checkpoint is None:
                 opt.advance(1)
@@ -126,8 +133,8 @@ def initial_runs(tr, starts: list, frame_index: int, notes: list[str], budget: F
                 if opt.n_evals >= checkpoint:
                     break
         ranked = sorted(runs, key=lambda r: r[1].best_energy)      # stable: ties keep the start order
-        n_pruned = sum(r[1].n_evals for r in ranked[cfg.init_keep:])
-        runs = sorted(ranked[:cfg.init_keep], key=lambda r: r[0])
+        n_pruned = sum(r[1].n_evals for r in ranked[cfg.first_frame.init_keep:])
+        runs = sorted(ranked[:cfg.first_frame.init_keep], key=lambda r: r[0])
     out = []
     for j, opt, pred, checkpoint in runs:
         if checkpoint is None:
@@ -139,35 +146,35 @@ def initial_runs(tr, starts: list, frame_index: int, notes: list[str], budget: F
     return out, n_pruned + sum(res.n_evals for _, res, _ in out)
 
 
-def polish(tr, x: np.ndarray, energy: float, frame_index: int, stream: int, notes, budget: FrameBudget):
-    """``config.init_polish``'s search of the initialized frame's pose ``x`` (energy ``energy``) as a tracked
-    frame, every stage, stream ``[seed, frame, stream]``: ``(result or None if the optimizer refused, the
+def polish(tr, ctx, x: np.ndarray, energy: float, stream: int, notes):
+    """``config.first_frame.init_polish``'s search of the initialized frame's pose ``x`` (energy ``energy``) as a
+    tracked frame, every stage, stream ``[seed, frame, stream]``: ``(result or None if the optimizer refused, the
     lower-energy pose of the two, its energy)``; a refusal is noted in ``notes`` (when given)."""
     try:
-        res = tr._optimize(x, frame_rng(tr.config.seed, frame_index, stream), budget, notes=notes)
+        res = tr.optimize(ctx, x, ctx.rng(stream), notes=notes)
     except ValueError as exc:
         if notes is not None:
             notes.append(f"initialization polish failed: {exc}")
         return None, x, energy
-    xp, ep = tr._final_pose(res)
+    xp, ep = tr.final_pose(res)
     return (res, xp, ep) if ep < energy else (res, x, energy)
 
 
-def polish_winner(tr, x: np.ndarray, energy: float, res, frame_index: int, notes: list[str],
-                  budget: FrameBudget):
-    """``config.init_polish``: the first frame's winner searched once more as a tracked frame (all stages)
+def polish_winner(tr, ctx, x: np.ndarray, energy: float, res):
+    """``config.first_frame.init_polish``: the first frame's winner searched once more as a tracked frame (all stages)
     from itself, and the heading check's rival (``heading_check.rival_start``) alike; the heading that
     fits better after it leads (the check still tracks both). Returns ``(x, energy, result, evaluations)``
     of the frame."""
     n_evals = 0
-    res2, x2, e2 = polish(tr, x, energy, frame_index, 6, notes, budget)
+    notes = ctx.notes
+    res2, x2, e2 = polish(tr, ctx, x, energy, 6, notes)
     if res2 is not None:
         n_evals += res2.n_evals
         if e2 < energy:
             x, energy, res = x2, e2, res2
     check = tr.heading_check
     if check.rival_start is not None:
-        res_r, xr, er = polish(tr, *check.rival_start[:2], frame_index, 7, None, budget)
+        res_r, xr, er = polish(tr, ctx, *check.rival_start[:2], 7, None)
         if res_r is not None:
             n_evals += res_r.n_evals
         if er < energy:
@@ -182,22 +189,22 @@ def polish_winner(tr, x: np.ndarray, energy: float, res, frame_index: int, notes
 
 
 def pick_rival(tr, runs: list, winner, x: np.ndarray, energy: float):
-    """The heading check's rival among the initialized frame's runs (``config.init_confirm_frames``):
+    """The heading check's rival among the initialized frame's runs (``config.heading.init_confirm_frames``):
     the lowest-energy run heading more than 90° away from the winner's estimate ``x``, if its
-    energy is within ``config.init_confirm_ratio`` of ``energy``; else None."""
+    energy is within ``config.heading.init_confirm_ratio`` of ``energy``; else None."""
     from .init import _wrap, _yaw_of
 
-    if not tr._has_heading or not np.isfinite(energy):
+    if not tr.has_heading or not np.isfinite(energy):
         return None
     yaw = _yaw_of(x[3:6])
     best = None
     for _, res, _ in runs:
         if res is winner:
             continue
-        xr, er = tr._final_pose(res)
+        xr, er = tr.final_pose(res)
         if abs(float(_wrap(_yaw_of(xr[3:6]) - yaw))) > np.pi / 2 and np.isfinite(er) \
                 and (best is None or er < best[1]):
             best = (xr, er)
-    if best is None or best[1] > tr.config.init_confirm_ratio * max(energy, 0.0):
+    if best is None or best[1] > tr.config.heading.init_confirm_ratio * max(energy, 0.0):
         return None
     return best[0], best[1], energy

@@ -57,14 +57,16 @@ def check_masks(tr, masks) -> tuple[list, list[str]]:
     return out, notes
 
 
-def set_masks(tr, masks: list, notes: list[str], frame_index: int | None, weights=None) -> int:
-    """Give the usable masks to the energy (with the view weights, if any, and if the energy takes
-    them); returns the number of views it uses (0: none)."""
+def set_masks(tr, ctx) -> int:
+    """Give the frame's usable masks ``ctx.masks`` to the energy (with the view weights ``ctx.weights``, if
+    any, and if the energy takes them; the energy samples its foreground pixels from the frame's stream 2);
+    returns the number of views it uses (0: none)."""
+    masks, notes, frame_index, weights = ctx.masks, ctx.notes, ctx.frame_index, ctx.weights
     if not any(m is not None for m in masks):
         return 0
     if frame_index is not None and isinstance(getattr(tr.energy, "rng", None), np.random.Generator):
         # the energy samples foreground pixels at set_masks: draw them from this frame's stream
-        tr.energy.rng = frame_rng(tr.config.seed, frame_index, 2)
+        tr.energy.rng = frame_rng(tr.config.search.seed, frame_index, 2)
     from isa_mocap_ros.energy.silhouette import SilhouetteEnergy, _mask_problem
 
     try:
@@ -84,32 +86,33 @@ def set_masks(tr, masks: list, notes: list[str], frame_index: int | None, weight
     return int(used) if used is not None else sum(m is not None for m in masks)
 
 
-def filter_masks(tr, usable: list, prediction, notes: list[str]) -> tuple[list, np.ndarray | None]:
-    """The frame's masks after the mask gate (``config.gate_margin_px``: foreground far from the predicted
-    silhouette dropped) and the visual-hull filter (``config.hull_filter``: foreground the other views do
-    not confirm), both around the frame's prediction; ``(masks, that prediction or None)`` (None when
-    neither ran: off, no estimate yet or no usable view). Sets ``tr.track.masks_now`` to the masks
-    returned: the contour stage fits what the energy scores, and a later re-centring starts from the
-    person's foreground (the prediction itself re-centres on the unfiltered ones)."""
+def filter_masks(tr, ctx) -> None:
+    """``ctx.masks``: the frame's checked masks ``ctx.raw_masks`` after the mask gate
+    (``config.masks.gate_margin_px``: foreground far from the predicted silhouette dropped) and the visual-hull
+    filter (``config.masks.hull_filter``: foreground the other views do not confirm), both around the frame's
+    prediction (made here when they run: ``ctx.prediction``; not when neither runs: off, no estimate yet or
+    no usable view). ``tr.track.masks_now`` becomes ``ctx.masks``: the contour stage fits what the energy
+    scores, and a later re-centring starts from the person's foreground (the prediction itself re-centres on
+    the unfiltered ones)."""
     cfg = tr.config
-    tr.track.masks_now = usable
-    if not (cfg.gate_margin_px > 0 or cfg.hull_filter) or tr.track.last is None \
+    usable = ctx.raw_masks
+    ctx.masks = tr.track.masks_now = usable
+    if not (cfg.masks.gate_margin_px > 0 or cfg.masks.hull_filter) or tr.track.last is None \
             or not any(m is not None for m in usable):
-        return usable, None
-    pred = frame_prediction.predict(tr, prediction, notes)
-    if cfg.gate_margin_px > 0:
-        usable = gate(tr, usable, pred, notes)
-    if cfg.hull_filter:
-        usable = hull(tr, usable, pred, notes)
-    tr.track.masks_now = usable
-    return usable, pred
+        return
+    pred = frame_prediction.prediction(tr, ctx)
+    if cfg.masks.gate_margin_px > 0:
+        usable = gate(tr, usable, pred, ctx.notes)
+    if cfg.masks.hull_filter:
+        usable = hull(tr, usable, pred, ctx.notes)
+    ctx.masks = tr.track.masks_now = usable
 
 
 def gate(tr, usable: list, pred: np.ndarray, notes: list[str]) -> list:
     """The usable masks gated around ``pred`` (:func:`.gate.gate_masks`); views left empty become None."""
-    g = gate_masks(usable, tr.cameras, tr.model, pred, tr.config.gate_margin_px)
+    g = gate_masks(usable, tr.cameras, tr.model, pred, tr.config.masks.gate_margin_px)
     return _noted(g, notes, "the gate", lambda total: f"all {total} foreground pixels farther than "
-                  f"{tr.config.gate_margin_px} px from the predicted silhouette")
+                  f"{tr.config.masks.gate_margin_px} px from the predicted silhouette")
 
 
 def hull(tr, usable: list, pred: np.ndarray, notes: list[str]) -> list:
@@ -121,17 +124,17 @@ def hull(tr, usable: list, pred: np.ndarray, notes: list[str]) -> list:
     idx = [v for v, m in enumerate(usable) if m is not None]
     keep: list = [None] * len(usable)
     for v, s in zip(idx, predicted_silhouettes(tr.model, [tr.cameras[v] for v in idx], pred,
-                                               margin_px=cfg.hull_keep_px)):
+                                               margin_px=cfg.masks.hull_keep_px)):
         keep[v] = s
-    g = hull_filter(usable, tr.cameras, pose_box(tr.model, pred, cfg.hull_pad_m),
-                    dilate_px=cfg.hull_dilate_px, keep=keep)
+    g = hull_filter(usable, tr.cameras, pose_box(tr.model, pred, cfg.masks.hull_pad_m),
+                    dilate_px=cfg.masks.hull_dilate_px, keep=keep)
     return _noted(g, notes, "the hull filter", lambda total: "no foreground pixel confirmed by the other views")
 
 
 def _noted(g, notes: list[str], what: str, why_empty: Callable[[int], str]) -> list:
     """The masks of a mask filter's :class:`.gate.GateResult` ``g`` for the energy: a view it emptied
     becomes None (note: ``why_empty(total)``), one it cut by more than :data:`GATE_NOTE_SHARE` gets a note.
-    (The views given to the filters are never empty: :meth:`Tracker._check_masks` skips empty ones.)"""
+    (The views given to the filters are never empty: :func:`check_masks` skips empty ones.)"""
     out = []
     for v, (m, lost, total) in enumerate(zip(g.masks, g.lost_px, g.total_px)):
         if m is not None and lost >= total:

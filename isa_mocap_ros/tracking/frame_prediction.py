@@ -13,14 +13,21 @@ from .init import InitError, root_from_masks
 from .predict import frames_kwargs
 
 
-def predict(tr, external, notes: list[str]) -> np.ndarray:
-    """The (damped) prediction: ``external`` (e.g. the prediction node's) or the tracker's own.
+def prediction(tr, ctx) -> np.ndarray:
+    """The frame's prediction ``ctx.prediction``, made by :func:`predict` at the first need (once per frame)."""
+    if ctx.prediction is None:
+        ctx.prediction = predict(tr, ctx)
+    return ctx.prediction
 
-    Both are damped the same way towards the last estimate (``root/joint_velocity_gain``), so the
-    node network (prediction from the prediction node) and ``isa-mocap track`` (own predictor,
-    same conversions) give identical numbers.
+
+def predict(tr, ctx) -> np.ndarray:
+    """The (damped) prediction of the frame ``ctx`` (:class:`~.frame_context.FrameContext`): its external
+    one (e.g. the prediction node's) or the tracker's own. Both are damped the same way towards the last
+    estimate (``root/joint_velocity_gain``), so the node network (prediction from the prediction node) and
+    ``isa-mocap track`` (own predictor, same conversions) give identical numbers; notes go to ``ctx.notes``.
     """
     D = tr.model.dof
+    external, notes = ctx.external_prediction, ctx.notes
     p = None
     if external is not None and tr.heading_check.own_prediction_frames > 0:
         notes.append("prediction: the external one follows the estimates from before the heading check's "
@@ -40,7 +47,7 @@ def predict(tr, external, notes: list[str]) -> np.ndarray:
             p = None
     if p is None:
         try:
-            ahead = min(tr.track.elapsed or 1, tr.config.max_frames_ahead)
+            ahead = min(tr.track.elapsed or 1, tr.config.prediction.max_frames_ahead)
             p = np.asarray(tr.predictor.predict(**frames_kwargs(ahead)), dtype=float)
         except ValueError as exc:      # PredictionError: empty history (cannot happen once initialized)
             notes.append(f"prediction: {exc}; using the last estimate")
@@ -56,11 +63,11 @@ def predict(tr, external, notes: list[str]) -> np.ndarray:
         idx = list(blk)
         p = p.copy() if p is external else p
         p[idx] = nearest_rotvec(p[idx], tr.track.last[idx])
-    gain = np.full(D, cfg.joint_velocity_gain)
+    gain = np.full(D, cfg.prediction.joint_velocity_gain)
     gain[:6] = ROOT_VELOCITY_GAIN
     out = tr.track.last + gain * (p - tr.track.last)        # damped extrapolation
-    if tr.track.elapsed > cfg.max_frames_ahead or (tr.track.elapsed > 1 and motion_unknown(tr)):
-        recentre(tr, out, notes)
+    if tr.track.elapsed > cfg.prediction.max_frames_ahead or (tr.track.elapsed > 1 and motion_unknown(tr)):
+        recentre(tr, out, ctx.raw_masks, notes)
     return out
 
 
@@ -71,19 +78,20 @@ def motion_unknown(tr) -> bool:
     return n is not None and int(n) < 2
 
 
-def recentre(tr, pred: np.ndarray, notes: list[str]) -> None:
+def recentre(tr, pred: np.ndarray, masks_now: list, notes: list[str]) -> None:
     """After more frames than ``max_frames_ahead`` unseen — or after any gap when the predictor holds
     a single estimate (the first estimate's frame: no motion to extrapolate) — move the predicted
     root position (x, y) by how far the foreground moved: the triangulated mask centroid
     (:func:`.init.root_from_masks`) of this frame minus that of the last estimate's frame.
     Extrapolating the last motion over such a gap says little (in real time the automatic
     initialization alone takes 4-10 frame periods, and a person walking moves 0.2-0.5 m
-    meanwhile), the foreground says where the body is."""
-    if tr.track.masks_last is None or tr.track.masks_now is None:
+    meanwhile), the foreground says where the body is. ``masks_now``: this frame's checked masks (before
+    the mask filters, which work around the prediction)."""
+    if tr.track.masks_last is None or masks_now is None:
         return
     try:
         c_last = root_from_masks(tr.model, tr.cameras, tr.track.masks_last)[0]
-        c_now = root_from_masks(tr.model, tr.cameras, tr.track.masks_now)[0]
+        c_now = root_from_masks(tr.model, tr.cameras, masks_now)[0]
     except InitError:
         return
     pred[:2] = tr.track.last[:2] + (c_now[:2] - c_last[:2])

@@ -1,7 +1,8 @@
 """The heading check: a standing silhouette looks nearly the same from the front and from the back, so
 a rival hypothesis heading the other way is tracked beside the track for a few frames and the energy
-sums decide (``TrackerConfig.init_confirm_frames``); re-checks when more views see the person, after an
-undecided check, or when the track travels backwards (the travel cue, ``heading_travel_cue``).
+sums decide (``TrackerConfig.heading.init_confirm_frames``); re-checks when more views see the person, after an
+undecided check, or when the track travels backwards (the travel cue, ``heading_travel_cue``). The functions
+take the tracker and its frame (:class:`~.frame_context.FrameContext`).
 """
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ def heading_recheck_pending(tr, masks: Sequence) -> bool:
     backwards): a caller that drops frames (the estimator node in real time) should hand the tracker
     the frames that follow in sequence, as for :attr:`checking_heading`, or the check ends at the
     first gap."""
-    if tr.config.init_confirm_frames <= 0 or tr.track.last is None or tr.heading_check.rival is not None:
+    if tr.config.heading.init_confirm_frames <= 0 or tr.track.last is None or tr.heading_check.rival is not None:
         return False
     if tr.heading_check.recheck_at is not None and tr.frames + 1 >= tr.heading_check.recheck_at:
         return True
@@ -44,7 +45,7 @@ def start_rival(tr, frame_index: int) -> None:
     tr.heading_check.rival_start = None
     predictor = copy.deepcopy(tr.predictor, memo={id(tr.model): tr.model})
     predictor.reset()
-    rival = type(tr)(tr.model, tr.cameras, dataclasses.replace(tr.config, init_confirm_frames=0),
+    rival = type(tr)(tr.model, tr.cameras, tr.config.replace(init_confirm_frames=0),
                      prior=tr.prior, energy=tr.energy, predictor=predictor)
     first_frame.initialize(rival, pose=xr, frame_index=frame_index)
     rival.track.elapsed = tr.track.elapsed
@@ -58,7 +59,7 @@ def travel(tr, min_periods: float = 0.0) -> tuple[float, float, float] | None:
     root's horizontal travel over the last estimates, or None when they span fewer than ``min_periods``
     periods (or none), the root moved less than :data:`TRAVEL_MIN_M_PER_FRAME` per period, or the model
     has no 3-DOF root rotation."""
-    if len(tr.track.roots) < 2 or not tr._has_heading:
+    if len(tr.track.roots) < 2 or not tr.has_heading:
         return None
     (ta, xa, ya), (tb, xb, yb) = tr.track.roots[0], tr.track.roots[-1]
     span, dist = tb - ta, math.hypot(xb - xa, yb - ya)
@@ -78,7 +79,8 @@ def travel_recheck_due(tr) -> tuple[float, float, float] | None:
     """The travel cue's trigger of a re-check: ``(degrees off the heading, m, periods)`` of :meth:`travel`
     over :data:`TRAVEL_FRAMES` periods when it points backwards (beyond :data:`TRAVEL_BACKWARDS_DEG`) and no
     re-check ran in the last :data:`TRAVEL_RECHECK_FRAMES` frames; else None."""
-    if not tr.config.heading_travel_cue or tr.frames < tr.heading_check.travel_recheck_after or tr.track.last is None:
+    if not tr.config.heading.heading_travel_cue or tr.frames < tr.heading_check.travel_recheck_after \
+            or tr.track.last is None:
         return None
     t = travel(tr, TRAVEL_FRAMES)
     if t is None:
@@ -87,21 +89,21 @@ def travel_recheck_due(tr) -> tuple[float, float, float] | None:
     return (off, t[1], t[2]) if off > TRAVEL_BACKWARDS_DEG else None
 
 
-def recheck_heading(tr, res: FrameResult, frame_index: int, frames_elapsed: float, t0: float) -> FrameResult:
-    """The heading re-check (``TrackerConfig.init_confirm_frames``): on a tracked frame where more
+def recheck_heading(tr, ctx, res: FrameResult, frames_elapsed: float) -> FrameResult:
+    """The heading re-check (``TrackerConfig.heading.init_confirm_frames``): on a tracked frame where more
     views use the person's foreground than when the heading was last checked (or an undecided
     check's re-check is due, or the travel cue finds the track moving backwards,
-    ``TrackerConfig.heading_travel_cue``), the frame's search from each standing variant heading the
+    ``TrackerConfig.heading.heading_travel_cue``), the frame's search from each standing variant heading the
     other way (at the estimate's root position, the automatic initialization's spreads, pruned as
     :meth:`_initial_runs` does); when the lowest-energy run's estimate heads more than 90° away and
     its energy is within ``init_confirm_ratio`` of this frame's, it becomes the rival of a heading
-    check as after the initialization."""
+    check as after the initialization. ``ctx``: the tracker's frame; ``res``: its result."""
     from .init import _wrap, _yaw_of, standing_poses
 
     cfg = tr.config
     due = tr.heading_check.recheck_at is not None and tr.frames >= tr.heading_check.recheck_at
-    if cfg.init_confirm_frames <= 0 or res.fell_back or res.initialized or frames_elapsed != 1 \
-            or not np.isfinite(res.energy) or not tr._has_heading:
+    if cfg.heading.init_confirm_frames <= 0 or res.fell_back or res.initialized or frames_elapsed != 1 \
+            or not np.isfinite(res.energy) or not tr.has_heading:
         return res
     more_views = res.views_used > tr.heading_check.views
     travel = None if due or more_views else travel_recheck_due(tr)
@@ -122,52 +124,54 @@ def recheck_heading(tr, res: FrameResult, frame_index: int, frames_elapsed: floa
     else:
         head = f"heading re-check: {res.views_used} views see the person ({before} when the heading was checked)"
     try:
-        runs, n = first_frame.initial_runs(tr, list(starts), frame_index, None, FrameBudget(cfg.evals), stream=(5,))
+        runs, n = first_frame.initial_runs(tr, ctx, list(starts), None, FrameBudget(cfg.search.evals), stream=(5,))
     except ValueError as exc:
-        return dataclasses.replace(res, time_s=time.perf_counter() - t0,
+        return dataclasses.replace(res, time_s=time.perf_counter() - ctx.t0,
                                    notes=res.notes + (f"{head}; its search failed ({exc}); kept this heading",))
-    xr, er = min((tr._final_pose(r) for _, r, _ in runs), key=lambda t: t[1])
+    xr, er = min((tr.final_pose(r) for _, r, _ in runs), key=lambda t: t[1])
     turned = abs(float(_wrap(_yaw_of(xr[3:6]) - yaw))) > np.pi / 2
-    if turned and np.isfinite(er) and er <= cfg.init_confirm_ratio * max(res.energy, 0.0):
+    if turned and np.isfinite(er) and er <= cfg.heading.init_confirm_ratio * max(res.energy, 0.0):
         tr.heading_check.rival_start = (xr, er, res.energy)
-        start_rival(tr, frame_index)
+        start_rival(tr, ctx.frame_index)
         note = (f"{head}: a run heading the other way ended {er:.4g} (estimate {res.energy:.4g}); both tracked for "
-                f"up to {cfg.init_confirm_frames} frames")
+                f"up to {cfg.heading.init_confirm_frames} frames")
     else:
         note = (f"{head}: a run heading the other way ended {er:.4g}"
                 f"{'' if turned else ' turned back'} (estimate {res.energy:.4g}); kept this heading")
-    return dataclasses.replace(res, n_evals=res.n_evals + n, time_s=time.perf_counter() - t0,
+    return dataclasses.replace(res, n_evals=res.n_evals + n, time_s=time.perf_counter() - ctx.t0,
                                notes=res.notes + (note,))
 
 
-def confirm_heading(tr, res: FrameResult, masks, frame_index: int, frames_elapsed: float,
-                     t0: float) -> FrameResult:
-    """One frame of the heading check: step the rival on the same masks, add both energies, decide
-    (see ``TrackerConfig.init_confirm_frames``); the frame's result (the rival's when it wins)."""
+def confirm_heading(tr, ctx, res: FrameResult, masks, frames_elapsed: float) -> FrameResult:
+    """One frame of the heading check: step the rival on the same masks (its own frame context, with the
+    tracker's plan and keypoint term), add both energies, decide (see
+    ``TrackerConfig.heading.init_confirm_frames``); the frame's result (the rival's when it wins). ``ctx``:
+    the tracker's frame; ``res``: its result."""
     cfg = tr.config
     rival = tr.heading_check.rival
-    other = rival._step(masks, frame_index, FrameBudget(tr.config.evals, tr._contour_now), prediction=None,
-                        frames_elapsed=frames_elapsed)
+    other = rival.track_frame(masks, rival.frame_context(ctx.frame_index, ctx.budget,
+                                                         keypoint_term=ctx.objective.keypoint_term),
+                              frames_elapsed=frames_elapsed)
     n_evals = res.n_evals + other.n_evals
     if res.fell_back and other.fell_back:       # nothing to compare this frame
-        return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0)
+        return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - ctx.t0)
     if res.fell_back != other.fell_back or not (np.isfinite(res.energy) and np.isfinite(other.energy)):
         tr.heading_check.rival = None
-        return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0, notes=res.notes + (
+        return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - ctx.t0, notes=res.notes + (
             "heading check ended: no decision (only one hypothesis could be tracked); kept this one",))
     c = tr.heading_check.confirm
     c[0] += 1
     c[1] += res.energy
     c[2] += other.energy
-    margin = cfg.init_confirm_margin
+    margin = cfg.heading.init_confirm_margin
     sums = f"energy sums over {c[0]} frame(s) {c[1]:.4g} vs {c[2]:.4g} for the other heading"
     # keeping may be decided early, switching only on all the frames: a wrong keep leaves the
     # track as it would be without the check, a wrong switch loses a good one (and one frame's
     # sums misled on 3 of 120 first frames of generated motions, docs/tracking.md)
-    last = c[0] >= cfg.init_confirm_frames
+    last = c[0] >= cfg.heading.init_confirm_frames
     # the travel cue (TRAVEL_FRAMES): when this heading moves backwards and the other forwards, the check
     # runs to its last frame and keeps this heading only if the energies clearly prefer it
-    t = travel(tr) if cfg.heading_travel_cue else None
+    t = travel(tr) if cfg.heading.heading_travel_cue else None
     off = off_travel(t[0], res.x) if t is not None else None
     contra = off is not None and off > TRAVEL_BACKWARDS_DEG \
         and off_travel(t[0], other.x) < 180.0 - TRAVEL_BACKWARDS_DEG
@@ -181,10 +185,10 @@ def confirm_heading(tr, res: FrameResult, masks, frame_index: int, frames_elapse
             # kept for want of evidence: the rival may still have been converging; once more later
             tr.heading_check.recheck_at = tr.frames + UNDECIDED_RECHECK_FRAMES
             sums += f"; undecided, re-checked in {UNDECIDED_RECHECK_FRAMES} frames"
-        return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0,
+        return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - ctx.t0,
                                    notes=res.notes + (f"heading check decided: kept the initial heading ({sums})",))
     if not last:
-        return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - t0)
+        return dataclasses.replace(res, n_evals=n_evals, time_s=time.perf_counter() - ctx.t0)
     # the rival wins: its track (estimate, predictor, masks, root history) becomes this tracker's; external predictions were made from this tracker's
     # estimates, so they are ignored while the predictor's history still holds any of them
     tr.heading_check.rival = None
@@ -194,7 +198,7 @@ def confirm_heading(tr, res: FrameResult, masks, frame_index: int, frames_elapse
     tr.heading_check.views = max(tr.heading_check.views, res.views_used, other.views_used)
     tr.track = rival.track
     cap = getattr(tr.predictor, "capacity", None)
-    tr.heading_check.own_prediction_frames = (int(cap) if cap is not None else cfg.predictor_order + 1) - 1
-    return dataclasses.replace(other, n_evals=n_evals, time_s=time.perf_counter() - t0, notes=other.notes + (
+    tr.heading_check.own_prediction_frames = (int(cap) if cap is not None else cfg.prediction.predictor_order + 1) - 1
+    return dataclasses.replace(other, n_evals=n_evals, time_s=time.perf_counter() - ctx.t0, notes=other.notes + (
         f"heading check decided: switched to the other heading ({sums}); the frames before were estimated facing "
         "the wrong way",))

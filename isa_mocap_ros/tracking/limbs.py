@@ -20,7 +20,7 @@ For the legs the tracker draws the hinge only (``twist=False``, the thigh kept):
 search box cannot follow — the CMU walk's kick straightens and re-bends the knee by 25-30° per frame
 — is caught by a knee proposal, while redrawing the hip's twist as well lost a right leg after the
 kick in 1 of 16 seeds (its knee 0.5 m off to the end); a leg folded in the prediction gets the
-twist as well (``TrackerConfig.limb_hinge_limbs``).
+twist as well (``TrackerConfig.stages.limb_hinge_limbs``).
 
 A limb that moves fast is trailed by the search (its box and spreads are centred on a damped
 prediction): **extrapolated proposals** carry the limb's angles further along the motion the frame's

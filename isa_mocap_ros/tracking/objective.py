@@ -1,34 +1,72 @@
-"""The tracker's objective as the optimizers see it: data term plus prior (and the frame's keypoint
-term), with ``restrict``."""
+"""The tracker's objective as the optimizers see it (:class:`TotalEnergy`): data term plus the Parzen prior
+``−η ln p(x)`` (13.33) and the frame's weighted keypoint term (13.30-13.31), with ``restrict``; and the
+frame's keypoint term from the detections (:func:`keypoint_energy`).
+"""
 from __future__ import annotations
 
 import numpy as np
 
+__all__ = ["TotalEnergy", "keypoint_energy"]
+
 
 class TotalEnergy:
-    """``tracker.total_energy`` with ``restrict`` (:meth:`Tracker.restricted_energy`), which
-    ``Hierarchical`` asks for when a partition starts."""
+    """``E(X) = data(X) − η ln p(X) + w · keypoints(X)`` of poses ``X (n, D)`` under the tracker's current
+    masks: the prior when ``TrackerConfig.objective.prior_eta > 0`` and the tracker has one, the keypoint
+    term ``keypoint_term`` (or None) weighted by ``TrackerConfig.keypoints.keypoint_weight``.
+    ``restrict(x_base, coords)`` gives the same values for poses equal to ``x_base`` outside ``coords``
+    (the data term's ``restrict``; None when it has none), which ``Hierarchical`` asks for per partition."""
 
-    def __init__(self, tracker) -> None:
+    def __init__(self, tracker, keypoint_term=None) -> None:
         self.tracker = tracker
+        self.keypoint_term = keypoint_term
+
+    @property
+    def prior_active(self) -> bool:
+        tr = self.tracker
+        return tr.prior is not None and tr.config.objective.prior_eta > 0
+
+    @property
+    def extra_terms(self) -> bool:
+        """Whether a term beside the silhouette energy is active (prior, keypoints): the search then runs
+        through the optimizer protocol on this objective, not the compiled path."""
+        return self.prior_active or self.keypoint_term is not None
+
+    def add_terms(self, X: np.ndarray, E: np.ndarray) -> np.ndarray:
+        """``E`` (the data term of ``X``) plus the prior and the weighted keypoint term, if active."""
+        tr = self.tracker
+        if tr.prior is not None and tr.config.objective.prior_eta > 0:
+            E = E + tr.prior.energy(X, eta=tr.config.objective.prior_eta)
+        if self.keypoint_term is not None:
+            E = E + tr.config.keypoints.keypoint_weight * self.keypoint_term(X)
+        return E
 
     def __call__(self, X) -> np.ndarray:
-        return self.tracker.total_energy(X)
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        return self.add_terms(X, np.asarray(self.tracker.energy(X), dtype=float))
 
     def restrict(self, x_base, coords):
-        return self.tracker.restricted_energy(x_base, coords)
+        restrict = getattr(self.tracker.energy, "restrict", None)
+        data = restrict(x_base, coords) if callable(restrict) else None
+        if data is None:
+            return None
+
+        def total(X):
+            X = np.atleast_2d(np.asarray(X, dtype=float))
+            return self.add_terms(X, np.asarray(data(X), dtype=float))
+        return total
 
 
 def keypoint_energy(tr, keypoints) -> tuple[object, str | None]:
     """The frame's :class:`~isa_mocap_ros.energy.KeypointEnergy` (or None) and a note on it."""
-    if keypoints is None or tr.config.keypoint_weight <= 0:
+    if keypoints is None or tr.config.keypoints.keypoint_weight <= 0:
         return None, None
     from isa_mocap_ros.energy import KeypointEnergy
+
     try:
-        term = KeypointEnergy(tr.model, tr.cameras, keypoints, sigma_m=tr.config.keypoint_sigma_m)
+        term = KeypointEnergy(tr.model, tr.cameras, keypoints, sigma_m=tr.config.keypoints.keypoint_sigma_m)
     except ValueError as exc:
         return None, f"keypoints ignored: {exc}"
     if term.n_correspondences == 0:
         return None, "keypoints: none usable (no detection above the confidence floor)"
     return term, (f"keypoints: {term.n_correspondences} in {len(set(term.views.tolist()))} views, "
-                  f"weight {tr.config.keypoint_weight:g}")
+                  f"weight {tr.config.keypoints.keypoint_weight:g}")

@@ -16,7 +16,7 @@ from .config import MIN_LIMB_PROPOSALS
 
 @dataclass(frozen=True)
 class FrameBudget:
-    """What one hypothesis may spend on a frame: ``evals`` evaluations (``TrackerConfig.evals``, or a heading
+    """What one hypothesis may spend on a frame: ``evals`` evaluations (``TrackerConfig.search.evals``, or a heading
     hypothesis of a heading check alike) and whether the contour stage runs (``step(contour_stage=)``).
     Every stage sizes its share from it; the configuration is never changed mid-step."""
 
@@ -28,8 +28,8 @@ def limb_share(tr, n_limbs: int, n: int | None = None) -> int:
     """Evaluations of the limb stage for ``n_limbs`` limbs with ``n`` drawn proposals each (default
     ``limb_proposals``): the drawn and the extrapolated proposals, the starting pose and the final
     pose."""
-    n = tr.config.limb_proposals if n is None else n
-    return (n + len(tr.config.limb_extrapolations)) * n_limbs + 2 if n_limbs else 0
+    n = tr.config.stages.limb_proposals if n is None else n
+    return (n + len(tr.config.stages.limb_extrapolations)) * n_limbs + 2 if n_limbs else 0
 
 
 def limb_proposals(tr, n_limbs: int, budget: FrameBudget) -> int:
@@ -38,8 +38,8 @@ def limb_proposals(tr, n_limbs: int, budget: FrameBudget) -> int:
     if not n_limbs:
         return 0
     cfg = tr.config
-    return max(0, min(cfg.limb_proposals,
-                      (budget.evals // 10 - 2) // n_limbs - len(cfg.limb_extrapolations)))
+    return max(0, min(cfg.stages.limb_proposals,
+                      (budget.evals // 10 - 2) // n_limbs - len(cfg.stages.limb_extrapolations)))
 
 
 def limb_stage(tr, notes, pred, budget: FrameBudget) -> tuple[list[str], list[str], int]:
@@ -49,20 +49,20 @@ def limb_stage(tr, notes, pred, budget: FrameBudget) -> tuple[list[str], list[st
     ``pred`` (``limb_fold_deg``, while each keeps ``limb_proposals`` within the tenth); a folded
     limb gets twist-and-hinge proposals even if it is in ``limb_hinge_limbs``."""
     cfg = tr.config
-    have = {limb.name for limb in tr._limbs.limbs}
-    limbs = [name for name in cfg.limb_proposal_limbs if name in have]
-    if cfg.limb_proposals <= 0:
+    have = {limb.name for limb in tr.limb_move.limbs}
+    limbs = [name for name in cfg.stages.limb_proposal_limbs if name in have]
+    if cfg.stages.limb_proposals <= 0:
         return [], [], 0
-    if limbs and limb_proposals(tr, len(limbs), budget) < min(MIN_LIMB_PROPOSALS, cfg.limb_proposals):
+    if limbs and limb_proposals(tr, len(limbs), budget) < min(MIN_LIMB_PROPOSALS, cfg.stages.limb_proposals):
         if notes is not None:
-            notes.append(f"limb stage skipped: fewer than {min(MIN_LIMB_PROPOSALS, cfg.limb_proposals)} "
+            notes.append(f"limb stage skipped: fewer than {min(MIN_LIMB_PROPOSALS, cfg.stages.limb_proposals)} "
                          f"proposals per limb fit in a tenth of the frame budget ({budget.evals}; "
                          f"{len(limbs)} limbs)")
         return [], [], 0
     folded = set()
-    if pred is not None and 0 < cfg.limb_fold_deg < 180:
-        fold = np.deg2rad(cfg.limb_fold_deg)
-        for limb in tr._limbs.limbs:
+    if pred is not None and 0 < cfg.stages.limb_fold_deg < 180:
+        fold = np.deg2rad(cfg.stages.limb_fold_deg)
+        for limb in tr.limb_move.limbs:
             if abs(float(pred[limb.hinge_dof])) <= fold:
                 continue
             if limb.name in limbs:
@@ -73,7 +73,7 @@ def limb_stage(tr, notes, pred, budget: FrameBudget) -> tuple[list[str], list[st
                 if notes is not None:
                     notes.append(f"limb stage: {limb.name} folded in the prediction "
                                  f"({np.rad2deg(float(pred[limb.hinge_dof])):.0f} deg), proposals for it too")
-    hinge = [name for name in limbs if name in cfg.limb_hinge_limbs and name not in folded]
+    hinge = [name for name in limbs if name in cfg.stages.limb_hinge_limbs and name not in folded]
     return limbs, hinge, limb_proposals(tr, len(limbs), budget)
 
 
@@ -82,8 +82,8 @@ def flat_algorithm(tr) -> tuple[str, dict]:
     from isa_mocap_ros.optim import inner_optimizer
 
     cfg = tr.config
-    name = inner_optimizer(cfg.optimizer) or cfg.optimizer
-    params = {k: v for k, v in cfg.params().items()
+    name = inner_optimizer(cfg.search.optimizer) or cfg.search.optimizer
+    params = {k: v for k, v in cfg.search.params().items()
               if k not in ("partitions", "optimizer", "initial_population", "evals_per_partition",
                            "whole_generations")}
     return name, params
@@ -95,19 +95,19 @@ def flat_generation(tr, d: int) -> int:
     only, so it is computed once per ``d``)."""
     from isa_mocap_ros.optim import make_optimizer
 
-    if d not in tr._flat_generations:
+    if d not in tr.generation_sizes:
         name, params = flat_algorithm(tr)
-        tr._flat_generations[d] = make_optimizer(name, np.zeros(d), np.ones(d), rng=np.random.default_rng(0),
+        tr.generation_sizes[d] = make_optimizer(name, np.zeros(d), np.ones(d), rng=np.random.default_rng(0),
                                                    **params).generation_size
-    return tr._flat_generations[d]
+    return tr.generation_sizes[d]
 
 
 def pelvis_share(tr, notes, budget: FrameBudget) -> int | None:
     """Evaluations of the pelvis stage, or None (off, no root children, or below one generation + 1)."""
     cfg = tr.config
-    if cfg.pelvis_fraction <= 0 or tr._pelvis_reaim is None or not tr._pelvis_reaim.ops:
+    if cfg.stages.pelvis_fraction <= 0 or tr.pelvis_reaim is None or not tr.pelvis_reaim.ops:
         return None
-    share = int(budget.evals * cfg.pelvis_fraction)
+    share = int(budget.evals * cfg.stages.pelvis_fraction)
     n = flat_generation(tr, 6)
     if share - 1 < n:       # one evaluation is kept for the final pose
         if notes is not None:
@@ -123,10 +123,10 @@ def torso_share(tr, notes, budget: FrameBudget) -> int | None:
     from isa_mocap_ros.optim import inner_optimizer
 
     cfg = tr.config
-    if cfg.torso_fraction <= 0 or tr._torso is None or inner_optimizer(cfg.optimizer) is None:
+    if cfg.stages.torso_fraction <= 0 or tr.torso_reaim is None or inner_optimizer(cfg.search.optimizer) is None:
         return None
-    share = int(budget.evals * cfg.torso_fraction)
-    n = flat_generation(tr, tr._torso.coords.size)
+    share = int(budget.evals * cfg.stages.torso_fraction)
+    n = flat_generation(tr, tr.torso_reaim.coords.size)
     if share - 2 < n:       # the start's and the result's energies
         if notes is not None:
             notes.append(f"torso stage skipped: its share ({share} evaluations) is below one generation "
@@ -137,7 +137,7 @@ def torso_share(tr, notes, budget: FrameBudget) -> int | None:
 
 def contour_extra(tr) -> int:
     """The contour stage's extra iterations on ``contour_extra_partitions`` (0 without such partitions)."""
-    return tr.config.contour_extra_iterations if tr._contour_extra_coords.size else 0
+    return tr.config.stages.contour_extra_iterations if tr.contour_extra_coords.size else 0
 
 
 def contour_share(tr, notes, budget: FrameBudget) -> int | None:
@@ -146,10 +146,10 @@ def contour_share(tr, notes, budget: FrameBudget) -> int | None:
     + 2 for the energies of the pose before and after), or None (off, or above a quarter of the
     frame budget, or no contour stage this frame)."""
     cfg = tr.config
-    if cfg.contour_iterations <= 0 or not budget.contour:
+    if cfg.stages.contour_iterations <= 0 or not budget.contour:
         return None
-    share = cfg.contour_iterations * (tr.model.dof + 1) \
-        + contour_extra(tr) * (tr._contour_extra_coords.size + 1) + 2
+    share = cfg.stages.contour_iterations * (tr.model.dof + 1) \
+        + contour_extra(tr) * (tr.contour_extra_coords.size + 1) + 2
     if 4 * share > budget.evals:
         if notes is not None:
             notes.append(f"contour stage skipped: its share ({share} evaluations) is above a quarter of the "

@@ -279,7 +279,7 @@ def calibrate_shape(dof: int, cameras: Sequence, frames: Sequence[tuple[int, Seq
         Consecutive frames from the first the person is in view, masks one per camera (None for a
         missing view); the first ``config.window_frames`` are used.
     tracker_config : TrackerConfig, optional
-        Settings of the pose fits (default ``TrackerConfig(seed=config.seed)``).
+        Settings of the pose fits (default ``TrackerConfig.from_flat(seed=config.seed)``).
     config : ShapeCalibrationConfig
     base_shape : mapping or path, optional
         Start and reference of the factors (default ``config/body/default.yaml``).
@@ -303,7 +303,7 @@ def calibrate_shape(dof: int, cameras: Sequence, frames: Sequence[tuple[int, Seq
         raise ShapeCalibrationError("frames: expected at least one frame with masks, received none")
     base = default_shape() if base_shape is None else (
         load_shape(base_shape) if not isinstance(base_shape, Mapping) else dict(base_shape))
-    tcfg = tracker_config if tracker_config is not None else TrackerConfig(seed=config.seed)
+    tcfg = tracker_config if tracker_config is not None else TrackerConfig.from_flat(seed=config.seed)
     say = progress or (lambda s: None)
     notes: list[str] = []
 

@@ -1,8 +1,8 @@
 """The frame's stage searches after the main search (``docs/tracking.md``): the pelvis stage
 (:func:`refit_pelvis`), the torso stage (:func:`refit_torso`), the limb stage (:func:`propose_limbs`)
-and the contour stage (:func:`fit_contours`). Each takes the
-tracker (its model, moves, energies) and a pose, and returns the pose it found with its energy and the
-evaluations it spent.
+and the contour stage (:func:`fit_contours`). Each takes the tracker (its model, moves, energy), the frame
+(:class:`~.frame_context.FrameContext`: its masks and objective) and a pose, and returns the pose it found with
+its energy and the evaluations it spent.
 """
 from __future__ import annotations
 
@@ -14,40 +14,40 @@ from isa_mocap_ros.optim import compiled_search
 
 from . import plan
 from .contour import ContourFitInfo
-from .config import CONTOUR_KEEP_TOLERANCE, TrackerError, _whole_generations
+from .config import CONTOUR_KEEP_TOLERANCE, TrackerError, whole_generations
 
 
-def fit_contours(tr, x, *, iterations: int | None = None, extra_iterations: int | None = None):
-    """The contour stage on pose ``x`` under the current masks (:class:`~.contour.ContourFit`):
-    ``config.contour_iterations`` (or ``iterations``) steps over all coordinates, then
-    ``config.contour_extra_iterations`` (or ``extra_iterations``) over the coordinates of
-    ``config.contour_extra_partitions`` alone, from that pose's contour points (rendered again);
+def fit_contours(tr, ctx, x, *, iterations: int | None = None, extra_iterations: int | None = None):
+    """The contour stage on pose ``x`` under the frame's masks ``ctx.masks`` (:class:`~.contour.ContourFit`):
+    ``config.stages.contour_iterations`` (or ``iterations``) steps over all coordinates, then
+    ``config.stages.contour_extra_iterations`` (or ``extra_iterations``) over the coordinates of
+    ``config.stages.contour_extra_partitions`` alone, from that pose's contour points (rendered again);
     returns ``(pose, its energy, evaluations charged, ContourFitInfo)`` (the info of both fits
     together). The fitted pose replaces ``x`` unless its silhouette energy is more than
     :data:`CONTOUR_KEEP_TOLERANCE` above ``x``'s (both evaluated in one batch: a mask contour bent by an
     occluder or noise can pull the fit away); the evaluations charged are ``(D + 1)`` per iteration
     taken over all coordinates, ``(k + 1)`` per iteration over ``k`` of them, + 2."""
-    if tr.track.masks_now is None:
+    if ctx.masks is None:
         raise TrackerError("fit_contours: no masks yet (call step first)")
-    iterations = tr.config.contour_iterations if iterations is None else iterations
+    iterations = tr.config.stages.contour_iterations if iterations is None else iterations
     extra = plan.contour_extra(tr) if extra_iterations is None else extra_iterations
     x = np.asarray(x, dtype=np.float64)
-    tr._contour.set_masks(tr.track.masks_now)
-    y, info = tr._contour.fit(x, iterations=iterations)
+    tr.contour_fit.set_masks(ctx.masks)
+    y, info = tr.contour_fit.fit(x, iterations=iterations)
     n = info.iterations * (tr.model.dof + 1) + 2
-    if extra and tr._contour_extra_coords.size and not info.stopped:
-        y, more = tr._contour.fit(y, iterations=extra, coords=tr._contour_extra_coords,
+    if extra and tr.contour_extra_coords.size and not info.stopped:
+        y, more = tr.contour_fit.fit(y, iterations=extra, coords=tr.contour_extra_coords,
                                     render_each=False)
-        n += more.iterations * (tr._contour_extra_coords.size + 1)
+        n += more.iterations * (tr.contour_extra_coords.size + 1)
         info = ContourFitInfo(info.iterations + more.iterations, info.correspondences + more.correspondences,
                               info.rms_px + more.rms_px, more.stopped)
-    e_x, e_y = (float(v) for v in tr.total_energy(np.stack([x, y])))
+    e_x, e_y = (float(v) for v in ctx.objective(np.stack([x, y])))
     return (y, e_y, n, info) if e_y < e_x + CONTOUR_KEEP_TOLERANCE * abs(e_x) else (x, e_x, n, info)
 
 
-def refit_pelvis(tr, x, *, evals: int, rng: np.random.Generator, optimizer: str | None = None,
+def refit_pelvis(tr, ctx, x, *, evals: int, rng: np.random.Generator, optimizer: str | None = None,
                  params: Mapping | None = None, bounds=None, spread=None) -> tuple[np.ndarray, float, int]:
-    """Re-fit the 6 root DOF of pose ``x`` under the current masks with the limbs below the root
+    """Re-fit the 6 root DOF of pose ``x`` on the frame's objective ``ctx.objective`` with the limbs below the root
     kept in place (:class:`~.reaim.ReaimMove`: the thighs swung about the knees, the lower spine about
     the chest); returns ``(pose, its energy, evaluations)``.
 
@@ -59,7 +59,7 @@ def refit_pelvis(tr, x, *, evals: int, rng: np.random.Generator, optimizer: str 
     from isa_mocap_ros.optim import make_optimizer, minimize
 
     m = tr.model
-    if tr._pelvis_reaim is None:
+    if tr.pelvis_reaim is None:
         raise TrackerError(f"refit_pelvis: model {m.name} has no root partition")
     x = np.asarray(x, dtype=float)
     lo, hi = bounds if bounds is not None else tr.search_box(x)[:2]
@@ -67,24 +67,24 @@ def refit_pelvis(tr, x, *, evals: int, rng: np.random.Generator, optimizer: str 
     if optimizer is None:
         optimizer, params = plan.flat_algorithm(tr)
     x1 = np.clip(x, lo, hi)
-    move = tr._pelvis_reaim.around(x1)
+    move = tr.pelvis_reaim.around(x1)
 
     def energy(roots):
-        return tr.total_energy(np.clip(move(roots), m.lower, m.upper))
+        return ctx.objective(np.clip(move(roots), m.lower, m.upper))
 
     opt = make_optimizer(optimizer, x1[:6], np.array(spread[:6]), rng=rng,
                          bounds=(lo[:6], hi[:6]), rotation_blocks=((3, 4, 5),), **dict(params or {}))
-    evals_search = _whole_generations(int(evals) - 1, opt.generation_size)
-    r = compiled_search.search(opt, energy, evals_search) if tr._compiled_search else None
+    evals_search = whole_generations(int(evals) - 1, opt.generation_size)
+    r = compiled_search.search(opt, energy, evals_search) if tr.use_compiled_search else None
     if r is None:                                 # not covered by the compiled path (the same numbers)
         r = minimize(opt, energy, max_evals=evals_search)
     out = np.clip(move(r.x)[0], m.lower, m.upper)
-    return out, float(tr.total_energy(out[None, :])[0]), r.n_evals + 1
+    return out, float(ctx.objective(out[None, :])[0]), r.n_evals + 1
 
 
-def refit_torso(tr, x, *, evals: int, rng: np.random.Generator, energy: float | None = None, bounds=None,
+def refit_torso(tr, ctx, x, *, evals: int, rng: np.random.Generator, energy: float | None = None, bounds=None,
                 spread=None) -> tuple[np.ndarray, float, int, bool]:
-    """The torso stage on pose ``x`` under the current masks: the configured algorithm's flat form
+    """The torso stage on pose ``x`` on the frame's objective ``ctx.objective``: the configured algorithm's flat form
     searches the torso partition's DOFs with the arms re-aimed (:class:`~.reaim.ReaimMove`: each
     upper arm swung about its elbow, the forearm keeping its direction), everything else held; the
     result replaces ``x`` when it lowers the energy.
@@ -98,46 +98,46 @@ def refit_torso(tr, x, *, evals: int, rng: np.random.Generator, energy: float | 
     from isa_mocap_ros.optim import make_optimizer, minimize
 
     m = tr.model
-    if tr._torso is None:
+    if tr.torso_reaim is None:
         raise TrackerError(f"refit_torso: model {m.name} has no torso partition")
     x = np.clip(np.asarray(x, dtype=float), m.lower, m.upper)
     if bounds is None or spread is None:
         box = tr.search_box(x)
         bounds = box[:2] if bounds is None else bounds
         spread = box[2] if spread is None else spread
-    c = tr._torso.coords
+    c = tr.torso_reaim.coords
     spread = np.asarray(spread, dtype=float)[c]
     lo, hi = np.minimum(bounds[0][c], x[c]), np.maximum(bounds[1][c], x[c])
     used = 0
     if energy is None:
-        energy, used = float(tr.total_energy(x[None, :])[0]), 1
-    move = tr._torso.around(x)
+        energy, used = float(ctx.objective(x[None, :])[0]), 1
+    move = tr.torso_reaim.around(x)
     # the poses differ from x in the torso and the re-aimed joints only: the restricted energy (same values)
-    changed = np.union1d(c, [d for j in tr._torso.ops for d in m.joint_dofs[j]])
-    data = tr.restricted_energy(x, changed) or tr.total_energy
+    changed = np.union1d(c, [d for j in tr.torso_reaim.ops for d in m.joint_dofs[j]])
+    data = ctx.objective.restrict(x, changed) or ctx.objective
 
     def energy_of(C):
         return data(np.clip(move(C), m.lower, m.upper))
 
     name, params = plan.flat_algorithm(tr)
     opt = make_optimizer(name, x[c], spread, rng=rng, bounds=(lo, hi), **params)
-    evals_search = _whole_generations(int(evals) - used - 1, opt.generation_size)
-    r = compiled_search.search(opt, energy_of, evals_search) if tr._compiled_search else None
+    evals_search = whole_generations(int(evals) - used - 1, opt.generation_size)
+    r = compiled_search.search(opt, energy_of, evals_search) if tr.use_compiled_search else None
     if r is None:
         r = minimize(opt, energy_of, max_evals=evals_search)
     y = np.clip(move(r.x[None, :])[0], m.lower, m.upper)
-    ey = float(tr.total_energy(y[None, :])[0])
+    ey = float(ctx.objective(y[None, :])[0])
     used += r.n_evals + 1
     if ey < energy:
         return y, ey, used, True
     return x, float(energy), used, False
 
 
-def propose_limbs(tr, x, *, n: int, rng: np.random.Generator, limbs: Sequence[str] | None = None,
+def propose_limbs(tr, ctx, x, *, n: int, rng: np.random.Generator, limbs: Sequence[str] | None = None,
                   hinge_only: Sequence[str] = (), last=None) -> tuple[np.ndarray, float, int, list[str]]:
-    """The limb stage on pose ``x`` under the current masks (:class:`~.limbs.LimbMove`): ``n``
+    """The limb stage on pose ``x`` on the frame's objective ``ctx.objective`` (:class:`~.limbs.LimbMove`): ``n``
     twist-and-hinge proposals per limb (hinge proposals only for the limbs in ``hinge_only``) and,
-    given the previous frame's pose ``last``, the ``config.limb_extrapolations`` proposals,
+    given the previous frame's pose ``last``, the ``config.stages.limb_extrapolations`` proposals,
     evaluated in one batch with ``x`` itself; each limb whose best proposal has a lower energy than
     ``x`` takes that proposal's angles.
 
@@ -146,21 +146,21 @@ def propose_limbs(tr, x, *, n: int, rng: np.random.Generator, limbs: Sequence[st
     not among the batch's when two limbs changed), so the stage spends exactly its share.
     """
     m = tr.model
-    names = [limb.name for limb in tr._limbs.limbs] if limbs is None else list(limbs)
-    chosen = [tr._limbs.limb(name) for name in names]
+    names = [limb.name for limb in tr.limb_move.limbs] if limbs is None else list(limbs)
+    chosen = [tr.limb_move.limb(name) for name in names]
     x = np.clip(np.asarray(x, dtype=float), m.lower, m.upper)
     if int(n) < 1 or not chosen:
-        return x, float(tr.total_energy(x[None, :])[0]), 1, []
+        return x, float(ctx.objective(x[None, :])[0]), 1, []
     n = int(n)
-    factors = tr.config.limb_extrapolations if last is not None else ()
-    w = tr.config.limb_hinge_window_deg
+    factors = tr.config.stages.limb_extrapolations if last is not None else ()
+    w = tr.config.stages.limb_hinge_window_deg
     window = np.deg2rad(w) if 0 < w < 180 else None
-    batches = [tr._limbs.draw(x, limb, n, rng, twist=limb.name not in hinge_only, window=window)
+    batches = [tr.limb_move.draw(x, limb, n, rng, twist=limb.name not in hinge_only, window=window)
                for limb in chosen]
     if factors:
-        batches = [np.vstack([P, tr._limbs.extrapolate(x, last, limb, factors)])
+        batches = [np.vstack([P, tr.limb_move.extrapolate(x, last, limb, factors)])
                    for limb, P in zip(chosen, batches)]
-    E = tr.total_energy(np.vstack([x[None, :]] + batches))
+    E = ctx.objective(np.vstack([x[None, :]] + batches))
     out, changed = x.copy(), []
     size = n + len(factors)
     for k, (limb, P) in enumerate(zip(chosen, batches)):
@@ -169,4 +169,4 @@ def propose_limbs(tr, x, *, n: int, rng: np.random.Generator, limbs: Sequence[st
         if Ek[i] < E[0]:
             out[limb.dofs] = P[i, limb.dofs]
             changed.append(limb.name)
-    return out, float(tr.total_energy(out[None, :])[0]), size * len(chosen) + 2, changed
+    return out, float(ctx.objective(out[None, :])[0]), size * len(chosen) + 2, changed

@@ -23,13 +23,15 @@ from isa_mocap_ros.geometry import nearest_rotvec
 
 from isa_mocap_ros.optim import compiled_search
 
-from . import first_frame, frame_masks, frame_prediction, heading, objective, plan, stages
+from . import first_frame, frame_masks, frame_prediction, heading, objective, plan
+from . import stages as frame_stages
 from .config import (DEFAULT_PARAMS, JOINT_SPREAD_RAD, ROOT_ROTATION_RADIUS_RAD, ROOT_ROTATION_SPREAD_RAD,
                      ROOT_TRANSLATION_SPREAD_M, PREDICTORS, FrameResult, TrackerConfig, TrackerError,
-                     _partition_coords, _whole_generations, frame_rng)
+                     frame_rng, partition_coords, whole_generations)
 from .contour import ContourFit
+from .frame_context import FrameContext
 from .gate import visible_shares
-from .init import InitError, initial_pose
+from .init import InitError
 from .limbs import LimbMove
 from .objective import TotalEnergy
 from .plan import FrameBudget
@@ -38,14 +40,14 @@ from .predict import (ArPredictor, ConstantPosePredictor, ConstantVelocityPredic
 from .reaim import ReaimMove
 from .state import HeadingCheckState, TrackState
 
-__all__ = ["TrackerError", "TrackerConfig", "FrameResult", "FrameBudget", "Tracker", "make_tracker", "DEFAULT_PARAMS",
-           "PREDICTORS", "frame_rng"]
+__all__ = ["TrackerError", "TrackerConfig", "FrameResult", "FrameBudget", "FrameContext", "Tracker", "make_tracker",
+           "DEFAULT_PARAMS", "PREDICTORS", "frame_rng"]
 
 
 def _make_predictor(config: TrackerConfig):
-    if config.predictor == "ar":
-        return ArPredictor(order=config.predictor_order)
-    if config.predictor == "constant_pose":
+    if config.prediction.predictor == "ar":
+        return ArPredictor(order=config.prediction.predictor_order)
+    if config.prediction.predictor == "constant_pose":
         return ConstantPosePredictor()
     return ConstantVelocityPredictor()
 
@@ -60,18 +62,18 @@ class Tracker:
         One per view, in view order.
     config : TrackerConfig
     prior : ParzenPrior, optional
-        Used when ``config.prior_eta > 0`` (else ``config.prior_file`` is loaded).
+        Used when ``config.objective.prior_eta > 0`` (else ``config.objective.prior_file`` is loaded).
     energy : object, optional
         Data term with ``set_masks(masks)`` and ``__call__(X (n, D)) -> (n,)``; default
         :class:`~isa_mocap_ros.energy.silhouette.SilhouetteEnergy` with the config's method and
         downsampling.
     predictor : object, optional
         With ``update(x)``, ``predict()``, ``reset()`` (e.g. :class:`.published.PublishedPredictor`
-        to reproduce the node network's numbers); default from ``config.predictor``.
+        to reproduce the node network's numbers); default from ``config.prediction.predictor``.
 
     Examples
     --------
-    >>> tracker = Tracker(model, rig.cameras, TrackerConfig(seed=1))      # doctest: +SKIP
+    >>> tracker = Tracker(model, rig.cameras, TrackerConfig.from_flat(seed=1))      # doctest: +SKIP
     >>> tracker.initialize(masks=first_masks)                              # doctest: +SKIP
     >>> for k, masks in enumerate(frames):                                 # doctest: +SKIP
     ...     r = tracker.step(masks, k); print(r.x[:3], r.energy, r.notes)
@@ -91,14 +93,14 @@ class Tracker:
         self.cameras = cams
         self.config = config
         self.prior = None
-        if config.prior_eta > 0:
-            if prior is None and config.prior_file:
+        if config.objective.prior_eta > 0:
+            if prior is None and config.objective.prior_file:
                 from isa_mocap_ros.energy.prior import ParzenPrior
 
-                prior = ParzenPrior.load(config.prior_file)
+                prior = ParzenPrior.load(config.objective.prior_file)
             if prior is None:
-                raise TrackerError("prior: expected a ParzenPrior (prior= or config.prior_file) when prior_eta > 0, "
-                                   "received none")
+                raise TrackerError("prior: expected a ParzenPrior (prior= or config.objective.prior_file) when "
+                                   "prior_eta > 0, received none")
             if getattr(prior, "n_dof", model.dof) != model.dof:
                 raise TrackerError(f"prior: expected a prior over {model.dof}-DOF poses, received one over "
                                    f"{prior.n_dof}")
@@ -107,44 +109,47 @@ class Tracker:
         from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
         if energy is None:
 
-            energy = SilhouetteEnergy(model, cams, None, method=config.energy, downsample=config.downsample,
-                                      n_model_points=config.n_model_points, n_mask_points=config.n_mask_points,
-                                      rng=np.random.default_rng([config.seed, 2**32 - 1]))
+            obj = config.objective
+            energy = SilhouetteEnergy(model, cams, None, method=obj.energy, downsample=obj.downsample,
+                                      n_model_points=obj.n_model_points, n_mask_points=obj.n_mask_points,
+                                      rng=np.random.default_rng([config.search.seed, 2**32 - 1]))
         if not (callable(energy) and hasattr(energy, "set_masks")):
             raise TrackerError(f"energy: expected an object with set_masks() and __call__, received "
                                f"{type(energy).__name__}")
         self.energy = energy
         # the automatic initialization's grid scores rough standing poses: with the fine sample
         # sizes it picked a heading 180 deg off on bags/demo, with the library's coarse ones not
-        self._init_energy = None
-        if own_energy and config.energy == "fast":
-            self._init_energy = SilhouetteEnergy(model, cams, None, method="fast", downsample=config.downsample,
-                                                 rng=np.random.default_rng([config.seed, 2**32 - 2]))
+        self.init_energy = None
+        if own_energy and config.objective.energy == "fast":
+            self.init_energy = SilhouetteEnergy(model, cams, None, method="fast",
+                                                downsample=config.objective.downsample,
+                                                rng=np.random.default_rng([config.search.seed, 2**32 - 2]))
         # what the frame carries to the next (last estimate, predictor, masks, root history, clock)
         self.track = TrackState(_make_predictor(config) if predictor is None else predictor)
-        self._pelvis_reaim = ReaimMove(model, [0]) if "root" in model.partitions else None
-        # the torso stage's move: the joints of the torso partition (e.g. spine and neck), the arms re-aimed
+        # the stages' moves (tracking/stages.py): the pelvis stage's (the root, the limbs below it re-aimed), the
+        # torso stage's (the joints of the torso partition, e.g. spine and neck, the arms re-aimed), the limb
+        # stage's proposals, the contour stage's fit and the coordinates of its extra iterations
+        self.pelvis_reaim = ReaimMove(model, [0]) if "root" in model.partitions else None
         torso_joints = sorted({int(model.dof_joint[d]) for d in model.partitions.get("torso", ())})
-        self._torso = ReaimMove(model, torso_joints) if torso_joints else None
-        self._flat_generations: dict[int, int] = {}     # _flat_generation's cache
-        self._limbs = LimbMove(model)
-        self._contour = ContourFit(model, self.cameras, n_points=config.contour_points,
-                                   max_px=config.contour_max_px)
-        self._contour_extra_coords = _partition_coords(model, config.contour_extra_partitions)
-        missing = [k for k in model.partitions if k not in config.partition_order]
+        self.torso_reaim = ReaimMove(model, torso_joints) if torso_joints else None
+        self.limb_move = LimbMove(model)
+        self.contour_fit = ContourFit(model, self.cameras, n_points=config.stages.contour_points,
+                                      max_px=config.stages.contour_max_px)
+        self.contour_extra_coords = partition_coords(model, config.stages.contour_extra_partitions)
+        self.generation_sizes: dict[int, int] = {}     # plan.flat_generation's cache, by coordinate count
+        missing = [k for k in model.partitions if k not in config.search.partition_order]
         if missing:
             raise TrackerError(f"partition_order: expected every partition of model {model.name} "
                                f"({', '.join(model.partitions)}), missing {', '.join(missing)}")
-        self._partitions = [np.asarray(model.partitions[k]) for k in config.partition_order if k in model.partitions]
+        # the hierarchical optimizers' partitions, in config.search.partition_order
+        self.partitions = [np.asarray(model.partitions[k]) for k in config.search.partition_order
+                           if k in model.partitions]
         self.frames = 0
-        self._contour_now = True               # step(contour_stage=...) of the frame being tracked
-        # the heading check after an automatic initialization (config.init_confirm_frames)
+        # the heading check after an automatic initialization (config.heading.init_confirm_frames)
         self.heading_check = HeadingCheckState()
         # h-isa on the fast energy runs compiled per partition (optim/compiled_search.py, the same
         # numbers as the optimizer protocol); False: always through the protocol (tests compare both)
-        self._compiled_search = True
-        # the keypoint term of the frame being tracked (config.keypoint_weight; set by step/initialize)
-        self._keypoint_term = None
+        self.use_compiled_search = True
 
     # ------------------------------------------------------------------ state
     @property
@@ -184,48 +189,29 @@ class Tracker:
         self.heading_check = HeadingCheckState()
 
     @property
-    def _has_heading(self) -> bool:
+    def has_heading(self) -> bool:
         """Whether the model's root turns by a 3-DOF rotation vector (a heading to check)."""
         return 3 in {len(b) for b in self.model.rotation_blocks}
 
-    def _prior_active(self) -> bool:
-        return self.prior is not None and self.config.prior_eta > 0
-
-    def _python_terms(self) -> bool:
-        """Whether a term beside the silhouette energy is active (prior, keypoints): the search then
-        runs through the optimizer protocol on :meth:`total_energy`, not the compiled path."""
-        return self._prior_active() or self._keypoint_term is not None
-
-    def _add_terms(self, X: np.ndarray, E: np.ndarray) -> np.ndarray:
-        """``E`` plus the prior ``−η ln p`` (13.33) and the frame's weighted keypoint term, if active."""
-        if self.prior is not None and self.config.prior_eta > 0:
-            E = E + self.prior.energy(X, eta=self.config.prior_eta)
-        if self._keypoint_term is not None:
-            E = E + self.config.keypoint_weight * self._keypoint_term(X)
-        return E
-
     def total_energy(self, X) -> np.ndarray:
-        """Data term plus the prior ``−η ln p`` (13.33) and the frame's keypoint term (if any) of poses
-        ``(n, D)`` under the current masks."""
-        X = np.atleast_2d(np.asarray(X, dtype=float))
-        return self._add_terms(X, np.asarray(self.energy(X), dtype=float))
+        """Data term plus the prior ``−η ln p`` (13.33) of poses ``(n, D)`` under the current masks
+        (:class:`.objective.TotalEnergy`; a step's own objective adds its keypoint term)."""
+        return TotalEnergy(self)(X)
 
     def restricted_energy(self, x_base, coords):
-        """:meth:`total_energy` for poses equal to ``x_base`` outside ``coords``, the same values: the
-        data term's ``restrict`` (``SilhouetteEnergy.restrict``) plus the prior on the full poses; None
-        when the data term has no ``restrict``. ``Hierarchical`` asks for it per partition."""
-        restrict = getattr(self.energy, "restrict", None)
-        data = restrict(x_base, coords) if callable(restrict) else None
-        if data is None:
-            return None
+        """:meth:`total_energy` for poses equal to ``x_base`` outside ``coords``, the same values (None when the
+        data term has no ``restrict``); see :meth:`.objective.TotalEnergy.restrict`."""
+        return TotalEnergy(self).restrict(x_base, coords)
 
-        def total(X):
-            X = np.atleast_2d(np.asarray(X, dtype=float))
-            return self._add_terms(X, np.asarray(data(X), dtype=float))
-        return total
-
-    # ------------------------------------------------------------------ masks
-
+    def frame_context(self, frame_index: int = 0, budget: FrameBudget | None = None, *, keypoint_term=None,
+                      prediction=None) -> FrameContext:
+        """A :class:`FrameContext` for frame ``frame_index``: plan ``budget`` (default the configured
+        evaluations with the contour stage), the objective with ``keypoint_term``, the external ``prediction``;
+        its masks are the tracker's current ones until the step checks and filters the frame's."""
+        return FrameContext(frame_index, self.config.search.seed,
+                            budget if budget is not None else FrameBudget(self.config.search.evals),
+                            TotalEnergy(self, keypoint_term), external_prediction=prediction,
+                            raw_masks=self.track.masks_now, masks=self.track.masks_now, t0=time.perf_counter())
 
     # ------------------------------------------------------------------ initialization
     def initialize(self, masks: Sequence | None = None, pose=None, *, frame_index: int = 0,
@@ -234,7 +220,8 @@ class Tracker:
         return first_frame.initialize(self, masks, pose, frame_index=frame_index, keypoints=keypoints)
 
 
-    def _accept(self, x: np.ndarray) -> None:
+    def accept(self, x: np.ndarray) -> None:
+        """Take ``x`` as the frame's estimate (:meth:`.state.TrackState.accept`)."""
         self.track.accept(x)
 
     # ------------------------------------------------------------------ one frame
@@ -242,8 +229,8 @@ class Tracker:
     def search_box(self, center) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Bounds ``(lo, hi)`` and initial spreads ``(D,)`` around a (clipped) prediction."""
         cfg, m = self.config, self.model
-        radius = np.full(m.dof, cfg.search_radius_rad)
-        radius[:3] = cfg.root_translation_radius_m
+        radius = np.full(m.dof, cfg.search.search_radius_rad)
+        radius[:3] = cfg.search.root_translation_radius_m
         radius[3:6] = ROOT_ROTATION_RADIUS_RAD
         spread = np.full(m.dof, JOINT_SPREAD_RAD)
         spread[:3] = ROOT_TRANSLATION_SPREAD_M
@@ -256,36 +243,36 @@ class Tracker:
         hi[tight] = lo[tight] + 1e-6
         return lo, hi, spread
 
-    def _search(self, pred: np.ndarray, rng: np.random.Generator, budget: FrameBudget, spread_scale: float = 1.0,
-                notes=None, stages: bool = True):
+    def plan_search(self, pred: np.ndarray, rng: np.random.Generator, budget: FrameBudget,
+                    spread_scale: float = 1.0, notes=None, stages: bool = True):
         """The frame's optimizer around ``pred`` (not yet run), its share of the budget, the stages
         ``(pelvis, torso, limb stage, contour shares; None or empty = skipped)`` and the search box
-        ``(lo, hi, spread, spread without the motion term)`` (see :meth:`_optimize`)."""
+        ``(lo, hi, spread, spread without the motion term)`` (see :meth:`optimize`)."""
         from isa_mocap_ros.optim import inner_optimizer, make_optimizer
 
         cfg = self.config
         lo, hi, spread = self.search_box(pred)
         base = spread * spread_scale
         spread = base.copy()              # the motion term widens the main search's spreads only
-        if stages and cfg.spread_velocity_gain > 0 and self.track.last is not None:
-            moved = cfg.spread_velocity_gain * np.abs(pred[6:] - self.track.last[6:])
+        if stages and cfg.search.spread_velocity_gain > 0 and self.track.last is not None:
+            moved = cfg.search.spread_velocity_gain * np.abs(pred[6:] - self.track.last[6:])
             spread[6:] = np.sqrt(spread[6:] ** 2 + moved ** 2)
         x0 = np.clip(pred, lo, hi)
-        params = cfg.params()
-        if inner_optimizer(cfg.optimizer) is not None:
-            params.setdefault("partitions", self._partitions)
+        params = cfg.search.params()
+        if inner_optimizer(cfg.search.optimizer) is not None:
+            params.setdefault("partitions", self.partitions)
             # whole generations (not on the automatically initialized frame, whose runs from the heading
             # candidates keep the proportional split their pruning and heading choice were measured with)
             params.setdefault("whole_generations", stages)
         elif "initial_population" not in params:
             # first generation: the prediction itself plus draws around it (so the estimate
             # can never be worse than the prediction by the energy's own measure)
-            n = make_optimizer(cfg.optimizer, x0, spread, rng=np.random.default_rng(0), bounds=(lo, hi),
+            n = make_optimizer(cfg.search.optimizer, x0, spread, rng=np.random.default_rng(0), bounds=(lo, hi),
                                **params).generation_size
             P = np.clip(x0 + rng.standard_normal((n, x0.size)) * spread, lo, hi)
             P[0] = x0
             params["initial_population"] = P
-        opt = make_optimizer(cfg.optimizer, x0, spread, rng=rng, bounds=(lo, hi),
+        opt = make_optimizer(cfg.search.optimizer, x0, spread, rng=rng, bounds=(lo, hi),
                              rotation_blocks=self.model.rotation_blocks, **params)
         share = plan.pelvis_share(self, notes, budget) if stages else None
         torso = plan.torso_share(self, notes, budget) if stages else None
@@ -295,61 +282,63 @@ class Tracker:
             - (contour or 0)
         if torso is not None:
             # the torso stage never starves the main search: two generations per partition stay
-            need = 2 * (sum(plan.flat_generation(self, len(p)) for p in self._partitions)
-                        if inner_optimizer(cfg.optimizer) is not None else opt.generation_size)
+            need = 2 * (sum(plan.flat_generation(self, len(p)) for p in self.partitions)
+                        if inner_optimizer(cfg.search.optimizer) is not None else opt.generation_size)
             if budget < need:
                 if notes is not None:
                     notes.append(f"torso stage skipped: with its share ({torso} evaluations) the main search would "
                                  f"keep {budget}, fewer than two generations per partition ({need})")
                 budget += torso
                 torso = None
-        if inner_optimizer(cfg.optimizer) is None:
-            budget = _whole_generations(budget, opt.generation_size)     # (hierarchical: its split does this)
+        if inner_optimizer(cfg.search.optimizer) is None:
+            budget = whole_generations(budget, opt.generation_size)     # (hierarchical: its split does this)
         return opt, budget, (share, torso, limbs, contour), (lo, hi, spread, base)
 
-    def _optimize(self, pred: np.ndarray, rng: np.random.Generator, budget: FrameBudget, spread_scale: float = 1.0,
-                  notes=None, stages: bool = True):
-        """One optimizer run of the frame budget around ``pred`` (raises the optimizer's errors), then
-        the pelvis stage (``config.pelvis_fraction`` of the budget), the torso stage
-        (``config.torso_fraction``), the limb stage (``config.limb_proposals``) and the contour stage
-        (``config.contour_iterations``), each also given what the searches before it left unspent
+    def optimize(self, ctx: FrameContext, pred: np.ndarray, rng: np.random.Generator, *, spread_scale: float = 1.0,
+                 notes=None, stages: bool = True):
+        """One optimizer run of the frame's budget ``ctx.budget`` on its objective around ``pred`` (raises the
+        optimizer's errors), then
+        the pelvis stage (``config.stages.pelvis_fraction`` of the budget), the torso stage
+        (``config.stages.torso_fraction``), the limb stage (``config.stages.limb_proposals``) and the contour stage
+        (``config.stages.contour_iterations``), each also given what the searches before it left unspent
         (they run whole generations; the limb stage takes the rest as more proposals, so a frame
         leaves fewer evaluations unspent than it has limbs in the stage);
         ``spread_scale`` multiplies the initial spreads (the first frame starts from a rough pose);
         skipped stages are noted in ``notes``. The heading candidates' searches of the automatically
         initialized frame have no stage (``stages=False``): from a rough standing pose the pelvis stage
         turned the pelvis against the legs (bags/demo: 270-340 mm on the first frames, measured); its
-        polish (``config.init_polish``) then searches the winner with every stage."""
+        polish (``config.first_frame.init_polish``) then searches the winner with every stage."""
         from isa_mocap_ros.optim import minimize
 
-        opt, budget, stage_shares, (lo, hi, spread, base) = self._search(pred, rng, budget, spread_scale, notes,
-                                                                         stages)
+        opt, budget, stage_shares, (lo, hi, spread, base) = self.plan_search(pred, rng, ctx.budget, spread_scale,
+                                                                             notes, stages)
         share, torso, limbs, contour = stage_shares
-        res = compiled_search.search(opt, self.energy, budget, extra_terms=self._python_terms()) \
-            if self._compiled_search else None
+        res = compiled_search.search(opt, self.energy, budget, extra_terms=ctx.objective.extra_terms) \
+            if self.use_compiled_search else None
         if res is None:                   # not covered by the compiled path (the same numbers through the protocol)
-            res = minimize(opt, TotalEnergy(self), max_evals=budget)
+            res = minimize(opt, ctx.objective, max_evals=budget)
         # what a search leaves unspent (less than a generation: whole generations) goes to the next stage
         spare = budget - res.n_evals
         if share is not None:
-            x, e, n = self.refit_pelvis(res.x, evals=share + spare, rng=rng, bounds=(lo, hi), spread=spread)
+            x, e, n = frame_stages.refit_pelvis(self, ctx, res.x, evals=share + spare, rng=rng, bounds=(lo, hi),
+                                                spread=spread)
             spare += share - n
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         if torso is not None:
-            x, e, n, _ = self.refit_torso(res.x, evals=torso + spare, rng=rng,
-                                          energy=res.energy if share is not None else None, bounds=(lo, hi),
-                                          spread=spread)
+            x, e, n, _ = frame_stages.refit_torso(self, ctx, res.x, evals=torso + spare, rng=rng,
+                                                  energy=res.energy if share is not None else None,
+                                                  bounds=(lo, hi), spread=spread)
             spare += torso - n
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         limbs, hinge, n_limb = limbs
         if limbs:
             extra = spare // len(limbs)       # more proposals with the rest
-            x, e, n, _ = self.propose_limbs(res.x, n=n_limb + extra, rng=rng, limbs=limbs, hinge_only=hinge,
-                                            last=self.track.last)
+            x, e, n, _ = frame_stages.propose_limbs(self, ctx, res.x, n=n_limb + extra, rng=rng, limbs=limbs,
+                                                    hinge_only=hinge, last=self.track.last)
             spare -= extra * len(limbs)
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
         if contour is not None:
-            x, e, n, info = self.fit_contours(res.x)
+            x, e, n, info = frame_stages.fit_contours(self, ctx, res.x)
             if info.stopped and notes is not None:
                 notes.append(f"contour stage: stopped after {info.iterations} iterations ({info.stopped})")
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
@@ -357,26 +346,26 @@ class Tracker:
 
 
     def fit_contours(self, x, *, iterations: int | None=None, extra_iterations: int | None=None):
-        """See :func:`.stages.fit_contours`."""
-        return stages.fit_contours(self, x, iterations=iterations, extra_iterations=extra_iterations)
+        """:func:`.stages.fit_contours` under the current masks."""
+        return frame_stages.fit_contours(self, self.frame_context(), x, iterations=iterations, extra_iterations=extra_iterations)
 
 
     def refit_pelvis(self, x, *, evals: int, rng: np.random.Generator, optimizer: str | None=None, params: Mapping | None=None, bounds=None, spread=None) -> tuple[np.ndarray, float, int]:
-        """See :func:`.stages.refit_pelvis`."""
-        return stages.refit_pelvis(self, x, evals=evals, rng=rng, optimizer=optimizer, params=params, bounds=bounds, spread=spread)
+        """:func:`.stages.refit_pelvis` under the current masks."""
+        return frame_stages.refit_pelvis(self, self.frame_context(), x, evals=evals, rng=rng, optimizer=optimizer, params=params, bounds=bounds, spread=spread)
 
 
     def refit_torso(self, x, *, evals: int, rng: np.random.Generator, energy: float | None=None, bounds=None, spread=None) -> tuple[np.ndarray, float, int, bool]:
-        """See :func:`.stages.refit_torso`."""
-        return stages.refit_torso(self, x, evals=evals, rng=rng, energy=energy, bounds=bounds, spread=spread)
+        """:func:`.stages.refit_torso` under the current masks."""
+        return frame_stages.refit_torso(self, self.frame_context(), x, evals=evals, rng=rng, energy=energy, bounds=bounds, spread=spread)
 
 
     def propose_limbs(self, x, *, n: int, rng: np.random.Generator, limbs: Sequence[str] | None=None, hinge_only: Sequence[str]=(), last=None) -> tuple[np.ndarray, float, int, list[str]]:
-        """See :func:`.stages.propose_limbs`."""
-        return stages.propose_limbs(self, x, n=n, rng=rng, limbs=limbs, hinge_only=hinge_only, last=last)
+        """:func:`.stages.propose_limbs` under the current masks."""
+        return frame_stages.propose_limbs(self, self.frame_context(), x, n=n, rng=rng, limbs=limbs, hinge_only=hinge_only, last=last)
 
 
-    def _final_pose(self, res) -> tuple[np.ndarray, float]:
+    def final_pose(self, res) -> tuple[np.ndarray, float]:
         """The optimizer's estimate (its best particle when the estimate is not finite) in the model's
         limits, rotation vectors shortened (|r| <= pi), and its energy."""
         if not np.all(np.isfinite(res.x)):
@@ -409,7 +398,7 @@ class Tracker:
             ``contour_iterations=0``): what the estimator node does in real time with a frame set that
             waited too long (its ``catch_up_ms``; the stage is the costliest in time per evaluation).
         keypoints : sequence of ``(uv (33, 2), confidence (33,))`` or None
-            Per camera BlazePose landmarks; with ``config.keypoint_weight > 0`` they add the keypoint term
+            Per camera BlazePose landmarks; with ``config.keypoints.keypoint_weight > 0`` they add the keypoint term
             to this frame's energy (the heading check's rival's too, so both are scored alike).
 
         Returns
@@ -417,27 +406,16 @@ class Tracker:
         FrameResult
         """
         term, note = objective.keypoint_energy(self, keypoints)
-        rival = self.heading_check.rival
-        self._keypoint_term = term
-        if rival is not None:
-            rival._keypoint_term = term
-        try:
-            res = self._step_frame(masks, frame_index, prediction=prediction, frames_elapsed=frames_elapsed,
-                                   contour_stage=contour_stage)
-        finally:
-            self._keypoint_term = None
-            if rival is not None:
-                rival._keypoint_term = None
+        ctx = self.frame_context(frame_index, FrameBudget(self.config.search.evals, bool(contour_stage)),
+                                 keypoint_term=term, prediction=prediction)
+        res = self._step_with_heading_check(masks, ctx, frames_elapsed)
         return res if note is None else dataclasses.replace(res, notes=res.notes + (note,))
 
-    def _step_frame(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1,
-                    contour_stage: bool = True) -> FrameResult:
-        """The frame without its keypoint term (set by :meth:`step`)."""
-        t0 = time.perf_counter()
+    def _step_with_heading_check(self, masks: Sequence, ctx: FrameContext, frames_elapsed: float) -> FrameResult:
+        """The frame of this hypothesis, then the heading check: start its rival after an automatic
+        initialization, re-check the heading, or step the rival beside the track and decide."""
         rival = self.heading_check.rival
-        self._contour_now = bool(contour_stage)
-        res = self._step(masks, frame_index, FrameBudget(self.config.evals, self._contour_now),
-                         prediction=prediction, frames_elapsed=frames_elapsed)
+        res = self.track_frame(masks, ctx, frames_elapsed=frames_elapsed)
         if self.heading_check.own_prediction_frames > 0:
             self.heading_check.own_prediction_frames -= 1
         if res.initialized:
@@ -445,13 +423,13 @@ class Tracker:
             self.heading_check.views = res.views_used
             if self.heading_check.rival_start is not None:
                 e_rival, e_win = self.heading_check.rival_start[1], self.heading_check.rival_start[2]
-                heading.start_rival(self, frame_index)
+                heading.start_rival(self, ctx.frame_index)
                 return dataclasses.replace(res, notes=res.notes + (
                     f"heading check started: a run heading the other way ended {e_rival:.4g} (winner {e_win:.4g}); both "
-                    f"tracked for up to {self.config.init_confirm_frames} frames",))
+                    f"tracked for up to {self.config.heading.init_confirm_frames} frames",))
             return res
         if rival is None:
-            return heading.recheck_heading(self, res, frame_index, frames_elapsed, t0)
+            return heading.recheck_heading(self, ctx, res, frames_elapsed)
         if rival is not self.heading_check.rival:
             return res
         if frames_elapsed != 1:
@@ -461,34 +439,33 @@ class Tracker:
             return dataclasses.replace(res, notes=res.notes + (
                 f"heading check ended: no decision ({frames_elapsed:g} frame periods since the last frame; "
                 "it compares consecutive frames only); kept this heading",))
-        return heading.confirm_heading(self, res, masks, frame_index, frames_elapsed, t0)
+        return heading.confirm_heading(self, ctx, res, masks, frames_elapsed)
 
-    def travel(self, min_periods: float=0.0) -> tuple[float, float, float] | None:
+    def travel(self, min_periods: float = 0.0) -> tuple[float, float, float] | None:
         """See :func:`.heading.travel`."""
         return heading.travel(self, min_periods)
 
-
-    def _step(self, masks: Sequence, frame_index: int, budget: FrameBudget, *, prediction=None,
-              frames_elapsed: float = 1) -> FrameResult:
-        """:meth:`step` for one hypothesis (without the heading check's rival)."""
+    def track_frame(self, masks: Sequence, ctx: FrameContext, *, frames_elapsed: float = 1) -> FrameResult:
+        """The frame ``ctx`` of this hypothesis (:meth:`step` without the heading check's rival): masks checked,
+        filtered around the prediction, weighted and given to the energy; the first frame initialized, a tracked
+        one searched from the prediction with every stage; the estimate taken."""
         t0 = time.perf_counter()
+        frame_index = ctx.frame_index
         if isinstance(frame_index, bool) or not isinstance(frame_index, (int, np.integer)) or frame_index < 0:
             raise TrackerError(f"frame_index: expected an integer >= 0, received {frame_index!r}")
         try:
             self.track.elapsed += frame_periods("frames_elapsed", frames_elapsed)
         except PredictionError as exc:
             raise TrackerError(str(exc)) from None
-        cfg = self.config
-        usable, notes = frame_masks.check_masks(self, masks)
-        # the mask gate and the visual-hull filter around the prediction (made here when they run)
-        usable, gated_pred = frame_masks.filter_masks(self, usable, prediction, notes)
-        weights = None
-        if cfg.view_weights and self.track.last is not None and any(m is not None for m in usable):
-            if gated_pred is None:
-                gated_pred = frame_prediction.predict(self, prediction, notes)
-            # Eq. 5's view weights (config.view_weights): the share of the predicted body each view sees
-            weights = visible_shares(self.model, self.cameras, gated_pred)
-        views = frame_masks.set_masks(self, usable, notes, frame_index, weights)
+        cfg, notes = self.config, ctx.notes
+        ctx.raw_masks, checked = frame_masks.check_masks(self, masks)
+        notes.extend(checked)
+        # the mask gate and the visual-hull filter around the prediction (made there when they run)
+        frame_masks.filter_masks(self, ctx)
+        if cfg.objective.view_weights and self.track.last is not None and any(m is not None for m in ctx.masks):
+            # Eq. 5's view weights (config.objective.view_weights): the share of the predicted body each view sees
+            ctx.weights = visible_shares(self.model, self.cameras, frame_prediction.prediction(self, ctx))
+        views = frame_masks.set_masks(self, ctx)
         if views == 0:
             notes.append("no usable view: falling back to the last estimate" if self.track.last is not None
                          else "no usable view and no estimate yet: nothing to track")
@@ -498,9 +475,7 @@ class Tracker:
         initialized = False
         if self.track.last is None:
             try:
-                res0 = initial_pose(self.model, self.cameras, usable, first_frame.init_energy_fn(self, usable, frame_index),
-                                    rng=frame_rng(cfg.seed, frame_index, 1), n_yaw=cfg.init_yaw_steps,
-                                    refine_evals=cfg.init_refine_evals)
+                res0 = first_frame.initial_grid(self, ctx)
             except InitError as exc:
                 notes.append(f"automatic initialization failed: {exc}")
                 return FrameResult(x=None, energy=float("nan"), n_evals=0, spread=float("nan"),
@@ -510,14 +485,14 @@ class Tracker:
             initialized = True
             starts = [c[0] for c in res0.candidates] or [res0.x]
         else:
-            starts = [gated_pred if gated_pred is not None else frame_prediction.predict(self, prediction, notes)]
-        # the first frame optimizes from every initialization candidate (pruned to config.init_keep
+            starts = [frame_prediction.prediction(self, ctx)]
+        # the first frame optimizes from every initialization candidate (pruned to config.first_frame.init_keep
         # runs part-way) and keeps the lowest energy
         try:
             if initialized:
-                runs, n = first_frame.initial_runs(self, starts, frame_index, notes, budget)
+                runs, n = first_frame.initial_runs(self, ctx, starts, notes, ctx.budget)
             else:
-                res = self._optimize(starts[0], frame_rng(cfg.seed, frame_index), budget, notes=notes)
+                res = self.optimize(ctx, starts[0], ctx.rng(), notes=notes)
                 runs, n = [(0, res, starts[0])], res.n_evals
         except ValueError as exc:
             # a configuration the optimizer rejects (budget below one generation, bad parameter):
@@ -531,17 +506,17 @@ class Tracker:
         if initialized:
             notes.append(f"initialized automatically ({len(starts)} heading candidates, {len(runs)} searched to the "
                          f"end, grid best yaw {np.rad2deg(res0.yaw):.0f} deg {res0.variant}, {n_evals} evaluations)")
-        x, energy = self._final_pose(res)
-        if initialized and cfg.init_confirm_frames > 0:
+        x, energy = self.final_pose(res)
+        if initialized and cfg.heading.init_confirm_frames > 0:
             self.heading_check.rival_start = first_frame.pick_rival(self, runs, res, x, energy)
-        if initialized and cfg.init_polish:
-            # config.init_polish: the winner (and the heading check's rival) searched once more, from itself
-            x, energy, res, n = first_frame.polish_winner(self, x, energy, res, frame_index, notes, budget)
+        if initialized and cfg.first_frame.init_polish:
+            # config.first_frame.init_polish: the winner (and the heading check's rival) searched once more, from itself
+            x, energy, res, n = first_frame.polish_winner(self, ctx, x, energy, res)
             n_evals += n
         if res.n_nonfinite:
             notes.append(f"energy: {res.n_nonfinite} non-finite evaluations")
         spread_out = res.history[-1].spread if res.history else float("nan")
-        self._accept(x)
+        self.accept(x)
         self.frames += 1
         return FrameResult(x=x, energy=float(energy), n_evals=int(n_evals), spread=float(spread_out),
                            time_s=time.perf_counter() - t0, views_used=views, notes=tuple(notes), fell_back=False,
@@ -552,4 +527,4 @@ def make_tracker(model, cameras: Sequence, *, energy_fn: Callable | None = None,
     """A :class:`Tracker` from flat settings: ``config`` keywords are :class:`TrackerConfig` fields (the
     estimator node's parameters carry the same names); ``energy_fn``: a data term object (see
     :class:`Tracker`)."""
-    return Tracker(model, cameras, TrackerConfig(**config), energy=energy_fn)
+    return Tracker(model, cameras, TrackerConfig.from_flat(**config), energy=energy_fn)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
+from isa_mocap_ros.config_checks import check_choice, check_number
 
 __all__ = ["SegmentationError", "SegmentationConfig"]
 
@@ -136,51 +136,34 @@ class SegmentationConfig:
     learn_from: str = "frames"
 
     def __post_init__(self) -> None:
-        if self.method not in METHODS:
-            raise SegmentationError(f"method: expected one of {METHODS}, got {self.method!r}")
-        if self.kernel not in ("numba", "numpy"):
-            raise SegmentationError(f"kernel: expected 'numba' or 'numpy', got {self.kernel!r}")
-        if self.robust not in ROBUST:
-            raise SegmentationError(f"robust: expected one of {ROBUST}, got {self.robust!r}")
-        if not (0.0 < self.robust_detect_fraction < 1.0):
-            raise SegmentationError("robust_detect_fraction: expected a number in (0, 1), got "
-                                    f"{self.robust_detect_fraction!r}")
-        if not (np.isfinite(self.robust_radius) and self.robust_radius >= 0):
-            raise SegmentationError(f"robust_radius: expected a finite number >= 0, got {self.robust_radius!r}")
-        if self.learn_from not in LEARN_FROM:
-            raise SegmentationError(f"learn_from: expected one of {LEARN_FROM}, got {self.learn_from!r}")
+        err = SegmentationError
+        check_choice("method", self.method, METHODS, error=err)
+        check_choice("kernel", self.kernel, ("numba", "numpy"), error=err)
+        check_choice("robust", self.robust, ROBUST, error=err)
+        check_number("robust_detect_fraction", self.robust_detect_fraction, lo=0.0, hi=1.0, lo_open=True,
+                     hi_open=True, error=err)
+        check_number("robust_radius", self.robust_radius, lo=0.0, error=err)
+        check_choice("learn_from", self.learn_from, LEARN_FROM, error=err)
         if self.learn_from == "stable" and self.learn_frames < 3:
             raise SegmentationError(f"learn_frames: learn_from 'stable' needs at least 3, got {self.learn_frames}")
         if self.learn_from == "stable" and self.method != "colour":
             raise SegmentationError(f"learn_from: 'stable' needs method 'colour', got method {self.method!r}")
-        if self.vote not in VOTES:
-            raise SegmentationError(f"vote: expected one of {VOTES}, got {self.vote!r}")
-        if not (np.isfinite(self.field_coupling) and 0.0 <= self.field_coupling <= 10.0):
-            raise SegmentationError(f"field_coupling: expected a number in [0, 10], got {self.field_coupling!r}")
-        _check_int("field_iterations", self.field_iterations, 0)
-        if not (np.isfinite(self.vote_sigma_px) and 0.0 <= self.vote_sigma_px <= 50.0):
-            raise SegmentationError(f"vote_sigma_px: expected a number in [0, 50], got {self.vote_sigma_px!r}")
-        _check_int("learn_frames", self.learn_frames, 1)
+        check_choice("vote", self.vote, VOTES, error=err)
+        check_number("field_coupling", self.field_coupling, lo=0.0, hi=10.0, error=err)
+        check_number("field_iterations", self.field_iterations, lo=0, integer=True, error=err)
+        check_number("vote_sigma_px", self.vote_sigma_px, lo=0.0, hi=50.0, error=err)
+        check_number("learn_frames", self.learn_frames, lo=1, integer=True, error=err)
         for name in ("threshold", "min_std", "initial_std", "shadow_chroma_threshold",
                      "knn_dist2_threshold"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
-                raise SegmentationError(f"{name}: expected a finite number > 0, got {value!r}")
-        if not (0.0 <= self.update_rate <= 1.0):
-            raise SegmentationError(f"update_rate: expected a number in [0, 1], got {self.update_rate!r}")
-        if not (0.0 < self.max_foreground_fraction <= 1.0):
-            raise SegmentationError("max_foreground_fraction: expected a number in (0, 1], got "
-                                    f"{self.max_foreground_fraction!r}")
-        if not (0.0 <= self.shadow_min_brightness < self.shadow_max_brightness):
+            check_number(name, getattr(self, name), lo=0.0, lo_open=True, error=err)
+        check_number("update_rate", self.update_rate, lo=0.0, hi=1.0, error=err)
+        check_number("max_foreground_fraction", self.max_foreground_fraction, lo=0.0, hi=1.0, lo_open=True, error=err)
+        check_number("shadow_min_brightness", self.shadow_min_brightness, lo=0.0, error=err)
+        if not self.shadow_min_brightness < self.shadow_max_brightness:
             raise SegmentationError(
                 "shadow_min_brightness, shadow_max_brightness: expected 0 <= min < max, got "
                 f"{self.shadow_min_brightness!r}, {self.shadow_max_brightness!r}")
         for name in ("std_smoothing_px", "update_margin_px", "open_kernel", "close_kernel",
                      "min_blob_area_px"):
-            _check_int(name, getattr(self, name), 0)
-        _check_int("history", self.history, 1)
-
-
-def _check_int(name: str, value, lowest: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lowest:
-        raise SegmentationError(f"{name}: expected an integer >= {lowest}, got {value!r}")
+            check_number(name, getattr(self, name), lo=0, integer=True, error=err)
+        check_number("history", self.history, lo=1, integer=True, error=err)
