@@ -80,7 +80,7 @@ def test_model_contour_points_are_those_of_the_full_label_image_bit_for_bit(scen
     """The contour points come from the silhouette and labels at the chosen contour pixels only; they
     are what labelling every pixel (``render_labels``, the first formulation) gives, to the bit."""
     from isa_mocap_ros.body import forward_kinematics
-    from isa_mocap_ros.energy.correspondence import _contour_pixels, capsule_frames, model_contour_points
+    from isa_mocap_ros.energy.correspondence import mask_contour_pixels, capsule_frames, model_contour_points
     from isa_mocap_ros.vision import render_labels
 
     model, rig, x0, _ = scene
@@ -91,7 +91,7 @@ def test_model_contour_points_are_those_of_the_full_label_image_bit_for_bit(scen
         for cam in rig:
             n_points = (50, 200, 10_000)[trial % 3]
             labels, depth = render_labels(cam, E, model.capsule_radii)
-            pix = _contour_pixels(labels >= 0)
+            pix = mask_contour_pixels(labels >= 0)
             if len(pix) > n_points:
                 pix = pix[np.floor(np.arange(n_points) * (len(pix) / n_points)).astype(np.int64)]
             cap, z = labels[pix[:, 1], pix[:, 0]], depth[pix[:, 1], pix[:, 0]].astype(np.float64)

@@ -16,7 +16,7 @@ def _yaw(rotvec):
     return np.arctan2(R[1, 0], R[0, 0])
 
 
-def _wrap(a):
+def wrap_angle(a):
     return (a + np.pi) % (2 * np.pi) - np.pi
 
 
@@ -83,7 +83,7 @@ def test_automatic_init_lands_near_the_rendered_person(seed):
     energy = SilhouetteEnergy(model, rig.cameras, masks, rng=np.random.default_rng(0))
     r = initial_pose(model, rig.cameras, masks, energy, rng=np.random.default_rng(seed), refine_evals=300)
     assert np.linalg.norm(r.x[:2] - x[:2]) < 0.10
-    assert abs(np.rad2deg(_wrap(_yaw(r.x[3:6]) - yaw))) < 20
+    assert abs(np.rad2deg(wrap_angle(_yaw(r.x[3:6]) - yaw))) < 20
     assert r.views_used == 4 and r.n_evals > 0 and len(r.candidates) >= 2
     assert r.energy == pytest.approx(float(energy(r.x[None])[0]), abs=1e-12)
 

@@ -149,19 +149,19 @@ def _heading_runs(scene, monkeypatch, *, wrong_first: bool, external=None, **cfg
     runs heading like the truth get 1.4x their energy, so a run facing the other way wins."""
     import dataclasses
 
-    from isa_mocap_ros.tracking.init import _wrap, _yaw_of
+    from isa_mocap_ros.tracking.init import wrap_angle, yaw_of
 
     model, cams, walk, masks = scene
     if wrong_first:
         orig = first_frame.initial_runs
-        yaw = _yaw_of(walk[0][3:6])
+        yaw = yaw_of(walk[0][3:6])
 
         def runs(tr, ctx, starts, notes, budget, stream=()):
             out, n = orig(tr, ctx, starts, notes, budget, stream)
             if stream:                                  # the heading re-check's runs are left alone
                 return out, n
             return [(j, dataclasses.replace(r, energy=1.4 * r.energy, best_energy=1.4 * r.best_energy)
-                     if abs(_wrap(_yaw_of(r.x[3:6]) - yaw)) < np.pi / 2 else r, p) for j, r, p in out], n
+                     if abs(wrap_angle(yaw_of(r.x[3:6]) - yaw)) < np.pi / 2 else r, p) for j, r, p in out], n
         monkeypatch.setattr(first_frame, "initial_runs", runs)
     # init_confirm_ratio 1.5: here the right and the wrong heading end 29 % apart on the first frame
     tr = Tracker(model, cams, TrackerConfig.from_flat(**{"seed": 0, "init_confirm_ratio": 1.5, **cfg}))

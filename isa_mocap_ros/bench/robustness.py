@@ -20,8 +20,7 @@ Protocol (ISA §13.4.2, Figs. 13.15-13.17, with our tracker's best settings):
   the images are segmented by the segmentation node's background model (learned from the 10
   distorted background frames), default tracker settings (h-isa, 1500 evaluations per frame, 39
   DOF, the subject's body shape, fast energy, no prior; ``--gate-margin-px`` sets the mask gate,
-  default the tracker's), once per tracker seed (default 0-7: one run is chaotic, see
-  ``docs/tracking.md``); the bags do not depend on the seed (rendered with seed 0);
+  default the tracker's), once per tracker seed (default 0-7: one run is chaotic); the bags do not depend on the seed (rendered with seed 0);
 * initialization: ``--init truth`` (default) starts from the ground truth of the first frame, as a
   manually initialized system (the papers'); that frame is not scored. ``--init auto`` uses the
   automatic initialization (every frame scored);
@@ -54,6 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
+from isa_mocap_ros.eval.compare import SequenceSpec
 from isa_mocap_ros.resources import cmu_walk_bvh
 
 #: the CMU walk in the shared data beside the checkout (or $ISA_MOCAP_SHARED); may be absent
@@ -69,25 +69,16 @@ TARGETS = (("clean", "mpjpe_mm", 25.0), ("clean", "knee_rmse_deg", 2.0), ("noise
            ("occluders35", "knee_rmse_deg", 4.0))
 
 
-@dataclass(frozen=True)
-class RobustSequence:
-    name: str
-    motion: str
-    start_s: float = 0.0
-    duration_s: float = 4.0
-    fps: float = 30.0
-    views: int = 4
-    width: int = 320
-    height: int = 240
-    seed: int = 0
-    #: ``mesh`` (a skinned human, the average man) or ``capsules`` (the tracking model itself: a control)
-    body: str = "mesh"
+#: the rendering of the robustness sequences: 30 fps, 4 views of 320 × 240 (the quick design: 160 × 120)
+SEQUENCE_DEFAULTS = dict(fps=30.0, views=4, width=320, height=240)
 
-    def bag_name(self, cond: str) -> str:
-        m = Path(self.motion).stem if self.motion.endswith(".bvh") else self.motion
-        return (f"{self.name}_{m}_{cond}_{self.duration_s:g}s_{self.fps:g}fps_from{self.start_s:g}_"
-                f"{self.width}x{self.height}_v{self.views}_e{EMPTY_FRAMES}_s{self.seed}"
-                + ("_mesh" if self.body == "mesh" else ""))
+
+def bag_name(seq: SequenceSpec, cond: str) -> str:
+    """The cached bag's directory name of sequence ``seq`` under condition ``cond``."""
+    m = Path(seq.motion).stem if seq.motion.endswith(".bvh") else seq.motion
+    return (f"{seq.name}_{m}_{cond}_{seq.duration_s:g}s_{seq.fps:g}fps_from{seq.start_s:g}_"
+            f"{seq.width}x{seq.height}_v{seq.views}_e{EMPTY_FRAMES}_s{seq.seed}"
+            + ("_mesh" if seq.body == "mesh" else ""))
 
 
 @dataclass(frozen=True)
@@ -131,7 +122,8 @@ def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK
                                        or gate_margin_px < 0):
         raise ValueError(f"gate_margin_px: expected an integer >= 0 or None, received {gate_margin_px!r}")
     if kind == "quick":
-        seqs = (RobustSequence("walk", "walk", duration_s=6 / 30, views=4, width=160, height=120, body=body),)
+        seqs = (SequenceSpec("walk", "walk", duration_s=6 / 30, **{**SEQUENCE_DEFAULTS, "width": 160, "height": 120},
+                             body=body),)
         seeds = seeds or (0,)
         return RobustDesign("quick", seqs, tuple(c[0] for c in CONDITIONS), optimizer, evals or 300, seeds[0], init,
                             seeds=seeds, gate_margin_px=gate_margin_px, body=body)
@@ -140,11 +132,12 @@ def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK
     seqs, notes = [], []
     dur = 4.0 if frames is None else int(frames) / 30.0
     if cmu_path is not None and Path(cmu_path).is_file():
-        seqs.append(RobustSequence("cmu_walk", str(cmu_path), start_s=1.0, duration_s=dur, body=body))
+        seqs.append(SequenceSpec("cmu_walk", str(cmu_path), start_s=1.0, duration_s=dur, **SEQUENCE_DEFAULTS,
+                                 body=body))
     else:
         notes.append(f"CMU walk skipped: {cmu_path} not found")
-    seqs += [RobustSequence("walk", "walk", duration_s=dur, body=body),
-             RobustSequence("jog", "jog", duration_s=dur, body=body)]
+    seqs += [SequenceSpec("walk", "walk", duration_s=dur, **SEQUENCE_DEFAULTS, body=body),
+             SequenceSpec("jog", "jog", duration_s=dur, **SEQUENCE_DEFAULTS, body=body)]
     seeds = seeds or DEFAULT_SEEDS
     return RobustDesign("default" if frames is None else f"default, {int(frames)} frames", tuple(seqs),
                         tuple(c[0] for c in CONDITIONS), optimizer, evals or 1500, seeds[0],
@@ -155,12 +148,12 @@ def _cond(key: str):
     return next(c for c in CONDITIONS if c[0] == key)
 
 
-def prepare_bag(seq: RobustSequence, cond: str, cache: Path) -> Path:
+def prepare_bag(seq: SequenceSpec, cond: str, cache: Path) -> Path:
     """Render ``seq`` under condition ``cond`` into ``cache`` once (``isa-mocap synth``'s code)."""
     from isa_mocap_ros.cli.synth import write_bag
 
     cache.mkdir(parents=True, exist_ok=True)
-    path = cache / seq.bag_name(cond)
+    path = cache / bag_name(seq, cond)
     if (path / "metadata.yaml").is_file():
         return path
     _, _, noise, occl, _ = _cond(cond)
@@ -264,7 +257,7 @@ def collect(design: RobustDesign, *, cache: Path, out: Path, progress: bool = Tr
             bag = prepare_bag(seq, cond, cache)
             t_synth = round(time.perf_counter() - ts, 2)
             for i, seed in enumerate(seeds):
-                run_out = out / (seq.bag_name(cond) + (f"_t{seed}" if len(seeds) > 1 else ""))
+                run_out = out / (bag_name(seq, cond) + (f"_t{seed}" if len(seeds) > 1 else ""))
                 todo.append((bag, run_out, design, seed, seq.name, cond, t_synth if i == 0 else 0.0))
 
     def report(r: dict) -> None:

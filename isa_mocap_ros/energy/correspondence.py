@@ -36,9 +36,10 @@ from scipy.spatial import cKDTree
 from ..body import BodyModel, capsule_endpoints, forward_kinematics
 from ..vision import Camera, capsule_data, render_labels_at, render_mask
 from ._checks import EnergyError, _check_cameras, _check_model, _check_poses
-from .silhouette import _mask_problem
+from .silhouette import mask_problem
 
-__all__ = ["CorrespondenceEnergy", "plucker_lines", "model_contour_points", "capsule_frames"]
+__all__ = ["CorrespondenceEnergy", "plucker_lines", "model_contour_points", "capsule_frames", "mask_contour_pixels",
+           "capsule_contour_points"]
 
 
 def plucker_lines(camera: Camera, pixels: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -84,7 +85,7 @@ def capsule_frames(model: BodyModel) -> np.ndarray:
     return out
 
 
-def _contour_pixels(mask: np.ndarray) -> np.ndarray:
+def mask_contour_pixels(mask: np.ndarray) -> np.ndarray:
     """``(k, 2)`` integer ``(u, v)`` of the outer contour pixels of a binary mask, in contour order."""
     contours, _ = cv2.findContours((mask > 0).astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     if not contours:
@@ -115,19 +116,19 @@ def model_contour_points(model: BodyModel, camera: Camera, x: Any, *,
         The surface point hit by the pixel's ray, in that joint's frame (metres).
     """
     x = np.asarray(x, dtype=np.float64)
-    return _contour_points(camera, capsule_endpoints(model, x)[0], model.capsule_radii, forward_kinematics(model, x)[0],
-                           capsule_frames(model), n_points)
+    return capsule_contour_points(camera, capsule_endpoints(model, x)[0], model.capsule_radii,
+                                  forward_kinematics(model, x)[0], capsule_frames(model), n_points)
 
 
-def _contour_points(camera: Camera, E: np.ndarray, radii, T: np.ndarray, cap_frames: np.ndarray, n_points: int,
-                    capsules: tuple | None = None):
+def capsule_contour_points(camera: Camera, E: np.ndarray, radii, T: np.ndarray, cap_frames: np.ndarray,
+                           n_points: int, capsules: tuple | None = None):
     """:func:`model_contour_points` from the pose's capsule end points ``E``, joint transforms ``T`` and
     :func:`capsule_frames` (computed once per pose for several views, as ``capsules``:
     :func:`~isa_mocap_ros.vision.capsule_data` of ``E``). The silhouette is rendered (rays stop at
     their first hit), the visible capsule and depth found at the chosen contour pixels only: the
     numbers :func:`~isa_mocap_ros.vision.render_labels` gives there, without labelling every pixel."""
     capsules = capsule_data(E, radii) if capsules is None else capsules
-    pix = _contour_pixels(render_mask(camera, E, radii, capsules=capsules))
+    pix = mask_contour_pixels(render_mask(camera, E, radii, capsules=capsules))
     if len(pix) > n_points:
         pix = pix[np.floor(np.arange(n_points) * (len(pix) / n_points)).astype(np.int64)]
     cap, z = render_labels_at(camera, E, radii, pix, capsules=capsules)
@@ -194,7 +195,7 @@ class CorrespondenceEnergy:
         self.skipped_views: list[tuple[int, str]] = []
         frames, local, dirs, moms = [], [], [], []
         for v, (mask, cam) in enumerate(zip(masks, self.cameras)):
-            problem = _mask_problem(mask, cam)
+            problem = mask_problem(mask, cam)
             if problem is not None:
                 self.skipped_views.append((v, problem))
                 continue
@@ -202,7 +203,7 @@ class CorrespondenceEnergy:
             if len(pix) == 0:
                 self.skipped_views.append((v, "the predicted model is not visible in this view"))
                 continue
-            image = _contour_pixels(np.asarray(mask))
+            image = mask_contour_pixels(np.asarray(mask))
             _, idx = cKDTree(image).query(pix.astype(float))
             n, m = plucker_lines(cam, image[idx].astype(float))
             frames.append(fr)

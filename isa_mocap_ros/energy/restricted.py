@@ -55,11 +55,11 @@ class RestrictedSilhouetteEnergy:
     """
 
     def __init__(self, energy: SilhouetteEnergy, x_base: Any, coords: Any) -> None:
-        if not hasattr(energy, "_restrict_cache"):      # a SilhouetteEnergy (not imported: see above)
+        if not isinstance(getattr(energy, "restriction_cache", None), dict):   # SilhouetteEnergy's public marker
             raise EnergyError(f"energy: expected a SilhouetteEnergy, received {type(energy).__name__}")
         model = energy.model
         D = model.dof
-        if energy._frame is None:
+        if not energy.has_masks:
             raise EnergyError("masks: expected masks to be set (constructor or set_masks) before restricting, "
                               "received none")
         try:
@@ -85,9 +85,9 @@ class RestrictedSilhouetteEnergy:
         self.coords = np.sort(idx)
         self._frame = energy._frame
         key = tuple(self.coords.tolist())
-        st = energy._restrict_cache.get(key)
+        st = energy.restriction_cache.get(key)
         if st is None:
-            st = energy._restrict_cache[key] = _restriction_structure(energy, self.coords)
+            st = energy.restriction_cache[key] = _restriction_structure(energy, self.coords)
         (self._fixed, self._fixed_mask, self._fk_joints, self._cam_joints, self.moving_capsules, self._mov_ci,
          self._moving_ci, moving, structural_full) = st
         self.full = energy.method != "fast" or structural_full

@@ -87,7 +87,7 @@ def _view_weights(weights: Any, n_views: int) -> np.ndarray:
     return w
 
 
-def _mask_problem(mask: Any, camera: Camera) -> str | None:
+def mask_problem(mask: Any, camera: Camera) -> str | None:
     """Why ``mask`` cannot be used for ``camera`` (None: usable)."""
     if mask is None:
         return "no mask (view missing)"
@@ -137,7 +137,7 @@ def exact_view_energy(model: BodyModel, camera: Camera, mask: Any, X: Any) -> np
     model = _check_model(model)
     if not isinstance(camera, Camera):
         raise EnergyError(f"camera: expected a Camera, received {type(camera).__name__}")
-    problem = _mask_problem(mask, camera)
+    problem = mask_problem(mask, camera)
     if problem is not None:
         raise EnergyError(f"mask: expected a non-empty ({camera.height}, {camera.width}) uint8 mask, "
                           f"received {problem}")
@@ -292,7 +292,9 @@ class SilhouetteEnergy:
         self.n_evals = 0
         self._used: list[int] = []
         self._frame: dict | None = None
-        self._restrict_cache: dict = {}     # coords -> what a restriction depends on besides pose and masks
+        # coords -> what a restriction depends on besides pose and masks (RestrictedSilhouetteEnergy's cache;
+        # its presence marks an energy that restricted.py can restrict, which does not import this module)
+        self.restriction_cache: dict = {}
         if masks is not None:
             self.set_masks(masks)
 
@@ -329,7 +331,7 @@ class SilhouetteEnergy:
                               f"view), received {len(masks)}")
         skipped, used = [], []
         for v, (m, cam) in enumerate(zip(masks, self.cameras)):
-            problem = _mask_problem(m, cam)
+            problem = mask_problem(m, cam)
             if problem is None:
                 used.append(v)
             else:

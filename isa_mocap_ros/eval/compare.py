@@ -51,7 +51,8 @@ CMU_WALK = cmu_walk_bvh()
 @dataclass(frozen=True)
 class SequenceSpec:
     """A sequence to synthesize: a generated motion name or a BVH path, rendered into ``views``
-    cameras of :func:`~isa_mocap_ros.vision.default_rig` at ``width × height``."""
+    cameras of :func:`~isa_mocap_ros.vision.default_rig` at ``width × height`` (the optimizer comparison's
+    sequences, and the robustness bench's: ``bench/robustness.py``)."""
 
     name: str
     motion: str

@@ -39,7 +39,16 @@ def _register_dependent_cache() -> None:
     edit (or a ``git pull``) of the energy kernels or the optimizer helpers the functions here would
     load their old machine code, kernels included. A locator placed first among numba's asks the
     locator numba would have chosen for everything but the stamp, which it extends with the
-    dependencies' hashes. Best effort: if numba's (internal) caching API differs, nothing changes."""
+    dependencies' hashes. Best effort: if numba's (internal) caching API differs, nothing changes.
+
+    Why numba's private ``CacheImpl._locator_classes`` (and ``_CacheLocator``, the locators' base): numba
+    (0.68) offers no public way to make a cached function's key depend on other files. Its documented
+    options choose *where* the cache lives (``NUMBA_CACHE_DIR``) and *which* of its locators run
+    (``NUMBA_CACHE_LOCATOR_CLASSES``, read from the process environment: it would replace the locator
+    list of every package in the process, and a class named there still has to subclass the private
+    ``_CacheLocator``); ``cache=False`` on these functions would recompile them (about a minute) in every
+    process. The insertion touches this module's functions only: the locator returns None for any
+    other file, and numba's own locator list follows unchanged."""
     try:
         from numba.core import caching
         from isa_mocap_ros.energy import _silhouette_kernel

@@ -110,7 +110,7 @@ class Hierarchical(Optimizer):
         with their generation sizes), leaving fewer than one generation unspent, instead of ending
         partitions on a truncated generation. A truncated last generation of a few rows makes the
         partition's estimate that of a few random particles for the weighted-mean estimators (ISA,
-        APF): measured in the tracker (``docs/tracking.md``, "Whole generations"). Default False.
+        APF; ``docs/decisions/002-whole-generations.md``). Default False.
     **params
         Passed to every inner optimizer.
     """

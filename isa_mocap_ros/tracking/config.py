@@ -63,7 +63,7 @@ CONTOUR_KEEP_TOLERANCE = 0.1
 MIN_LIMB_PROPOSALS = 4
 
 #: Optimizer parameters used unless ``optimizer_params`` sets them (tuned on the silhouette energy,
-#: see ``docs/tracking.md``); the library defaults apply to anything not listed.
+#: ``docs/decisions/001-hierarchy-order.md``); the library defaults apply to anything not listed.
 DEFAULT_PARAMS: Mapping[str, Mapping[str, Any]] = MappingProxyType({
     "isa": MappingProxyType({"n_particles": 100, "kernel": "s2", "schedule": "adaptive", "target_ess": 0.3,
                              "c": 0.5, "variance": "selected"}),
@@ -79,8 +79,8 @@ class TrackerError(ValueError):
 def whole_generations(evals: int, generation: int) -> int:
     """``evals`` rounded down to whole generations (unchanged below one generation: the optimizer's error
     names it). The tracker's searches never end on a truncated generation, whose few rows would make a
-    weighted-mean estimate (ISA, APF) that of a few random particles (``docs/tracking.md``, "Whole
-    generations")."""
+    weighted-mean estimate (ISA, APF) that of a few random particles
+    (``docs/decisions/002-whole-generations.md``)."""
     return evals // generation * generation if evals >= generation else evals
 
 

@@ -22,8 +22,8 @@ global search: a few **iterated closest point** steps, each
 4. the new pose clipped to the model's limits.
 
 New here (neither paper has it): the papers' searches are global; this local step after the global
-search removes the residual error a population's weighted mean leaves (the knees of the CMU walk
-trail their motion, see docs/tracking.md "The contour stage"). It needs no silhouette-energy
+search removes the residual error a population's weighted mean leaves (fast knees trail their motion;
+``docs/decisions/008-contour-stage.md``). It needs no silhouette-energy
 evaluation; the tracker charges each iteration ``D + 1`` evaluations of its budget — the cost of
 the same Jacobian by finite differences of the correspondence energy — and evaluates the silhouette
 energy of the poses before and after (``Tracker.fit_contours`` keeps the fit unless its energy is more
@@ -43,7 +43,7 @@ from scipy.spatial import cKDTree
 from ..body import BodyModel
 from ..body import capsule_endpoints, forward_kinematics
 from ..body.kinematics import _descendant_mask, _fk
-from ..energy.correspondence import _contour_pixels, _contour_points, capsule_frames, plucker_lines
+from ..energy.correspondence import mask_contour_pixels, capsule_contour_points, capsule_frames, plucker_lines
 from ..geometry import exp_so3, log_so3
 from ..geometry.so3 import nearest_rotvec
 from ..vision import capsule_data
@@ -179,7 +179,7 @@ class ContourFit:
             if m.shape != (cam.height, cam.width):
                 raise ContourFitError(f"masks: expected ({cam.height}, {cam.width}) for this camera, received "
                                       f"shape {m.shape}")
-            c = _contour_pixels(m).astype(np.float64)
+            c = mask_contour_pixels(m).astype(np.float64)
             # the contour pixels, their KD-tree and the Plücker line of each (13.30), once per frame
             self._images.append((c, cKDTree(c), *plucker_lines(cam, c)) if len(c) else None)
         return sum(c is not None for c in self._images)
@@ -197,8 +197,8 @@ class ContourFit:
         for v, (img, cam) in enumerate(zip(self._images, self.cameras)):
             if img is None:
                 continue
-            pix, fr, loc = _contour_points(cam, E, self.model.capsule_radii, T, self._cap_frames, self.n_points,
-                                           capsules)
+            pix, fr, loc = capsule_contour_points(cam, E, self.model.capsule_radii, T, self._cap_frames,
+                                                  self.n_points, capsules)
             if len(pix):
                 out.append((v, fr, loc))
         return out
@@ -266,8 +266,7 @@ class ContourFit:
         ``render_each``: the model contour points are those of the current pose at every step (one
         rendering per view and step); False: those of ``x``, moved with their joints at each step —
         a third of the cost, but the contour generator of a capsule slides over its surface as the
-        pose turns, and on fast arms that fitted worse (generated wave, 8 seeds: 8.94 → 9.76 mm; no
-        difference on the CMU walk; docs/tracking.md, "The knee target")."""
+        pose turns, and fast arms fitted worse (``docs/decisions/008-contour-stage.md``)."""
         iterations = _check_positive("iterations", iterations, integer=True, zero=True)
         x = np.array(x, dtype=np.float64)
         if x.shape != (self.model.dof,) or not np.all(np.isfinite(x)):

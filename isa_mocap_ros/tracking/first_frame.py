@@ -192,17 +192,17 @@ def pick_rival(tr, runs: list, winner, x: np.ndarray, energy: float):
     """The heading check's rival among the initialized frame's runs (``config.heading.init_confirm_frames``):
     the lowest-energy run heading more than 90° away from the winner's estimate ``x``, if its
     energy is within ``config.heading.init_confirm_ratio`` of ``energy``; else None."""
-    from .init import _wrap, _yaw_of
+    from .init import wrap_angle, yaw_of
 
     if not tr.has_heading or not np.isfinite(energy):
         return None
-    yaw = _yaw_of(x[3:6])
+    yaw = yaw_of(x[3:6])
     best = None
     for _, res, _ in runs:
         if res is winner:
             continue
         xr, er = tr.final_pose(res)
-        if abs(float(_wrap(_yaw_of(xr[3:6]) - yaw))) > np.pi / 2 and np.isfinite(er) \
+        if abs(float(wrap_angle(yaw_of(xr[3:6]) - yaw))) > np.pi / 2 and np.isfinite(er) \
                 and (best is None or er < best[1]):
             best = (xr, er)
     if best is None or best[1] > tr.config.heading.init_confirm_ratio * max(energy, 0.0):

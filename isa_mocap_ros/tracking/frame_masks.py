@@ -67,11 +67,11 @@ def set_masks(tr, ctx) -> int:
     if frame_index is not None and isinstance(getattr(tr.energy, "rng", None), np.random.Generator):
         # the energy samples foreground pixels at set_masks: draw them from this frame's stream
         tr.energy.rng = frame_rng(tr.config.search.seed, frame_index, 2)
-    from isa_mocap_ros.energy.silhouette import SilhouetteEnergy, _mask_problem
+    from isa_mocap_ros.energy.silhouette import SilhouetteEnergy, mask_problem
 
     try:
         if weights is not None and isinstance(tr.energy, SilhouetteEnergy):
-            if not any(w > 0 and _mask_problem(m, c) is None for w, m, c in zip(weights, masks, tr.cameras)):
+            if not any(w > 0 and mask_problem(m, c) is None for w, m, c in zip(weights, masks, tr.cameras)):
                 weights = None             # no usable view sees the predicted body: count them alike
             tr.energy.set_masks(masks, weights)
         else:

@@ -8,19 +8,15 @@ predicted model silhouette dilated by ``margin_px`` pixels. A touching component
 (a limb that moved further than the margin from the prediction stays whole as long as it is
 connected to the body), a component entirely outside the dilated silhouette is dropped.
 
-Why components, not pixels (``rule="pixels"``: foreground ∩ grown silhouette), measured on the
-robustness bench at 10 px (3 seeds, ``docs/tracking.md``, "Occluders and the gate"): a clean
-person is one component, so clean tracking is unchanged *bit for bit* (CMU walk and generated walk,
-every seed), where the pixel rule trims whatever part of a limb the prediction did not reach and
-re-rolled the clean runs (one of three lost a knee on the CMU walk, 44° knee RMSE); with 35
-occluders the component rule gave the better walks (knee 9.9° / 6.2° against 19.2° / 11.1°, off:
-63.8° / 14.1°), the pixel rule the better jog (141 against 195 mm, off 305 mm; the jog is lost
-either way). The price: an occluder touching the person's grown silhouette stays, whole.
+Why components, not pixels (``rule="pixels"``: foreground ∩ grown silhouette): a clean person is one
+component, so clean tracking is unchanged bit for bit, where the pixel rule trims whatever part of a
+limb the prediction did not reach; with occluders the component rule tracked the walks better (the
+figures: ``docs/decisions/003-mask-gate-and-hull.md``). The price: an occluder touching the person's
+grown silhouette stays, whole.
 
 The grown silhouette is drawn from the projected capsules with the margin added to their pixel
-radii (:func:`predicted_silhouettes`; 1.3-1.6 ms for 4 views at 320×240, where rendering the exact
-silhouette with :func:`isa_mocap_ros.vision.render_mask` and dilating took 4-6 ms); the whole gate
-takes ≈ 3 ms per frame of 4 views, against ≈ 35 ms for the frame's 1500 evaluations.
+radii (:func:`predicted_silhouettes`: cheaper than rendering the exact silhouette with
+:func:`isa_mocap_ros.vision.render_mask` and dilating it).
 """
 from __future__ import annotations
 

@@ -70,9 +70,9 @@ def travel(tr, min_periods: float = 0.0) -> tuple[float, float, float] | None:
 
 def off_travel(direction: float, x) -> float:
     """Degrees between pose ``x``'s heading and a travel ``direction`` (radians)."""
-    from .init import _wrap, _yaw_of
+    from .init import wrap_angle, yaw_of
 
-    return math.degrees(abs(float(_wrap(direction - _yaw_of(np.asarray(x, dtype=float)[3:6])))))
+    return math.degrees(abs(float(wrap_angle(direction - yaw_of(np.asarray(x, dtype=float)[3:6])))))
 
 
 def travel_recheck_due(tr) -> tuple[float, float, float] | None:
@@ -98,7 +98,7 @@ def recheck_heading(tr, ctx, res: FrameResult, frames_elapsed: float) -> FrameRe
     :meth:`_initial_runs` does); when the lowest-energy run's estimate heads more than 90° away and
     its energy is within ``init_confirm_ratio`` of this frame's, it becomes the rival of a heading
     check as after the initialization. ``ctx``: the tracker's frame; ``res``: its result."""
-    from .init import _wrap, _yaw_of, standing_poses
+    from .init import wrap_angle, yaw_of, standing_poses
 
     cfg = tr.config
     due = tr.heading_check.recheck_at is not None and tr.frames >= tr.heading_check.recheck_at
@@ -114,7 +114,7 @@ def recheck_heading(tr, ctx, res: FrameResult, frames_elapsed: float) -> FrameRe
     tr.heading_check.travel_recheck_after = tr.frames + TRAVEL_RECHECK_FRAMES
     before, tr.heading_check.views = tr.heading_check.views, max(tr.heading_check.views, res.views_used)
     x = np.asarray(res.x, dtype=float)
-    yaw = _yaw_of(x[3:6])
+    yaw = yaw_of(x[3:6])
     starts, _ = standing_poses(tr.model, x[:3], [yaw + np.pi])
     if travel:
         head = (f"heading re-check: the person moves backwards ({travel[1]:.2f} m in {travel[2]:g} frames, "
@@ -129,7 +129,7 @@ def recheck_heading(tr, ctx, res: FrameResult, frames_elapsed: float) -> FrameRe
         return dataclasses.replace(res, time_s=time.perf_counter() - ctx.t0,
                                    notes=res.notes + (f"{head}; its search failed ({exc}); kept this heading",))
     xr, er = min((tr.final_pose(r) for _, r, _ in runs), key=lambda t: t[1])
-    turned = abs(float(_wrap(_yaw_of(xr[3:6]) - yaw))) > np.pi / 2
+    turned = abs(float(wrap_angle(yaw_of(xr[3:6]) - yaw))) > np.pi / 2
     if turned and np.isfinite(er) and er <= cfg.heading.init_confirm_ratio * max(res.energy, 0.0):
         tr.heading_check.rival_start = (xr, er, res.energy)
         start_rival(tr, ctx.frame_index)
@@ -167,7 +167,7 @@ def confirm_heading(tr, ctx, res: FrameResult, masks, frames_elapsed: float) -> 
     sums = f"energy sums over {c[0]} frame(s) {c[1]:.4g} vs {c[2]:.4g} for the other heading"
     # keeping may be decided early, switching only on all the frames: a wrong keep leaves the
     # track as it would be without the check, a wrong switch loses a good one (and one frame's
-    # sums misled on 3 of 120 first frames of generated motions, docs/tracking.md)
+    # sums misled on some first frames of generated motions, docs/decisions/010-heading-check.md)
     last = c[0] >= cfg.heading.init_confirm_frames
     # the travel cue (TRAVEL_FRAMES): when this heading moves backwards and the other forwards, the check
     # runs to its last frame and keeps this heading only if the energies clearly prefer it

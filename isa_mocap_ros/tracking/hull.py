@@ -32,9 +32,8 @@ Details:
   (``cv2.remap``, nearest; the maps computed once per camera), so the kernel projects without
   distortion; a pinhole pixel the real camera does not see abstains, like a point off the image.
 
-Cost: ≈ 11 ms per frame of 4 views at 320×240 with ~3000 foreground pixels each when every pixel is
-tested (one thread, numba; AMD EPYC of session 19), against ≈ 100 ms for the frame's 1500 evaluations
-there; pixels in ``keep`` are not tested (the tracker's kept silhouette holds most of the person).
+Cost: linear in the foreground pixels tested, a small share of a tracked frame's time (``bench speed``'s
+profile); pixels in ``keep`` are not tested (the tracker's kept silhouette holds most of the person).
 :func:`hull_filter_numpy` is the reference (the same masks, tested), vectorized and slow.
 """
 from __future__ import annotations

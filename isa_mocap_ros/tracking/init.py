@@ -39,7 +39,7 @@ import numpy as np
 from isa_mocap_ros.geometry import exp_so3, log_so3
 
 __all__ = ["InitError", "InitResult", "STANDING_VARIANTS", "mask_centroid", "triangulate_rays",
-           "root_from_masks", "standing_poses", "yaw_rotvec", "initial_pose"]
+           "root_from_masks", "standing_poses", "yaw_rotvec", "yaw_of", "wrap_angle", "initial_pose"]
 
 
 class InitError(ValueError):
@@ -247,12 +247,14 @@ def standing_poses(model, root, yaws, *, variants=None) -> tuple[np.ndarray, lis
     return np.array(rows), labels
 
 
-def _yaw_of(rotvec) -> float:
+def yaw_of(rotvec) -> float:
+    """Heading (rad, about world z) of the root rotation vector ``rotvec`` (3,): the angle of its x axis."""
     R = exp_so3(np.asarray(rotvec, float))
     return float(np.arctan2(R[1, 0], R[0, 0]))
 
 
-def _wrap(a):
+def wrap_angle(a):
+    """Angles ``a`` (rad) wrapped into [-π, π)."""
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
 
@@ -314,7 +316,7 @@ def initial_pose(model, cameras: Sequence, masks: Sequence, energy: Callable, *,
         for sector in range(4):
             centre = yaw0 + sector * np.pi / 2
             for i in order:
-                if abs(_wrap(labels[i][0] - centre)) <= np.pi / 4 + 1e-9 and np.isfinite(E[i]):
+                if abs(wrap_angle(labels[i][0] - centre)) <= np.pi / 4 + 1e-9 and np.isfinite(E[i]):
                     starts.append(int(i))
                     break
         spread = np.array([0.1, 0.1, 0.05, 0.1, 0.1, 0.2])

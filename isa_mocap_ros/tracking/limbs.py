@@ -1,12 +1,10 @@
 """Limb stage: twist-and-hinge proposals that re-open a folded or flipped limb.
 
-Why (measured on the CMU walk, ``docs/tracking.md``): when an arm moves fast, the tracker can end
-with the forearm folded back onto the upper arm (elbow at its −150° limit) while the real arm is
-stretched, the upper arm's *direction* still right within 5-20°. Its rotation about its own axis
-(the twist) is then 140-180° off. Stretching the elbow alone raises the energy at every angle (the
-forearm swings through the background in the wrong plane: 0.083 → 0.093-0.100 at CMU frame 204),
-the stretched arm's twist is far outside the search box (prediction ± 0.5 rad), and the arm stays
-folded for the rest of the sequence (right wrist 340-410 mm off over the last 50 frames, 4 of 4 seeds).
+Why: when an arm moves fast, the tracker can end with the forearm folded back onto the upper arm while
+the real arm is stretched, the upper arm's *direction* right but its rotation about its own axis (the
+twist) far off. Stretching the elbow alone raises the energy at every angle (the forearm swings through
+the background in the wrong plane) and the right twist is outside the search box (prediction ± 0.5 rad),
+so no search step leaves the fold. The figures: ``docs/decisions/007-limb-stage.md``.
 
 The move that leaves it keeps the upper bone's direction and re-draws the two hidden coordinates:
 
@@ -17,10 +15,9 @@ The move that leaves it keeps the upper bone's direction and re-draws the two hi
     ``θ``. ``φ ~ U[−π, π)`` and ``θ ~ U[lower, upper]`` of the hinge.
 
 For the legs the tracker draws the hinge only (``twist=False``, the thigh kept): a knee that the
-search box cannot follow — the CMU walk's kick straightens and re-bends the knee by 25-30° per frame
-— is caught by a knee proposal, while redrawing the hip's twist as well lost a right leg after the
-kick in 1 of 16 seeds (its knee 0.5 m off to the end); a leg folded in the prediction gets the
-twist as well (``TrackerConfig.stages.limb_hinge_limbs``).
+search box cannot follow (a kick straightens and re-bends it faster than the box moves) is caught by a
+knee proposal, and redrawing the hip's twist as well measured worse; a leg folded in the prediction gets
+the twist as well (``TrackerConfig.stages.limb_hinge_limbs``).
 
 A limb that moves fast is trailed by the search (its box and spreads are centred on a damped
 prediction): **extrapolated proposals** carry the limb's angles further along the motion the frame's

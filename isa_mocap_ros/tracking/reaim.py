@@ -1,13 +1,10 @@
 """Re-aimed moves: new values for some joints with the limbs below them kept where they were.
 
-Why (measured on the CMU walk, ``docs/tracking.md``, "Re-aimed moves"): the hip joint centres are
-the worst-estimated joints of the tracked walk (29 mm mean, more than the knees and ankles), and
-they set the knee angle: with the knee and the ankle where the estimate has them, the true hip
-centres alone take the knee-angle RMSE from 6.1 / 7.8° to 3.3 / 5.5°. The hip centres hang on the
-pelvis, whose orientation the silhouette barely sees. No move of the tracker could correct them:
-the hierarchy's root partition turns the whole body, and a pelvis move that keeps the children's world
-*rotations* (the pelvis stage until session 13) carries each thigh is carried with its hip centre and the knee
-moves as far as the hip. The move that corrects a hip centre turns the thigh about the knee.
+Why: the hip joint centres are the worst-estimated joints of a tracked walk, and they set the knee
+angle; they hang on the pelvis, whose orientation the silhouette barely sees. The hierarchy's root
+partition turns the whole body, and a pelvis move that keeps the children's world *rotations* carries
+each thigh with its hip centre, so the knee moves as far as the hip. The move that corrects a hip
+centre turns the thigh about the knee (the figures: ``docs/decisions/005-pelvis-stage.md``).
 
 For candidate values of the *moved* joints' DOFs (the root, or the torso partition) the pose is
 rebuilt in kinematic order, and every joint hanging directly below them (an *attached* joint: a
@@ -25,8 +22,8 @@ joint with DOFs whose parent is moved, or carried rigidly by a moved joint) is *
     shoulders).
 
 Other attached three-axis joints keep their world rotations (as in the pelvis move); everything
-else keeps its angles. With the root moved this is the pelvis stage's move: the pelvis turns and shifts, the thighs swing about the knees, the lower spine about
-the chest, and the legs below the knees, the chest, arms and head stay in the world. With the torso
+else keeps its angles. With the root moved this is the pelvis stage's move: the pelvis turns and shifts,
+the thighs swing about the knees, the lower spine about the chest, and the legs below the knees, the chest, arms and head stay in the world. With the torso
 moved (the **torso stage**) the spine and neck bend and twist while the upper arms swing about the
 elbows: the hierarchy fits the torso with the arms held at their angles, so a torso move drags the
 arms with it, and the arms (fitted first) hold the torso where they fit.

@@ -306,7 +306,7 @@ class Tracker:
         ``spread_scale`` multiplies the initial spreads (the first frame starts from a rough pose);
         skipped stages are noted in ``notes``. The heading candidates' searches of the automatically
         initialized frame have no stage (``stages=False``): from a rough standing pose the pelvis stage
-        turned the pelvis against the legs (bags/demo: 270-340 mm on the first frames, measured); its
+        turned the pelvis against the legs (``docs/decisions/009-first-frame.md``); its
         polish (``config.first_frame.init_polish``) then searches the winner with every stage."""
         from isa_mocap_ros.optim import minimize
 
