@@ -16,9 +16,22 @@ def test_quick_json(capsys):
     assert [r["evals_per_frame"] for r in rows] == [500, 1500, 3000]
     for r in rows:
         assert r["frames"] == 3 and np.isfinite(r["frames_per_s"]) and r["frames_per_s"] > 0
+        assert np.isfinite(r["cpu_ms_per_frame"]) and r["cpu_ms_per_frame"] > 0
     assert res["network"]["rows"] == [] and res["network"]["skipped"] == "--quick"
+    pr = res["profile"]
+    assert pr["frames"] == 3 and pr["evals_per_frame"] == 1500 and pr["cpu_ms_per_frame"] > 0
+    stages = {r["stage"]: r for r in pr["by_stage"]}
+    assert list(stages) == [s[0] for s in bench_speed.PROFILE_STAGES] + ["bookkeeping (the rest of the step)"]
+    # every default stage ran once a frame, and the rows add up to the profiled step
+    for name in ("prediction", "main search", "pelvis stage", "torso stage", "limb stage", "contour stage"):
+        assert stages[name]["calls_per_frame"] >= 1 and stages[name]["cpu_ms_per_frame"] > 0, name
+    total = sum(r["cpu_ms_per_frame"] for r in pr["by_stage"])
+    assert abs(total - pr["profiled_cpu_ms_per_frame"]) < 1e-6 * total + 1e-9
+    assert stages["bookkeeping (the rest of the step)"]["share"] < 0.5
+    assert len(pr["by_call"]) == 15 and any("silhouette" in r["function"] for r in pr["by_call"])
     md = bench_speed.render_markdown(res)
     assert "#### Offline tracker" in md and "Skipped (--quick)" in md
+    assert "#### Where a tracked frame's CPU time goes" in md and "| contour stage |" in md
 
 
 def test_bad_frames(capsys):

@@ -111,6 +111,24 @@ def test_fk_matches_per_pose_reference(model, backend):
         joint_positions(model, X, backend="gpu")
 
 
+def test_fk_small_batches_on_the_calling_thread_give_the_parallel_kernels_bits(model):
+    from isa_mocap_ros.body import kinematics as kin
+
+    rng = np.random.default_rng(1)
+    X = random_poses(model, rng, 2 * kin.SERIAL_BELOW + 3)
+    tables = kin._kernel_tables(model)
+    J = len(model.joint_names)
+    outs = []
+    for kernel in (kin._fk_kernel, kin._fk_kernel_serial):
+        R, P = np.empty((len(X), J, 3, 3)), np.empty((len(X), J, 3))
+        kernel(X, *tables, R, P)
+        outs.append((R, P))
+    np.testing.assert_array_equal(outs[0][0], outs[1][0])
+    np.testing.assert_array_equal(outs[0][1], outs[1][1])
+    for n in (1, kin.SERIAL_BELOW - 1, kin.SERIAL_BELOW):       # both sides of the switch: the same bits
+        np.testing.assert_array_equal(joint_positions(model, X[:n]), outs[0][1][:n])
+
+
 def test_fk_backends_agree_on_large_batch():
     m = make_model(39)
     X = random_poses(m, np.random.default_rng(9), 2000)

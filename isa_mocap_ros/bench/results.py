@@ -337,7 +337,13 @@ def headlines(data: dict) -> list[str]:
             + ", ".join(f"{x['frames_per_s']:.2f} frames/s at {x['evals_per_frame']}" for x in sp["tracker"]["rows"])
         for x in sp["network"]["rows"]:
             if "error" not in x and x.get("fps") is not None:
-                line += f"; network {x['mode']} {x['fps']:.2f} frame sets/s, p95 latency {_f(x['latency_ms_p95'], '{:.0f}')} ms"
+                line += (f"; network {x['mode']} {x['fps']:.2f} frame sets/s, p95 latency {_f(x['latency_ms_p95'], '{:.0f}')} ms, "
+                         f"{x.get('dropped_frames')} of {x.get('frame_sets_played')} frame sets dropped")
+        pr = sp.get("profile")
+        if pr:
+            top = sorted((r for r in pr["by_stage"]), key=lambda r: -r["cpu_ms_per_frame"])[:3]
+            line += (f"; tracked frame at {pr['evals_per_frame']} evaluations: {pr['cpu_ms_per_frame']:.1f} CPU ms, most in "
+                     + ", ".join(f"{r['stage']} {100 * r['share']:.0f} %" for r in top))
         out.append(line)
     a = data.get("ackley")
     if a:

@@ -12,15 +12,25 @@ after the other on the same machine:
    frames over the summed wall time of the tracker's steps (segmentation and bag reading excluded),
    and the whole call's wall time is reported too (after an unreported warm-up call that loads or
    compiles the compiled kernels);
-3. **network**: ``isa-mocap run``'s code (:mod:`isa_mocap_ros.cli.run`: segmentation, prediction and
+   The steps' CPU time (``time.process_time``, every thread of the process) is reported beside the
+   wall time: it is what a before/after comparison on a shared machine can trust;
+3. **profile**: where a tracked frame's CPU time goes (:func:`frame_profile`), 1500 evaluations, the
+   same frames: the step's CPU time unprofiled, then under ``cProfile`` with a CPU clock by stage
+   (:data:`PROFILE_STAGES`: prediction, mask checks / gate / hull, view weights, the masks to the
+   energy, the main search, the pelvis, torso, limb and contour stages, the rest as bookkeeping) and
+   the top functions by own CPU time;
+4. **network**: ``isa-mocap run``'s code (:mod:`isa_mocap_ros.cli.run`: segmentation, prediction and
    estimator nodes and a recorder, each its own process, over DDS on localhost) on ``bags/demo``,
-   once in real time (rate 1.0: frames the estimator cannot keep up with are dropped) and once in
-   lockstep: frame sets processed per second of replay, the real-time factor (that rate over the
-   bag's 30 frames/s), latency p50 / p95 (image received → estimate received, the recorder's clock),
-   dropped frame sets, and the mean joint error.
+   three times (:data:`NETWORK_MODES`): in real time (rate 1.0: frames the estimator cannot keep up
+   with are dropped), in real time with a CPU-bound process beside it (one core busy,
+   :func:`busy_core`), and in lockstep: frame sets processed per second of replay, the real-time
+   factor (that rate over the bag's 30 frames/s), latency p50 / p95 (image received → estimate
+   received, the recorder's clock), dropped frame sets (start-up included), and the mean joint error,
+   also as the difference to the lockstep run's. The first run calibrates the body shape
+   (``isa-mocap run --shape auto``, before its replay); the others track with that shape file.
 
-``--quick`` (tests): energy at small sizes, the tracker on 3 frames of ``bags/fixture`` (its exact
-masks), no network part (``--network`` adds it on ``bags/fixture`` in lockstep).
+``--quick`` (tests): energy at small sizes, the tracker and the profile on 3 frames of ``bags/fixture``
+(its exact masks), no network part (``--network`` adds it on ``bags/fixture`` in lockstep).
 """
 from __future__ import annotations
 
@@ -76,7 +86,10 @@ def tracker_speed(bag: Path, *, frames: int, budgets=BUDGETS, optimizer: str = "
         s = track_bag(ns(b, frames + 1, f"track_{b}"), collect=got)
         wall = time.perf_counter() - t0
         steps = np.array(list(got["step_seconds"].values()), dtype=float)
+        cpu = np.array(list(got["step_cpu_seconds"].values()), dtype=float)
         rows.append({"evals_per_frame": int(b), "frames": int(steps.size),
+                     "cpu_ms_per_frame": float(cpu.mean() * 1e3),
+                     "frames_per_cpu_s": float(cpu.size / cpu.sum()) if cpu.sum() > 0 else float("nan"),
                      "frames_per_s": float(steps.size / steps.sum()) if steps.sum() > 0 else float("nan"),
                      "ms_per_frame_p50": float(np.median(steps) * 1e3), "ms_per_frame_max": float(steps.max() * 1e3),
                      "evals_per_s": float(b * steps.size / steps.sum()) if steps.sum() > 0 else float("nan"),
@@ -84,18 +97,141 @@ def tracker_speed(bag: Path, *, frames: int, budgets=BUDGETS, optimizer: str = "
     return rows
 
 
-def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path) -> dict:
-    """``isa-mocap run`` on ``bag`` in real time (rate 1.0) or lockstep; the summary's speed figures."""
+#: The tracked frame's stages for the profile: a label, then the functions whose CPU time (cumulative,
+#: as ``(file, function, caller or None)``; a caller restricts to the calls from that function) it sums.
+#: What the tracker's step spends outside them is "bookkeeping" (the step's own Python, notes, clipping,
+#: the final pose). A stage nested in another (a re-run frame of the heading check) counts in its own row.
+PROFILE_STAGES = (
+    ("prediction", (("frame_prediction.py", "predict", None),)),
+    ("masks: checks, gate, hull filter", (("frame_masks.py", "check_masks", None), ("frame_masks.py", "gate", None),
+                                          ("frame_masks.py", "hull", None))),
+    ("view weights", (("gate.py", "visible_shares", None),)),
+    ("masks to the energy (foreground sample)", (("frame_masks.py", "set_masks", None),)),
+    ("main search: set-up (box, optimizer, plan)", (("tracker.py", "plan_search", "optimize"),)),
+    ("main search", (("compiled_search.py", "search", "optimize"), ("_base.py", "minimize", "optimize"))),
+    ("pelvis stage", (("stages.py", "refit_pelvis", None),)),
+    ("torso stage", (("stages.py", "refit_torso", None),)),
+    ("limb stage", (("stages.py", "propose_limbs", None),)),
+    ("contour stage", (("stages.py", "fit_contours", None),)),
+)
+#: The profiled root: the tracker's step (everything it calls).
+PROFILE_ROOT = ("tracker.py", "step")
+
+
+def _pkey_match(key, file: str, func: str) -> bool:
+    return key[2] == func and key[0].replace("\\", "/").endswith("/" + file)
+
+
+def profile_stages(stats) -> tuple[float, list[tuple[str, float, int]]]:
+    """``(CPU seconds of the tracker's steps, [(stage, CPU seconds, calls)])`` from ``pstats.Stats``
+    ``stats`` of a profile enabled around :meth:`Tracker.step` only (:data:`PROFILE_STAGES`), with a last
+    row "bookkeeping" for the rest of the step."""
+    raw = stats.stats
+    root = [k for k in raw if _pkey_match(k, *PROFILE_ROOT)]
+    total = sum(raw[k][3] for k in root)
+    rows = []
+    for label, funcs in PROFILE_STAGES:
+        t, n = 0.0, 0
+        for file, func, caller in funcs:
+            for k, (cc, nc, tt, ct, callers) in raw.items():
+                if not _pkey_match(k, file, func):
+                    continue
+                if caller is None:
+                    t += ct
+                    n += nc
+                else:
+                    for ck, (ccc, cnc, ctt, cct) in callers.items():
+                        if ck[2] == caller:
+                            t += cct
+                            n += cnc
+        rows.append((label, t, n))
+    rows.append(("bookkeeping (the rest of the step)", max(0.0, total - sum(r[1] for r in rows)), 0))
+    return total, rows
+
+
+def frame_profile(bag: Path, *, frames: int, evals: int = 1500, optimizer: str = "h-isa", use_masks: bool = False,
+                  work: Path, top: int = 15) -> dict:
+    """CPU-time profile of the tracker's steps on ``frames`` frames of ``bag`` (``isa-mocap track``'s code,
+    as :func:`tracker_speed`): per frame, by stage (:data:`PROFILE_STAGES`) and by function (the ``top``
+    functions by own CPU time). Two runs: one unprofiled (the CPU time per step as it is) and one under
+    ``cProfile`` with a CPU-time clock (``time.process_time``: every thread of the process, so the numba
+    kernels' worker threads count; other processes' load does not), whose per-call overhead inflates the
+    Python-heavy parts: its stage rows are shares of the profiled step."""
+    import cProfile
+    import pstats
+
+    from isa_mocap_ros.cli.track import track_bag
+
+    def ns(name: str, n: int) -> argparse.Namespace:
+        return argparse.Namespace(
+            bag=str(bag), out=str(work / name), optimizer=optimizer, evals=int(evals), params=None, model=None,
+            seed=0, frames=n, start=0, use_masks=use_masks, learn_frames=None, shape="truth", init="truth",
+            predictor=None, prior=None, prior_eta=0.0, energy="fast", overwrite=True, no_progress=True)
+
+    track_bag(ns("profile_warmup", 3))          # loads or compiles every numba function the steps call
+    plain: dict = {}
+    track_bag(ns("profile_plain", frames + 1), collect=plain)
+    cpu = np.array(list(plain["step_cpu_seconds"].values()), dtype=float)
+    prof = cProfile.Profile(time.process_time)
+    got: dict = {"profiler": prof}
+    track_bag(ns("profile", frames + 1), collect=got)
+    n = len(got["step_cpu_seconds"])
+    st = pstats.Stats(prof)
+    total, stage_rows = profile_stages(st)
+    funcs = sorted(st.stats.items(), key=lambda kv: -kv[1][2])[:top]
+    by_call = [{"function": f"{Path(k[0]).name}:{k[1]}({k[2]})" if k[0] != "~" else k[2],
+                "calls_per_frame": round(v[1] / max(n, 1), 1), "own_ms_per_frame": v[2] / max(n, 1) * 1e3,
+                "cumulative_ms_per_frame": v[3] / max(n, 1) * 1e3} for k, v in funcs]
+    return {"bag": bag.name, "optimizer": optimizer, "evals_per_frame": int(evals), "frames": int(n),
+            "cpu_ms_per_frame": float(cpu.mean() * 1e3) if cpu.size else float("nan"),
+            "cpu_ms_per_frame_p50": float(np.median(cpu) * 1e3) if cpu.size else float("nan"),
+            "profiled_cpu_ms_per_frame": total / max(n, 1) * 1e3,
+            "by_stage": [{"stage": label, "cpu_ms_per_frame": t / max(n, 1) * 1e3,
+                          "share": t / total if total > 0 else float("nan"),
+                          "calls_per_frame": round(c / max(n, 1), 2)} for label, t, c in stage_rows],
+            "by_call": by_call}
+
+
+#: The network part's runs: (mode label, lockstep, a CPU-bound process beside it).
+NETWORK_MODES = (("real time", False, False), ("real time, one core busy", False, True), ("lockstep", True, False))
+
+
+@contextlib.contextmanager
+def busy_core(on: bool = True):
+    """A CPU-bound process (one core kept busy: a Python busy loop at normal priority) while the block
+    runs; stopped (by its own pid) after it."""
+    import subprocess
+
+    if not on:
+        yield None
+        return
+    proc = subprocess.Popen([sys.executable, "-c", "while True: pass"], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        yield proc
+    finally:
+        proc.kill()
+        proc.wait(10)
+
+
+def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path, lockstep: bool | None = None,
+                  busy: bool = False, shape: str = "auto") -> dict:
+    """``isa-mocap run`` on ``bag`` in real time (rate 1.0) or lockstep (``lockstep``, default: ``mode ==
+    "lockstep"``), with a CPU-bound process beside it when ``busy`` (:func:`busy_core`), tracking with
+    body shape ``shape`` (``isa-mocap run --shape``; the calibration runs before the replay); the
+    summary's speed figures and ``body_shape``, the shape file the run tracked with."""
     from isa_mocap_ros.cli import run as run_cli
 
-    out = work / f"run_{mode}"
+    lockstep = (mode == "lockstep") if lockstep is None else lockstep
+    out = work / ("run_" + "".join(ch if ch.isalnum() else "_" for ch in mode))
     p = argparse.ArgumentParser()
     run_cli.add_run_arguments(p)
-    argv = [str(bag), "--out", str(out), "--quiet", "--overlay-frames", "0", "--optimizer", optimizer]
-    argv += ["--lockstep"] if mode == "lockstep" else ["--rate", "1.0"]
+    argv = [str(bag), "--out", str(out), "--quiet", "--overlay-frames", "0", "--optimizer", optimizer,
+            "--shape", shape]
+    argv += ["--lockstep"] if lockstep else ["--rate", "1.0"]
     buf = io.StringIO()
     t0 = time.perf_counter()
-    with contextlib.redirect_stdout(buf):
+    with contextlib.redirect_stdout(buf), busy_core(busy):
         rc = run_cli.run(p.parse_args(argv))
     wall = time.perf_counter() - t0
     if rc != 0 or not (out / "summary.json").is_file():
@@ -104,8 +240,10 @@ def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path) -> dict:
     s = json.loads((out / "summary.json").read_text())
     bag_fps = _bag_fps(bag)
     keep = ("frame_sets_played", "frames_processed", "frames_estimated", "fps", "latency_ms_p50", "latency_ms_p95",
-            "dropped_frames", "dropped_while_initializing", "frames_without_contour_stage", "init_ms", "tracker_ms_p50", "tracker_ms_p95", "mpjpe_mm", "knee_rmse_deg", "evals_per_frame", "optimizer")
-    r = {"mode": mode, **{k: s.get(k) for k in keep}, "bag_fps": bag_fps, "wall_seconds": round(wall, 1)}
+            "dropped_frames", "dropped_while_initializing", "frames_without_contour_stage", "budget_lowered", "track_resets", "init_ms", "tracker_ms_p50", "tracker_ms_p95", "mpjpe_mm", "knee_rmse_deg", "evals_per_frame", "optimizer")
+    r = {"mode": mode, "busy_core": bool(busy),
+         "body_shape": str(out / "body.yaml") if (out / "body.yaml").is_file() else (None if shape == "auto" else shape), **{k: s.get(k) for k in keep}, "bag_fps": bag_fps,
+         "wall_seconds": round(wall, 1)}
     r["real_time_factor"] = (s["fps"] / bag_fps) if bag_fps and s.get("fps") and np.isfinite(s["fps"]) else None
     return r
 
@@ -137,14 +275,33 @@ def collect(args: argparse.Namespace) -> dict:
         res["tracker"] = {"bag": tbag.name, "optimizer": args.optimizer, "frames": frames,
                           "rows": tracker_speed(tbag, frames=frames, optimizer=args.optimizer,
                                                 use_masks=args.quick, work=work)}
+        print(f"bench speed: CPU profile of the tracked frame on {tbag.name}, {frames} frames ...", file=sys.stderr,
+              flush=True)
+        res["profile"] = frame_profile(tbag, frames=frames, optimizer=args.optimizer, use_masks=args.quick,
+                                       work=work)
         net = (not args.no_network) and (not args.quick or args.network)
         if net:
             nbag = bags / ("fixture" if args.quick else "demo")
-            modes = ("lockstep",) if args.quick else ("real time", "lockstep")
+            modes = [m for m in NETWORK_MODES if m[1]] if args.quick else list(NETWORK_MODES)
             rows = []
-            for m in modes:
-                print(f"bench speed: node network on {nbag.name}, {m} ...", file=sys.stderr, flush=True)
-                rows.append(network_speed(nbag, mode=m, optimizer=args.optimizer, work=work))
+            shape = "auto"          # calibrated by the first run; the others track with the same shape file
+            for label, lockstep, busy in modes:
+                print(f"bench speed: node network on {nbag.name}, {label} ...", file=sys.stderr, flush=True)
+                try:
+                    r = network_speed(nbag, mode=label, optimizer=args.optimizer, work=work, lockstep=lockstep,
+                                      busy=busy, shape=shape)
+                except Exception as exc:  # noqa: BLE001 - one failed run is a row saying so, not a lost bench
+                    r = {"mode": label, "busy_core": busy, "error": f"{type(exc).__name__}: {exc}"}
+                if shape == "auto" and r.get("body_shape"):
+                    shape = str(shutil.copy(r["body_shape"], work / "body.yaml"))
+                rows.append(r)
+            ref = next((r for r in rows if r["mode"] == "lockstep" and "error" not in r), None)
+            for r in rows:
+                if ref is not None and "error" not in r and r.get("mpjpe_mm") is not None \
+                        and ref.get("mpjpe_mm") is not None:
+                    r["mpjpe_vs_lockstep_mm"] = r["mpjpe_mm"] - ref["mpjpe_mm"]
+                if "error" not in r and r.get("frame_sets_played"):
+                    r["dropped_share"] = (r["dropped_frames"] or 0) / r["frame_sets_played"]
             res["network"] = {"bag": nbag.name, "rows": rows}
         else:
             res["network"] = {"skipped": "--quick" if args.quick else "--no-network", "rows": []}
@@ -166,37 +323,71 @@ def render_markdown(res: dict) -> str:
          f"{e['dof']} DOF, {e['views']} views, batch {e['batch']} (exact reference measured on {e['exact_batch']} poses"
          f"{energy_sizes(e)}).",
          "", "| energy | evaluations/s |", "|---|---|",
-         f"| fast (compiled kernel) | {e['fast_evals_per_s']:.0f} |", f"| exact (raster reference) | {e['exact_evals_per_s']:.0f} |",
+         f"| fast (compiled kernel) | {e['fast_evals_per_s']:.0f} |",
+         *([f"| fast, per CPU second (every thread) | {e['fast_evals_per_cpu_s']:.0f} |"]
+           if e.get("fast_evals_per_cpu_s") else []),
+         f"| exact (raster reference) | {e['exact_evals_per_s']:.0f} |",
          f"| ratio | {e['ratio']:.0f}× |", ""]
     t = res["tracker"]
     L += ["#### Offline tracker", "",
           f"`bags/{t['bag']}`, {t['optimizer']}, {t['frames']} frames per budget after a ground-truth first frame; "
-          "frames/s over the tracker's steps (segmentation and bag reading excluded).", "",
-          "| evaluations/frame | frames/s | ms/frame (median) | ms/frame (max) | evaluations/s | call wall time (s) |",
-          "|---|---|---|---|---|---|"]
+          "frames/s over the tracker's steps (segmentation and bag reading excluded); CPU ms/frame: the steps' "
+          "CPU time, every thread of the process (two busy threads count twice).", "",
+          "| evaluations/frame | frames/s | ms/frame (median) | ms/frame (max) | CPU ms/frame (mean) | evaluations/s "
+          "| call wall time (s) |",
+          "|---|---|---|---|---|---|---|"]
     for r in t["rows"]:
         L.append(f"| {r['evals_per_frame']} | {_f(r['frames_per_s'], '{:.2f}')} | {_f(r['ms_per_frame_p50'], '{:.0f}')} | "
-                 f"{_f(r['ms_per_frame_max'], '{:.0f}')} | {_f(r['evals_per_s'], '{:.0f}')} | {r['wall_seconds']:.1f} |")
+                 f"{_f(r['ms_per_frame_max'], '{:.0f}')} | {_f(r.get('cpu_ms_per_frame'), '{:.1f}')} | "
+                 f"{_f(r['evals_per_s'], '{:.0f}')} | {r['wall_seconds']:.1f} |")
+    if res.get("profile"):
+        L += ["", *render_profile(res["profile"])]
     n = res["network"]
     L += ["", "#### Node network (`isa-mocap run`)", ""]
     if not n["rows"]:
         L.append(f"Skipped ({n.get('skipped')}).")
     else:
-        L += [f"`bags/{n['bag']}`, segmentation + prediction + estimator + recorder processes over DDS (localhost).", "",
-              "| mode | frame sets played | processed | frames/s | real-time factor | latency p50 (ms) | latency p95 (ms) | dropped | of them while initializing | without the contour stage | initialization (ms) | tracker ms per set p50 / p95 | mean joint error (mm) |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        L += [f"`bags/{n['bag']}`, segmentation + prediction + estimator + recorder processes over DDS (localhost); "
+              "one core busy: a CPU-bound process (a Python busy loop) runs beside the network for the whole run. "
+              "Dropped: frame sets played and not processed, start-up included (the share in brackets); latency: "
+              "image received → joint_states received (the recorder's clock); vs lockstep: mean joint error "
+              "minus the lockstep run's (same body shape, calibrated once by the first run).", "",
+              "| mode | frame sets played | processed | frames/s | real-time factor | latency p50 (ms) | latency p95 (ms) | dropped | of them while initializing | without the contour stage | initialization (ms) | tracker ms per set p50 / p95 | mean joint error (mm) | vs lockstep (mm) |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in n["rows"]:
             if "error" in r:
-                L.append(f"| {r['mode']} | failed: {r['error']} | | | | | | | | | | | |")
+                L.append(f"| {r['mode']} | failed: {r['error']} | | | | | | | | | | | | |")
                 continue
+            share = f" ({100 * r['dropped_share']:.0f} %)" if r.get("dropped_share") is not None else ""
             L.append(f"| {r['mode']} | {r['frame_sets_played']} | {r['frames_processed']} | {_f(r['fps'], '{:.2f}')} | "
                      f"{_f(r['real_time_factor'], '{:.2f}')} | {_f(r['latency_ms_p50'], '{:.0f}')} | "
-                     f"{_f(r['latency_ms_p95'], '{:.0f}')} | {r['dropped_frames']} | "
+                     f"{_f(r['latency_ms_p95'], '{:.0f}')} | {r['dropped_frames']}{share} | "
                      f"{_f(r.get('dropped_while_initializing'), '{}')} | "
                      f"{_f(r.get('frames_without_contour_stage'), '{}')} | {_f(r.get('init_ms'), '{:.0f}')} | "
                      f"{_f(r.get('tracker_ms_p50'), '{:.0f}')} / "
-                     f"{_f(r.get('tracker_ms_p95'), '{:.0f}')} | {_f(r['mpjpe_mm'])} |")
+                     f"{_f(r.get('tracker_ms_p95'), '{:.0f}')} | {_f(r['mpjpe_mm'])} | "
+                     f"{_f(r.get('mpjpe_vs_lockstep_mm'), '{:+.1f}')} |")
     return "\n".join(L) + "\n"
+
+
+def render_profile(pr: dict) -> list[str]:
+    """The markdown lines of :func:`frame_profile`'s result."""
+    L = ["#### Where a tracked frame's CPU time goes", "",
+         f"`bags/{pr['bag']}`, {pr['optimizer']}, {pr['evals_per_frame']} evaluations/frame, {pr['frames']} frames "
+         f"after a ground-truth first frame. CPU time of the tracker's step (every thread of the process): "
+         f"{_f(pr['cpu_ms_per_frame'], '{:.1f}')} ms per frame unprofiled (median "
+         f"{_f(pr['cpu_ms_per_frame_p50'], '{:.1f}')}), {_f(pr['profiled_cpu_ms_per_frame'], '{:.1f}')} ms under "
+         "`cProfile` with a CPU clock (its per-call overhead inflates the Python-heavy rows).", "",
+         "| stage | CPU ms/frame (profiled) | share | calls/frame |", "|---|---|---|---|"]
+    for r in pr["by_stage"]:
+        L.append(f"| {r['stage']} | {_f(r['cpu_ms_per_frame'], '{:.2f}')} | {_f(100 * r['share'], '{:.1f}')} % | "
+                 f"{_f(r['calls_per_frame'] or None, '{:g}')} |")
+    L += ["", "Top functions by own CPU time (profiled):", "",
+          "| function | calls/frame | own CPU ms/frame | cumulative CPU ms/frame |", "|---|---|---|---|"]
+    for r in pr["by_call"]:
+        L.append(f"| `{r['function']}` | {r['calls_per_frame']:g} | {r['own_ms_per_frame']:.2f} | "
+                 f"{r['cumulative_ms_per_frame']:.2f} |")
+    return L
 
 
 def plot(res: dict, path: Path) -> Path:
@@ -208,7 +399,7 @@ def plot(res: dict, path: Path) -> Path:
     rows = res["tracker"]["rows"]
     fig, ax = plt.subplots(figsize=(6, 3.6))
     ax.plot([r["evals_per_frame"] for r in rows], [r["frames_per_s"] for r in rows], "bo-", label="offline tracker")
-    for r, st in zip(res["network"]["rows"], ("g--", "m:")):
+    for r, st in zip(res["network"]["rows"], ("g--", "r-.", "m:")):
         if r.get("fps"):
             ax.axhline(r["fps"], color=st[0], ls=st[1:], label=f"network, {r['mode']} ({r.get('evals_per_frame')} evals)")
     ax.set_xlabel("evaluations per frame")

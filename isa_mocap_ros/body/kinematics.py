@@ -97,33 +97,50 @@ def rodrigues_into(wx, wy, wz, R):  # pragma: no cover - compiled
     R[2, 1] = A * wx + B * wy * wz
 
 
+@numba.njit(cache=True, inline="always", fastmath=False)
+def _fk_pose(X, i, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
+    """Rotations ``R[i]`` and positions ``P[i]`` of pose ``X[i]`` (one pose of :func:`_fk_kernel`)."""
+    J = parents.shape[0]
+    rodrigues_into(X[i, 3], X[i, 4], X[i, 5], R[i, 0])       # root: Eq. 13.20, Taylor series near 0
+    for c in range(3):
+        P[i, 0, c] = X[i, c]
+    for j in range(1, J):
+        p = parents[j]
+        for r in range(3):
+            P[i, j, r] = P[i, p, r] + R[i, p, r, 0] * offsets[j, 0] + R[i, p, r, 1] * offsets[j, 1] \
+                + R[i, p, r, 2] * offsets[j, 2]
+            for c in range(3):
+                R[i, j, r, c] = R[i, p, r, c]
+        for k in range(ptr[j], ptr[j + 1]):
+            a = axes[k]
+            q = X[i, dofs[k]]
+            co = np.cos(q)
+            si = np.sin(q)
+            u = (a + 1) % 3
+            v = (a + 2) % 3
+            for r in range(3):          # R ← R · R_a(q): columns u, v rotate
+                mu = R[i, j, r, u]
+                mv = R[i, j, r, v]
+                R[i, j, r, u] = mu * co + mv * si
+                R[i, j, r, v] = -mu * si + mv * co
+
+
 @numba.njit(parallel=True, cache=True, fastmath=False)
 def _fk_kernel(X, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
-    n = X.shape[0]
-    J = parents.shape[0]
-    for i in numba.prange(n):
-        rodrigues_into(X[i, 3], X[i, 4], X[i, 5], R[i, 0])       # root: Eq. 13.20, Taylor series near 0
-        for c in range(3):
-            P[i, 0, c] = X[i, c]
-        for j in range(1, J):
-            p = parents[j]
-            for r in range(3):
-                P[i, j, r] = P[i, p, r] + R[i, p, r, 0] * offsets[j, 0] + R[i, p, r, 1] * offsets[j, 1] \
-                    + R[i, p, r, 2] * offsets[j, 2]
-                for c in range(3):
-                    R[i, j, r, c] = R[i, p, r, c]
-            for k in range(ptr[j], ptr[j + 1]):
-                a = axes[k]
-                q = X[i, dofs[k]]
-                co = np.cos(q)
-                si = np.sin(q)
-                u = (a + 1) % 3
-                v = (a + 2) % 3
-                for r in range(3):          # R ← R · R_a(q): columns u, v rotate
-                    mu = R[i, j, r, u]
-                    mv = R[i, j, r, v]
-                    R[i, j, r, u] = mu * co + mv * si
-                    R[i, j, r, v] = -mu * si + mv * co
+    for i in numba.prange(X.shape[0]):
+        _fk_pose(X, i, parents, offsets, ptr, dofs, axes, R, P)
+
+
+@numba.njit(cache=True, fastmath=False)
+def _fk_kernel_serial(X, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
+    """:func:`_fk_kernel` on the calling thread (the same operations, so the same bits)."""
+    for i in range(X.shape[0]):
+        _fk_pose(X, i, parents, offsets, ptr, dofs, axes, R, P)
+
+
+#: Batches smaller than this run on the calling thread: a parallel launch for one pose cost more CPU than
+#: the pose (the tracker calls FK on single poses ~14 times a frame; bench speed's profile, docs/nodes.md).
+SERIAL_BELOW = 32
 
 
 def _fk_numba(model: BodyModel, X: np.ndarray):
@@ -131,7 +148,7 @@ def _fk_numba(model: BodyModel, X: np.ndarray):
     n, J = X.shape[0], len(model.joint_names)
     R = np.empty((n, J, 3, 3))
     P = np.empty((n, J, 3))
-    _fk_kernel(np.ascontiguousarray(X), *tables, R, P)
+    (_fk_kernel_serial if n < SERIAL_BELOW else _fk_kernel)(np.ascontiguousarray(X), *tables, R, P)
     return R, P
 
 

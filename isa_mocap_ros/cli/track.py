@@ -252,7 +252,9 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     differently): ``model``, ``truth_model``, ``estimates`` / ``truth`` / ``energies`` (dicts frame
     index -> pose / energy), ``init_frame`` (the index initialized from the ground truth with
     ``--init truth``, else None), ``stamps`` (frame index -> stamp in ns) and ``step_seconds`` (frame
-    index -> wall time of the tracker's step, segmentation excluded).
+    index -> wall time of the tracker's step, segmentation excluded), ``step_cpu_seconds`` (the same steps'
+    CPU time, every thread of the process). A ``collect["profiler"]`` given in (a ``cProfile.Profile``)
+    is enabled around the tracker's steps only.
     """
     from tqdm import tqdm
 
@@ -399,6 +401,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     estimates: dict[int, np.ndarray] = {}
     energies: dict[int, float] = {}
     step_seconds: dict[int, float] = {}
+    step_cpu: dict[int, float] = {}         # CPU time of the step (this process, every thread)
+    profiler = None if collect is None else collect.get("profiler")
     init_frame = None
     results = []
     n_fell_back = 0
@@ -461,7 +465,13 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                 if detector is not None and (not tracker.initialized
                                              or (kp_every > 0 and ((fr.index - first) // stride) % kp_every == 0)):
                     kp = keypoints_of(fr, masks)
+                c0 = time.process_time()
+                if profiler is not None:
+                    profiler.enable()
                 r = tracker.step(masks, int(fr.stamp_ns), frames_elapsed=stride, keypoints=kp)
+                if profiler is not None:
+                    profiler.disable()
+                step_cpu[fr.index] = time.process_time() - c0
                 x = r.x
             dt = time.perf_counter() - t0
             t_track += dt
@@ -490,6 +500,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         collect.update(model=model, truth_model=seq.truth_model, estimates=dict(estimates), energies=dict(energies),
                        truth={f.index: f.truth for f in seq.frames[first:stop:stride] if f.truth is not None},
                        init_frame=init_frame, stamps=stamp_of, step_seconds=dict(step_seconds),
+                       step_cpu_seconds=dict(step_cpu),
                        truth_markers={f.index: f.truth_markers for f in seq.frames[first:stop:stride]
                                       if f.truth_markers is not None},
                        truth_marker_names=tuple(seq.truth_marker_names), body=seq.body_kind)

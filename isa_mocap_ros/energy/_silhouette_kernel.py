@@ -30,7 +30,46 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from collections import namedtuple
+
 from isa_mocap_ros.body.kinematics import rodrigues_into
+
+# ---------------------------------------------------------------------- argument bundles
+# The kernels take their arrays in a few named tuples (numba types each as a tuple of its arrays' types
+# and unpacks it at compile time: the same machine code as separate arguments, measured, docs/energy.md).
+#: The body: kinematic tables (``body.kinematics.kinematic_tables``) and capsules. ``parents (J,)``,
+#: ``offsets (J, 3)``, ``ptr (J + 1,)``, ``dofs``, ``axes``; ``caps (C, 2)`` int64 joint indices; ``radii
+#: (C, 2)`` float64 metres.
+Body = namedtuple("Body", "parents offsets ptr dofs axes caps radii")
+#: The views of the current masks: ``cam_R, cam_t (V, 3, 3), (V, 3)`` world -> camera; ``cam_K (V, 5)`` fx,
+#: fy, cx, cy of the downsampled camera and the scale of ``cov``; ``cam_D (V, 8)``; ``cam_hasd (V,)`` bool;
+#: ``cov (V, Hmax * Wmax + 8)`` foreground coverage of the downsampled mask, rows of ``Wmax``, times ``1 /
+#: cam_K[v, 4]`` (uint8 0/1 at full resolution, float32 fractions when downsampled), then 8 zeros (the
+#: last one is the pixel that points not counted read); ``cov_wh (V, 3)`` int64 width, height of the
+#: downsampled image and ``Wmax``; ``view_w (V,)`` float64 weights of the views, >= 0 with a positive sum
+#: (Eq. 5 becomes ``sum_v w_v f_v / sum_v w_v``; all ones: Eq. 5 itself, to the bit).
+Views = namedtuple("Views", "cam_R cam_t cam_K cam_D cam_hasd cov cov_wh view_w")
+#: Term 1's template: ``order (C,)`` int64 processing order of the capsules (a point counts for the first
+#: one containing it); ``tmpl_a, tmpl_s (T + 8,)`` float32 template points (8 padding points at the end),
+#: along the capsule axis in [0, 1] and across it in [-1, 1]; capsule ``c`` owns ``tmpl_ptr[c]:tmpl_ptr[c
+#: + 1]`` (``tmpl_ptr (C + 1,)``), laid out as ``tmpl_na[c]`` strata along the axis (in increasing order)
+#: of equally many points each.
+Template = namedtuple("Template", "order tmpl_a tmpl_s tmpl_ptr tmpl_na")
+#: Term 2's foreground sample: ``fg_x, fg_y (V * S * Ms,)`` float32 normalized foreground sample points in
+#: ``S`` vertical strips (x quantiles) per view, strip ``r = v S + s`` at ``r Ms``, sorted by y; ``Ms`` a
+#: multiple of 8, padded with points far outside the image; ``fg_n (V,)`` int64 sample size per view
+#: (``fg_n[v] == 0`` selects the area estimate of term 2 for view ``v``); ``fg_tab (V S, NB + 1)`` int64,
+#: ``fg_tab[r, b]`` = first point of strip ``r`` with ``y >= y0 + b dy`` (the strip's count at NB);
+#: ``fg_bins (V S, 2)`` ``y0, 1 / dy`` of those bins; ``fg_xr (V S, 2)`` x range of each strip; ``fg_area
+#: (V,)`` area of the foreground in the normalized plane (full-resolution pixels).
+Foreground = namedtuple("Foreground", "fg_x fg_y fg_n fg_tab fg_bins fg_xr fg_area")
+#: A restriction (:func:`silhouette_restricted`): the base pose ``x_base (D,)``, the coordinates fixed at
+#: it ``fixed_dofs``, the joints to recompute ``fk_joints`` (rotating or moving, tree order) and to project
+#: ``cam_joints`` (moving), the moving capsules ``mov_caps`` (processing order), their processing
+#: positions ``mov_ci`` (ascending) and the positions' moving flags ``moving_ci (C,)``.
+Restriction = namedtuple("Restriction", "x_base fixed_dofs fk_joints cam_joints mov_caps mov_ci moving_ci")
+#: What the poses of a restriction share (:func:`restrict_prepare`'s result; its docstring).
+Stage = namedtuple("Stage", "R0 P0 CP0 G0 G320 box0 BX0_ t1 s_px s_py s_idx s_f s_pre u_x u_y u_pre base_hit")
 
 # Columns of a view's capsule table ``G (C, G_COLS)`` (:func:`_project_cap`), in the capsule's 2-D frame:
 # start point a, unit axis u, length, radii at a and b, sine and cosine of the tangent angle, the
@@ -51,7 +90,8 @@ G32_CA_LEN = 9             # cos * L, -1 when one disc holds the other
 G32_RA2, G32_RB2 = 10, 11  # squared radii
 G32_COLS = 12
 
-__all__ = ["fk_positions_batch", "silhouette_batch", "project_capsules", "inside_points"]
+__all__ = ["fk_positions_batch", "silhouette_batch", "silhouette_batch_serial", "project_capsules", "inside_points", "Body", "Views", "Template",
+           "Foreground", "Restriction", "Stage"]
 
 
 @numba.njit(cache=True, inline="always")
@@ -614,43 +654,13 @@ def _t2_runs(c, box, v, n_strips, fg_x, fg_y, fg_tab, fg_bins, fg_xr, fg_ms, fla
 DETERMINISTIC_FASTMATH = {"contract", "nnan", "ninf", "nsz", "arcp", "afn"}
 
 
-@numba.njit(parallel=True, cache=True, fastmath=DETERMINISTIC_FASTMATH)
-def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
-                     cam_R, cam_t, cam_K, cam_D, cam_hasd, cov, cov_wh,
-                     order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_xr, fg_area,
-                     view_w, n_chunks, out):  # pragma: no cover - compiled
-    """Fast Eq. 5 for poses ``X (n, D)`` into ``out (n,)``.
-
-    Parameters
-    ----------
-    X : (n, D) float64, finite rows only
-    parents, offsets, ptr, dofs, axes : kinematic tables (see ``body.kinematics._kernel_tables``)
-    caps : (C, 2) int64 joint indices;  radii : (C, 2) float64 metres
-    cam_R, cam_t : (V, 3, 3), (V, 3) world -> camera
-    cam_K : (V, 5) fx, fy, cx, cy of the downsampled camera and the scale of ``cov``;
-    cam_D : (V, 8);  cam_hasd : (V,) bool
-    cov : (V, Hmax * Wmax + 8) foreground coverage of the downsampled mask, rows of ``Wmax``, times
-        ``1 / cam_K[v, 4]`` (uint8 0/1 at full resolution, float32 fractions when downsampled), then
-        8 zeros (the last one is the pixel that points not counted read)
-    cov_wh : (V, 3) int64 width, height of the downsampled image and ``Wmax``
-    order : (C,) int64 processing order of the capsules (a point counts for the first one containing it)
-    tmpl_a, tmpl_s : (T + 8,) float32 template points (8 padding points at the end), along the capsule axis in [0, 1] and across it in [-1, 1];
-        capsule ``c`` owns ``tmpl_ptr[c]:tmpl_ptr[c + 1]`` (``tmpl_ptr (C + 1,)``), laid out as
-        ``tmpl_na[c]`` strata along the axis (in increasing order) of equally many points each
-    fg_x, fg_y : (V * S * Ms,) float32 normalized foreground sample points in ``S`` vertical strips
-        (x quantiles) per view, strip ``r = v S + s`` at ``r Ms``, sorted by y; ``Ms`` a multiple of 8,
-        padded with points far outside the image;  fg_n : (V,) int64 sample size per view;
-        ``fg_n[v] == 0`` selects the area estimate of term 2 for view ``v``
-    fg_tab : (V S, NB + 1) int64, ``fg_tab[r, b]`` = first point of strip ``r`` with ``y >= y0 + b dy``
-        (the strip's count at NB)
-    fg_bins : (V S, 2) ``y0, 1 / dy`` of those bins;  fg_xr : (V S, 2) x range of each strip
-    fg_area : (V,) area of the foreground in the normalized plane (full-resolution pixels)
-    view_w : (V,) float64 weights of the views, >= 0 with a positive sum: Eq. 5 becomes
-        ``sum_v w_v f_v / sum_v w_v`` (all ones: Eq. 5 itself, to the bit)
-    n_chunks : int, work units of the parallel loop
-    out : (n,) float64
-    """
-    n = X.shape[0]
+@numba.njit(cache=True, inline="always", fastmath=DETERMINISTIC_FASTMATH)
+def _batch_rows(X, lo, hi, body, views, tmpl, fg, out):  # pragma: no cover - compiled
+    """:func:`silhouette_batch` of the rows ``lo:hi`` of ``X`` (one work unit, with its own scratch)."""
+    parents, offsets, ptr, dofs, axes, caps, radii = body
+    cam_R, cam_t, cam_K, cam_D, cam_hasd, cov, cov_wh, view_w = views
+    order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na = tmpl
+    fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_xr, fg_area = fg
     J = parents.shape[0]
     C = caps.shape[0]
     V = cam_R.shape[0]
@@ -660,75 +670,99 @@ def silhouette_batch(X, parents, offsets, ptr, dofs, axes, caps, radii,
     wsum = 0.0
     for v in range(V):
         wsum += view_w[v]
-    for chunk in numba.prange(n_chunks):
-        lo = chunk * n // n_chunks
-        hi = (chunk + 1) * n // n_chunks
-        R = np.empty((J, 3, 3))
-        P = np.empty((J, 3))
-        CP = np.empty((J, 4))
-        G = np.empty((C, G_COLS))
-        G32 = np.empty((C, G32_COLS), np.float32)
-        box = np.empty((C, 4))
-        EB = np.zeros((11, C + 8))     # the capsules in processing order (whole vectors)
-        S = np.zeros((4, C + 8))
-        OK = np.zeros(C + 8, np.int64)
-        NEAR = np.empty(C, np.int64)
-        flag = np.empty(max(1, fg_x.shape[0]), np.float32)
-        kmax = _scratch_len(tmpl_ptr)
-        PX = np.zeros(kmax + 8, np.float32)     # a point's frame coordinates: along, across
-        PY = np.zeros(kmax + 8, np.float32)
-        IDX = np.empty(kmax, np.int32)     # a point's pixel, zpix when not counted
-        zpix = np.int32(cov.shape[1] - 1)
-        for i in range(lo, hi):
-            _fk_one(X[i], parents, offsets, ptr, dofs, axes, R, P)
-            total = 0.0
-            for v in range(V):
-                _to_camera(P, cam_R, cam_t, v, CP)
-                _project_caps(CP, caps, radii, G)
-                for c in range(C):
-                    _clip_cap(G, c, v, cam_K, cov_wh, cam_hasd)
-                    _cap_box(G, G32, box, c)
-                for ci in range(C):     # boxes and hulls in processing order, for the overlap candidates
-                    _eb_set(EB, ci, G, box, order[ci])
-                # term 1: model silhouette points not on foreground. Points of capsule c in its
-                # bounding rectangle; kept if inside c's hull and in no earlier capsule's hull
-                num = 0.0
-                den = 0.0
+    R = np.empty((J, 3, 3))
+    P = np.empty((J, 3))
+    CP = np.empty((J, 4))
+    G = np.empty((C, G_COLS))
+    G32 = np.empty((C, G32_COLS), np.float32)
+    box = np.empty((C, 4))
+    EB = np.zeros((11, C + 8))     # the capsules in processing order (whole vectors)
+    S = np.zeros((4, C + 8))
+    OK = np.zeros(C + 8, np.int64)
+    NEAR = np.empty(C, np.int64)
+    flag = np.empty(max(1, fg_x.shape[0]), np.float32)
+    kmax = _scratch_len(tmpl_ptr)
+    PX = np.zeros(kmax + 8, np.float32)     # a point's frame coordinates: along, across
+    PY = np.zeros(kmax + 8, np.float32)
+    IDX = np.empty(kmax, np.int32)     # a point's pixel, zpix when not counted
+    zpix = np.int32(cov.shape[1] - 1)
+    for i in range(lo, hi):
+        _fk_one(X[i], parents, offsets, ptr, dofs, axes, R, P)
+        total = 0.0
+        for v in range(V):
+            _to_camera(P, cam_R, cam_t, v, CP)
+            _project_caps(CP, caps, radii, G)
+            for c in range(C):
+                _clip_cap(G, c, v, cam_K, cov_wh, cam_hasd)
+                _cap_box(G, G32, box, c)
+            for ci in range(C):     # boxes and hulls in processing order, for the overlap candidates
+                _eb_set(EB, ci, G, box, order[ci])
+            # term 1: model silhouette points not on foreground. Points of capsule c in its
+            # bounding rectangle; kept if inside c's hull and in no earlier capsule's hull
+            num = 0.0
+            den = 0.0
+            for ci in range(C):
+                c = order[ci]
+                if G[c, G_VALID] == 0.0:
+                    continue
+                _t1_points(ci, c, v, G, G32, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na,
+                           cam_K, cov_wh, cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK, True)
+                nk = tmpl_ptr[c + 1] - tmpl_ptr[c]
+                cnt, fsum = _t1_count(c, v, nk, G, PX, PY, IDX, zpix, cam_K, cam_D, cam_hasd, cov, cov_wh)
+                w = _t1_weight(G, c, nk)
+                den += w * cnt
+                num += w * (cnt - fsum)
+            t1 = num / den if den > 0.0 else 1.0
+            if fg_n[v] == 0:
+                # term 2 from the same points: |F minus M| / |F| = 1 - (integral of F over M) / |F|
+                t2 = 1.0 - (den - num) / fg_area[v]
+                t2 = min(1.0, max(0.0, t2))
+            else:
+                # term 2: foreground points not covered by the model; the points are sorted by y,
+                # so a capsule's box meets a contiguous run of them in each strip
+                r0 = v * n_strips
+                for k in range(n_strips * fg_ms):
+                    flag[numba.uint64(r0 * fg_ms + k)] = zero
                 for ci in range(C):
                     c = order[ci]
                     if G[c, G_VALID] == 0.0:
                         continue
-                    _t1_points(ci, c, v, G, G32, EB, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na,
-                               cam_K, cov_wh, cam_hasd, zpix, PX, PY, IDX, NEAR, S, OK, True)
-                    nk = tmpl_ptr[c + 1] - tmpl_ptr[c]
-                    cnt, fsum = _t1_count(c, v, nk, G, PX, PY, IDX, zpix, cam_K, cam_D, cam_hasd, cov, cov_wh)
-                    w = _t1_weight(G, c, nk)
-                    den += w * cnt
-                    num += w * (cnt - fsum)
-                t1 = num / den if den > 0.0 else 1.0
-                if fg_n[v] == 0:
-                    # term 2 from the same points: |F minus M| / |F| = 1 - (integral of F over M) / |F|
-                    t2 = 1.0 - (den - num) / fg_area[v]
-                    t2 = min(1.0, max(0.0, t2))
-                else:
-                    # term 2: foreground points not covered by the model; the points are sorted by y,
-                    # so a capsule's box meets a contiguous run of them in each strip
-                    r0 = v * n_strips
-                    for k in range(n_strips * fg_ms):
-                        flag[numba.uint64(r0 * fg_ms + k)] = zero
-                    for ci in range(C):
-                        c = order[ci]
-                        if G[c, G_VALID] == 0.0:
-                            continue
-                        _t2_runs(c, box, v, n_strips, fg_x, fg_y, fg_tab, fg_bins, fg_xr, fg_ms, flag, G32)
-                    # the padding is never inside a hull: count whole strips (an integer count of the
-                    # 0/1 flags, vectorized: the same value as their sum in order)
-                    hit = 0
-                    for k in range(n_strips * fg_ms):
-                        hit += flag[numba.uint64(r0 * fg_ms + k)] != zero
-                    t2 = 1.0 - float(hit) / fg_n[v]
-                total += view_w[v] * (0.5 * t1 + 0.5 * t2)
-            out[i] = total / wsum
+                    _t2_runs(c, box, v, n_strips, fg_x, fg_y, fg_tab, fg_bins, fg_xr, fg_ms, flag, G32)
+                # the padding is never inside a hull: count whole strips (an integer count of the
+                # 0/1 flags, vectorized: the same value as their sum in order)
+                hit = 0
+                for k in range(n_strips * fg_ms):
+                    hit += flag[numba.uint64(r0 * fg_ms + k)] != zero
+                t2 = 1.0 - float(hit) / fg_n[v]
+            total += view_w[v] * (0.5 * t1 + 0.5 * t2)
+        out[i] = total / wsum
+
+
+@numba.njit(parallel=True, cache=True, fastmath=DETERMINISTIC_FASTMATH)
+def silhouette_batch(X, body, views, tmpl, fg, n_chunks, out):  # pragma: no cover - compiled
+    """Fast Eq. 5 for poses ``X (n, D)`` into ``out (n,)``.
+
+    Parameters
+    ----------
+    X : (n, D) float64, finite rows only
+    body : :data:`Body`;  views : :data:`Views`;  tmpl : :data:`Template`;  fg : :data:`Foreground`
+    n_chunks : int, work units of the parallel loop
+    out : (n,) float64
+    """
+    n = X.shape[0]
+    for chunk in numba.prange(n_chunks):
+        _batch_rows(X, chunk * n // n_chunks, (chunk + 1) * n // n_chunks, body, views, tmpl, fg, out)
+
+
+@numba.njit(cache=True, fastmath=DETERMINISTIC_FASTMATH)
+def silhouette_batch_serial(X, body, views, tmpl, fg, n_chunks, out):  # pragma: no cover - compiled
+    """:func:`silhouette_batch` on the calling thread, for a few poses (a parallel launch costs more than
+    a pose; the same operations, so the same bits); ``n_chunks`` is ignored."""
+    _batch_rows(X, 0, X.shape[0], body, views, tmpl, fg, out)
+
+
+#: Batches of fewer poses than this go to :func:`silhouette_batch_serial` (:class:`.silhouette.SilhouetteEnergy`).
+SERIAL_BELOW = 8
 
 
 # ---------------------------------------------------------------------- restricted evaluation
@@ -762,11 +796,9 @@ def _t1_recount(v, s0, s1, ALIVE, s_idx, s_f, cam_K, cam_hasd, cov):  # pragma: 
 
 
 @numba.njit(cache=True, fastmath=DETERMINISTIC_FASTMATH)
-def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, cam_t, cam_K, cam_D, cam_hasd,
-                     cov, cov_wh, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_xr,
-                     moving):  # pragma: no cover - compiled
+def restrict_prepare(x, body, views, tmpl, fg, moving):  # pragma: no cover - compiled
     """What the poses of a stage share, from the base pose ``x`` and ``moving (C,)`` (bool: capsules
-    whose end joints move); arguments as :func:`silhouette_batch`. Returns a tuple:
+    whose end joints move); the bundles as :func:`silhouette_batch`. Returns a tuple (:data:`Stage`):
 
     ``R (J, 3, 3), P (J, 3)`` forward kinematics of ``x``; per view ``CP (V, J, 4)``, ``G (V, C, G_COLS)``,
     ``G32 (V, C, G32_COLS)``, ``box (V, C, 4)``, ``BX (V, 4, C)`` (the boxes in processing order);
@@ -778,6 +810,10 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
     fixed capsule covers, ``u_x, u_y`` (strip ``r`` at ``r Ms``, in sample order) with
     ``u_pre (V S, Ms + 1)`` (those before sample point ``k`` of the strip) and ``base_hit (V,)``, the
     sample points the fixed capsules cover."""
+    parents, offsets, ptr, dofs, axes, caps, radii = body
+    cam_R, cam_t, cam_K, cam_D, cam_hasd, cov, cov_wh, view_w = views
+    order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na = tmpl
+    fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_xr, fg_area = fg
     J = parents.shape[0]
     C = caps.shape[0]
     V = cam_R.shape[0]
@@ -888,19 +924,22 @@ def restrict_prepare(x, parents, offsets, ptr, dofs, axes, caps, radii, cam_R, c
 
 
 @numba.njit(parallel=True, cache=True, fastmath=DETERMINISTIC_FASTMATH)
-def silhouette_restricted(X, x_base, fixed_dofs, fk_joints, cam_joints, mov_caps, mov_ci, moving_ci,
-                          parents, offsets, ptr, dofs, axes, caps, radii, cam_R, cam_t, cam_K, cam_D, cam_hasd,
-                          cov, cov_wh, order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na, fg_n, fg_tab, fg_bins, fg_xr, fg_area,
-                          view_w, R0, P0, CP0, G0, G320, box0, BX0_, t1, s_px, s_py, s_idx, s_f, s_pre, u_x, u_y, u_pre,
-                          base_hit, n_chunks, out):  # pragma: no cover - compiled
-    """:func:`silhouette_batch` for poses ``X (n, D)`` equal to ``x_base`` at ``fixed_dofs``, from the
-    stage data of :func:`restrict_prepare` (``R0 .. base_hit``). Per pose: forward kinematics of the
+def silhouette_restricted(X, restriction, body, views, tmpl, fg, stage, n_chunks, out):  # pragma: no cover - compiled
+    """:func:`silhouette_batch` for poses ``X (n, D)`` equal to ``x_base`` at ``fixed_dofs`` (the
+    :data:`Restriction` ``restriction``), from the stage data of :func:`restrict_prepare` (the
+    :data:`Stage` ``stage``; the other bundles as :func:`silhouette_batch`). Per pose: forward kinematics of the
     joints ``fk_joints`` (those that rotate or move, in tree order), projection of ``cam_joints`` (those
     that move) and of the moving capsules ``mov_caps`` (at processing positions ``mov_ci``, ascending;
     ``moving_ci (C,)`` flags the positions); term 1 in full for a moving capsule, for a fixed one its
     stored points tested against the earlier moving capsules whose boxes meet its own (usually none:
     the stored sums); term 2 from the stored count plus the uncovered points the moving capsules
     cover. A row that differs from ``x_base`` at a fixed coordinate gets ``out = -1``."""
+    x_base, fixed_dofs, fk_joints, cam_joints, mov_caps, mov_ci, moving_ci = restriction
+    parents, offsets, ptr, dofs, axes, caps, radii = body
+    cam_R, cam_t, cam_K, cam_D, cam_hasd, cov, cov_wh, view_w = views
+    order, tmpl_a, tmpl_s, tmpl_ptr, tmpl_na = tmpl
+    fg_x, fg_y, fg_n, fg_tab, fg_bins, fg_xr, fg_area = fg
+    R0, P0, CP0, G0, G320, box0, BX0_, t1, s_px, s_py, s_idx, s_f, s_pre, u_x, u_y, u_pre, base_hit = stage
     n = X.shape[0]
     C = caps.shape[0]
     V = cam_R.shape[0]

@@ -93,18 +93,11 @@ class RestrictedSilhouetteEnergy:
         self.full = energy.method != "fast" or structural_full
         if self.full:
             return
-        fr = self._frame
-        stage = _k.restrict_prepare(
-            x, *energy._kin, energy._caps, energy._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"], fr["cam_D"],
-            fr["cam_hasd"], fr["cov"], fr["cov_wh"], energy._order, energy._tmpl_a, energy._tmpl_s,
-            energy._tmpl_ptr, energy._tmpl_na, fr["fg_x"], fr["fg_y"], fr["fg_n"], fr["fg_tab"], fr["fg_bins"],
-            fr["fg_xr"], moving)
+        body, views, tmpl, fg = energy.kernel_args()
+        stage = _k.Stage(*_k.restrict_prepare(x, body, views, tmpl, fg, moving))
         # the kernel's arguments between X and (n_chunks, out)
-        self._args = (x, self._fixed, self._fk_joints, self._cam_joints, self.moving_capsules, self._mov_ci,
-                      self._moving_ci, *energy._kin, energy._caps, energy._radii, fr["cam_R"], fr["cam_t"],
-                      fr["cam_K"], fr["cam_D"], fr["cam_hasd"], fr["cov"], fr["cov_wh"], energy._order,
-                      energy._tmpl_a, energy._tmpl_s, energy._tmpl_ptr, energy._tmpl_na, fr["fg_n"], fr["fg_tab"],
-                      fr["fg_bins"], fr["fg_xr"], fr["fg_area"], fr["view_w"], *stage)
+        self._args = (_k.Restriction(x, self._fixed, self._fk_joints, self._cam_joints, self.moving_capsules,
+                                     self._mov_ci, self._moving_ci), body, views, tmpl, fg, stage)
 
     def kernel_args(self) -> tuple:
         """The arguments of the restricted kernel between the poses and ``(n_chunks, out)`` (for the

@@ -286,6 +286,9 @@ class SilhouetteEnergy:
         # bigger capsules first: their points need no overlap test, and they own the shared area
         self._order = np.argsort(-np.diff(self._tmpl_ptr), kind="stable").astype(np.int64)
         self.n_template = int(self._tmpl_ptr[-1])
+        # the kernels' argument bundles that do not change with the masks
+        self._body = _k.Body(*self._kin, self._caps, self._radii)
+        self._template_args = _k.Template(self._order, self._tmpl_a, self._tmpl_s, self._tmpl_ptr, self._tmpl_na)
         self._small = tuple(c.scaled(1.0 / self.downsample) for c in self.cameras)
         self.skipped_views: list[tuple[int, str]] = []
         self.n_views_used = 0
@@ -349,6 +352,9 @@ class SilhouetteEnergy:
         frame: dict = {"F": F, "n_fg": {v: int(np.count_nonzero(F[v])) for v in used}, "view_w": view_w}
         if self.method == "fast":
             frame.update(self._fast_frame(used, F))
+            # the kernels' argument bundles of these masks (_k.Views, _k.Foreground)
+            frame["views"] = _k.Views(*(frame[k] for k in _k.Views._fields))
+            frame["fg"] = _k.Foreground(*(frame[k] for k in _k.Foreground._fields))
         self._frame = frame
         self._threads = numba.get_num_threads()      # per set_masks: the call costs ~20 µs
         self.skipped_views, self._used, self.n_views_used = skipped, used, len(used)
@@ -452,17 +458,18 @@ class SilhouetteEnergy:
 
     def _kernel_args(self) -> tuple:
         """The arguments of :func:`~._silhouette_kernel.silhouette_batch` between the poses and
-        ``n_chunks`` for the current masks (also what the tracker's compiled search passes it)."""
+        ``n_chunks`` for the current masks, its bundles ``(Body, Views, Template, Foreground)`` (also
+        what the tracker's compiled search passes it)."""
         fr = self._frame
-        return (*self._kin, self._caps, self._radii, fr["cam_R"], fr["cam_t"], fr["cam_K"], fr["cam_D"],
-                fr["cam_hasd"], fr["cov"], fr["cov_wh"], self._order, self._tmpl_a, self._tmpl_s, self._tmpl_ptr,
-                self._tmpl_na, fr["fg_x"], fr["fg_y"], fr["fg_n"], fr["fg_tab"], fr["fg_bins"], fr["fg_xr"],
-                fr["fg_area"], fr["view_w"])
+        return self._body, fr["views"], self._template_args, fr["fg"]
 
     def _fast(self, X: np.ndarray) -> np.ndarray:
         out = np.empty(X.shape[0])
         n_chunks = max(1, min(X.shape[0], 8 * self._threads))
-        _k.silhouette_batch(X, *self._kernel_args(), n_chunks, out)
+        # a few poses (a stage's final pose, the contour stage's pair) on this thread: a parallel launch
+        # costs more than they do (the same bits either way)
+        kernel = _k.silhouette_batch_serial if X.shape[0] < _k.SERIAL_BELOW else _k.silhouette_batch
+        kernel(X, *self._kernel_args(), n_chunks, out)
         return out
 
     def restrict(self, x_base: Any, coords: Any) -> "RestrictedSilhouetteEnergy":

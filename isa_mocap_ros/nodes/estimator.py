@@ -55,6 +55,7 @@ from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, decla
 from isa_mocap_ros.tracking.predict import periods_between
 from isa_mocap_ros.tracking.sync import FrameSynchronizer, LatestSlot, SyncError
 from isa_mocap_ros.tracking.config import TrackerConfig, field_docs
+from isa_mocap_ros.tracking.load import LoadGovernor, LoadSettings
 from isa_mocap_ros.vision import Camera
 from isa_mocap_ros.vision.overlay import draw_overlay
 
@@ -110,6 +111,13 @@ class EstimatorNode(Node):
                                    "instead of dropping sets (0 = never)", lo=0.0, hi=60_000.0)
         self.backlog = declare(self, "backlog", 1, "real time: frame sets kept waiting while the tracker is busy "
                                "(the newest; older ones are dropped)", lo=1, hi=100)
+        degrade = declare(self, "degrade", True, "real time: while the tracker does not keep up with the frame sets, "
+                          "lower its budget (contour stage off, then fewer evaluations) before dropping sets, and "
+                          "return to the full budget when it catches up (isa_mocap_ros.tracking.load; lockstep: never)")
+        degrade_min_evals = declare(self, "degrade_min_evals", 300, "degrade: fewest evaluations per frame set",
+                                    lo=1, hi=1_000_000)
+        degrade_headroom = declare(self, "degrade_headroom", 0.85, "degrade: a budget fits when its step time is "
+                                   "below this share of frame_period_s", lo=0.05, hi=1.0)
         self.use_prediction = declare(self, "use_prediction", True, "use prediction/joint_states when it arrives")
         self.prediction_wait_s = declare(self, "prediction_wait_s", 1.0,
                                          "lockstep: longest wait for a frame's prediction", lo=0.0, hi=60.0)
@@ -133,6 +141,12 @@ class EstimatorNode(Node):
         if sync not in ("exact", "approximate"):
             raise ValueError(f"sync must be 'exact' or 'approximate', got {sync!r}")
         self.tracker_config = TrackerConfig.from_flat(**settings)   # checks every setting (TrackerError names it)
+        # real time: the frame budget under load (None: always the full budget)
+        self.governor = LoadGovernor(LoadSettings(
+            evals=self.tracker_config.search.evals, period_s=self.frame_period_s, headroom=degrade_headroom,
+            min_evals=degrade_min_evals)) if degrade and not self.lockstep else None
+        self._dropped_seen = 0           # slot.dropped at the governor's last observation
+        self.budget_reason = ""          # the governor's last change, for /diagnostics
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
                                       slop_ns=0 if sync == "exact" else int(slop_s * 1e9),
                                       max_wait_s=self.view_timeout_s, min_views=min(min_views, self.n_views))
@@ -475,8 +489,13 @@ class EstimatorNode(Node):
         # real time: a set that waited for the tracker (the one before took longer than a frame period)
         # is tracked without the contour stage (catch_up_ms), so the tracker catches up instead of dropping
         late = not self.lockstep and 0 < self.catch_up_ms < (time.monotonic() - t_ready) * 1e3
+        # under load the governor's lowered budget (isa_mocap_ros.tracking.load)
+        budget = self.governor.decision() if self.governor is not None else None
         result = self.tracker.step(masks, frame_set.stamp_ns, prediction=prediction, frames_elapsed=gap,
-                                   contour_stage=not late)
+                                   contour_stage=not late and (budget is None or budget.contour_stage),
+                                   evals=None if budget is None or budget.level == 0 else budget.evals)
+        if self.governor is not None and result.x is not None and not result.initialized:
+            self._govern(frame_set.stamp_ns, result)
         self.frames_done += 1
         if late and result.x is not None and not result.fell_back and not result.initialized:
             self.frames_caught_up += 1
@@ -500,6 +519,19 @@ class EstimatorNode(Node):
         if self.overlay and self.frames_done % self.overlay_every == 0 and result.x is not None:
             with one_numba_thread():
                 self._publish_overlay(frame_set, result.x)
+
+    def _govern(self, stamp_ns: int, result) -> None:
+        """The governor's account of a tracked set (its step time, energy and the sets dropped since the
+        last one); a changed budget is logged and shown in /diagnostics; a track lost for long re-initializes."""
+        dropped = self.slot.dropped - self._dropped_seen
+        self._dropped_seen = self.slot.dropped
+        d = self.governor.observe(step_s=result.time_s, energy=result.energy, fell_back=result.fell_back,
+                                  dropped=dropped)
+        if d.reason:
+            self.budget_reason = d.reason
+            self.problems.event("budget", f"frame {stamp_ns}: budget level {d.level}: {d.reason}")
+        if d.reset:
+            self.tracker.reset()         # the next set initializes automatically
 
     def _done(self, stamp_ns: int) -> None:
         self.pub_done.publish(ma.make_header(stamp_ns, self.world_frame))
@@ -559,6 +591,11 @@ class EstimatorNode(Node):
             "views_used": getattr(r, "views_used", 0),
             "latency_ms_p50": p50, "latency_ms_p95": p95,
             "tracker_ms_p50": t50, "tracker_ms_p95": t95, "init_ms": self.init_ms,
+            # the budget under load (isa_mocap_ros.tracking.load): level 0 = full, its evaluations and contour stage
+            **({"budget_level": g.level, "budget_evals": g.decision().evals,
+                "budget_contour_stage": g.decision().contour_stage, "budget_lowered": g.lowered,
+                "budget_reason": self.budget_reason, "track_resets": g.resets}
+               if (g := self.governor) is not None else {"budget_level": "off"}),
             "problems": json.dumps(self.problems.counts), "events": json.dumps(self.problems.events),
         }
         st.level = DiagnosticStatus.OK if self.problems.total == 0 else DiagnosticStatus.WARN

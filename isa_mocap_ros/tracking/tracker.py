@@ -380,7 +380,7 @@ class Tracker:
 
 
     def step(self, masks: Sequence, frame_index: int, *, prediction=None, frames_elapsed: float = 1,
-             contour_stage: bool = True, keypoints: Sequence | None = None) -> FrameResult:
+             contour_stage: bool = True, keypoints: Sequence | None = None, evals: int | None = None) -> FrameResult:
         """Track one frame (see the module docstring). Never raises on bad masks, predictions or keypoints.
 
         Parameters
@@ -400,13 +400,19 @@ class Tracker:
         keypoints : sequence of ``(uv (33, 2), confidence (33,))`` or None
             Per camera BlazePose landmarks; with ``config.keypoints.keypoint_weight > 0`` they add the keypoint term
             to this frame's energy (the heading check's rival's too, so both are scored alike).
+        evals : int, optional
+            This frame's evaluation budget instead of ``config.search.evals`` (the estimator node's lowered budget
+            under load, :mod:`.load`); the stages size their shares from it.
 
         Returns
         -------
         FrameResult
         """
+        if evals is not None and (isinstance(evals, bool) or not isinstance(evals, (int, np.integer)) or evals < 1):
+            raise TrackerError(f"evals: expected an integer >= 1 or None, received {evals!r}")
         term, note = objective.keypoint_energy(self, keypoints)
-        ctx = self.frame_context(frame_index, FrameBudget(self.config.search.evals, bool(contour_stage)),
+        ctx = self.frame_context(frame_index, FrameBudget(self.config.search.evals if evals is None else int(evals),
+                                                             bool(contour_stage)),
                                  keypoint_term=term, prediction=prediction)
         res = self._step_with_heading_check(masks, ctx, frames_elapsed)
         return res if note is None else dataclasses.replace(res, notes=res.notes + (note,))

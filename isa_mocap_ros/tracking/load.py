@@ -1,0 +1,193 @@
+"""Graceful degradation under load: the frame budget a real-time tracker can keep up with.
+
+When frame sets arrive faster than the tracker finishes them, a real-time estimator has two ways to
+keep up: drop sets (the tracker then predicts across a gap, with a wider search and worse estimates)
+or spend less on each set. :class:`LoadGovernor` does the second first: it steps down a ladder of
+budgets (:data:`LEVELS`: the contour stage off, then fewer evaluations) while the measured step time
+does not fit the frame period, and back up once the measured time at the current level leaves room
+for the next one up (a step up that then does not fit comes back down, and the next try waits
+twice as long: no oscillation at the edge). It is a pure policy: it never reads a clock itself; the caller passes the
+monotonic time of each observation, so tests drive it with a fake clock.
+
+A lost track: the estimate's energy far above its recent level (``lost_factor`` × the running median
+of the last accepted frames) or a frame that fell back returns the governor to the full budget at once
+(a lowered budget is the likeliest cause under load); when it stays lost for ``reset_after`` frame
+sets, :meth:`LoadGovernor.observe` says so (``Decision.reset``) and the caller re-initializes the
+tracker (its automatic initialization finds the person again).
+
+The estimator node uses it in real time (``degrade`` parameters, docs/nodes.md) and reports the level
+in ``/diagnostics``; lockstep never degrades.
+"""
+from __future__ import annotations
+
+import dataclasses
+from collections import deque
+
+import numpy as np
+
+#: The budget ladder: (share of the configured evaluations, contour stage on). Level 0 is the full
+#: budget; each level down saves more of the step's time (the contour stage is the costliest stage per
+#: evaluation, ``isa-mocap bench speed``'s profile).
+LEVELS = ((1.0, True), (1.0, False), (0.67, False), (0.5, False), (0.33, False))
+
+
+class LoadError(ValueError):
+    """A bad setting of the governor (the message names it)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Decision:
+    """The budget of the next frame set: ``evals`` evaluations, the contour stage on or off, the ladder
+    ``level`` (0 = full), why it changed (``reason``, "" when it did not) and whether the caller should
+    re-initialize the tracker (``reset``: the track stayed lost)."""
+    evals: int
+    contour_stage: bool
+    level: int
+    reason: str = ""
+    reset: bool = False
+
+
+@dataclasses.dataclass(frozen=True)
+class LoadSettings:
+    """The governor's settings (one line each, with unit and why)."""
+    evals: int                      # the configured (full) evaluations per frame set
+    period_s: float                 # the frame period the tracker must keep up with, seconds
+    headroom: float = 0.85          # a level fits when its step time is below this share of the period
+    down_after: int = 2             # consecutive frame sets over the period before stepping down (one slow set is noise)
+    up_after: int = 15              # consecutive sets with room for the level above before stepping up (~0.5 s at 30 Hz)
+    min_evals: int = 150            # never fewer evaluations than this (a generation or two of every partition)
+    lost_factor: float = 2.0        # energy above this × the running median of the last frames = lost
+    reset_after: int = 10           # frame sets lost in a row (at the full budget) before re-initializing
+    window: int = 30                # frames in the running step-time and energy statistics
+    max_backoff: int = 8            # a step up that did not fit doubles the wait before the next one, up to this factor
+
+    def __post_init__(self) -> None:
+        for name in ("evals", "down_after", "up_after", "min_evals", "reset_after", "window", "max_backoff"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise LoadError(f"{name}: expected an integer >= 1, received {v!r}")
+        for name, lo, hi in (("period_s", 0.0, np.inf), ("headroom", 0.0, 1.0), ("lost_factor", 1.0, np.inf)):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and lo < v <= hi):
+                raise LoadError(f"{name}: expected a number in ({lo}, {hi}], received {v!r}")
+
+
+class LoadGovernor:
+    """The frame budget under load (see the module docstring).
+
+    Examples
+    --------
+    >>> g = LoadGovernor(LoadSettings(evals=1500, period_s=1 / 30))
+    >>> g.decision().evals, g.decision().contour_stage
+    (1500, True)
+    >>> for t in range(3):            # three sets of 50 ms each: over the 33 ms period
+    ...     d = g.observe(step_s=0.05, energy=0.1)
+    >>> d.level, d.contour_stage
+    (1, False)
+    """
+
+    def __init__(self, settings: LoadSettings):
+        if not isinstance(settings, LoadSettings):
+            raise LoadError(f"settings: expected LoadSettings, received {type(settings).__name__}")
+        self.settings = settings
+        self.level = 0
+        self._over = 0                  # consecutive sets over the period at this level
+        self._room = 0                  # consecutive sets with room for the level above
+        self._lost = 0                  # consecutive lost sets
+        self._steps: deque[float] = deque(maxlen=settings.window)   # step seconds at the current level
+        self._energies: deque[float] = deque(maxlen=settings.window)  # energies of the sets not lost
+        self.lowered = 0                # times the level went down
+        self._backoff = 1               # × up_after: doubled by each step up that did not fit
+        self._since_up = None           # sets since the last step up (None: none pending)
+        self.resets = 0                 # re-initializations asked for
+
+    def budget(self, level: int) -> tuple[int, bool]:
+        """``(evaluations, contour stage)`` of ladder level ``level``."""
+        share, contour = LEVELS[level]
+        s = self.settings
+        return max(min(s.evals, s.min_evals), int(round(share * s.evals))), contour
+
+    def decision(self, reason: str = "", reset: bool = False) -> Decision:
+        """The budget of the current level."""
+        evals, contour = self.budget(self.level)
+        return Decision(evals, contour, self.level, reason, reset)
+
+    def _set_level(self, level: int) -> None:
+        if level > self.level:
+            self.lowered += 1
+            if self._since_up is not None:       # the step up before did not fit: wait longer next time
+                self._backoff = min(2 * self._backoff, self.settings.max_backoff)
+            self._since_up = None
+        elif level < self.level:
+            self._since_up = 0
+        self.level = level
+        self._over = self._room = 0
+        self._steps.clear()
+
+    def observe(self, *, step_s: float, energy: float, fell_back: bool = False, dropped: int = 0) -> Decision:
+        """Account for one tracked frame set and return the next one's budget.
+
+        Parameters
+        ----------
+        step_s : float
+            The set's tracking time, seconds (the tracker's step at the current level).
+        energy : float
+            The estimate's energy (nan when there was none).
+        fell_back : bool
+            The tracker kept its last estimate (no usable view, optimizer failure).
+        dropped : int
+            Frame sets dropped since the previous observation (the caller replaced them while busy): a
+            sign of overload even when this step was quick.
+        """
+        s = self.settings
+        # a lost track: back to the full budget at once; re-initialize when it stays lost
+        lost = fell_back or not np.isfinite(energy) or (
+            len(self._energies) >= 5 and energy > s.lost_factor * float(np.median(self._energies)))
+        if lost:
+            self._lost += 1
+            if self._lost >= s.reset_after and self.level == 0:
+                self._lost = 0
+                self._energies.clear()
+                self.resets += 1
+                return self.decision(f"track lost for {s.reset_after} frame sets: re-initializing", reset=True)
+            if self.level != 0:
+                self._set_level(0)
+                return self.decision(f"track lost (energy {energy:.3g}): full budget")
+            return self.decision()
+        self._lost = 0
+        self._energies.append(float(energy))
+        self._steps.append(float(step_s))
+        limit = s.headroom * s.period_s
+        typical = float(np.median(self._steps))
+        if step_s > s.period_s or dropped > 0:
+            self._over += 1
+            self._room = 0
+        else:
+            self._over = 0
+        if self._since_up is not None:
+            self._since_up += 1
+            if self._since_up > s.window:        # the step up held: the next one waits the base time again
+                self._since_up = None
+                self._backoff = 1
+        if self._over >= s.down_after and self.level < len(LEVELS) - 1:
+            before = self.level
+            self._set_level(before + 1)
+            evals, contour = self.budget(self.level)
+            return self.decision(f"over the frame period ({1e3 * step_s:.0f} ms > {1e3 * s.period_s:.0f} ms"
+                                 + (f", {dropped} set(s) dropped" if dropped else "")
+                                 + f"): {evals} evaluations" + ("" if contour else ", no contour stage"))
+        if self.level > 0:
+            # the level above, from this level's typical time: conservatively the whole step scales with
+            # the evaluations (the fixed costs do not); what the contour stage adds back is not modelled
+            # but tried: a step up that does not fit comes down after down_after sets, and the next
+            # try waits twice as long (up to max_backoff × up_after)
+            here, _ = self.budget(self.level)
+            up, _ = self.budget(self.level - 1)
+            projected = typical * up / here
+            self._room = self._room + 1 if projected < limit else 0
+            if self._room >= s.up_after * self._backoff:
+                self._set_level(self.level - 1)
+                evals, contour = self.budget(self.level)
+                return self.decision(f"caught up ({1e3 * typical:.0f} ms a set): {evals} evaluations"
+                                     + (", contour stage on" if contour else ""))
+        return self.decision()

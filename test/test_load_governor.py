@@ -1,0 +1,163 @@
+"""tracking/load.py: the budget ladder under load, driven by a fake clock (no real time)."""
+import numpy as np
+import pytest
+
+from isa_mocap_ros.tracking.load import LEVELS, LoadError, LoadGovernor, LoadSettings
+
+PERIOD = 1 / 30
+
+
+def step_time(d, *, load=1.0, fixed=0.004, per_eval=10e-6, contour=0.008):
+    """A tracker whose step costs a fixed part, a part per evaluation and the contour stage, all
+    stretched by ``load`` (2: another process takes half the CPU)."""
+    return load * (fixed + per_eval * d.evals + (contour if d.contour_stage else 0.0))
+
+
+def simulate(gov, loads, *, n_sets=300, energy=0.1):
+    """Frame sets arrive every PERIOD (fake clock); a busy tracker keeps only the newest waiting set
+    (the estimator's backlog of 1), the others are dropped. ``loads(k)``: the load while set k is
+    tracked. Returns (tracked set indices, dropped count, decisions)."""
+    t_free = 0.0
+    waiting = None
+    tracked, dropped, decisions = [], 0, []
+    dropped_since = 0
+    d = gov.decision() if gov is not None else None
+    full = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD)).decision()
+    for k in range(n_sets):
+        t = k * PERIOD
+        # the tracker finishes the sets it can before this one arrives
+        while waiting is not None and t_free <= t:
+            start = max(t_free, waiting * PERIOD)
+            dd = d if gov is not None else full
+            s = step_time(dd, load=loads(waiting))
+            t_free = start + s
+            tracked.append(waiting)
+            if gov is not None:
+                d = gov.observe(step_s=s, energy=energy, dropped=dropped_since)
+                decisions.append(d)
+            dropped_since = 0
+            waiting = None
+        if waiting is not None:
+            dropped += 1
+            dropped_since += 1
+        waiting = k
+    return tracked, dropped, decisions
+
+
+def test_full_budget_while_it_fits():
+    g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD))
+    for _ in range(50):
+        d = g.observe(step_s=0.025, energy=0.1)
+    assert (d.evals, d.contour_stage, d.level, d.reason) == (1500, True, 0, "")
+    assert g.lowered == 0
+
+
+def test_one_slow_set_is_noise():
+    g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD, down_after=2))
+    g.observe(step_s=0.025, energy=0.1)
+    assert g.observe(step_s=0.060, energy=0.1).level == 0
+    assert g.observe(step_s=0.025, energy=0.1).level == 0
+    d = g.observe(step_s=0.060, energy=0.1)
+    assert d.level == 0
+    d = g.observe(step_s=0.060, energy=0.1)
+    assert d.level == 1 and not d.contour_stage and d.evals == 1500 and "over the frame period" in d.reason
+
+
+def test_steps_down_the_ladder_and_not_below():
+    g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD, down_after=1, min_evals=600))
+    levels = [g.observe(step_s=0.1, energy=0.1).level for _ in range(10)]
+    assert levels == [1, 2, 3, 4, 4, 4, 4, 4, 4, 4]
+    assert [g.budget(k) for k in range(len(LEVELS))] == [(1500, True), (1500, False), (1005, False), (750, False),
+                                                         (600, False)]       # 0.33 × 1500 = 495 < min_evals
+    assert g.lowered == 4
+
+
+def test_drops_count_as_overload_even_after_a_quick_step():
+    g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD, down_after=2))
+    g.observe(step_s=0.02, energy=0.1, dropped=1)
+    d = g.observe(step_s=0.02, energy=0.1, dropped=2)
+    assert d.level == 1 and "2 set(s) dropped" in d.reason
+
+
+def test_returns_to_the_full_budget_when_the_load_goes():
+    g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD, up_after=5))
+    busy = [g.observe(step_s=step_time(g.decision(), load=2.5), energy=0.1).level for _ in range(30)]
+    assert max(busy) >= 2
+    idle = [g.observe(step_s=step_time(g.decision(), load=1.0), energy=0.1) for _ in range(60)]
+    assert idle[-1].level == 0 and idle[-1].evals == 1500 and idle[-1].contour_stage
+    # one level at a time, each after up_after sets with room
+    ups = [d for d in idle if d.reason.startswith("caught up")]
+    assert len(ups) == max(busy)
+    # an idle tracker at the full budget stays there
+    assert all(d.level == 0 for d in idle[-20:])
+
+
+def test_a_step_up_that_does_not_fit_waits_longer_next_time():
+    # the full budget never fits (the contour stage alone is over), level 1 does: the governor tries the
+    # full budget again, each time after twice as many sets, up to max_backoff
+    g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD, up_after=4, down_after=2, max_backoff=4))
+    levels = [g.observe(step_s=step_time(g.decision(), contour=0.030), energy=0.1).level for _ in range(200)]
+    tries = [i for i in range(1, len(levels)) if levels[i] == 0 and levels[i - 1] == 1]
+    gaps = np.diff(tries)
+    assert len(tries) >= 4 and list(gaps[:2]) == sorted(gaps[:2]) and gaps[1] > gaps[0]
+    assert gaps[-1] == gaps[-2]                                  # capped at max_backoff × up_after
+    assert sum(lv == 0 for lv in levels[20:]) < 0.2 * len(levels[20:])
+
+
+def test_keeps_up_under_load_with_fewer_drops_than_the_full_budget():
+    load = lambda k: 2.0 if 60 <= k < 240 else 1.0            # one core busy for 6 s of 10
+    tracked_full, dropped_full, _ = simulate(None, load)
+    g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD))
+    tracked, dropped, decisions = simulate(g, load)
+    assert dropped_full > 0.2 * 300
+    assert dropped <= 0.10 * 300 and dropped < dropped_full / 3
+    assert max(d.level for d in decisions) >= 1
+    assert decisions[-1].level == 0                            # back to the full budget after the load
+
+
+def test_lost_track_returns_to_full_budget_then_resets():
+    g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD, down_after=1, reset_after=4))
+    for _ in range(10):
+        g.observe(step_s=0.02, energy=0.1)
+    g.observe(step_s=0.1, energy=0.1)
+    assert g.level == 1
+    d = g.observe(step_s=0.1, energy=0.5)                      # 5 × the median energy: lost
+    assert d.level == 0 and d.contour_stage and "track lost" in d.reason and not d.reset
+    out = [g.observe(step_s=0.02, energy=0.5) for _ in range(3)]
+    assert [o.reset for o in out] == [False, False, True] and "re-initializing" in out[-1].reason
+    assert g.resets == 1
+    # after the reset the energy statistics start anew: the new level is not "lost"
+    assert all(not g.observe(step_s=0.02, energy=0.5).reset for _ in range(10))
+
+
+def test_fell_back_and_non_finite_energy_count_as_lost():
+    g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD, reset_after=2))
+    assert not g.observe(step_s=0.02, energy=0.1, fell_back=True).reset
+    assert g.observe(step_s=0.02, energy=float("nan")).reset
+
+
+def test_same_inputs_same_decisions():
+    rng = np.random.default_rng(3)
+    steps = rng.uniform(0.01, 0.08, 200)
+    energies = rng.uniform(0.05, 0.3, 200)
+
+    def run():
+        g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD))
+        return [g.observe(step_s=s, energy=e) for s, e in zip(steps, energies)]
+    assert run() == run()
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(evals=0), "evals: expected an integer >= 1"),
+    (dict(period_s=0.0), "period_s: expected a number"),
+    (dict(headroom=1.5), "headroom: expected a number"),
+    (dict(down_after=True), "down_after: expected an integer"),
+    (dict(lost_factor=0.5), "lost_factor"),
+    (dict(max_backoff=0), "max_backoff"),
+])
+def test_bad_settings(kw, match):
+    base = dict(evals=1500, period_s=PERIOD)
+    with pytest.raises(LoadError, match=match):
+        LoadSettings(**{**base, **kw})
+    with pytest.raises(LoadError, match="settings: expected LoadSettings"):
+        LoadGovernor({"evals": 1500})
