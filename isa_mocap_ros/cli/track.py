@@ -85,9 +85,13 @@ def register(sub) -> None:
     p.add_argument("--keypoint-weight", type=float, default=0.0, metavar="W",
                    help="weight of the learned-keypoint term (BlazePose landmarks on the images, cropped around "
                         "the mask; docs/keypoints.md); 0 = off (default)")
-    p.add_argument("--keypoint-every", type=int, default=0, metavar="K",
-                   help="with --keypoint-weight: detect keypoints on the automatically initialized frame and on "
-                        "every K-th tracked frame (0 = the initialized frame only; default 0)")
+    p.add_argument("--keypoint-every", type=int, default=6, metavar="K",
+                   help="with --keypoint-weight: after the dense start, detect keypoints on every K-th frame with a "
+                        "person of each view (0 = the dense start only; default 6, the keypoint node's "
+                        "every_k_frames)")
+    p.add_argument("--keypoint-dense", type=int, default=None, metavar="N",
+                   help="with --keypoint-weight: detect on each view's first N frames with a person (the "
+                        "initialization and its heading check; default 4, the keypoint node's dense_frames)")
     p.add_argument("--refine-masks", action="store_true",
                    help="model-guided mask refinement: a graph cut (GrabCut) per view seeded by the previous "
                         "estimate's silhouette (ISA eq. 13.29's shape prior; isa_mocap_ros.vision.refine), for "
@@ -289,14 +293,17 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         has_mask_topics = any(t.endswith("/mask") and t.startswith(f"{TOPIC}/cam") for t in probe.topics)
     use_masks = bool(args.use_masks and has_mask_topics)
     kp_weight = float(getattr(args, "keypoint_weight", 0.0) or 0.0)
-    kp_every = int(getattr(args, "keypoint_every", 0) or 0)
-    if not np.isfinite(kp_weight) or kp_weight < 0 or kp_every < 0:
-        raise ValueError(f"--keypoint-weight / --keypoint-every: expected numbers >= 0, received {kp_weight}, "
-                         f"{kp_every}")
+    kp_every = int(getattr(args, "keypoint_every", 6))
+    from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, KeypointSchedule, detect_in_mask
+    kp_dense = getattr(args, "keypoint_dense", None)
+    kp_dense = DENSE_FRAMES if kp_dense is None else int(kp_dense)
+    if not np.isfinite(kp_weight) or kp_weight < 0 or kp_every < 0 or kp_dense < 0:
+        raise ValueError(f"--keypoint-weight / --keypoint-every / --keypoint-dense: expected numbers >= 0, received "
+                         f"{kp_weight}, {kp_every}, {kp_dense}")
     detector = None
     if kp_weight > 0:
         from isa_mocap_ros.vision.landmark_model import ModelUnavailable
-        from isa_mocap_ros.vision.landmarks import PoseLandmarker, box_from_mask
+        from isa_mocap_ros.vision.landmarks import PoseLandmarker
         try:
             detector = PoseLandmarker()
         except ModelUnavailable as exc:
@@ -409,20 +416,30 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     t_track = 0.0
     kp_seconds: list[float] = []        # detection time per frame set with keypoints
 
+    schedules = [KeypointSchedule(kp_every, dense_frames=kp_dense) for _ in seq.cameras]
+    kp_views = [0]                      # detections run
+
     def keypoints_of(fr, masks):
+        """The keypoint node's output for this frame (the same schedule and detection, through its message:
+        Point32 is float32), so a lockstep run of the network with keypoints gives these estimates."""
+        import msg_adapters as ma
         t0 = time.perf_counter()
-        out = []
-        for img, m in zip(fr.images, masks):
-            box = None if img is None or m is None else box_from_mask(m)
-            if box is None or img.ndim != 3:
+        out, looked = [], False
+        for v, (img, m) in enumerate(zip(fr.images, masks)):
+            if img is None or m is None or not schedules[v].due(bool(np.any(m))):
                 out.append(None)
                 continue
-            lm = detector.detect(img, box)           # bag images are rgb8 (camera node, synth)
-            out.append((lm.uv, lm.confidence))
-        if any(o is not None for o in out):          # frames without foreground cost nothing
+            looked = True
+            kp_views[0] += 1
+            lm = detect_in_mask(detector, img, m)       # bag images are rgb8 (camera node, synth)
+            if lm is None:
+                out.append(None)
+                continue
+            wire = ma.to_cdr(ma.keypoints_to_polygon(lm.uv, lm.confidence))     # float32 on the wire
+            out.append(ma.polygon_to_keypoints(ma.from_cdr(wire, "geometry_msgs/msg/PolygonStamped")))
+        if looked:
             kp_seconds.append(time.perf_counter() - t0)
-            return out
-        return None
+        return out if any(o is not None for o in out) else None
     with BagWriter(est_path, overwrite=args.overwrite) as bag:
         bag.add_topic(f"{TOPIC}/joint_states", "sensor_msgs/msg/JointState", qos=[QOS_DEFAULT])
         # the model the joint states belong to (with the shape tracked with): a self-describing result
@@ -461,10 +478,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                 r = None
                 x = tracker.last_estimate
             else:
-                kp = None
-                if detector is not None and (not tracker.initialized
-                                             or (kp_every > 0 and ((fr.index - first) // stride) % kp_every == 0)):
-                    kp = keypoints_of(fr, masks)
+                kp = keypoints_of(fr, masks) if detector is not None else None
                 c0 = time.process_time()
                 if profiler is not None:
                     profiler.enable()
@@ -511,8 +525,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                      "view_weights": cfg.objective.view_weights,
                      "init_confirm_frames": cfg.heading.init_confirm_frames,
                      "partition_order": list(cfg.search.partition_order),
-                     "keypoint_weight": kp_weight, "keypoint_every": kp_every,
-                     "keypoint_frames": len(kp_seconds),
+                     "keypoint_weight": kp_weight, "keypoint_every": kp_every, "keypoint_dense": kp_dense,
+                     "keypoint_frames": len(kp_seconds), "keypoint_detections": kp_views[0],
                      "keypoint_ms_per_frame_set": float(np.mean(kp_seconds) * 1e3) if kp_seconds else None,
                      "masks": "recorded" if use_masks else f"segmented (learned from {learn} frames)",
                      "frames_tracked": n_tracked, "frames_estimated": len(estimates), "frames_fell_back": n_fell_back,
