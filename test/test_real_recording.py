@@ -61,7 +61,7 @@ def test_reference_topic_names_the_markers_without_a_model_description():
 
 
 def test_reference_names_are_mapped_to_our_joints(demo_bag):
-    from isa_mocap_ros.cli.track import read_sequence
+    from isa_mocap_ros.cli.track_io import read_sequence
     from isa_mocap_ros.eval.trc import POSE2SIM_TO_JOINTS
 
     seq = read_sequence(demo_bag, want_images=True, want_masks=False)

@@ -275,7 +275,7 @@ def bench_synth(det: PoseLandmarker, width: int, height: int, step: int, seconds
 
 def bench_cost(args) -> dict:
     """CPU time of the detector per detection and per frame set at the keypoint node's rate (module docstring)."""
-    from isa_mocap_ros.cli.track import read_sequence
+    from isa_mocap_ros.cli.track_io import read_sequence
     from isa_mocap_ros.resources import default_bag
     from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, KeypointSchedule, detect_in_mask
     from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig

@@ -40,7 +40,7 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from isa_mocap_ros.body import save_shape
-    from isa_mocap_ros.cli.track import read_sequence
+    from isa_mocap_ros.cli.track_io import read_sequence
     from isa_mocap_ros.bag import BagReader
     from isa_mocap_ros.tracking.shape_calibration import ShapeCalibrationError
 

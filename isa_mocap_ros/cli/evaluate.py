@@ -106,7 +106,7 @@ def evaluate(args) -> dict:
     """Do the work of ``isa-mocap evaluate`` (raises ValueError on bad input); return the evaluation."""
     from isa_mocap_ros.body import make_model
     from isa_mocap_ros.cli.run_report import read_estimates
-    from isa_mocap_ros.cli.track import read_sequence
+    from isa_mocap_ros.cli.track_io import read_sequence
     from isa_mocap_ros.eval import joint_errors_mm, marker_positions, per_joint_angle_rmse_deg, shared_markers
     from isa_mocap_ros.eval.report import accuracy, plot_sequence
 

@@ -148,7 +148,7 @@ def _body_shape(args: argparse.Namespace, bag: Path, out: Path, learn: int | Non
             raise ValueError(f"--shape: expected auto, default, truth or a body-shape YAML file ({exc})") from None
         return str(Path(shape).resolve())
     from isa_mocap_ros.body import save_shape
-    from isa_mocap_ros.cli.track import read_sequence
+    from isa_mocap_ros.cli.track_io import read_sequence
 
     seq = read_sequence(bag, want_images=True, want_masks=False)
     path = out / "body.yaml"

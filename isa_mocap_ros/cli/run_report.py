@@ -154,7 +154,7 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
     import cv2
 
     from isa_mocap_ros.body import make_model
-    from isa_mocap_ros.cli.track import read_sequence
+    from isa_mocap_ros.cli.track_io import read_sequence
     from isa_mocap_ros.eval.report import plot_sequence
 
     model = make_model(args.model or 39)
