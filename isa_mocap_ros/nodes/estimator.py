@@ -35,7 +35,8 @@ those camera infos and from the ``extrinsics`` whose parent is ``world_frame`` a
 frame the view's masks name. A prediction is stored only when it is well formed (the model's joints,
 finite) and its stamp lies within ``max_stamp_gap_s`` of the frame sets. A camera that changes (a
 pair of a new size) restarts the tracker with the new cameras. Every dropped message is counted
-(``bad_inputs`` in ``/diagnostics``) and logged, one rate-limited line per kind.
+(``bad_inputs`` in ``/diagnostics``) and logged, one rate-limited line per kind. The input callbacks are in
+:mod:`isa_mocap_ros.nodes.estimator_intake`.
 """
 from __future__ import annotations
 
@@ -59,25 +60,19 @@ from isa_mocap_ros.body import capsule_endpoints, joint_positions, make_model, p
 from isa_mocap_ros.body.hri import hri_joint_names, hri_urdf
 from isa_mocap_ros.eval.peers import register_peers
 from isa_mocap_ros.geometry import exp_so3
-from isa_mocap_ros.intake import Setting, StampWindow, ViewGate
+from isa_mocap_ros.intake import StampWindow, ViewGate
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, declare_config, one_numba_thread, run_node
+from isa_mocap_ros.nodes.estimator_intake import EstimatorIntake
 from isa_mocap_ros.tracking.predict import periods_between
-from isa_mocap_ros.tracking.sync import FrameSynchronizer, LatestSlot, SyncError
+from isa_mocap_ros.tracking.sync import FrameSynchronizer, LatestSlot
 from isa_mocap_ros.tracking.config import TrackerConfig, field_docs
 from isa_mocap_ros.tracking.load import LoadGovernor, LoadSettings
-from isa_mocap_ros.vision import Camera
 from isa_mocap_ros.vision.overlay import draw_overlay
 
 
 #: TrackerConfig fields that are not parameters of this node (none: every setting is one)
 NOT_PARAMETERS: tuple[str, ...] = ()
-
-#: keypoint messages (or skip notices) kept per view while their frame set is on its way
-KEYPOINT_DEPTH = 64
-
-#: distinct child frames kept per view from cam<i>/extrinsics (the one the view's masks name is used)
-MAX_CAMERA_FRAMES = 8
 
 #: the starts of the tracker's notes (``FrameResult.notes``) on what a normal run does: the empty masks of
 #: the frames before anyone is in view (the segmentation's background-learning frames), the automatic
@@ -96,7 +91,7 @@ def note_is_expected(note: str) -> bool:
     return note.startswith(EXPECTED_NOTES) or any(p.match(note) for p in _EXPECTED_NOTE_PATTERNS)
 
 
-class EstimatorNode(Node):
+class EstimatorNode(EstimatorIntake, Node):
     """Thin node over :class:`isa_mocap_ros.tracking.tracker.Tracker` (see the module docstring)."""
 
     def __init__(self, **kwargs) -> None:
@@ -238,208 +233,6 @@ class EstimatorNode(Node):
             f"estimator: {self.model.name} ({self.model.dof} DOF), {self.tracker_config.search.optimizer} with "
             f"{self.tracker_config.search.evals} evaluations per frame, {self.n_views} views, "
             f"seed {self.tracker_config.search.seed}, {'lockstep' if self.lockstep else 'real time'}")
-
-    # -- calibration and masks: checked before they reach the synchronizer (isa_mocap_ros.intake) ----------
-    def _info_cb(self, v: int):
-        last = [None, None]  # key and intrinsics of the last good camera info: a camera sends the same one every frame
-
-        def cb(msg: CameraInfo) -> None:
-            key = ma.camera_info_key(msg)
-            try:
-                stamp = ma.stamp_to_ns(msg.header)
-                if key is not None and key == last[0]:
-                    intr = last[1]   # unchanged (bit for bit): the intrinsics are this message's
-                else:
-                    intr = ma.camera_info_to_intrinsics(msg)
-                    last[:] = key, intr
-            except ma.AdapterError as exc:
-                self.problems.report(f"info{v}", f"cam{v}/camera_info dropped: {exc}")
-                return
-            with self._cv:
-                self._settle(v, *self.gates[v].add_info(stamp, Setting(msg.header.frame_id, intr.width, intr.height),
-                                                        intr))
-        return cb
-
-    def _extr_cb(self, v: int):
-        def cb(msg: TransformStamped) -> None:
-            try:
-                parent = msg.header.frame_id
-                if parent != self.world_frame:
-                    raise ma.AdapterError("TransformStamped.header.frame_id", f"the world frame {self.world_frame!r}",
-                                          parent)
-                known = self.gates[v].setting
-                if known is not None and known.frame_id and msg.child_frame_id != known.frame_id:
-                    raise ma.AdapterError("TransformStamped.child_frame_id", f"the frame of cam{v}'s camera "
-                                          f"{known.frame_id!r}", msg.child_frame_id)
-                rt = ma.transform_to_rt(msg)
-                store = self._extrinsics[v]
-                if msg.child_frame_id not in store and len(store) >= MAX_CAMERA_FRAMES:
-                    raise ma.AdapterError("TransformStamped.child_frame_id", f"one of the {MAX_CAMERA_FRAMES} camera "
-                                          f"frames seen so far ({', '.join(map(repr, store))})", msg.child_frame_id)
-            except ma.AdapterError as exc:
-                self.problems.report(f"extr{v}", f"cam{v}/extrinsics dropped: {exc}")
-                return
-            with self._cv:
-                store[msg.child_frame_id] = rt   # used when it is the frame of the view's masks (_cameras)
-        return cb
-
-    def _pose_of(self, v: int):
-        """The extrinsics of view ``v`` for the frame its camera_info and masks name (any, when they name none)."""
-        frame = self.gates[v].setting.frame_id if self.gates[v].setting is not None else None
-        store = self._extrinsics[v]
-        if frame is None:
-            return None
-        if frame == "" and store:
-            return next(reversed(store.values()))
-        return store.get(frame)
-
-    def _cameras(self) -> list[Camera] | None:
-        poses = [self._pose_of(v) for v in range(self.n_views)]
-        if any(i is None for i in self._intrinsics) or any(p is None for p in poses):
-            return None
-        cams = []
-        for v, (intr, (R, t)) in enumerate(zip(self._intrinsics, poses)):
-            # extrinsics carry the camera pose in the world (TF: parent world, child optical frame)
-            cams.append(Camera.from_intrinsics_and_pose(f"cam{v}", K=intr.K, D=intr.D, width=intr.width,
-                                                        height=intr.height, R_wc=R, t_wc=t))
-        return cams
-
-    def _mask_cb(self, v: int):
-        def cb(msg: Image) -> None:
-            try:
-                mask = ma.image_to_array(msg)
-                if mask.ndim != 2 or mask.dtype != np.uint8:
-                    raise ma.AdapterError(f"cam{v}/mask.encoding", "mono8", msg.encoding)
-                stamp = ma.stamp_to_ns(msg.header)
-            except ma.AdapterError as exc:
-                self.problems.report(f"mask{v}", f"cam{v}/mask dropped: {exc}")
-                return
-            with self._cv:
-                self._settle(v, *self.gates[v].add_image(stamp, Setting(msg.header.frame_id, mask.shape[1],
-                                                                        mask.shape[0], "mono8"), mask))
-        return cb
-
-    def _settle(self, v: int, accepted, rejected) -> None:
-        """(Under ``_cv``.) Report view ``v``'s rejected inputs; its accepted masks go to the synchronizer."""
-        for r in rejected:
-            self.problems.report(f"info{v}:gate" if r.kind == "camera_info" else f"mask{v}:{r.kind}",
-                                 r.text.replace(": image", ": mask", 1))
-        for a in accepted:
-            self._intrinsics[v] = a.info
-            if a.changed and self.tracker is not None:
-                self._camera_changed = f"cam{v}: {a.changed}"
-                self.get_logger().warn(f"cam{v}: the camera changed ({a.changed}; its camera_info and mask of stamp "
-                                       f"{a.stamp_ns} agree): the tracker restarts with the new cameras")
-            try:
-                sets = self.sync.add(v, a.stamp_ns, a.payload, time.monotonic())
-            except SyncError as exc:
-                self.problems.report(f"order{v}", f"cam{v}/mask dropped: {exc}")
-                continue
-            self._stream.accept(a.stamp_ns)
-            for fs in sets:
-                self.slot.put((fs, time.monotonic()))
-        if accepted:
-            self._cv.notify_all()
-
-    def _image_cb(self, v: int):
-        def cb(msg: Image) -> None:
-            try:
-                img = ma.image_to_array(msg, copy=True)
-            except ma.AdapterError as exc:
-                self.problems.report(f"image{v}", f"cam{v}/image_raw dropped: {exc}")
-                return
-            store = self._images[v]
-            store[ma.stamp_to_ns(msg.header)] = img
-            while len(store) > 30:
-                del store[min(store)]
-        return cb
-
-    def _prediction_cb(self, msg: JointState) -> None:
-        try:
-            _, q = ma.joint_state_to_arrays(msg, self.model.dof_names)
-            stamp = ma.stamp_to_ns(msg.header)
-        except ma.AdapterError as exc:
-            self.problems.report(f"prediction:{exc.field.split(' of ')[0]}", f"prediction dropped: {exc}")
-            return
-        with self._cv:
-            far = self._stream.far(stamp) if self._stream.last_ns is not None else "it came before any frame set"
-            if far is not None:   # never stored: it could push the frames' own predictions out
-                self.problems.report("prediction:stamp", f"prediction dropped: {far}")
-                return
-            self._predictions[stamp] = q
-            while len(self._predictions) > 100:
-                del self._predictions[min(self._predictions)]
-            self._cv.notify_all()
-
-    def _keypoints_cb(self, v: int):
-        def cb(msg: PolygonStamped) -> None:
-            stamp = ma.stamp_to_ns(msg.header)
-            try:
-                kp = ma.polygon_to_keypoints(msg)
-            except ma.AdapterError as exc:
-                self.problems.report(f"keypoints{v}", f"cam{v}/keypoints dropped: {exc}")
-                return
-            self._store_keypoints(v, stamp, kp, f"cam{v}/keypoints")
-        return cb
-
-    def _skipped_cb(self, v: int):
-        def cb(msg: Header) -> None:
-            self._store_keypoints(v, ma.stamp_to_ns(msg), None, f"cam{v}/keypoints_skipped")
-        return cb
-
-    def _store_keypoints(self, v: int, stamp: int, kp, topic: str) -> None:
-        with self._cv:
-            if self._stream.last_ns is not None and (far := self._stream.far(stamp)) is not None:
-                self.problems.report(f"keypoints{v}:stamp", f"{topic} dropped: {far}")
-                return
-            store = self._keypoints[v]
-            if stamp in store and store[stamp] is not None and kp is not None:
-                self.problems.report(f"keypoints{v}:twice", f"{topic} dropped: a second message for stamp {stamp}")
-                return
-            if stamp not in store or kp is not None:
-                store[stamp] = kp
-            while len(store) > KEYPOINT_DEPTH:
-                del store[min(store)]
-            self._cv.notify_all()
-
-    def _keypoints_for(self, frame_set) -> list | None:
-        """(Under ``_cv``.) The set's keypoints per view ((uv, confidence) or None), None when no view has any;
-        after waiting (lockstep ``keypoint_wait_s``, real time ``keypoint_realtime_wait_s``) until every view
-        with a mask has its message (keypoints or skip notice)."""
-        views = [v for v in range(self.n_views) if frame_set.items[v] is not None]
-        stamps = frame_set.stamps_ns
-        wait_s = self.keypoint_wait_s if self.lockstep else self.keypoint_realtime_wait_s
-        deadline = time.monotonic() + wait_s
-        while missing := [v for v in views if stamps[v] not in self._keypoints[v]]:
-            left = deadline - time.monotonic()
-            if left <= 0 or self._stop.is_set():
-                text = (f"frame set {frame_set.stamp_ns}: no keypoints or skip notice from views {missing} within "
-                        f"{wait_s:.3f} s; tracked without them")
-                if self.lockstep:
-                    self.problems.report("nokeypoints", text)
-                else:                       # real time: a late detection is expected under load
-                    self.problems.event("nokeypoints", text)
-                break
-            self._cv.wait(min(left, 0.05))
-        out = [self._keypoints[v].get(stamps[v]) if v in views else None for v in range(self.n_views)]
-        for v in views:         # this set's and older ones are done with
-            for s in [s for s in self._keypoints[v] if s <= stamps[v]]:
-                del self._keypoints[v][s]
-        return out if any(o is not None for o in out) else None
-
-    def _poll_partial(self) -> None:
-        with self._cv:
-            for s in self.sync.poll(time.monotonic()):
-                self.problems.report("partial", f"frame set {s.stamp_ns} without views {list(s.missing)} "
-                                                f"after {self.view_timeout_s:.1f} s; tracking with the others")
-                self.slot.put((s, time.monotonic()))
-            self._cv.notify_all()
-
-    def _prediction_for(self, stamp_ns: int) -> np.ndarray | None:
-        """The prediction node's prediction for this frame (stamps within half a period), if any."""
-        half = self.frame_period_s * 0.5e9
-        best = [s for s in self._predictions if abs(s - stamp_ns) < half]
-        return self._predictions.get(best[0]) if best else None
 
     # -- the work -------------------------------------------------------------------------------
     def _warm_up(self) -> None:
