@@ -483,17 +483,18 @@ def marker_names(clip: MotionClip) -> list[str]:
     return [clip.model.joint_names[j] for j in clip.model.markers]
 
 
-def _plain(v: Any) -> Any:
+def plain_data(v: Any) -> Any:
+    """``v`` with numpy arrays and scalars turned into plain lists, floats (rounded to 9 digits) and ints, for YAML."""
     if isinstance(v, np.ndarray):
-        return [_plain(x) for x in v.tolist()]
+        return [plain_data(x) for x in v.tolist()]
     if isinstance(v, (np.floating, float)):
         return round(float(v), 9)
     if isinstance(v, np.integer):
         return int(v)
     if isinstance(v, dict) or hasattr(v, "items"):
-        return {str(k): _plain(x) for k, x in v.items()}
+        return {str(k): plain_data(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_plain(x) for x in v]
+        return [plain_data(x) for x in v]
     return v
 
 
@@ -513,12 +514,12 @@ def model_yaml(clip: MotionClip, *, seed: int, empty_frames: int, rig: Rig, nois
         "format": 1,
         "model": {"name": m.name, "dof": m.dof, "dof_names": list(m.dof_names),
                   "marker_joints": marker_names(clip),
-                  "shape": _plain({"name": m.shape["name"], "offsets": dict(m.shape["offsets"]),
+                  "shape": plain_data({"name": m.shape["name"], "offsets": dict(m.shape["offsets"]),
                                    "radii": dict(m.shape["radii"])})},
         "root": ("root_tx, root_ty, root_tz: pelvis position in world (m); root_rx, root_ry, root_rz: roll, pitch, "
                  "yaw (rad) with R = Rz(yaw) Ry(pitch) Rx(roll) (isa_mocap_ros.body.joint_state_to_pose)"),
         "motion": {"name": clip.name, "source": clip.source, "fps": float(clip.fps), "frames": clip.n_frames,
-                   "params": _plain(clip.params)},
+                   "params": plain_data(clip.params)},
         "sequence": {"seed": int(seed), "empty_frames": int(empty_frames), "t0_ns": T0_NS,
                      "views": len(rig), "rig": rig.name,
                      "sizes": [[c.width, c.height] for c in rig.cameras],

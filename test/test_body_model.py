@@ -116,7 +116,7 @@ def test_fk_small_batches_on_the_calling_thread_give_the_parallel_kernels_bits(m
 
     rng = np.random.default_rng(1)
     X = random_poses(model, rng, 2 * kin.SERIAL_BELOW + 3)
-    tables = kin._kernel_tables(model)
+    tables = kin.kernel_tables(model)
     J = len(model.joint_names)
     outs = []
     for kernel in (kin._fk_kernel, kin._fk_kernel_serial):

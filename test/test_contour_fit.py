@@ -7,7 +7,7 @@ import pytest
 from isa_mocap_ros.body import capsule_endpoints, forward_kinematics, make_model
 from isa_mocap_ros.geometry import exp_so3, log_so3
 from isa_mocap_ros.tracking.contour import ContourFit, ContourFitError, _normal_equations
-from isa_mocap_ros.body.kinematics import _fk
+from isa_mocap_ros.body.kinematics import joint_frames
 from isa_mocap_ros.vision import default_rig, render_mask
 
 
@@ -54,7 +54,7 @@ def test_normal_equations_match_finite_differences(scene):
     h = 1e-6
     J = np.stack([(_residuals(model, _perturbed(model, x, d, h), frames, local, n, m) - e) / h
                   for d in range(model.dof)], axis=1)
-    R, P, axes = _fk(model, x[None], want_axes=True)
+    R, P, axes = joint_frames(model, x[None], want_axes=True)
     A, g = _normal_equations(R[0], P[0], axes[0], frames, local, n, m, np.asarray(model.dof_joint),
                              fit._below)
     np.testing.assert_allclose(A, J.T @ J, rtol=1e-4, atol=1e-7)

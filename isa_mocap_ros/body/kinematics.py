@@ -48,7 +48,7 @@ def _as_batch(model: BodyModel, X) -> np.ndarray:
     return X[None] if X.ndim == 1 else X
 
 
-def _fk(model: BodyModel, X: np.ndarray, *, want_axes: bool = False):
+def joint_frames(model: BodyModel, X: np.ndarray, *, want_axes: bool = False):
     """World rotations ``(n, J, 3, 3)``, positions ``(n, J, 3)`` and, optionally, the world axis
     of every joint-angle DOF ``(n, D, 3)`` (rows 0-5 unused)."""
     n = X.shape[0]
@@ -144,7 +144,7 @@ SERIAL_BELOW = 32
 
 
 def _fk_numba(model: BodyModel, X: np.ndarray):
-    tables = _kernel_tables(model)
+    tables = kernel_tables(model)
     n, J = X.shape[0], len(model.joint_names)
     R = np.empty((n, J, 3, 3))
     P = np.empty((n, J, 3))
@@ -155,7 +155,9 @@ def _fk_numba(model: BodyModel, X: np.ndarray):
 _TABLES: dict = {}
 
 
-def _kernel_tables(model: BodyModel):
+def kernel_tables(model: BodyModel):
+    """The compiled kinematics' tables of ``model`` (cached per model object): parents ``(J,)``, offsets
+    ``(J, 3)``, a row pointer ``(J+1,)`` into the joint-angle DOF indices ``(K,)`` and their axes ``(K,)`` (0, 1, 2 = x, y, z)."""
     key = id(model)
     hit = _TABLES.get(key)
     if hit is not None and hit[0] is model:
@@ -179,7 +181,7 @@ def _rot_pos(model: BodyModel, X: np.ndarray, backend: str):
     if backend == "numba":
         return _fk_numba(model, X)
     if backend == "numpy":
-        return _fk(model, X)[:2]
+        return joint_frames(model, X)[:2]
     raise BodyError(f"backend: expected 'numba' or 'numpy', got {backend!r}")
 
 
@@ -250,7 +252,7 @@ def _position_jacobian_dk(model: BodyModel, X, joints) -> tuple[np.ndarray, np.n
     joints = np.asarray(joints, dtype=int)
     if joints.ndim != 1 or np.any(joints < 0) or np.any(joints >= len(model.joint_names)):
         raise BodyError(f"joints: expected indices in [0, {len(model.joint_names)}), got {joints}")
-    _, Pall, axes = _fk(model, X, want_axes=True)
+    _, Pall, axes = joint_frames(model, X, want_axes=True)
     P = Pall[:, joints]
     n, K = P.shape[:2]
     JacT = np.zeros((n, model.dof, K, 3))
@@ -261,7 +263,7 @@ def _position_jacobian_dk(model: BodyModel, X, joints) -> tuple[np.ndarray, np.n
     JacT[:, 4, :, 0], JacT[:, 5, :, 0] = u[..., 2], -u[..., 1]
     JacT[:, 3, :, 1], JacT[:, 5, :, 1] = -u[..., 2], u[..., 0]
     JacT[:, 3, :, 2], JacT[:, 4, :, 2] = u[..., 1], -u[..., 0]
-    below = _descendant_mask(model)[:, joints]          # (J, K): joint k is below (or at) joint j
+    below = descendant_mask(model)[:, joints]          # (J, K): joint k is below (or at) joint j
     for d in range(6, model.dof):
         j = model.dof_joint[d]
         mask = below[j]
@@ -275,7 +277,8 @@ def _position_jacobian_dk(model: BodyModel, X, joints) -> tuple[np.ndarray, np.n
     return P, JacT
 
 
-def _descendant_mask(model: BodyModel) -> np.ndarray:
+def descendant_mask(model: BodyModel) -> np.ndarray:
+    """``(J, J)`` bool: ``[j, k]`` is True when joint ``k`` is joint ``j`` or below it in the tree."""
     J = len(model.joint_names)
     M = np.eye(J, dtype=bool)
     for k in range(J):

@@ -156,12 +156,12 @@ def load_shape(path) -> dict:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
         raise BodyError(f"shape: {path} is not valid YAML: {exc}") from exc
-    return _complete_shape(data, source=str(path))
+    return complete_shape(data, source=str(path))
 
 
 def save_shape(shape: Mapping, path) -> None:
     """Write a body shape (as returned by :func:`load_shape` or ``model.shape``) to YAML."""
-    shape = _complete_shape(shape, source="shape")
+    shape = complete_shape(shape, source="shape")
     data = {"name": shape["name"],
             "offsets": {k: [round(float(v), 6) for v in val] for k, val in shape["offsets"].items()},
             "radii": {k: [round(float(v), 6) for v in val] for k, val in shape["radii"].items()}}
@@ -173,7 +173,9 @@ def default_shape() -> dict:
     return load_shape(DEFAULT_SHAPE_PATH)
 
 
-def _complete_shape(data, *, source: str) -> dict:
+def complete_shape(data, *, source: str) -> dict:
+    """A body-shape mapping (``offsets``, ``radii``) checked and completed (an offset given for one side only is
+    mirrored to the other); raises :class:`BodyError` naming ``source`` and the field."""
     if not isinstance(data, Mapping):
         raise BodyError(f"{source}: expected a mapping with 'offsets' and 'radii', got {type(data).__name__}")
     for key in ("offsets", "radii"):
@@ -356,7 +358,7 @@ def make_model(dof: int = 39, *, shape=None) -> BodyModel:
     elif isinstance(shape, (str, Path)):
         shp = load_shape(shape)
     elif isinstance(shape, Mapping):
-        shp = _complete_shape(copy.deepcopy(dict(shape)), source="shape")
+        shp = complete_shape(copy.deepcopy(dict(shape)), source="shape")
     else:
         raise BodyError(f"shape: expected a path, a mapping or None, got {type(shape).__name__}")
 

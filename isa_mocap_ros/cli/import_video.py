@@ -174,7 +174,7 @@ def write_import(args) -> dict:
     from tqdm import tqdm
 
     from isa_mocap_ros.bag import QOS_DEFAULT, QOS_LATCHED, BagWriter
-    from isa_mocap_ros.cli.synth import _camera_info, _canonical
+    from isa_mocap_ros.cli.synth import camera_info_message, canonical_cdr
     from isa_mocap_ros.eval.trc import TRC_TO_WORLD, read_trc
     from isa_mocap_ros.synth import T0_NS, stamp_ns
     from isa_mocap_ros.vision.calib_formats import read_calibration
@@ -183,7 +183,7 @@ def write_import(args) -> dict:
     from msg_adapters import array_to_image, rt_to_transform, to_cdr, type_name_of
 
     def cdr(msg) -> bytes:
-        return _canonical(to_cdr(msg), type_name_of(msg))
+        return canonical_cdr(to_cdr(msg), type_name_of(msg))
 
     out = Path(args.out)
     if (out.exists() or out.is_symlink()) and not args.overwrite:
@@ -294,7 +294,7 @@ def write_import(args) -> dict:
                     continue
                 fid = f"cam{i}_optical_frame"
                 bag.write(f"{TOPIC}/cam{i}/image_raw", cdr(array_to_image(imgs[i], "rgb8", stamp_ns=s, frame_id=fid)), s)
-                bag.write(f"{TOPIC}/cam{i}/camera_info", cdr(_camera_info(cam, s, fid)), s)
+                bag.write(f"{TOPIC}/cam{i}/camera_info", cdr(camera_info_message(cam, s, fid)), s)
             return s
 
         for k in range(K):

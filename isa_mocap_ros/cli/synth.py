@@ -107,7 +107,8 @@ def _rig(args):
     return rig
 
 
-def _camera_info(cam, stamp_ns, frame_id):
+def camera_info_message(cam, stamp_ns, frame_id):
+    """The ``sensor_msgs/CameraInfo`` of camera ``cam`` (0 or 4 distortion coefficients padded to 5)."""
     from msg_adapters import Intrinsics, intrinsics_to_camera_info
 
     D = np.asarray(cam.dist, dtype=float)
@@ -136,7 +137,7 @@ def _pose_array(positions, rotations, stamp_ns):
     return msg
 
 
-def _canonical(cdr: bytes, type_name: str) -> bytes:
+def canonical_cdr(cdr: bytes, type_name: str) -> bytes:
     """The CDR bytes of a message with zeroed alignment padding.
 
     rclpy's serializer (Fast-CDR) leaves the padding bytes between fields uninitialised (and may
@@ -166,7 +167,7 @@ def write_bag(args) -> dict:
     from msg_adapters import array_to_image, arrays_to_joint_state, rt_to_transform, to_cdr, type_name_of
 
     def cdr(msg) -> bytes:
-        return _canonical(to_cdr(msg), type_name_of(msg))
+        return canonical_cdr(to_cdr(msg), type_name_of(msg))
 
     out = Path(args.out)
     if (out.exists() or out.is_symlink()) and not args.overwrite:
@@ -212,7 +213,7 @@ def write_bag(args) -> dict:
                 fid = f"cam{i}_optical_frame"
                 bag.write(f"{TOPIC}/cam{i}/image_raw", cdr(array_to_image(fr.images[i], "rgb8", stamp_ns=s,
                                                                            frame_id=fid)), s)
-                bag.write(f"{TOPIC}/cam{i}/camera_info", cdr(_camera_info(cam, s, fid)), s)
+                bag.write(f"{TOPIC}/cam{i}/camera_info", cdr(camera_info_message(cam, s, fid)), s)
                 if args.masks:
                     bag.write(f"{TOPIC}/cam{i}/mask", cdr(array_to_image(fr.masks[i], "mono8", stamp_ns=s,
                                                                           frame_id=fid)), s)

@@ -159,7 +159,7 @@ def label(alg: str, dof: int, budget: int) -> str:
 def prepare_sequence(spec: SequenceSpec, cache_dir: Path | str) -> Path:
     """Synthesize ``spec`` once into ``cache_dir`` (an ``.npz``: packed masks, truth poses, truth model
     shape, rig size); return its path (an existing file is reused)."""
-    from isa_mocap_ros.synth import SceneRenderer, _plain, make_clip, make_renderer, marker_names
+    from isa_mocap_ros.synth import SceneRenderer, plain_data, make_clip, make_renderer, marker_names
     from isa_mocap_ros.vision import default_rig, render_mask
 
     cache_dir = Path(cache_dir)
@@ -186,7 +186,7 @@ def prepare_sequence(spec: SequenceSpec, cache_dir: Path | str) -> Path:
             E = renderer.endpoints(pose)
             for v, cam in enumerate(rig.cameras):
                 masks[k, v] = render_mask(cam, E, clip.model.capsule_radii) > 0
-    shape = _plain({"name": clip.model.shape["name"], "offsets": dict(clip.model.shape["offsets"]),
+    shape = plain_data({"name": clip.model.shape["name"], "offsets": dict(clip.model.shape["offsets"]),
                     "radii": dict(clip.model.shape["radii"])})
     tmp = path.with_suffix(".tmp.npz")
     np.savez_compressed(tmp, masks=np.packbits(masks, axis=-1), truth=np.asarray(clip.poses, dtype=float),

@@ -42,7 +42,7 @@ from scipy.spatial import cKDTree
 
 from ..body import BodyModel
 from ..body import capsule_endpoints, forward_kinematics
-from ..body.kinematics import _descendant_mask, _fk
+from ..body.kinematics import descendant_mask, joint_frames
 from ..energy.correspondence import mask_contour_pixels, capsule_contour_points, capsule_frames, plucker_lines
 from ..geometry import exp_so3, log_so3
 from ..geometry.so3 import nearest_rotvec
@@ -159,7 +159,7 @@ class ContourFit:
         self.n_points = _check_positive("n_points", n_points, integer=True)
         self.max_px = _check_positive("max_px", max_px)
         self.damping = _check_positive("damping", damping, zero=True)
-        self._below = _descendant_mask(model)                 # (J, J): [j, f] frame f at or below joint j
+        self._below = descendant_mask(model)                 # (J, J): [j, f] frame f at or below joint j
         self._dof_joint = np.asarray(model.dof_joint)
         self._cap_frames = capsule_frames(model)
         self._images: list = [None] * len(self.cameras)
@@ -213,7 +213,7 @@ class ContourFit:
         if points is None:
             points = self.model_points(x)
         if fk is None:
-            R, P, _ = _fk(self.model, x[None])
+            R, P, _ = joint_frames(self.model, x[None])
             fk = R[0], P[0]
         R, P = fk
         F, L, N, M, Dst = [], [], [], [], []
@@ -237,10 +237,10 @@ class ContourFit:
 
     def step(self, x: np.ndarray, frames, local, n, m, *, coords=None, fk=None) -> np.ndarray:
         """One damped Gauss-Newton step of pose ``x`` on the given pairs (clipped to the limits), over the
-        coordinates ``coords`` (default all; the others held); ``fk``: ``_fk(model, x, want_axes=True)``
+        coordinates ``coords`` (default all; the others held); ``fk``: ``joint_frames(model, x, want_axes=True)``
         if known."""
         model = self.model
-        R, P, axes = _fk(model, x[None], want_axes=True) if fk is None else fk
+        R, P, axes = joint_frames(model, x[None], want_axes=True) if fk is None else fk
         f64 = [np.ascontiguousarray(a, dtype=np.float64) for a in (local, n, m)]
         A, g = _normal_equations(R[0], P[0], axes[0], np.ascontiguousarray(frames, dtype=np.int64), *f64,
                                  self._dof_joint, self._below)
@@ -283,7 +283,7 @@ class ContourFit:
         for _ in range(iterations):
             if points is None or render_each:
                 points = self.model_points(x)
-            fk = _fk(self.model, x[None], want_axes=True)
+            fk = joint_frames(self.model, x[None], want_axes=True)
             frames, local, n, m, dist = self.correspondences(x, points, (fk[0][0], fk[1][0]))
             counts.append(len(frames))
             rms.append(float(np.sqrt(np.mean(dist ** 2))) if len(dist) else float("nan"))

@@ -65,7 +65,7 @@ class ReaimMove:
     """
 
     def __init__(self, model, joints: Sequence) -> None:
-        from isa_mocap_ros.body.kinematics import _kernel_tables
+        from isa_mocap_ros.body.kinematics import kernel_tables
 
         self.model = model
         names = list(model.joint_names)
@@ -86,7 +86,7 @@ class ReaimMove:
         self.joints = tuple(sorted(set(moved)))
         self.coords = np.array(sorted(d for j in self.joints for d in (range(6) if j == 0 else model.joint_dofs[j])),
                                dtype=np.int64)
-        self._tables = _kernel_tables(model)
+        self._tables = kernel_tables(model)
         self.ops = self._plan()
         J = len(names)
         self._op = np.zeros(J, dtype=np.int64)

@@ -125,7 +125,7 @@ def shape_from_params(base: Mapping, factors: Mapping[str, float] | Sequence[flo
     """The body shape ``base`` scaled by the factors of :data:`SHAPE_PARAMS` (a mapping by name or a
     sequence in that order; missing names = 1). Left/right symmetric: every right-side entry is the
     mirror of the left one."""
-    from isa_mocap_ros.body.model import _complete_shape
+    from isa_mocap_ros.body.model import complete_shape
 
     if not isinstance(factors, Mapping):
         f = np.asarray(factors, dtype=float)
@@ -139,7 +139,7 @@ def shape_from_params(base: Mapping, factors: Mapping[str, float] | Sequence[flo
     g = {n: float(factors.get(n, 1.0)) for n, _, _ in SHAPE_PARAMS}
     if not all(np.isfinite(v) and v > 0 for v in g.values()):
         raise ShapeCalibrationError(f"factors: expected positive finite numbers, received {g}")
-    shp = _complete_shape(copy.deepcopy(dict(base)), source="base shape")
+    shp = complete_shape(copy.deepcopy(dict(base)), source="base shape")
     offsets, radii = {}, {}
     for j, o in shp["offsets"].items():
         if j.startswith("right_"):
@@ -166,7 +166,7 @@ def shape_from_params(base: Mapping, factors: Mapping[str, float] | Sequence[flo
         elif part in _R_LEGS:
             k *= g["r_legs"]
         radii[c] = np.array(r, dtype=float) * k
-    return _complete_shape({"name": name, "offsets": offsets, "radii": radii}, source=name)
+    return complete_shape({"name": name, "offsets": offsets, "radii": radii}, source=name)
 
 
 def bone_lengths(model) -> dict[str, float]:
