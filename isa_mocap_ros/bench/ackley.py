@@ -83,7 +83,7 @@ def _isa_steps(kernel: str, n: int, b: float, c: float, noise: bool, seed: int, 
     opt.bind(_energy(noise, rng))
     for t in range(limit + 1):
         next(opt)
-        if np.linalg.norm(opt._x) < delta:
+        if np.linalg.norm(opt.estimate()[0]) < delta:
             return t
     return None
 

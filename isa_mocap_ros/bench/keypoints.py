@@ -305,8 +305,7 @@ def bench_cost(args) -> dict:
     x = np.zeros((256, 256, 3), np.float32)
     for _ in range(50):
         c0 = time.thread_time()
-        det._it.set_tensor(det._in, x[None])
-        det._it.invoke()
+        det.run_model(x)
         invoke_ms.append((time.thread_time() - c0) * 1e3)
     c = np.array(cpu_ms)
     return dict(bag=str(bag), frame_sets=sets, detections=len(c), every_k=args.every, dense_frames=DENSE_FRAMES,

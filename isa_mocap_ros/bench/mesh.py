@@ -104,7 +104,7 @@ def summarize(runs: list[dict]) -> dict:
                 for k in ("mpjpe_mm", "offset_removed_mpjpe_mm", "knee_rmse_deg", "offset_removed_knee_rmse_deg")}
         mean["max_frame_error_mm"] = float(max(v["max_frame_error_mm"] for v in per.values()))
         mean["backwards_runs"] = int(sum(v["backwards_runs"] for v in per.values()))
-        out["conditions"].append({"condition": cond, "label": br._cond(cond)[1], "per_subject": per, **mean})
+        out["conditions"].append({"condition": cond, "label": br.condition(cond)[1], "per_subject": per, **mean})
     tg = []
     for cond, what, limit, label in TARGETS:
         c = next((x for x in out["conditions"] if x["condition"] == cond), None)

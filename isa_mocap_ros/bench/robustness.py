@@ -151,7 +151,8 @@ def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK
                         init, tuple(notes), seeds=seeds, gate_margin_px=gate_margin_px, body=body)
 
 
-def _cond(key: str):
+def condition(key: str):
+    """The entry of :data:`CONDITIONS` named ``key``."""
     return next(c for c in CONDITIONS if c[0] == key)
 
 
@@ -163,7 +164,7 @@ def prepare_bag(seq: SequenceSpec, cond: str, cache: Path) -> Path:
     path = cache / bag_name(seq, cond)
     if (path / "metadata.yaml").is_file():
         return path
-    _, _, noise, occl, _ = _cond(cond)
+    _, _, noise, occl, _ = condition(cond)
     tmp = cache / (path.name + ".tmp")
     shutil.rmtree(tmp, ignore_errors=True)
     write_bag(argparse.Namespace(
@@ -431,7 +432,7 @@ def plot(res: dict, path: Path) -> Path:
             a = ax[i, j]
             a.plot(r["t_s"], kt[:, j], "k-", lw=2, label="ground truth")
             a.plot(r["t_s"], ke[:, j], "r--", lw=1.3, label="estimate")
-            a.set_title(f"{_cond(r['condition'])[1]}: {side} knee (knee RMSE {r['knee_rmse_deg']:.2f}°)", fontsize=8)
+            a.set_title(f"{condition(r['condition'])[1]}: {side} knee (knee RMSE {r['knee_rmse_deg']:.2f}°)", fontsize=8)
             a.set_ylabel("deg", fontsize=8)
             if i == 0 and j == 0:
                 a.legend(fontsize=7, loc="upper right")

@@ -83,7 +83,7 @@ class RestrictedSilhouetteEnergy:
         self.energy = energy
         self.x_base = x
         self.coords = np.sort(idx)
-        self._frame = energy._frame
+        self._frame = energy.frame_data
         key = tuple(self.coords.tolist())
         st = energy.restriction_cache.get(key)
         if st is None:
@@ -119,7 +119,7 @@ class RestrictedSilhouetteEnergy:
         """Energies ``(n,)`` of poses ``X (n, D)`` equal to ``x_base`` outside ``coords``."""
         en = self.energy
         X, ok = _check_poses(en.model, X)
-        if en._frame is not self._frame:
+        if en.frame_data is not self._frame:
             raise EnergyError("masks: expected the masks this restriction was made for, received new ones "
                               "(set_masks was called since): restrict again")
         if self.full:       # the full kernel is right for any pose: nothing to check
@@ -143,7 +143,7 @@ class RestrictedSilhouetteEnergy:
 
     def _fast(self, X: np.ndarray) -> np.ndarray:
         out = np.empty(X.shape[0])
-        _k.silhouette_restricted(X, *self._args, max(1, min(X.shape[0], 8 * self.energy._threads)), out)
+        _k.silhouette_restricted(X, *self._args, max(1, min(X.shape[0], 8 * self.energy.threads)), out)
         return out
 
     def __repr__(self) -> str:
@@ -160,14 +160,14 @@ def _restriction_structure(energy: SilhouetteEnergy, coords: np.ndarray) -> tupl
     D = energy.model.dof
     fixed = np.ones(D, bool)
     fixed[coords] = False
-    parents, _, ptr, dofs, _ = energy._kin
+    parents, _, ptr, dofs, _ = energy.kin_tables
     J = parents.size
     rot = np.zeros(J, bool)         # a coordinate of the joint or of an ancestor
     moved = np.zeros(J, bool)       # an ancestor rotates
     for j in range(1, J):
         rot[j] = rot[parents[j]] or not fixed[dofs[ptr[j]:ptr[j + 1]]].all()
         moved[j] = rot[parents[j]] or moved[parents[j]]
-    caps, order = energy._caps, energy._order
+    caps, order = energy.capsule_joints, energy.capsule_order
     moving = np.ascontiguousarray(moved[caps[:, 0]] | moved[caps[:, 1]])
     pos = np.empty(len(order), np.int64)
     pos[order] = np.arange(len(order))

@@ -483,6 +483,27 @@ class SilhouetteEnergy:
         return total / fr["view_w"].sum()
 
     @property
+    def frame_data(self) -> dict | None:
+        """The current frame's kernel inputs (a new object at each :meth:`set_masks`; None without masks):
+        what a restriction made for this frame checks it still scores."""
+        return self._frame
+
+    @property
+    def kin_tables(self) -> tuple:
+        """The model's kinematic tables (:func:`kinematic_tables`)."""
+        return self._kin
+
+    @property
+    def capsule_joints(self) -> np.ndarray:
+        """``(C, 2)`` int64: the two joints of each capsule."""
+        return self._caps
+
+    @property
+    def capsule_order(self) -> np.ndarray:
+        """``(C,)`` int64: the capsules in the kernel's processing order (bigger capsules first)."""
+        return self._order
+
+    @property
     def threads(self) -> int:
         """numba threads of the kernels, read by the last :meth:`set_masks`."""
         return self._threads

@@ -307,6 +307,21 @@ class Optimizer:
         return float("nan"), float("nan")
 
     # ---------------------------------------------------------------- protocol
+    def estimate(self) -> tuple[np.ndarray, float | None]:
+        """The current estimate ``x (d,)`` (a copy) and its energy, None when it was not evaluated (the
+        weighted mean of the particle methods)."""
+        return self._estimate()
+
+    def size_for_budget(self, max_evals: int | None) -> None:
+        """Let the algorithm size itself from a budget of ``max_evals`` evaluations (PSO g_max, APF
+        n_particles) without binding an energy, as :meth:`bind` does (a driver that splits its budget)."""
+        self._on_bind(max_evals)
+
+    def record(self, X: np.ndarray, E: np.ndarray, *, n_counted: int, n_bad: int = 0) -> None:
+        """:meth:`tell` for energies already checked (``E (n,)`` finite or +inf, ``n_bad`` of them replaced):
+        ``n_counted`` of the ``n`` rows were evaluated (a truncated last generation). ``X`` is kept as given."""
+        self._record(X, E, n_counted=n_counted, n_bad=n_bad)
+
     def ask(self) -> np.ndarray:
         """Next generation to evaluate, ``(n, d)`` (a fresh array)."""
         X = np.array(self._ask(), dtype=float, copy=True)

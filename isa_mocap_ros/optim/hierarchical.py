@@ -188,7 +188,7 @@ class Hierarchical(Optimizer):
                             bounds=(self.lo[idx], self.hi[idx]), initial_population=P,
                             rotation_blocks=blocks, **self.params)
         if share is not None:
-            opt._on_bind(share)
+            opt.size_for_budget(share)
             if share < opt.generation_size:
                 raise OptimError(
                     f"max_evals: partition {k} ({len(idx)} coordinates) gets {share} evaluations, "
@@ -268,7 +268,7 @@ class Hierarchical(Optimizer):
         inner = self._inner
         idx = self.partitions[self.k]
         if inner is not None and inner.n_iter > 0:
-            self._x[idx] = inner._estimate()[0]
+            self._x[idx] = inner.estimate()[0]
         self.partition_log.append((self.k, self._inner_used))
         self.k += 1
         self._inner = None
@@ -281,7 +281,7 @@ class Hierarchical(Optimizer):
                              "minimize/bind or evals_per_partition= to Hierarchical")
         if not self._advance_if_done():
             raise OptimError("ask: every partition is finished")
-        Xs = self._current()._ask()                 # copied into X below
+        Xs = self._current().ask()
         X = np.empty((len(Xs), self.d))
         X[:] = self._x
         X[:, self._columns[self.k]] = Xs
@@ -308,7 +308,7 @@ class Hierarchical(Optimizer):
         inner = self._current()
         n = getattr(self, "_counted", len(X))
         # F order, as X[:, index_array] gives: the inner weighted mean (BLAS) keeps its bits
-        inner._record(X[:, self._columns[self.k]].copy(order="F"), E, n_counted=n, n_bad=0)
+        inner.record(X[:, self._columns[self.k]].copy(order="F"), E, n_counted=n, n_bad=0)
         self._inner_used += n
         self._counted = len(X)
         self._last_pop = X
@@ -326,7 +326,7 @@ class Hierarchical(Optimizer):
     def _estimate(self):
         x = self._x.copy()
         if self._inner is not None and self._inner.n_iter > 0 and self.k < len(self.partitions):
-            x[self.partitions[self.k]] = self._inner._estimate()[0]
+            x[self.partitions[self.k]] = self._inner.estimate()[0]
         return x, None
 
     def _population(self):

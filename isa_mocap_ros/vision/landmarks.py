@@ -204,6 +204,12 @@ class PoseLandmarker:
             out = cv2.cvtColor(out, cv2.COLOR_BGR2RGB)
         return out.astype(np.float32) * np.float32(1.0 / 255.0)
 
+    def run_model(self, x: np.ndarray) -> None:
+        """Run the network once on a prepared input ``x`` (what :meth:`crop` returns), outputs not decoded (for
+        timing the model alone)."""
+        self._it.set_tensor(self._in, x[None])
+        self._it.invoke()
+
     def detect(self, image: Any, roi: Any, *, bgr: bool = False) -> Landmarks2D:
         """Landmarks of the person in the region ``roi`` = ``(cu, cv, side, angle_rad)`` of ``image``
         ((H, W, 3) uint8, RGB unless ``bgr``)."""
