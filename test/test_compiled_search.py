@@ -132,14 +132,14 @@ def test_cached_code_depends_on_the_kernels_it_calls():
     # changes a kernel recompiles it instead of loading old machine code)
     import hashlib
 
-    from isa_mocap_ros.energy import _silhouette_kernel
+    from isa_mocap_ros.energy import silhouette_kernel
     from isa_mocap_ros.optim import _fast, _fast_so3
 
     for fn in (compiled_search._partition, compiled_search.rotation_mean):
         locator = fn._cache._impl.locator
         assert type(locator).__name__ == "_DependentLocator"
         h = hashlib.sha256()
-        for m in (_silhouette_kernel, _fast, _fast_so3):
+        for m in (silhouette_kernel, _fast, _fast_so3):
             h.update(open(m.__file__, "rb").read())
         assert locator.get_source_stamp()[1] == h.hexdigest()
 

@@ -7,7 +7,7 @@ from scipy.stats import spearmanr
 
 from isa_mocap_ros.body import capsule_endpoints, joint_positions, make_model
 from isa_mocap_ros.energy import EnergyError, SilhouetteEnergy, exact_view_energy
-from isa_mocap_ros.energy import _silhouette_kernel as K
+from isa_mocap_ros.energy import silhouette_kernel as K
 from isa_mocap_ros.energy.silhouette import kinematic_tables
 from isa_mocap_ros.vision import default_rig, look_at, render_mask
 

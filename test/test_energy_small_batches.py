@@ -4,7 +4,7 @@ import numpy as np
 
 from isa_mocap_ros.body import capsule_endpoints, make_model
 from isa_mocap_ros.energy import SilhouetteEnergy
-from isa_mocap_ros.energy import _silhouette_kernel as K
+from isa_mocap_ros.energy import silhouette_kernel as K
 from isa_mocap_ros.vision import default_rig, render_mask
 
 

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _silhouette_kernel as _k
+from . import silhouette_kernel as _k
 from ._checks import EnergyError, _check_poses
 
 __all__ = ["RestrictedSilhouetteEnergy"]

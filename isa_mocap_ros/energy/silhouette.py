@@ -15,7 +15,7 @@ pixels the model misses; ``f`` is minimised and lies in ``[0, 1]``.
   docs/vision.md) and pixels are counted. A model with no pixel in the view gets ``f_v = 1``
   (the first term is 0/0 there; we take its worst value 1/2).
 * :class:`SilhouetteEnergy` evaluates Eq. 5 over the usable views with either the exact
-  reference (``method="exact"``) or the compiled estimate of :mod:`._silhouette_kernel`
+  reference (``method="exact"``) or the compiled estimate of :mod:`.silhouette_kernel`
   (``method="fast"``, the default): the same two terms from a fixed stratified template of points
   in each capsule's projected area (overlaps counted once) looked up in a downsampled foreground
   coverage image, and from a fixed sample of foreground pixels tested against the projected
@@ -31,7 +31,7 @@ import numpy as np
 
 from ..body import BodyModel, capsule_endpoints
 from ..vision import Camera, render_mask
-from . import _silhouette_kernel as _k
+from . import silhouette_kernel as _k
 from ._checks import EnergyError, _check_cameras, _check_model, _check_poses
 from .restricted import RestrictedSilhouetteEnergy
 
@@ -513,7 +513,7 @@ class SilhouetteEnergy:
         return self._kernel_args()
 
     def _kernel_args(self) -> tuple:
-        """The arguments of :func:`~._silhouette_kernel.silhouette_batch` between the poses and
+        """The arguments of :func:`~.silhouette_kernel.silhouette_batch` between the poses and
         ``n_chunks`` for the current masks, its bundles ``(Body, Views, Template, Foreground)`` (also
         what the tracker's compiled search passes it)."""
         fr = self._frame

@@ -25,7 +25,7 @@ import numba
 import numpy as np
 from numba.extending import overload
 
-from isa_mocap_ros.energy import _silhouette_kernel as _k
+from isa_mocap_ros.energy import silhouette_kernel as _k
 from isa_mocap_ros.optim import _fast, _fast_so3
 from isa_mocap_ros.optim._base import GenerationInfo, Result
 from isa_mocap_ros.optim.isa import C_SCALES, VARIANCE_READINGS, covariance_constant
@@ -51,14 +51,14 @@ def _register_dependent_cache() -> None:
     other file, and numba's own locator list follows unchanged."""
     try:
         from numba.core import caching
-        from isa_mocap_ros.energy import _silhouette_kernel
+        from isa_mocap_ros.energy import silhouette_kernel
         from isa_mocap_ros.optim import _fast as fast_mod, _fast_so3 as so3_mod
     except ImportError:                                                    # pragma: no cover
         return
     impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
     if impl is None or not hasattr(caching, "_CacheLocator"):                # pragma: no cover
         return
-    deps = tuple(m.__file__ for m in (_silhouette_kernel, fast_mod, so3_mod))
+    deps = tuple(m.__file__ for m in (silhouette_kernel, fast_mod, so3_mod))
     here = os.path.abspath(__file__)
 
     class _DependentLocator(caching._CacheLocator):
