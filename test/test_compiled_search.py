@@ -142,6 +142,11 @@ def test_cached_code_depends_on_the_kernels_it_calls():
         for m in (silhouette_kernel, _fast, _fast_so3):
             h.update(open(m.__file__, "rb").read())
         assert locator.get_source_stamp()[1] == h.hexdigest()
+        # and the cache files' names carry the dependencies' module names: an index pickled before one was
+        # renamed names a module that is gone, and must be missed rather than loaded (ModuleNotFoundError)
+        names = " ".join(m.__name__ for m in (silhouette_kernel, _fast, _fast_so3))
+        tag = hashlib.sha256(names.encode()).hexdigest()[:8]
+        assert locator.get_disambiguator() == f"{locator._inner.get_disambiguator()}-{tag}"
 
 
 @pytest.mark.parametrize("params, budget", [

@@ -42,7 +42,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from isa_mocap_ros.bench.keypoints_tracking import bench_init, bench_peer, bench_track, print_init, print_track
+from isa_mocap_ros.bench.keypoints_tracking import (bench_init, bench_peer, bench_track, print_init,
+                                                   print_track)
 from isa_mocap_ros.resources import cmu_walk_bvh, shared_data_dir
 from isa_mocap_ros.vision.landmarks import LANDMARK_NAMES, PoseLandmarker, box_from_mask, box_from_points, upright_angle
 

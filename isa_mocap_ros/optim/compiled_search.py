@@ -59,6 +59,8 @@ def _register_dependent_cache() -> None:
     if impl is None or not hasattr(caching, "_CacheLocator"):                # pragma: no cover
         return
     deps = tuple(m.__file__ for m in (silhouette_kernel, fast_mod, so3_mod))
+    dep_names = " ".join(m.__name__ for m in (silhouette_kernel, fast_mod, so3_mod))
+    dep_tag = hashlib.sha256(dep_names.encode()).hexdigest()[:8]
     here = os.path.abspath(__file__)
 
     class _DependentLocator(caching._CacheLocator):
@@ -72,7 +74,10 @@ def _register_dependent_cache() -> None:
             return self._inner.get_cache_path()
 
         def get_disambiguator(self):
-            return self._inner.get_disambiguator()
+            # the dependencies' module names are part of the cache files' names: an index pickles the kernel
+            # module's types by module name, so an index written before a dependency was renamed would fail to
+            # load (ModuleNotFoundError) instead of missing
+            return f"{self._inner.get_disambiguator()}-{dep_tag}"
 
         def get_source_stamp(self):
             h = hashlib.sha256()
