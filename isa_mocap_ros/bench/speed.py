@@ -66,6 +66,61 @@ def energy_speed(quick: bool) -> dict:
     return json_of(bench_energy, ["--quick"] if quick else [])
 
 
+#: working resolutions (``work_scale``) of the segmentation part: the default first, then a reduced one
+SEGMENTATION_SCALES = (1.0, 0.5)
+
+
+def segmentation_speed(bag: Path, *, scales=SEGMENTATION_SCALES, rounds: int = 3) -> dict:
+    """CPU time of the segmentation per frame set and per view, per working resolution, and the masks'
+    agreement with the default's.
+
+    The segmentation node's core (:class:`~isa_mocap_ros.vision.segmentation.BackgroundSegmenter`, one
+    per view, ``pipeline.yaml``'s defaults but ``work_scale``, learning from the bag's empty frames) on
+    every frame set of ``bag``; the scales interleaved in ``rounds`` rounds in this process (after an
+    unreported warm-up round), CPU time of the calling thread (``time.thread_time``) per set after the
+    learning frames: the median over sets, then the median over rounds. IoU: the masks pooled over
+    sets and views against the first scale's (intersection / union of the foreground pixels).
+    """
+    from isa_mocap_ros.cli.track import read_sequence
+    from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig
+
+    seq = read_sequence(bag, want_images=True, want_masks=False)
+    frames = [f for f in seq.frames if all(i is not None for i in f.images)]
+    learn = seq.empty_frames or 10
+    V = len(frames[0].images)
+
+    def one(scale: float):
+        segs = [BackgroundSegmenter(SegmentationConfig(learn_frames=learn, work_scale=scale)) for _ in range(V)]
+        cpu, masks = [], []
+        for f in frames:
+            t0 = time.thread_time()
+            m = [segs[v].apply(f.images[v]) for v in range(V)]
+            cpu.append(time.thread_time() - t0)
+            masks.append(m)
+        return float(np.median(cpu[learn:])), masks[learn:]
+
+    for sc in scales:
+        one(sc)
+    cpu = {sc: [] for sc in scales}
+    masks = {}
+    for _ in range(rounds):
+        for sc in scales:
+            t, masks[sc] = one(sc)
+            cpu[sc].append(t)
+    ref = masks[scales[0]]
+    rows = []
+    for sc in scales:
+        inter = sum(int(np.count_nonzero((a > 0) & (b > 0))) for fa, fb in zip(masks[sc], ref) for a, b in zip(fa, fb))
+        union = sum(int(np.count_nonzero((a > 0) | (b > 0))) for fa, fb in zip(masks[sc], ref) for a, b in zip(fa, fb))
+        ms = 1e3 * float(np.median(cpu[sc]))
+        rows.append({"work_scale": sc, "cpu_ms_per_set": ms, "cpu_ms_per_view": ms / V,
+                     "cpu_ms_per_set_rounds": [1e3 * t for t in cpu[sc]],
+                     "iou_vs_default": inter / union if union else None})
+    h, w = frames[0].images[0].shape[:2]
+    return {"bag": bag.name, "views": V, "image": f"{w}x{h}", "sets": len(frames) - learn, "learn_frames": learn,
+            "rounds": rounds, "rows": rows}
+
+
 def tracker_speed(bag: Path, *, frames: int, budgets=BUDGETS, optimizer: str = "h-isa", use_masks: bool = False,
                   work: Path) -> list[dict]:
     """Offline tracker frames/s per budget (``isa-mocap track``'s code)."""
@@ -271,6 +326,8 @@ def collect(args: argparse.Namespace) -> dict:
         print("bench speed: energy ...", file=sys.stderr, flush=True)
         res["energy"] = energy_speed(args.quick)
         tbag = bags / ("fixture" if args.quick else "demo")
+        print(f"bench speed: segmentation on {tbag.name} ...", file=sys.stderr, flush=True)
+        res["segmentation"] = segmentation_speed(tbag, rounds=1 if args.quick else 3)
         print(f"bench speed: tracker on {tbag.name}, {frames} frames per budget ...", file=sys.stderr, flush=True)
         res["tracker"] = {"bag": tbag.name, "optimizer": args.optimizer, "frames": frames,
                           "rows": tracker_speed(tbag, frames=frames, optimizer=args.optimizer,
@@ -328,6 +385,8 @@ def render_markdown(res: dict) -> str:
            if e.get("fast_evals_per_cpu_s") else []),
          f"| exact (raster reference) | {e['exact_evals_per_s']:.0f} |",
          f"| ratio | {e['ratio']:.0f}× |", ""]
+    if res.get("segmentation"):
+        L += render_segmentation(res["segmentation"])
     t = res["tracker"]
     L += ["#### Offline tracker", "",
           f"`bags/{t['bag']}`, {t['optimizer']}, {t['frames']} frames per budget after a ground-truth first frame; "
@@ -368,6 +427,20 @@ def render_markdown(res: dict) -> str:
                      f"{_f(r.get('tracker_ms_p95'), '{:.0f}')} | {_f(r['mpjpe_mm'])} | "
                      f"{_f(r.get('mpjpe_vs_lockstep_mm'), '{:+.1f}')} |")
     return "\n".join(L) + "\n"
+
+
+def render_segmentation(sg: dict) -> list[str]:
+    """The markdown lines of :func:`segmentation_speed`'s result."""
+    L = ["#### Segmentation", "",
+         f"`bags/{sg['bag']}`, {sg['views']} views {sg['image']}, {sg['sets']} frame sets after {sg['learn_frames']} "
+         f"learning frames; the segmentation node's core per view (`work_scale` 1 = the default); CPU time of the "
+         f"calling thread, median over sets, median of {sg['rounds']} interleaved rounds; IoU: the masks against the "
+         "default's, pooled.", "",
+         "| work_scale | CPU ms per set | CPU ms per view | IoU vs default |", "|---|---|---|---|"]
+    for r in sg["rows"]:
+        L.append(f"| {r['work_scale']:g} | {r['cpu_ms_per_set']:.2f} | {r['cpu_ms_per_view']:.2f} | "
+                 f"{_f(r['iou_vs_default'], '{:.3f}')} |")
+    return L + [""]
 
 
 def render_profile(pr: dict) -> list[str]:
