@@ -1,6 +1,7 @@
 """Segmentation node as a real process: masks of the synthetic person, source headers, bad images."""
 from __future__ import annotations
 
+import re
 
 import numpy as np
 import pytest
@@ -151,7 +152,14 @@ def test_bad_images_are_dropped_with_one_line_each_and_good_ones_still_segmented
         # the issue's stray message, before anything else: a valid 7x3 bgr8 image (no camera_info of its stamp)
         tiny = ma.array_to_image(np.full((3, 7, 3), 90, np.uint8), "bgr8", stamp_ns=next_stamp(),
                                  frame_id="cam0_optical_frame")
-        h.send(0, tiny, info=False)
+        # sent until the node says it dropped it: a node still starting keeps only the newest image of
+        # its best-effort queue, and a stray message is not sent again by anyone
+        tiny_sent = 0
+        while tiny_sent < 3:
+            h.send(0, tiny, info=False)
+            tiny_sent += 1
+            if seg.wait_for_output("size 7x3", 10):
+                break
         for _ in range(LEARN + 2):
             images = src.read()
             s = next_stamp()
@@ -205,7 +213,8 @@ def test_bad_images_are_dropped_with_one_line_each_and_good_ones_still_segmented
     assert "WARN" in lines[0], out
     assert seg.stop() == 0
     # one line per kind (rate-limited): the second image of the wrong size is counted, not logged
-    assert "9 images dropped" in seg.output(), seg.output()
+    dropped = re.search(r"(\d+) images dropped", seg.output())
+    assert dropped and 9 <= int(dropped.group(1)) <= 8 + tiny_sent, seg.output()
 
 
 def test_a_real_resolution_change_restarts_the_learning_with_one_line(spawn, rosenv, tmp_path):

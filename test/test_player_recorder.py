@@ -148,7 +148,9 @@ def test_start_offset_clock_and_loop(spawn, tmp_path):
     assert clocks and set(clocks) <= set(frame_stamps(12)[6:]) and clocks == sorted(clocks)
     # --loop replays again from the start until stopped
     loop = spawn("loop", *CLI, "play", str(src), "--loop", "--rate", "10", "--topics", "/mocap/cam0/image_raw")
-    time.sleep(4.0)                                       # the bag lasts 0.04 s at rate 10
+    # the bag lasts 0.04 s at rate 10: once played, the player says it loops, and keeps running
+    assert loop.wait_for_output("replaying it from the start", 60), loop.output()
+    time.sleep(1.0)
     assert loop.popen.poll() is None, loop.output()       # still running: it loops
     assert loop.stop(signal.SIGINT, timeout=20) in (0, 1), loop.output()   # Ctrl-C ends it cleanly
     assert "Traceback" not in loop.output()

@@ -47,12 +47,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from isa_mocap_ros.eval.peers import register_peers
+    try:  # Ctrl-C while the command starts up ends it as quietly as while it runs
+        from isa_mocap_ros.eval.peers import register_peers
 
-    register_peers()  # the reference optimizers "pycma" and "scipy-de" are selectable too
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
+        register_peers()  # the reference optimizers "pycma" and "scipy-de" are selectable too
+        args = build_parser().parse_args(argv)
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         return 130

@@ -28,7 +28,6 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
-from scipy import stats as _st
 
 __all__ = ["StatsError", "FriedmanResult", "HolmRow", "RankingTable", "rank_matrix", "average_ranks", "friedman",
            "friedman_from_ranks", "holm", "ranking_table", "format_ranking_table"]
@@ -107,6 +106,14 @@ class RankingTable:
                          for r in self.rows]}
 
 
+
+def _scipy_stats():
+    """``scipy.stats``, imported on first use (it costs ~1 s, and every ``isa-mocap`` command imports this
+    module through the bench registry)."""
+    from scipy import stats
+
+    return stats
+
 def _nan_none(v: float):
     return None if v is None or not np.isfinite(v) else float(v)
 
@@ -144,7 +151,7 @@ def rank_matrix(errors) -> np.ndarray:
     """Ranks ``(N, k)`` of the algorithms on each problem: 1 = lowest error, ties averaged
     (``+inf`` errors rank last)."""
     a = _matrix(errors)
-    return np.vstack([_st.rankdata(row) for row in a])
+    return np.vstack([_scipy_stats().rankdata(row) for row in a])
 
 
 def average_ranks(errors) -> np.ndarray:
@@ -189,9 +196,9 @@ def friedman(errors, algorithms: Sequence[str] | None = None, *, alpha: float = 
     raw = friedman_from_ranks(R, N)
     stat = 0.0 if corr <= 0 else max(0.0, raw / corr)
     df = k - 1
-    p = float(_st.chi2.sf(stat, df))
+    p = float(_scipy_stats().chi2.sf(stat, df))
     return FriedmanResult(algorithms=names, mean_ranks=tuple(float(x) for x in R), statistic=float(stat), pvalue=p,
-                          df=df, n_problems=N, critical_value=float(_st.chi2.ppf(1.0 - alpha, df)), alpha=alpha)
+                          df=df, n_problems=N, critical_value=float(_scipy_stats().chi2.ppf(1.0 - alpha, df)), alpha=alpha)
 
 
 def holm(mean_ranks: Sequence[float], n_problems: int, algorithms: Sequence[str] | None = None, *,
@@ -235,7 +242,7 @@ def holm(mean_ranks: Sequence[float], n_problems: int, algorithms: Sequence[str]
     se = np.sqrt(k * (k + 1) / (6.0 * N))
     c = order[0]
     z = (R - R[c]) / se
-    p = 2.0 * _st.norm.sf(np.abs(z))
+    p = 2.0 * _scipy_stats().norm.sf(np.abs(z))
     # step-down over ascending p-values: the largest rank differences first
     others = [j for j in order[1:]]
     by_p = sorted(others, key=lambda j: (p[j], -R[j]))

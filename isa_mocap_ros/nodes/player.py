@@ -192,6 +192,7 @@ class BagPlayer(Node):
         t_start = time.monotonic()
         start_ns = self.reader.start_ns + int(self.options.start_offset_s * 1e9)
         n_frames = 0
+        passes = 1
         while self._running():
             # real time: the clock starts once the first frame set is out. The first message on each
             # topic costs the publisher tens of ms (DDS writer set-up): timed from before it, the
@@ -227,6 +228,9 @@ class BagPlayer(Node):
                                 f"{self.lockstep_timeout_s:.1f} s; continuing")
             if not self.options.loop:
                 break
+            if passes == 1:
+                self.get_logger().info("loop: the bag played once; replaying it from the start until stopped")
+            passes += 1
         self._wait_for_all_acked()
         summary = {"messages": self.published, "frames": n_frames, "topics": len(self.publishers_by_topic),
                    "seconds": round(time.monotonic() - t_start, 3),
