@@ -1,9 +1,11 @@
 """Publishes malformed and valid-but-wrong messages on every input topic of the node network, until killed.
 
-``python fuzzer.py VIEWS RATE_HZ SEED`` (in the caller's ROS domain, namespace /mocap). Each tick it
+``python fuzzer.py VIEWS RATE_HZ SEED [PREFIX]`` (in the caller's ROS domain, namespace /mocap; PREFIX: only
+the kinds whose name starts with it, e.g. ``keypoints``). Each tick it
 picks the next kind of a fixed cycle and a view (seeded), and publishes one message on
-``cam<v>/image_raw``, ``cam<v>/camera_info``, ``cam<v>/extrinsics``, ``cam<v>/mask`` or
-``prediction/joint_states``. It listens to ``cam0/camera_info`` to learn the stream's stamps and the
+``cam<v>/image_raw``, ``cam<v>/camera_info``, ``cam<v>/extrinsics``, ``cam<v>/mask``,
+``prediction/joint_states``, ``cam<v>/keypoints`` or ``cam<v>/keypoints_skipped`` (the estimator takes the
+last two only with ``keypoint_weight`` > 0). It listens to ``cam0/camera_info`` to learn the stream's stamps and the
 cameras' size, so the valid-but-wrong messages come *near* the stream (a few ms after a real frame's
 stamp, never on it) where a stamp check alone would not catch them.
 
@@ -12,7 +14,9 @@ malformed messages (truncated data, unknown encodings, NaN, zero K or quaternion
 lists), and messages that disagree with what the node knows: another size or encoding than the
 view's camera, another frame id, a camera_info with no image of its stamp, a stamp far from the
 stream, extrinsics from another parent frame or for another child frame, predictions far from the
-frame sets. It never sends what a network cannot tell from the camera itself: an image and a
+frame sets, keypoints of another count than 0 or 33, with NaN or a confidence above 1 (on the next frame's
+own stamp: a lockstep estimator must still wait for that view's real message), keypoints and skip notices
+far from the stream. It never sends what a network cannot tell from the camera itself: an image and a
 camera_info of one stamp that agree, or a well-formed mask / prediction right in the stream.
 
 Prints ``sent <kind> <n>`` lines every second and a total per kind at exit (SIGINT/SIGTERM).
@@ -23,10 +27,11 @@ import time
 
 import numpy as np
 import rclpy
-from geometry_msgs.msg import TransformStamped
+from geometry_msgs.msg import Point32, PolygonStamped, TransformStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import Header
 
 import msg_adapters as ma
 from isa_mocap_ros.body import make_model
@@ -35,7 +40,7 @@ HOUR_NS = 3600 * 10**9
 
 
 class Fuzzer(Node):
-    def __init__(self, views: int, rate_hz: float, seed: int) -> None:
+    def __init__(self, views: int, rate_hz: float, seed: int, prefix: str = "") -> None:
         super().__init__("fuzzer", namespace="/mocap")
         self.views = views
         self.rng = np.random.default_rng(seed)
@@ -47,13 +52,15 @@ class Fuzzer(Node):
         self.mask = [self.create_publisher(Image, f"cam{v}/mask", rel) for v in range(views)]
         self.extr = [self.create_publisher(TransformStamped, f"cam{v}/extrinsics", latched) for v in range(views)]
         self.pred = self.create_publisher(JointState, "prediction/joint_states", rel)
+        self.kp = [self.create_publisher(PolygonStamped, f"cam{v}/keypoints", rel) for v in range(views)]
+        self.kp_skipped = [self.create_publisher(Header, f"cam{v}/keypoints_skipped", rel) for v in range(views)]
         self.names = make_model(39).dof_names
         self.last_real_ns = 1_700_000_000_000_000_000   # until the stream is heard: the project's bags' epoch
         self.size = (320, 240)
         self.unique = 0
         self.own_info_stamps: set[int] = set()   # its own camera infos come back to its subscription
         self.create_subscription(CameraInfo, "cam0/camera_info", self._heard, rel)
-        self.kinds = [k for k in dir(self) if k.startswith("k_")]
+        self.kinds = [k for k in dir(self) if k.startswith("k_" + prefix)]
         self.sent: dict[str, int] = {k[2:]: 0 for k in self.kinds}
         self.tick = 0
         self.create_timer(1.0 / rate_hz, self._send)
@@ -218,6 +225,33 @@ class Fuzzer(Node):
         q = self.rng.normal(0.0, 0.3, len(self.names))
         return self.pred, self._pred(self.names, q, self.far())
 
+    # -- keypoints -----------------------------------------------------------------------------------
+    def _kp(self, v, n, stamp, *, bad=None):
+        msg = PolygonStamped(header=ma.make_header(stamp, self.frame(v)))
+        pts = [Point32(x=float(10 + i), y=float(20 + i), z=0.9) for i in range(n)]
+        if bad == "nan":
+            pts[self.unique % n].x = float("nan")
+        elif bad == "confidence":
+            pts[self.unique % n].z = 1.5
+        msg.polygon.points = pts
+        self.unique += 1
+        return self.kp[v], msg
+
+    def k_keypoints_wrong_count(self, v):
+        return self._kp(v, 17, self.last_real_ns + 33_333_333)
+
+    def k_keypoints_nan(self, v):
+        return self._kp(v, 33, self.last_real_ns + 33_333_333, bad="nan")
+
+    def k_keypoints_confidence_above_one(self, v):
+        return self._kp(v, 33, self.last_real_ns + 33_333_333, bad="confidence")
+
+    def k_keypoints_far_stamp(self, v):
+        return self._kp(v, 33, self.far())
+
+    def k_keypoints_skipped_far_stamp(self, v):
+        return self.kp_skipped[v], ma.make_header(self.far(), self.frame(v))
+
     # ----------------------------------------------------------------------------------------------
     def _send(self) -> None:
         kind = self.kinds[self.tick % len(self.kinds)]
@@ -231,7 +265,7 @@ class Fuzzer(Node):
 def main() -> None:
     views, rate, seed = int(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3])
     rclpy.init()
-    node = Fuzzer(views, rate, seed)
+    node = Fuzzer(views, rate, seed, sys.argv[4] if len(sys.argv) > 4 else "")
     signal.signal(signal.SIGTERM, lambda *a: rclpy.try_shutdown())
     try:
         rclpy.spin(node)

@@ -1,13 +1,15 @@
-"""Keypoint node as a real process: BlazePose landmarks of a rendered person on cam<i>/keypoints,
-every k-th frame, image and mask paired in either order, source headers, empty masks give empty
-polygons, bad masks are dropped."""
+"""Keypoint node as a real process: BlazePose landmarks of a rendered person on cam<i>/keypoints on the
+frames its schedule picks (the dense start, then every k-th), image and mask paired in either order,
+source headers; every other frame (not picked, empty mask, bad mask: dropped with a line) on
+cam<i>/keypoints_skipped, so each frame gets exactly one message."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import yaml
 from geometry_msgs.msg import PolygonStamped
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import Header
 
 import msg_adapters as ma
 from isa_mocap_ros.body import joint_positions
@@ -31,11 +33,14 @@ def model_file():
 
 
 def test_node_publishes_landmarks_every_k_frames(model_file, rosenv, spawn, tmp_path):
-    params = {"views": 2, "every_k_frames": 2}
+    # reliable inputs, as `isa-mocap run --lockstep` sets them (sensor-data QoS drops messages on a loaded machine)
+    params = {"views": 2, "every_k_frames": 2, "dense_frames": 1,
+              "qos_overrides": {f"/mocap/cam{v}/{t}": {"subscription": {"reliability": "reliable"}}
+                                for v in range(2) for t in ("image_raw", "mask", "camera_info")}}
     path = tmp_path / "kp.yaml"
     path.write_text(yaml.safe_dump({"/mocap/keypoints": {"ros__parameters": params}}))
     proc = spawn("keypoints", *NODE, "--params-file", str(path))
-    assert proc.wait_for_output("keypoints: 2 views, every 2 frame(s)", 90), proc.output()
+    assert proc.wait_for_output("keypoints: 2 views, every 2 frame(s) after the first 1", 90), proc.output()
 
     rig = default_rig(n_views=2, width=480, height=360)
     clip = make_clip("walk", dof=39, fps=30.0, duration_s=0.2, seed=1)
@@ -47,11 +52,20 @@ def test_node_publishes_landmarks_every_k_frames(model_file, rosenv, spawn, tmp_
     with ros_node(rosenv, "kp_test") as (node, ex):
         img_pubs = [node.create_publisher(Image, f"/mocap/cam{v}/image_raw", qos.RELIABLE) for v in range(2)]
         mask_pubs = [node.create_publisher(Image, f"/mocap/cam{v}/mask", qos.RELIABLE) for v in range(2)]
+        info_pubs = [node.create_publisher(CameraInfo, f"/mocap/cam{v}/camera_info", qos.RELIABLE) for v in range(2)]
+        K = np.array([[250.0, 0, 240], [0, 250.0, 180], [0, 0, 1]])
+        intr = ma.Intrinsics(K=K, D=np.zeros(5), P=np.hstack([K, np.zeros((3, 1))]), R=np.eye(3), width=480, height=360)
+
+        def info(v, stamp):       # the camera's: an image is taken when a camera_info of its stamp agrees
+            info_pubs[v].publish(ma.intrinsics_to_camera_info(intr, stamp_ns=stamp, frame_id=f"cam{v}_optical_frame"))
         got: list[dict[int, PolygonStamped]] = [{}, {}]
+        skipped: list[list[int]] = [[], []]
         for v in range(2):
             node.create_subscription(PolygonStamped, f"/mocap/cam{v}/keypoints",
                                      lambda m, v=v: got[v].__setitem__(ma.stamp_to_ns(m.header), m), qos.RELIABLE)
-        assert spin_until(ex, lambda: all(p.get_subscription_count() > 0 for p in img_pubs + mask_pubs)
+            node.create_subscription(Header, f"/mocap/cam{v}/keypoints_skipped",
+                                     lambda m, v=v: skipped[v].append(ma.stamp_to_ns(m)), qos.RELIABLE)
+        assert spin_until(ex, lambda: all(p.get_subscription_count() > 0 for p in img_pubs + mask_pubs + info_pubs)
                           and all(node.count_publishers(f"/mocap/cam{v}/keypoints") for v in range(2)), 30)
         stamps = []
         for f in range(4):
@@ -64,11 +78,12 @@ def test_node_publishes_landmarks_every_k_frames(model_file, rosenv, spawn, tmp_
                 mk = ma.array_to_image(masks[v], "mono8")
                 mk.header = im.header
                 first, second = (mask_pubs, img_pubs) if f == 2 else (img_pubs, mask_pubs)   # either order pairs
+                info(v, stamp)
                 first[v].publish(mk if f == 2 else im)
                 spin_until(ex, lambda: False, 0.05)
                 second[v].publish(im if f == 2 else mk)
             spin_until(ex, lambda: False, 0.05)
-        assert spin_until(ex, lambda: all(len(g) >= 2 for g in got), 60), (got, proc.output())
+        assert spin_until(ex, lambda: all(len(g) >= 2 for g in got), 120), (got, proc.output())
         # an empty mask: "looked, nobody"; a mask of the wrong size: dropped with a log line
         stamp = stamps[-1] + 10 * 33_333_333
         for v, mask in ((0, np.zeros((360, 480), np.uint8)), (1, np.zeros((10, 10), np.uint8))):
@@ -76,14 +91,17 @@ def test_node_publishes_landmarks_every_k_frames(model_file, rosenv, spawn, tmp_
             im.header = ma.make_header(stamp, f"cam{v}_optical_frame")
             mk = ma.array_to_image(mask, "mono8")
             mk.header = im.header
+            info(v, stamp)
             img_pubs[v].publish(im)
             spin_until(ex, lambda: False, 0.05)
             mask_pubs[v].publish(mk)
-        assert spin_until(ex, lambda: stamp in got[0], 30), proc.output()
-        assert proc.wait_for_output("cam1 frame at", 30), proc.output()
-    # every 2nd frame (0 and 2) per view, with the image's header
+        assert spin_until(ex, lambda: stamp in skipped[0], 30), proc.output()
+        assert proc.wait_for_output("cam1/mask dropped: frame 'cam1_optical_frame', 10x10, is not the view's", 30), \
+            proc.output()
+    # the first frame and every 2nd after (0 and 2) per view, with the image's header; 1 and 3 skipped
     for v in range(2):
-        assert sorted(got[v])[:2] == [stamps[0], stamps[2]]
+        assert sorted(got[v]) == [stamps[0], stamps[2]]
+        assert skipped[v] == [stamps[1], stamps[3]] + ([stamp] if v == 0 else [])
         assert got[v][stamps[0]].header.frame_id == f"cam{v}_optical_frame"
         for f in (0, 2):
             uv, conf = ma.polygon_to_keypoints(got[v][stamps[f]])
@@ -91,8 +109,7 @@ def test_node_publishes_landmarks_every_k_frames(model_file, rosenv, spawn, tmp_
             err = np.linalg.norm(uv[li] - ref, axis=1)
             assert np.median(err) < 15.0, err              # pixels, at 480x360
             assert conf.min() >= 0 and conf.max() <= 1 and np.median(conf[li]) > 0.5
-    assert ma.polygon_to_keypoints(got[0][stamp]) is None
-    assert stamp not in got[1]
+    assert all(stamp not in g for g in got)
 
 
 def test_run_starts_the_keypoint_node_only_when_asked_and_records_its_topic():
@@ -111,4 +128,5 @@ def test_run_starts_the_keypoint_node_only_when_asked_and_records_its_topic():
     assert spec.exec == "keypoints_node" and params["views"] == "2"
     # lockstep: image and mask subscriptions reliable, as the segmentation's and the estimator's
     assert params["qos_overrides./mocap/cam1/mask.subscription.reliability"] == "reliable"
+    assert params["qos_overrides./mocap/cam1/camera_info.subscription.reliability"] == "reliable"
     assert "/mocap/cam*/keypoints" in RECORDED

@@ -11,6 +11,8 @@ Two kinds of sequence (docs/keypoints.md):
   the error includes the peer's own error and its keypoint definitions (not anatomical joint centres).
   Two crops: upright, and turned so the reference's hip-to-shoulder direction points up
   (``upright_angle``, as a predicted pose would give).
+* ``mesh``: skinned-mesh renders (the three subjects, generated walk, jog, wave; flat-shaded triangles, not
+  real images), against the mesh skeleton's joint centres projected; crop around the exact mask;
 * ``synth``: capsule renders of the tracking model (flat-shaded, ``isa_mocap_ros.synth``; the
   default 4-camera rig at ``--width`` x ``--height``), generated motions and the CMU walk if present;
   the reference is the exact joint centres projected; the crop is the square around the exact mask.
@@ -21,11 +23,28 @@ reference better with left and right exchanged).
 
 A third kind, ``track``, tracks capsule renders (``isa-mocap synth`` with exact masks, 4 views at
 320x240, 10 empty frames, ``--track-s`` seconds of each motion, bag seeds ``--seeds``) with
-``isa-mocap track``'s code and the automatic initialization, three ways: without the keypoint term, with
+``isa-mocap track``'s code and the automatic initialization (tracker seed = bag seed), three ways: without the keypoint term, with
 it on the initialized frame only, and on that frame and every ``--every``-th frame (weight
 ``--weight``). Scored per run: mean joint error (Eq. 20), frames tracked facing backwards (estimate's
 heading more than 90 degrees from the truth's), leg swaps (frames whose left/right knee and ankle fit
 the truth better exchanged), and the detection time per frame set that had keypoints.
+
+A fifth kind, ``cost``, measures the detector's CPU time on a bag (``--cost-bag``, default the shipped
+mesh demo): per detection (crop + model, ``time.thread_time``: the CPU time of the calling thread, so
+other processes on a loaded machine inflate it much less than wall time; cache and SMT sharing still
+do), on the frames the keypoint node's schedule picks (the dense start, then every ``--every``-th frame
+with a person of each view, exact crop from the recorded mask or the segmented image), and from those the
+average CPU time per frame set at that rate.
+
+A sixth kind, ``peer``, tracks an imported real recording with reference markers (``--peer-bag``, made by
+``isa-mocap import ... --reference FILE.trc``) without and with the term (``isa-mocap track``'s defaults:
+automatic shape and initialization, segmented images; a run folder in ``--cache`` that holds a
+``summary.json`` is scored as it is) and scores the estimates against the peer's 3-D keypoints *here* (the
+project's scorer for the reference topic is issue 34's): per frame, the mean distance of our 12 limb joint
+centres (shoulders, elbows, wrists, hips, knees, ankles) from the peer's keypoints of the same names
+(:data:`_TRC_TO_JOINT`; a peer's keypoints are not joint centres, so the figure has a floor), the frames facing
+backwards (our left-to-right hip direction more than 90 degrees, in the ground plane, from the peer's) and the
+leg swaps (our left knee and ankle closer to the peer's right ones, summed over both legs).
 
 A fourth kind, ``init``, isolates the heading decision: every ``--init-every``-th frame of each motion
 and seed is rendered (320x240, 4 views) and handed to a fresh tracker as its first frame (the automatic
@@ -53,6 +72,11 @@ _TRC_TO_LM = {"RShoulder": "right_shoulder", "LShoulder": "left_shoulder", "RElb
               "LElbow": "left_elbow", "RWrist": "right_wrist", "LWrist": "left_wrist", "RHip": "right_hip",
               "LHip": "left_hip", "RKnee": "right_knee", "LKnee": "left_knee", "RAnkle": "right_ankle",
               "LAnkle": "left_ankle", "RHeel": "right_heel", "LHeel": "left_heel", "Nose": "nose"}
+# Pose2Sim TRC keypoint -> our joint (the peer kind)
+_TRC_TO_JOINT = {"RShoulder": "right_shoulder", "LShoulder": "left_shoulder", "RElbow": "right_elbow",
+                 "LElbow": "left_elbow", "RWrist": "right_wrist", "LWrist": "left_wrist", "RHip": "right_hip",
+                 "LHip": "left_hip", "RKnee": "right_knee", "LKnee": "left_knee", "RAnkle": "right_ankle",
+                 "LAnkle": "left_ankle"}
 # model joint -> BlazePose landmark (synthetic ground truth)
 _JOINT_TO_LM = {"left_shoulder": "left_shoulder", "right_shoulder": "right_shoulder", "left_elbow": "left_elbow",
                 "right_elbow": "right_elbow", "left_wrist": "left_wrist", "right_wrist": "right_wrist",
@@ -62,7 +86,7 @@ _LEGS = ("hip", "knee", "ankle")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--kinds", default="real,synth", help="comma-separated: real, synth, track, init (default real,synth)")
+    p.add_argument("--kinds", default="real,synth", help="comma-separated: real, synth, mesh, track, init, cost, peer (default real,synth)")
     p.add_argument("--step", type=int, default=5, help="every STEP-th frame (default 5)")
     p.add_argument("--data", default=str(_REAL), help="the Pose2Sim demo folder")
     p.add_argument("--width", type=int, default=640, help="synthetic image width (default 640)")
@@ -74,10 +98,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seeds", default="0,1,2", help="track kind: bag seeds (default 0,1,2)")
     p.add_argument("--track-s", type=float, default=3.0, help="track kind: seconds of each motion (default 3)")
     p.add_argument("--weight", type=float, default=1.0, help="track kind: keypoint weight (default 1)")
-    p.add_argument("--every", type=int, default=5, help="track kind: every K-th frame (default 5)")
+    p.add_argument("--every", type=int, default=6, help="track, cost, peer kinds: after the dense start, every K-th "
+                   "frame with a person (default 6, the keypoint node's)")
+    p.add_argument("--body", choices=("capsules", "mesh"), default="capsules",
+                   help="track kind: render the generated motions as capsules (the control, default) or meshes")
+    p.add_argument("--subjects", default="slim_woman,average_man,heavy_man",
+                   help="track kind with --body mesh: mesh subjects (default all three)")
+    p.add_argument("--shape", default="truth", choices=("truth", "auto", "default"),
+                   help="track kind: the tracker's body shape (default truth: the bag's ground-truth model's)")
     p.add_argument("--init-every", type=int, default=15, help="init kind: every K-th frame is a first frame")
-    p.add_argument("--configs", default="off,init,every", help="track kind: which of off, init, every to run")
+    p.add_argument("--configs", default="off,start,every", help="track kind: which of off, start (the dense start "
+                   "only), every to run")
     p.add_argument("--cache", default="out/bench_keypoints", help="track kind: bags and tracking output folder")
+    p.add_argument("--bvh-scale", type=float, default=None, help="track kind: metres per unit of BVH files given "
+                   "in --motions (the CMU clips of data/mocap/cmu: 0.056444)")
+    p.add_argument("--peer-bag", default=None, help="peer kind: an imported real recording with reference markers")
+    p.add_argument("--cost-bag", default=None, help="cost kind: bag to time the detector on (default: the shipped "
+                   "demo bag)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
 
 
@@ -196,6 +233,38 @@ def bench_real(det: PoseLandmarker, root: Path, step: int, *, aligned: bool) -> 
     return out
 
 
+def bench_synth_mesh(det: PoseLandmarker, width: int, height: int, step: int, seconds: float,
+                     subjects: list[str]) -> dict:
+    """The detector on skinned-mesh renders (flat-shaded triangles, ``MeshSceneRenderer``; the default 4-camera
+    rig): per subject and motion, against the mesh skeleton's joint centres projected; crop around the exact
+    mask."""
+    from isa_mocap_ros.body.mesh import MESH_MARKERS
+    from isa_mocap_ros.synth import MeshSceneRenderer, make_clip
+    from isa_mocap_ros.vision import default_rig
+
+    rig = default_rig(width=width, height=height)
+    names = list(_JOINT_TO_LM.values())
+    li = [LANDMARK_NAMES.index(n) for n in names]
+    mi = [MESH_MARKERS.index(j) for j in _JOINT_TO_LM]
+    out = {}
+    for subject in subjects:
+        for motion in ("walk", "jog", "wave"):
+            clip = make_clip(motion, dof=39, fps=30.0, duration_s=seconds, seed=0, body="mesh", subject=subject)
+            renderer = MeshSceneRenderer(clip, rig, seed=0)
+            tally = _Tally(names)
+            for f in range(0, clip.n_frames, step):
+                images, masks = renderer.render(f, f)
+                J = renderer.posed(f)[1]
+                for cam, img, mask in zip(rig.cameras, images, masks):
+                    box = box_from_mask(mask)
+                    if box is None:
+                        continue
+                    lm, ms = _detect(det, img, box, bgr=False)
+                    tally.add(lm.uv[li], cam.project(J[mi]), box[2], lm.score, ms)
+            out[f"mesh {subject} {motion}"] = tally.summary()
+    return out
+
+
 def bench_synth(det: PoseLandmarker, width: int, height: int, step: int, seconds: float) -> dict:
     from isa_mocap_ros.body import joint_positions
     from isa_mocap_ros.synth import SceneRenderer, make_clip
@@ -229,20 +298,142 @@ def bench_synth(det: PoseLandmarker, width: int, height: int, step: int, seconds
     return out
 
 
+def bench_cost(args) -> dict:
+    """CPU time of the detector per detection and per frame set at the keypoint node's rate (module docstring)."""
+    from isa_mocap_ros.cli.track import read_sequence
+    from isa_mocap_ros.resources import default_bag
+    from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, KeypointSchedule, detect_in_mask
+    from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig
+
+    bag = Path(args.cost_bag) if args.cost_bag else default_bag()
+    seq = read_sequence(bag, want_images=True, want_masks=True)
+    det = PoseLandmarker()
+    learn = seq.empty_frames or 10
+    segs = [BackgroundSegmenter(SegmentationConfig(learn_frames=learn)) for _ in seq.cameras]
+    schedules = [KeypointSchedule(args.every, dense_frames=DENSE_FRAMES) for _ in seq.cameras]
+    cpu_ms, wall_ms, invoke_ms = [], [], []
+    sets = 0
+    for fr in seq.frames:
+        masks = list(fr.masks) if fr.masks and all(m is not None for m in fr.masks) else \
+            [seg.apply(img) for seg, img in zip(segs, fr.images)]
+        if fr.index < learn and not (fr.masks and all(m is not None for m in fr.masks)):
+            continue
+        sets += 1
+        for v, (img, m) in enumerate(zip(fr.images, masks)):
+            if not schedules[v].due(bool(np.any(m))):
+                continue
+            c0, w0 = time.thread_time(), time.perf_counter()
+            detect_in_mask(det, img, m)
+            cpu_ms.append((time.thread_time() - c0) * 1e3)
+            wall_ms.append((time.perf_counter() - w0) * 1e3)
+    # the model alone (no crop), on one fixed input, 50 times
+    x = np.zeros((256, 256, 3), np.float32)
+    for _ in range(50):
+        c0 = time.thread_time()
+        det._it.set_tensor(det._in, x[None])
+        det._it.invoke()
+        invoke_ms.append((time.thread_time() - c0) * 1e3)
+    c = np.array(cpu_ms)
+    return dict(bag=str(bag), frame_sets=sets, detections=len(c), every_k=args.every, dense_frames=DENSE_FRAMES,
+                detections_per_set=len(c) / max(sets, 1), cpu_ms_per_detection_mean=float(c.mean()),
+                cpu_ms_per_detection_median=float(np.median(c)), wall_ms_per_detection_median=float(np.median(wall_ms)),
+                cpu_ms_per_invoke_median=float(np.median(invoke_ms)),
+                cpu_ms_per_frame_set=float(c.sum() / max(sets, 1)))
+
+
+def _print_cost(res: dict) -> None:
+    print("\n== cost (detector CPU time, time.thread_time) ==")
+    print(f"{res['bag']}: {res['frame_sets']} frame sets, {res['detections']} detections at the schedule (dense "
+          f"{res['dense_frames']}, then every {res['every_k']}): {res['detections_per_set']:.2f} per set; "
+          f"CPU per detection {res['cpu_ms_per_detection_median']:.1f} ms median / {res['cpu_ms_per_detection_mean']:.1f} "
+          f"mean (wall {res['wall_ms_per_detection_median']:.1f} median), model invoke alone "
+          f"{res['cpu_ms_per_invoke_median']:.1f} ms; CPU per frame set {res['cpu_ms_per_frame_set']:.1f} ms on average")
+
+
+def peer_scores(bag: Path, run_dir: Path) -> dict:
+    """Our estimates in ``run_dir/estimates`` against the peer's keypoints in ``bag`` (the peer kind)."""
+    from isa_mocap_ros.body import joint_positions
+    from isa_mocap_ros.cli.run_report import published_model, read_estimates
+
+    import yaml
+
+    import msg_adapters as ma
+    from isa_mocap_ros.bag import BagReader
+
+    # the import's reference (isa-mocap import --reference): names in the latched YAML, points per frame
+    marker_names: list[str] = []
+    markers: dict[int, np.ndarray] = {}
+    with BagReader(bag) as r:
+        for m in r.messages(["/mocap/ground_truth/reference", "/mocap/ground_truth/markers"]):
+            msg = ma.from_cdr(m.data, m.type)
+            if m.topic.endswith("/reference"):
+                marker_names = list(yaml.safe_load(msg.data)["marker_names"])
+            else:
+                markers[ma.stamp_to_ns(msg.header)] = np.array([(p.position.x, p.position.y, p.position.z)
+                                                                for p in msg.poses])
+    model = published_model(run_dir / "estimates")
+    est = read_estimates(run_dir / "estimates", model)["poses"]
+    names = [n for n in _TRC_TO_JOINT if n in marker_names]
+    mi = [marker_names.index(n) for n in names]
+    ji = [model.joint_names.index(_TRC_TO_JOINT[n]) for n in names]
+    err, back, swaps = [], 0, 0
+    for stamp in sorted(markers):
+        if stamp not in est:
+            continue
+        P = joint_positions(model, np.asarray(est[stamp])[None])[0][ji]
+        R = markers[stamp][mi]
+        ok = np.all(np.isfinite(R), axis=1)
+        err.append(float(np.linalg.norm(P[ok] - R[ok], axis=1).mean() * 1e3))
+        k = {n: i for i, n in enumerate(names)}
+        hp, hr = P[k["LHip"]] - P[k["RHip"]], R[k["LHip"]] - R[k["RHip"]]
+        back += bool(hp[:2] @ hr[:2] < 0)
+        straight = sum(np.linalg.norm(P[k[s + j]] - R[k[s + j]]) for s in "LR" for j in ("Knee", "Ankle"))
+        crossed = sum(np.linalg.norm(P[k[s + j]] - R[k[o + j]]) for s, o in ("LR", "RL") for j in ("Knee", "Ankle"))
+        swaps += bool(crossed < straight)
+    e = np.array(err)
+    return dict(frames=len(e), mean_mm=float(e.mean()), median_mm=float(np.median(e)), max_mm=float(e.max()),
+                backwards=back, leg_swaps=swaps, markers=names)
+
+
+def bench_peer(args) -> dict:
+    from isa_mocap_ros.cli.track import track_bag
+
+    if not args.peer_bag:
+        raise SystemExit("isa-mocap bench keypoints: --kinds peer needs --peer-bag BAG (isa-mocap import ... --reference)")
+    bag = Path(args.peer_bag)
+    out = {}
+    for name, w in (("off", 0.0), (f"every {args.every}", args.weight)):
+        run_dir = Path(args.cache) / f"{bag.name}_{name.replace(' ', '_')}"
+        if not (run_dir / "summary.json").is_file():
+            track_bag(argparse.Namespace(
+                bag=str(bag), out=str(run_dir), optimizer="h-isa", evals=1500, params=None, model=None, seed=0,
+                frames=None, start=0, use_masks=False, learn_frames=None, shape="auto", init="auto", predictor=None,
+                prior=None, prior_eta=0.0, energy="fast", overwrite=True, no_progress=True, keypoint_weight=w,
+                keypoint_every=args.every, calib_frames=None, calib_rounds=None, calib_evals=None))
+        out[name] = peer_scores(bag, run_dir)
+        print(f"  peer {bag.name} {name}: {out[name]}", file=sys.stderr, flush=True)
+    return out
+
+
 def _heading(x: np.ndarray) -> float:
     from isa_mocap_ros.geometry import exp_so3
     f = exp_so3(np.asarray(x[3:6], float)) @ [1.0, 0.0, 0.0]
     return float(np.arctan2(f[1], f[0]))
 
 
-def _track_one(bag: Path, out: Path, *, weight: float, every: int) -> dict:
+def _track_one(bag: Path, out: Path, *, weight: float, every: int, shape: str = "truth", seed: int = 0) -> dict:
+    """``isa-mocap track`` of one bag (h-isa 1500, exact masks, automatic initialization) and its scores:
+    mean joint error (Eq. 20), frames facing backwards (torso heading more than 90 degrees from the truth's;
+    the run is *backwards* when most frames are), leg-swap frames (the estimated left knee and ankle lie
+    closer to the true right ones than to the true left ones, summed over both legs)."""
     from isa_mocap_ros.cli.track import track_bag
     from isa_mocap_ros.eval import marker_positions, shared_markers
 
     ns = argparse.Namespace(
-        bag=str(bag), out=str(out), optimizer="h-isa", evals=1500, params=None, model=None, seed=0, frames=None,
-        start=0, use_masks=True, learn_frames=None, shape="truth", init="auto", predictor=None, prior=None,
-        prior_eta=0.0, energy="fast", overwrite=True, no_progress=True, keypoint_weight=weight, keypoint_every=every)
+        bag=str(bag), out=str(out), optimizer="h-isa", evals=1500, params=None, model=None, seed=seed, frames=None,
+        start=0, use_masks=True, learn_frames=None, shape=shape, init="auto", predictor=None, prior=None,
+        prior_eta=0.0, energy="fast", overwrite=True, no_progress=True, keypoint_weight=weight, keypoint_every=every,
+        calib_frames=None, calib_rounds=None, calib_evals=None)
     got: dict = {}
     s = track_bag(ns, collect=got)
     model, tm = got["model"], got["truth_model"]
@@ -258,7 +449,8 @@ def _track_one(bag: Path, out: Path, *, weight: float, every: int) -> dict:
     straight = np.linalg.norm(Pe - Pt, axis=2).sum(axis=1)
     swapped = np.linalg.norm(Pe[:, swap_idx] - Pt, axis=2).sum(axis=1)
     return dict(mpjpe_mm=float(s["mpjpe_mm"]), frames=len(idx), backwards=int(back),
-                leg_swaps=int(np.sum(swapped < straight)), keypoint_frames=s["keypoint_frames"],
+                backwards_run=bool(back > len(idx) / 2), leg_swaps=int(np.sum(swapped < straight)),
+                keypoint_frames=s["keypoint_frames"], keypoint_detections=s.get("keypoint_detections", 0),
                 keypoint_ms_per_frame_set=s["keypoint_ms_per_frame_set"], fps=float(s["fps"]))
 
 
@@ -270,8 +462,8 @@ def bench_track(args) -> dict:
     bvh = cmu_walk_bvh()
     motions = [m.strip() for m in args.motions.split(",") if m.strip()]
     seeds = [int(v) for v in args.seeds.split(",") if v.strip()]
-    configs = {"off": (0.0, 0), "init": (args.weight, 0), f"every {args.every}": (args.weight, args.every)}
-    wanted = [c.strip() for c in getattr(args, "configs", "off,init,every").split(",") if c.strip()]
+    configs = {"off": (0.0, 0), "start": (args.weight, 0), f"every {args.every}": (args.weight, args.every)}
+    wanted = [c.strip() for c in getattr(args, "configs", "off,start,every").split(",") if c.strip()]
     configs = {k: v for k, v in configs.items() if k.split()[0] in wanted}
     if args.weight != 1.0:
         configs = {(f"{k} w{args.weight:g}" if v[0] > 0 else k): v for k, v in configs.items()}
@@ -282,18 +474,26 @@ def bench_track(args) -> dict:
             print(f"bench keypoints: {bvh} not found; skipping cmu", file=sys.stderr)
             continue
         given = Path(motion)
-        for seed in ([0] if (given / "metadata.yaml").is_file() else seeds):
-            bag = given if (given / "metadata.yaml").is_file() else cache / f"{motion}_s{seed}"
+        mname = given.stem if motion.endswith(".bvh") else motion      # a BVH file's name labels its runs
+        body = getattr(args, "body", "capsules")
+        subjects = ([x.strip() for x in args.subjects.split(",") if x.strip()] if body == "mesh"
+                    and not (given / "metadata.yaml").is_file() else [None])
+        for subject, seed in [(su, se) for su in subjects
+                              for se in ([0] if (given / "metadata.yaml").is_file() else seeds)]:
+            label = mname + (f" {subject}" if subject else "")
+            bag = given if (given / "metadata.yaml").is_file() else \
+                cache / (f"{mname}_s{seed}" + (f"_mesh_{subject}" if subject else "_capsules"))
             if not (bag / "metadata.yaml").is_file():
                 write_bag(argparse.Namespace(
                     motion=src, out=str(bag), views=None, width=None, height=None, fps=30.0, model=39,
-                    start_s=1.0 if motion == "cmu" else 0.0, duration_s=args.track_s, empty_frames=10, noise=0.0,
-                    occluders=0, rig=None, seed=seed, bvh_scale=None, masks=True, compression="zstd", chunk_mb=32.0,
-                    overwrite=True, no_progress=True))
+                    start_s=1.0 if motion == "cmu" or motion.endswith(".bvh") else 0.0, duration_s=args.track_s, empty_frames=10, noise=0.0,
+                    occluders=0, rig=None, seed=seed, bvh_scale=args.bvh_scale if motion.endswith(".bvh") else None, masks=True,
+                    compression="zstd", chunk_mb=32.0, overwrite=True, no_progress=True, body=body, subject=subject or "average_man", skirt=False))
             for name, (w, k) in configs.items():
-                r = _track_one(bag, cache / f"{given.name}_s{seed}_{name.replace(' ', '_')}", weight=w, every=k)
-                out.setdefault(name, {})[f"{motion} s{seed}"] = r
-                print(f"  {motion} seed {seed} {name:8s} mpjpe {r['mpjpe_mm']:7.1f} mm  backwards {r['backwards']:3d}"
+                r = _track_one(bag, cache / f"{bag.name}_{name.replace(' ', '_')}", weight=w, every=k,
+                               shape=getattr(args, "shape", "truth"), seed=seed)
+                out.setdefault(name, {})[f"{label} s{seed}"] = r
+                print(f"  {label} seed {seed} {name:8s} mpjpe {r['mpjpe_mm']:7.1f} mm  backwards {r['backwards']:3d}"
                       f"/{r['frames']}  leg swaps {r['leg_swaps']:3d}  keypoint frames {r['keypoint_frames']:3d}"
                       f"  {r['keypoint_ms_per_frame_set'] or 0:6.1f} ms/set", file=sys.stderr, flush=True)
     return out
@@ -351,15 +551,17 @@ def _print_init(res: dict) -> None:
 
 
 def _print_track(res: dict) -> None:
-    print("\n== track (capsule renders, automatic initialization) ==")
-    print(f"{'config':14s} {'runs':>4s} {'mpjpe mm':>9s} {'runs backwards':>14s} {'backwards frames':>16s} "
-          f"{'leg swaps':>9s} {'ms/set (kp frames)':>18s}")
+    print("\n== track (automatic initialization) ==")
+    print(f"{'config':14s} {'runs':>4s} {'mpjpe mm':>9s} {'backwards runs':>14s} {'runs w/ bw frames':>17s} "
+          f"{'backwards frames':>16s} {'leg swaps':>9s} {'ms/set (kp frames)':>18s}")
     for name, runs in res.items():
         r = list(runs.values())
         ms = [x["keypoint_ms_per_frame_set"] for x in r if x["keypoint_ms_per_frame_set"]]
         print(f"{name:14s} {len(r):4d} {np.mean([x['mpjpe_mm'] for x in r]):9.1f} "
-              f"{sum(x['backwards'] > 0 for x in r):14d} {sum(x['backwards'] for x in r):16d} "
-              f"{sum(x['leg_swaps'] for x in r):9d} {np.mean(ms) if ms else 0:18.1f}")
+              f"{sum(x.get('backwards_run', False) for x in r):14d} {sum(x['backwards'] > 0 for x in r):17d} "
+              f"{sum(x['backwards'] for x in r):16d} {sum(x['leg_swaps'] for x in r):9d} {np.mean(ms) if ms else 0:18.1f}")
+    print("per run: " + "; ".join(f"{name} {seq}: {x['mpjpe_mm']:.1f} mm, bw {x['backwards']}/{x['frames']}, "
+                                  f"swaps {x['leg_swaps']}" for name, runs in res.items() for seq, x in runs.items()))
 
 
 def _print(kind: str, res: dict) -> None:
@@ -378,7 +580,7 @@ def _print(kind: str, res: dict) -> None:
 
 def run(args: argparse.Namespace) -> int:
     kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
-    bad = [k for k in kinds if k not in ("real", "synth", "track", "init")]
+    bad = [k for k in kinds if k not in ("real", "synth", "mesh", "track", "init", "cost", "peer")]
     if bad or args.step < 1:
         print(f"isa-mocap bench keypoints: error: --kinds {bad} / --step {args.step}: expected real, synth and "
               "a step >= 1", file=sys.stderr)
@@ -388,7 +590,11 @@ def run(args: argparse.Namespace) -> int:
         results["track"] = bench_track(args)
     if "init" in kinds:
         results["init"] = bench_init(args)
-    det = PoseLandmarker() if {"real", "synth"} & set(kinds) else None
+    if "cost" in kinds:
+        results["cost"] = bench_cost(args)
+    if "peer" in kinds:
+        results["peer"] = bench_peer(args)
+    det = PoseLandmarker() if {"real", "synth", "mesh"} & set(kinds) else None
     if "real" in kinds:
         root = Path(args.data)
         if not (root / "balancing").is_dir():
@@ -399,9 +605,14 @@ def run(args: argparse.Namespace) -> int:
             results["real aligned crop"] = bench_real(det, root, args.step, aligned=True)
     if "synth" in kinds:
         results["synth"] = bench_synth(det, args.width, args.height, args.step, args.synth_s)
+    if "mesh" in kinds:
+        results["mesh renders"] = bench_synth_mesh(det, args.width, args.height, args.step, args.synth_s,
+                                                   [x.strip() for x in args.subjects.split(",") if x.strip()])
     if args.json:
         print(json.dumps(results, indent=1))
     else:
         for kind, res in results.items():
-            {"track": _print_track, "init": _print_init}.get(kind, lambda r: _print(kind, r))(res)
+            {"track": _print_track, "init": _print_init, "cost": _print_cost,
+             "peer": lambda r: print("\n== peer ==\n" + "\n".join(f"{k}: {v}" for k, v in r.items()))}.get(
+                kind, lambda r: _print(kind, r))(res)
     return 0

@@ -1,8 +1,8 @@
 """``isa-mocap bench all``: run every benchmark and regenerate the results page (``docs/RESULTS.md``).
 
-``isa-mocap bench all [--quick] [--results PATH] [--out DIR] [--jobs N] [--only A,B]``. Runs, in
-order, ackley, adapters, render, energy, compare, robustness, speed and mesh_baseline (mesh bodies vs
-capsules, reduced) with their default designs (compare and robustness on mesh bodies since issue 32)
+``isa-mocap bench all [--quick] [--results PATH] [--out DIR] [--jobs N] [--only A,B] [--render]``. Runs, in
+order, ackley, adapters, render, energy, compare, robustness, speed, mesh_baseline (mesh bodies vs
+capsules, reduced) and mesh (the headline: mesh subjects, automatic shape and initialization) with their default designs (compare and robustness on mesh bodies since issue 32)
 (``--quick``: their ``--quick`` variants), then writes
 
 * ``PATH`` (default ``docs/RESULTS.md`` of the source checkout): every bench's tables, the figures,
@@ -14,7 +14,8 @@ Work files (the comparison's resumable ``cells.jsonl``, the robustness bags) go 
 (default ``out/bench``; with ``--quick`` a temporary directory): ``bench all --resume`` continues an
 interrupted comparison from its ``cells.jsonl`` (without it, the previous cells are moved to
 ``cells.jsonl.prev`` so results of older code never mix with new ones); the robustness bags are
-cached there by their parameters. ``--only`` runs a subset; the page then shows the
+cached there by their parameters. ``--render`` runs nothing and rewrites the page from the saved
+results. ``--only`` runs a subset; the page then shows the
 other benches' last saved raw results when ``results/<bench>.json`` exists (and says so).
 """
 from __future__ import annotations
@@ -41,7 +42,7 @@ from isa_mocap_ros.bench._common import energy_sizes, json_of
 #: both cores at full load that ackley, compare and robustness take, the node network's real-time run
 #: in ``speed`` dropped 24 of 145 frame sets (tracker 31 ms a frame, p50) where the same bench alone
 #: a minute later dropped 6 (22.7 ms; session 12, docs/evaluation.md).
-ORDER = ("energy", "speed", "adapters", "render", "ackley", "compare", "robustness", "mesh_baseline")
+ORDER = ("energy", "speed", "adapters", "render", "ackley", "compare", "robustness", "mesh_baseline", "mesh")
 _SRC_ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -61,6 +62,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resume", action="store_true",
                    help="continue the comparison of the last run in --out (its cells.jsonl) instead of starting anew; "
                         "only with unchanged code")
+    p.add_argument("--render", action="store_true",
+                   help="run nothing: rewrite the page from the saved results (PATH's folder/results/<bench>.json), "
+                        "e.g. after one bench was run alone with --json there")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -149,6 +153,13 @@ def _bench_mesh_baseline(quick: bool, ctx: dict) -> dict:
     return mb.collect(jobs=ctx["jobs"], out=ctx["out"] / "mesh_baseline", quick=quick)
 
 
+def _bench_mesh(quick: bool, ctx: dict) -> dict:
+    from isa_mocap_ros.bench import mesh as bm
+
+    return bm.collect(bm.make_design("quick" if quick else "default"), cache=ctx["out"] / "cache" / "robustness",
+                      out=ctx["out"] / "mesh", jobs=ctx["jobs"], progress=ctx["progress"])
+
+
 def _bench_speed(quick: bool, ctx: dict) -> dict:
     from isa_mocap_ros.bench import speed as bench_speed
 
@@ -159,7 +170,7 @@ def _bench_speed(quick: bool, ctx: dict) -> dict:
 
 RUNNERS = {"ackley": _bench_ackley, "adapters": _bench_adapters, "render": _bench_render, "energy": _bench_energy,
            "compare": _bench_compare, "robustness": _bench_robustness, "speed": _bench_speed,
-           "mesh_baseline": _bench_mesh_baseline}
+           "mesh_baseline": _bench_mesh_baseline, "mesh": _bench_mesh}
 
 
 # ------------------------------------------------------------------ markdown sections
@@ -276,6 +287,13 @@ def md_mesh_baseline(d: dict) -> str:
     return render_markdown(d)
 
 
+def md_mesh(d: dict) -> str:
+    from isa_mocap_ros.bench.mesh import render_markdown
+
+    return "`isa-mocap bench mesh` (module docstring; limits: docs/shape_calibration.md, docs/tracking.md).\n\n" \
+        + render_markdown(d) + "\n"
+
+
 def md_speed(d: dict) -> str:
     from isa_mocap_ros.bench.speed import render_markdown
 
@@ -311,6 +329,11 @@ def targets(data: dict) -> list[tuple[str, str, str]]:
 def headlines(data: dict) -> list[str]:
     """One line per bench with its main measured figure (for the page's top and the closing note)."""
     out = []
+    me = data.get("mesh")
+    if me and me.get("conditions"):
+        out.append("**mesh subjects, everything automatic** (shape, initialization; bench mesh): " + "; ".join(
+            f"{x['label']} {x['mpjpe_mm']:.1f} mm ({x['offset_removed_mpjpe_mm']:.1f} mm offset removed), knee "
+            f"{x['knee_rmse_deg']:.2f}°, {x['backwards_runs']} run(s) backwards" for x in me["conditions"]))
     c = data.get("compare")
     if c and c.get("mean_over_sequences_mm"):
         from isa_mocap_ros.eval.compare import PEER_ALGORITHMS, label
@@ -365,7 +388,8 @@ def headlines(data: dict) -> list[str]:
     return out
 
 
-SECTIONS = (("ackley", "Ackley function (ISA §13.4.1, Tables 13.1-13.2)", md_ackley),
+SECTIONS = (("mesh", "Headline: mesh subjects, automatic shape and initialization (issue 33)", md_mesh),
+            ("ackley", "Ackley function (ISA §13.4.1, Tables 13.1-13.2)", md_ackley),
             ("compare", "Optimizer comparison (EA-vs-PF §5.2-5.4, with pycma and scipy-DE)", md_compare),
             ("robustness", "Robustness: noise and occlusions (ISA §13.4.2)", md_robustness),
             ("mesh_baseline", "Mesh bodies vs capsules (issue 32's baseline)", md_mesh_baseline),
@@ -465,6 +489,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"isa-mocap bench all: error: --only: expected names of {', '.join(ORDER)}, received {bad}",
                   file=sys.stderr)
             return 2
+    if getattr(args, "render", False):
+        only = ()
     page = Path(args.results) if args.results else default_results_path()
     fig_dir = page.parent / "results"
     tmp = None
@@ -512,7 +538,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"== bench {name}: {d['_seconds']:.0f} s", file=sys.stderr, flush=True)
         figs = figures(data, fig_dir)
         cmd = "isa-mocap bench all" + (" --quick" if args.quick else "") + (f" --only {args.only}" if args.only else "") \
-            + (f" --jobs {args.jobs}" if args.jobs != 2 else "") + (" --resume" if args.resume else "") + (f" --results {args.results}" if args.results else "")
+            + (f" --jobs {args.jobs}" if args.jobs != 2 else "") + (" --resume" if args.resume else "") \
+            + (" --render" if getattr(args, "render", False) else "") + (f" --results {args.results}" if args.results else "")
         meta = {"command": cmd, "quick": bool(args.quick), "machine": machine(), "commit": commit,
                 "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
                 "seconds": time.perf_counter() - t_all}

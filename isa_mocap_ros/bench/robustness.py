@@ -78,7 +78,8 @@ def bag_name(seq: SequenceSpec, cond: str) -> str:
     m = Path(seq.motion).stem if seq.motion.endswith(".bvh") else seq.motion
     return (f"{seq.name}_{m}_{cond}_{seq.duration_s:g}s_{seq.fps:g}fps_from{seq.start_s:g}_"
             f"{seq.width}x{seq.height}_v{seq.views}_e{EMPTY_FRAMES}_s{seq.seed}"
-            + ("_mesh" if seq.body == "mesh" else ""))
+            + ("_mesh" if seq.body == "mesh" else "")
+            + (f"_{seq.subject}" if seq.body == "mesh" and seq.subject != "average_man" else ""))
 
 
 @dataclass(frozen=True)
@@ -97,6 +98,12 @@ class RobustDesign:
     gate_margin_px: int | None = None
     #: what the sequences show: ``mesh`` (default) or ``capsules`` (the control)
     body: str = "mesh"
+    #: the tracking model's shape: ``truth`` (the bag's, a diagnostic) or ``auto`` (calibrated from the images)
+    shape: str = "truth"
+    #: shape calibration options with ``shape="auto"`` (``track``'s ``--calib-*``): (name, value) pairs
+    calib: tuple = ()
+    #: tracker options beyond the defaults (``track``'s arguments, e.g. ``silhouette_core_px``): (name, value) pairs
+    tracker: tuple = ()
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -162,8 +169,8 @@ def prepare_bag(seq: SequenceSpec, cond: str, cache: Path) -> Path:
     write_bag(argparse.Namespace(
         motion=seq.motion, out=str(tmp), views=seq.views, width=seq.width, height=seq.height, fps=seq.fps, model=39,
         start_s=seq.start_s, duration_s=seq.duration_s, empty_frames=EMPTY_FRAMES, noise=noise, occluders=occl,
-        rig=None, seed=seq.seed, bvh_scale=None, masks=False, compression="zstd", chunk_mb=32.0, overwrite=True,
-        no_progress=True, body=seq.body, subject="average_man", skirt=False))
+        rig=None, seed=seq.seed, bvh_scale=seq.bvh_scale, masks=False, compression="zstd", chunk_mb=32.0,
+        overwrite=True, no_progress=True, body=seq.body, subject=seq.subject, skirt=False))
     shutil.rmtree(path, ignore_errors=True)
     tmp.rename(path)
     return path
@@ -179,8 +186,9 @@ def track_condition(bag: Path, out: Path, design: RobustDesign, seed: int | None
     ns = argparse.Namespace(
         bag=str(bag), out=str(out), optimizer=design.optimizer, evals=design.evals, params=None, model=None,
         seed=design.seed if seed is None else int(seed), frames=None, start=0, use_masks=False, learn_frames=None,
-        shape="truth", init=design.init, predictor=None, prior=None, prior_eta=0.0, energy="fast", overwrite=True,
-        no_progress=True, gate_margin_px=design.gate_margin_px)
+        shape=getattr(design, "shape", "truth"), init=design.init, predictor=None, prior=None, prior_eta=0.0,
+        energy="fast", overwrite=True, no_progress=True, gate_margin_px=design.gate_margin_px,
+        **dict(getattr(design, "calib", ())), **dict(getattr(design, "tracker", ())))
     got: dict = {}
     t0 = time.perf_counter()
     s = track_bag(ns, collect=got)
@@ -216,7 +224,14 @@ def track_condition(bag: Path, out: Path, design: RobustDesign, seed: int | None
         knees_e = np.degrees(P[:, model.knee_dofs])
         knees_t = np.degrees(T[:, tm.knee_dofs])
         ke = knee_errors_deg(P, T, model, true_model=tm)
-    return {"seed": int(s["seed"]), "gate_margin_px": s.get("gate_margin_px"),
+    extra = {}
+    if mesh:
+        extra = {"offset_removed_mpjpe_mm": acc["offset_removed_mpjpe_mm"],
+                 "offset_removed_max_frame_error_mm": acc["offset_removed_max_frame_error_mm"],
+                 "backwards_share": acc.get("backwards_share", float("nan")),
+                 "offset_removed_knee_rmse_deg": acc.get("offset_removed_knee_rmse_deg", float("nan")),
+                 "per_marker_offset_mm": acc["per_marker_offset_mm"]}
+    return {**extra, "seed": int(s["seed"]), "gate_margin_px": s.get("gate_margin_px"),
             "frames": acc["frames"], "mpjpe_mm": acc["mpjpe_mm"], "max_frame_error_mm": acc["max_frame_error_mm"],
             "knee_rmse_deg": acc["knee_rmse_deg"], "fps": s["fps"], "frames_fell_back": s["frames_fell_back"],
             "seconds": round(seconds, 2), "init": s.get("init", "ground truth" if design.init == "truth" else ""),

@@ -55,8 +55,12 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
                         "recorder; default 5, 0 = off): on a small machine the tracker's threads then lose "
                         "less time to the helpers (docs/nodes.md)")
     p.add_argument("--keypoints", action="store_true",
-                   help="also run the keypoint node (BlazePose landmarks on cam<i>/keypoints, recorded; its "
-                        "every_k_frames from the parameter file; docs/keypoints.md)")
+                   help="also run the keypoint node (BlazePose landmarks on cam<i>/keypoints, recorded) and track "
+                        "with them (the estimator's keypoint_weight; docs/keypoints.md)")
+    p.add_argument("--keypoint-weight", type=float, default=1.0, metavar="W",
+                   help="with --keypoints: weight of the keypoint term (default 1.0; 0 = detect and record only)")
+    p.add_argument("--keypoint-every", type=int, default=None, metavar="K",
+                   help="with --keypoints: the keypoint node's every_k_frames (default: the parameter file's, 6)")
     p.add_argument("--shape", default="auto", metavar="auto|default|truth|FILE",
                    help="body shape the estimator tracks with: 'auto' (default) calibrates it from the bag's first "
                         "frames before the replay (as isa-mocap calibrate; written to DIR/body.yaml); 'default' = "
@@ -99,9 +103,12 @@ def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
     kp = []
     if getattr(args, "keypoints", False):
         kp_params = [("views", str(n_views))]
+        if getattr(args, "keypoint_every", None) is not None:
+            kp_params.append(("every_k_frames", str(args.keypoint_every)))
+        est.append(("keypoint_weight", repr(float(getattr(args, "keypoint_weight", 1.0)))))
         if args.lockstep:
             kp_params += [(f"qos_overrides.{NS}/cam{v}/{t}.subscription.reliability", "reliable")
-                          for v in range(n_views) for t in ("image_raw", "mask")]
+                          for v in range(n_views) for t in ("image_raw", "mask", "camera_info")]
         kp = [NodeSpec(exec="keypoints_node", name="keypoints", params=tuple(kp_params), nice=nice, **common)]
     work = kp + [
         NodeSpec(exec="segmentation_node", name="segmentation", params=tuple(seg), nice=nice, **common),

@@ -186,6 +186,8 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
         # Tracker.step of the set the automatic initialization ran on (nan: initialized otherwise)
         "init_ms": float(diag.get("init_ms", "nan")),
         "bad_inputs": int(diag.get("bad_inputs", 0) or 0), "wall_seconds": round(wall_seconds, 1),
+        # frame sets tracked with keypoints (run --keypoints; the estimator's last 1 Hz figure)
+        "keypoint_sets": int(diag.get("keypoint_sets", 0) or 0),
         # real time under load (the estimator's degrade, isa_mocap_ros.tracking.load), its last 1 Hz diagnostics:
         # times the budget was lowered, the level at the end (0 = full; "off" in lockstep), re-initializations
         "budget_lowered": int(diag.get("budget_lowered", 0) or 0),

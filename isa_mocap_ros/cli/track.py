@@ -66,6 +66,10 @@ def register(sub) -> None:
     p.add_argument("--prior", default=None, metavar="NPZ", help="Parzen prior file (with --prior-eta)")
     p.add_argument("--prior-eta", type=float, default=0.0, help="prior weight (0 = off)")
     p.add_argument("--energy", choices=("fast", "exact"), default="fast", help="silhouette energy method")
+    p.add_argument("--silhouette-core-px", type=float, default=None, metavar="PX",
+                   help="silhouette energy: a foreground pixel d px from the background counts min(1, d/PX) in "
+                        "the term of foreground the model misses (the rim of clothes and soft tissue asks less "
+                        "to be covered; <= 1: Eq. 4 as printed; default: the tracker's default)")
     p.add_argument("--gate-margin-px", type=int, default=None, metavar="PX",
                    help="mask gate: keep only foreground components within PX pixels of the predicted silhouette "
                         "(0 = off; default: the tracker's default)")
@@ -85,9 +89,13 @@ def register(sub) -> None:
     p.add_argument("--keypoint-weight", type=float, default=0.0, metavar="W",
                    help="weight of the learned-keypoint term (BlazePose landmarks on the images, cropped around "
                         "the mask; docs/keypoints.md); 0 = off (default)")
-    p.add_argument("--keypoint-every", type=int, default=0, metavar="K",
-                   help="with --keypoint-weight: detect keypoints on the automatically initialized frame and on "
-                        "every K-th tracked frame (0 = the initialized frame only; default 0)")
+    p.add_argument("--keypoint-every", type=int, default=6, metavar="K",
+                   help="with --keypoint-weight: after the dense start, detect keypoints on every K-th frame with a "
+                        "person of each view (0 = the dense start only; default 6, the keypoint node's "
+                        "every_k_frames)")
+    p.add_argument("--keypoint-dense", type=int, default=None, metavar="N",
+                   help="with --keypoint-weight: detect on each view's first N frames with a person (the "
+                        "initialization and its heading check; default 4, the keypoint node's dense_frames)")
     p.add_argument("--overwrite", action="store_true", help="replace DIR/estimates if it exists")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     from isa_mocap_ros.cli.shape_options import add_calibration_arguments
@@ -202,14 +210,17 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         has_mask_topics = any(t.endswith("/mask") and t.startswith(f"{TOPIC}/cam") for t in probe.topics)
     use_masks = bool(args.use_masks and has_mask_topics)
     kp_weight = float(getattr(args, "keypoint_weight", 0.0) or 0.0)
-    kp_every = int(getattr(args, "keypoint_every", 0) or 0)
-    if not np.isfinite(kp_weight) or kp_weight < 0 or kp_every < 0:
-        raise ValueError(f"--keypoint-weight / --keypoint-every: expected numbers >= 0, received {kp_weight}, "
-                         f"{kp_every}")
+    kp_every = int(getattr(args, "keypoint_every", 6))
+    from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, KeypointSchedule, detect_in_mask
+    kp_dense = getattr(args, "keypoint_dense", None)
+    kp_dense = DENSE_FRAMES if kp_dense is None else int(kp_dense)
+    if not np.isfinite(kp_weight) or kp_weight < 0 or kp_every < 0 or kp_dense < 0:
+        raise ValueError(f"--keypoint-weight / --keypoint-every / --keypoint-dense: expected numbers >= 0, received "
+                         f"{kp_weight}, {kp_every}, {kp_dense}")
     detector = None
     if kp_weight > 0:
         from isa_mocap_ros.vision.landmark_model import ModelUnavailable
-        from isa_mocap_ros.vision.landmarks import PoseLandmarker, box_from_mask
+        from isa_mocap_ros.vision.landmarks import PoseLandmarker
         try:
             detector = PoseLandmarker()
         except ModelUnavailable as exc:
@@ -265,6 +276,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                   energy=args.energy, prior_eta=args.prior_eta, keypoint_weight=kp_weight)
     if args.predictor:
         cfg_kw["predictor"] = args.predictor
+    if getattr(args, "silhouette_core_px", None) is not None:
+        cfg_kw["silhouette_core_px"] = args.silhouette_core_px
     if getattr(args, "gate_margin_px", None) is not None:
         cfg_kw["gate_margin_px"] = args.gate_margin_px
     if getattr(args, "no_hull", False):
@@ -311,20 +324,30 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     t_track = 0.0
     kp_seconds: list[float] = []        # detection time per frame set with keypoints
 
+    schedules = [KeypointSchedule(kp_every, dense_frames=kp_dense) for _ in seq.cameras]
+    kp_views = [0]                      # detections run
+
     def keypoints_of(fr, masks):
+        """The keypoint node's output for this frame (the same schedule and detection, through its message:
+        Point32 is float32), so a lockstep run of the network with keypoints gives these estimates."""
+        import msg_adapters as ma
         t0 = time.perf_counter()
-        out = []
-        for img, m in zip(fr.images, masks):
-            box = None if img is None or m is None else box_from_mask(m)
-            if box is None or img.ndim != 3:
+        out, looked = [], False
+        for v, (img, m) in enumerate(zip(fr.images, masks)):
+            if img is None or m is None or not schedules[v].due(bool(np.any(m))):
                 out.append(None)
                 continue
-            lm = detector.detect(img, box)           # bag images are rgb8 (camera node, synth)
-            out.append((lm.uv, lm.confidence))
-        if any(o is not None for o in out):          # frames without foreground cost nothing
+            looked = True
+            kp_views[0] += 1
+            lm = detect_in_mask(detector, img, m)       # bag images are rgb8 (camera node, synth)
+            if lm is None:
+                out.append(None)
+                continue
+            wire = ma.to_cdr(ma.keypoints_to_polygon(lm.uv, lm.confidence))     # float32 on the wire
+            out.append(ma.polygon_to_keypoints(ma.from_cdr(wire, "geometry_msgs/msg/PolygonStamped")))
+        if looked:
             kp_seconds.append(time.perf_counter() - t0)
-            return out
-        return None
+        return out if any(o is not None for o in out) else None
     with BagWriter(est_path, overwrite=args.overwrite) as bag:
         bag.add_topic(f"{TOPIC}/joint_states", "sensor_msgs/msg/JointState", qos=[QOS_DEFAULT])
         # the model the joint states belong to (with the shape tracked with): a self-describing result
@@ -357,10 +380,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                 r = None
                 x = tracker.last_estimate
             else:
-                kp = None
-                if detector is not None and (not tracker.initialized
-                                             or (kp_every > 0 and ((fr.index - first) // stride) % kp_every == 0)):
-                    kp = keypoints_of(fr, masks)
+                kp = keypoints_of(fr, masks) if detector is not None else None
                 c0 = time.process_time()
                 if profiler is not None:
                     profiler.enable()
@@ -402,11 +422,12 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                      "stride": stride, "shape": shape_arg,
                      "optimizer_params": cfg.search.params(), "model_dof": model.dof, "seed": args.seed,
                      "gate_margin_px": cfg.masks.gate_margin_px, "hull_filter": cfg.masks.hull_filter,
+                     "silhouette_core_px": cfg.objective.silhouette_core_px,
                      "view_weights": cfg.objective.view_weights,
                      "init_confirm_frames": cfg.heading.init_confirm_frames,
                      "partition_order": list(cfg.search.partition_order),
-                     "keypoint_weight": kp_weight, "keypoint_every": kp_every,
-                     "keypoint_frames": len(kp_seconds),
+                     "keypoint_weight": kp_weight, "keypoint_every": kp_every, "keypoint_dense": kp_dense,
+                     "keypoint_frames": len(kp_seconds), "keypoint_detections": kp_views[0],
                      "keypoint_ms_per_frame_set": float(np.mean(kp_seconds) * 1e3) if kp_seconds else None,
                      "masks": "recorded" if use_masks else f"segmented (learned from {learn} frames)",
                      "frames_tracked": n_tracked, "frames_estimated": len(estimates), "frames_fell_back": n_fell_back,
@@ -452,6 +473,11 @@ def run(args: argparse.Namespace) -> int:
                                                f"(by {s['scored_by'].replace('_', ' ')})"),
                  ("max frame error", f"{s['max_frame_error_mm']:.1f} mm"),
                  ("knee-angle RMSE", f"{s['knee_rmse_deg']:.2f} deg")]
+        if "offset_removed_mpjpe_mm" in s:
+            rows.append(("each joint's mean offset removed", f"{s['offset_removed_mpjpe_mm']:.1f} mm "
+                                                            f"(max frame {s['offset_removed_max_frame_error_mm']:.1f} mm"
+                                                            + (f", knee {s['offset_removed_knee_rmse_deg']:.2f} deg)"
+                                                               if "offset_removed_knee_rmse_deg" in s else ")")))
     else:
         rows.append(("accuracy", "no ground truth in the bag"))
     print("track: accuracy\n" + _table(rows))

@@ -101,13 +101,28 @@ def mask_problem(mask: Any, camera: Camera) -> str | None:
     return None
 
 
-def _view_terms(camera: Camera, F: np.ndarray, n_fg: int, E: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """Eq. 4 for each pose: ``E (n, C, 2, 3)`` end points, ``F (H, W)`` bool foreground."""
+def core_weights(F: np.ndarray, core_px: float) -> np.ndarray | None:
+    """Weights ``(H, W)`` of the foreground pixels in term 2 of Eq. 4: ``min(1, d / core_px)``, ``d`` a
+    pixel's distance to the background (1 at the silhouette's edge; ``cv2.distanceTransform``, exact L2);
+    None when ``core_px <= 1`` (every pixel counts 1: Eq. 4 as printed)."""
+    if core_px <= 1.0:
+        return None
+    d = cv2.distanceTransform(F.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    return np.minimum(1.0, d.astype(np.float64) / core_px) * F
+
+
+def _view_terms(camera: Camera, F: np.ndarray, n_fg: int, E: np.ndarray, radii: np.ndarray,
+                core: np.ndarray | None = None) -> np.ndarray:
+    """Eq. 4 for each pose: ``E (n, C, 2, 3)`` end points, ``F (H, W)`` bool foreground; ``core`` the
+    foreground pixels' weights in term 2 (:func:`core_weights`; None: all 1)."""
     out = np.empty(E.shape[0])
     for i in range(E.shape[0]):
         M = render_mask(camera, E[i], radii) > 0
         n_model = int(np.count_nonzero(M))
-        miss = int(np.count_nonzero(F & ~M))        # Σ_{p ∈ D(F)} F(p) − M(x, p)
+        if core is None:
+            miss = int(np.count_nonzero(F & ~M))        # Σ_{p ∈ D(F)} F(p) − M(x, p)
+        else:
+            miss = float(core[~M].sum()) / float(core.sum()) * n_fg
         if n_model == 0:
             out[i] = 0.5 + 0.5 * miss / n_fg
             continue
@@ -222,6 +237,12 @@ class SilhouetteEnergy:
     n_mask_points : int
         Fast method only: foreground pixels sampled per view and frame (systematic sample in raster
         order with a random start; all pixels when the mask has fewer).
+    core_px : float
+        Term 2 of Eq. 4 (foreground the model misses) counts a foreground pixel by ``min(1, d / core_px)``,
+        ``d`` its distance to the background in pixels (:func:`core_weights`): the silhouette's rim, where
+        clothes and soft tissue lie outside any capsule body, asks less to be covered, while term 1 still
+        charges every model pixel off the foreground. ``<= 1`` (default 0): Eq. 4 as printed. The fast
+        method draws its foreground sample in proportion to the weights (needs ``n_mask_points > 0``).
     rng : numpy.random.Generator, optional
         Source of the template jitter (drawn once here) and of the foreground samples (drawn at
         each :meth:`set_masks`). Same generator state ⇒ same values. ``None``: ``default_rng(0)``.
@@ -256,7 +277,8 @@ class SilhouetteEnergy:
 
     def __init__(self, model: BodyModel, cameras: Sequence[Camera], masks: Sequence[Any] | None = None, *,
                  method: str = "fast", downsample: int = 1, n_model_points: int = N_MODEL_POINTS,
-                 n_mask_points: int = N_MASK_POINTS, rng: np.random.Generator | None = None) -> None:
+                 n_mask_points: int = N_MASK_POINTS, core_px: float = 0.0,
+                 rng: np.random.Generator | None = None) -> None:
         self.model = _check_model(model)
         self.cameras = _check_cameras(cameras)
         if method not in ("fast", "exact"):
@@ -270,8 +292,15 @@ class SilhouetteEnergy:
             rng = np.random.default_rng(0)
         if not isinstance(rng, np.random.Generator):
             raise EnergyError(f"rng: expected a numpy.random.Generator, received {type(rng).__name__}")
+        if isinstance(core_px, bool) or not isinstance(core_px, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(core_px) or core_px < 0:
+            raise EnergyError(f"core_px: expected a finite number >= 0 (pixels), received {core_px!r}")
+        if core_px > 1 and method == "fast" and n_mask_points == 0:
+            raise EnergyError("core_px: expected n_mask_points > 0 with core_px > 1 (the fast method weighs the "
+                              "sampled foreground pixels), received n_mask_points=0")
         self.downsample = int(downsample)
         self.n_mask_points = int(n_mask_points)
+        self.core_px = float(core_px)
         self.rng = rng
         self._radii = np.ascontiguousarray(model.capsule_radii, dtype=np.float64)
         self._caps = np.ascontiguousarray(model.capsules, dtype=np.int64)
@@ -349,9 +378,10 @@ class SilhouetteEnergy:
             raise EnergyError(f"weights: expected a positive sum over the usable views {used}, received "
                               f"{view_w.tolist()}")
         F = {v: _foreground(masks[v]) for v in used}
-        frame: dict = {"F": F, "n_fg": {v: int(np.count_nonzero(F[v])) for v in used}, "view_w": view_w}
+        frame: dict = {"F": F, "n_fg": {v: int(np.count_nonzero(F[v])) for v in used}, "view_w": view_w,
+                       "core": {v: core_weights(F[v], self.core_px) for v in used}}
         if self.method == "fast":
-            frame.update(self._fast_frame(used, F))
+            frame.update(self._fast_frame(used, F, frame["core"]))
             # the kernels' argument bundles of these masks (_k.Views, _k.Foreground)
             frame["views"] = _k.Views(*(frame[k] for k in _k.Views._fields))
             frame["fg"] = _k.Foreground(*(frame[k] for k in _k.Foreground._fields))
@@ -359,7 +389,7 @@ class SilhouetteEnergy:
         self._threads = numba.get_num_threads()      # per set_masks: the call costs ~20 µs
         self.skipped_views, self._used, self.n_views_used = skipped, used, len(used)
 
-    def _fast_frame(self, used: list[int], F: dict) -> dict:
+    def _fast_frame(self, used: list[int], F: dict, core: dict) -> dict:
         V = len(used)
         M = self.n_mask_points
         S = _N_STRIPS
@@ -390,7 +420,12 @@ class SilhouetteEnergy:
             fg_area[k] = _normalized_area(cam, uu, vv)
             if M == 0:
                 continue
-            if n > M:                                       # systematic sample, random start
+            if core[v] is not None:                         # systematic sample in proportion to the weights
+                cum = np.cumsum(core[v][vv, uu])
+                pos = (self.rng.random() + np.arange(M)) * (cum[-1] / M)
+                idx = np.minimum(np.searchsorted(cum, pos, side="right"), n - 1)
+                vv, uu = vv[idx], uu[idx]
+            elif n > M:                                     # systematic sample, random start
                 idx = np.floor(self.rng.random() * (n / M) + np.arange(M) * (n / M)).astype(np.int64)
                 idx = np.minimum(idx, n - 1)
                 vv, uu = vv[idx], uu[idx]
@@ -444,7 +479,7 @@ class SilhouetteEnergy:
         fr = self._frame
         total = np.zeros(X.shape[0])
         for v, w in zip(self._used, fr["view_w"]):
-            total += w * _view_terms(self.cameras[v], fr["F"][v], fr["n_fg"][v], E, self._radii)
+            total += w * _view_terms(self.cameras[v], fr["F"][v], fr["n_fg"][v], E, self._radii, fr["core"][v])
         return total / fr["view_w"].sum()
 
     @property
@@ -499,5 +534,5 @@ class SilhouetteEnergy:
     def __repr__(self) -> str:
         return (f"SilhouetteEnergy(model={self.model.name!r}, views={len(self.cameras)}, method={self.method!r}, "
                 f"used={self.n_views_used}, downsample={self.downsample}, n_template={self.n_template}, "
-                f"n_mask_points={self.n_mask_points})")
+                f"n_mask_points={self.n_mask_points}, core_px={self.core_px})")
 

@@ -66,11 +66,16 @@ class SequenceSpec:
     #: ``mesh`` (a skinned human, the average man; scored by its skeleton's joint centres) or
     #: ``capsules`` (the tracking model itself, a control; scored against the ground-truth poses)
     body: str = "mesh"
+    #: the mesh subject (``isa-mocap synth --subject``; the robustness and mesh benches)
+    subject: str = "average_man"
+    #: metres per BVH unit (None: detected; the CMU clips in shared/data/mocap/cmu need 0.056444)
+    bvh_scale: float | None = None
 
     def cache_name(self) -> str:
         m = Path(self.motion).stem if self.motion.endswith(".bvh") else self.motion
         return (f"{self.name}_{m}_{self.duration_s:.4g}s_{self.fps:g}fps_from{self.start_s:g}_{self.width}x{self.height}"
-                f"_v{self.views}_s{self.seed}" + ("_mesh" if self.body == "mesh" else "") + ".npz")
+                f"_v{self.views}_s{self.seed}" + ("_mesh" if self.body == "mesh" else "")
+                + (f"_{self.subject}" if self.body == "mesh" and self.subject != "average_man" else "") + ".npz")
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,8 @@ import numpy as np
 
 __all__ = ["MetricsError", "joint_errors_mm", "frame_errors_mm", "mpjpe_mm", "max_frame_error_mm",
            "knee_rmse_deg", "knee_errors_deg", "per_joint_angle_rmse_deg", "angle_difference",
-           "shared_markers", "marker_positions", "score_markers", "knee_flexion_from_points"]
+           "shared_markers", "marker_positions", "score_markers", "knee_flexion_from_points",
+           "body_frames", "offset_removed_errors_mm", "heading_errors_deg"]
 
 
 class MetricsError(ValueError):
@@ -64,6 +65,77 @@ def joint_errors_mm(pred_joints, true_joints) -> np.ndarray:
     """
     P, T = _pair(pred_joints, true_joints)
     return 1e3 * np.linalg.norm(P - T, axis=-1)
+
+
+def body_frames(true_joints, left_hip: int, right_hip: int) -> np.ndarray:
+    """Per-frame body axes ``(F, 3, 3)`` from the true hips, world z up: columns ``lateral`` (the
+    horizontal direction from the right hip to the left), ``forward`` (``up × lateral``) and ``up``.
+
+    A frame whose hips are vertically aligned (no horizontal hip axis) takes the previous frame's axes
+    (the world axes if it is the first). Used to express a joint's offset in the body, so that an offset of
+    definition (the same joint placed differently by two skeletons) stays one vector while the body turns.
+    """
+    T = _points("true_joints", true_joints)
+    a = T[:, left_hip] - T[:, right_hip]
+    a[:, 2] = 0.0
+    n = np.linalg.norm(a, axis=-1)
+    R = np.empty((T.shape[0], 3, 3))
+    last = np.eye(3)
+    for f in range(T.shape[0]):
+        if n[f] > 1e-6:
+            x = a[f] / n[f]
+            last = np.column_stack([x, np.cross([0.0, 0.0, 1.0], x), [0.0, 0.0, 1.0]])
+        R[f] = last
+    return R
+
+
+def heading_errors_deg(pred_joints, true_joints, left_hip: int, right_hip: int) -> np.ndarray:
+    """Per frame, the angle ``(F,)`` in degrees (0-180) between the estimated and the true horizontal hip
+    axes (right hip to left hip): near 180° the body is tracked facing backwards (a silhouette seen from the
+    front looks nearly like one seen from the back)."""
+    P, T = _pair(pred_joints, true_joints)
+    a = (P[:, left_hip] - P[:, right_hip])[:, :2]
+    b = (T[:, left_hip] - T[:, right_hip])[:, :2]
+    c = np.sum(a * b, axis=1) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-12)
+    return np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+def offset_removed_errors_mm(pred_joints, true_joints, frames=None) -> tuple[np.ndarray, np.ndarray]:
+    """Joint errors with each joint's mean offset removed: the error of the motion, not of where a
+    skeleton puts its joint centres.
+
+    Two skeletons may define a joint at different places in the body (a mesh rig's hip joint 1-2 cm below
+    its pelvis, a capsule model's 5 cm; a peer system's keypoints): a constant offset in the body then adds
+    to every frame's Eq. 20 error. Here each joint's error vector ``x̂_i − x_i`` is expressed in the body
+    frame ``frames`` (:func:`body_frames`; None = the world axes), averaged over the frames, and that mean
+    offset ``o_i`` is removed: ``‖x̂_i − x_i − R o_i‖``.
+
+    Parameters
+    ----------
+    pred_joints, true_joints : (F, M, 3) array_like
+        Estimated and true joint centres, metres, same markers in the same order.
+    frames : (F, 3, 3) array_like, optional
+        Body axes (columns) per frame.
+
+    Returns
+    -------
+    errors : (F, M) ndarray
+        Millimetres, after removing the offsets.
+    offsets : (M, 3) ndarray
+        The mean offsets ``o_i`` in the body frame (lateral, forward, up), millimetres.
+    """
+    P, T = _pair(pred_joints, true_joints)
+    D = P - T
+    if frames is None:
+        R = np.broadcast_to(np.eye(3), (P.shape[0], 3, 3))
+    else:
+        R = np.asarray(frames, dtype=float)
+        if R.shape != (P.shape[0], 3, 3):
+            raise MetricsError(f"frames: expected shape ({P.shape[0]}, 3, 3), received {R.shape}")
+    local = np.einsum("fji,fmj->fmi", R, D)        # R^T d
+    o = local.mean(axis=0)
+    rest = D - np.einsum("fij,mj->fmi", R, o)
+    return 1e3 * np.linalg.norm(rest, axis=-1), 1e3 * o
 
 
 def frame_errors_mm(pred_joints, true_joints) -> np.ndarray:
@@ -243,7 +315,14 @@ def score_markers(model, poses, truth_names, truth_markers) -> dict:
         ``frames``, ``mpjpe_mm``, ``median_frame_error_mm``, ``max_frame_error_mm``,
         ``worst_frame`` (index into the F frames), ``knee_rmse_deg`` (NaN without hips, knees and
         ankles on both sides), ``markers`` (names compared), ``frame_errors_mm`` (F,),
-        ``per_marker_mm`` (name -> mean), ``knee_errors_deg`` ((F, 2) estimate - truth, left/right).
+        ``per_marker_mm`` (name -> mean), ``knee_errors_deg`` ((F, 2) estimate - truth, left/right);
+        and the same error with each joint's mean offset in the body removed
+        (:func:`offset_removed_errors_mm`, body axes from the true hips, else the world axes):
+        ``offset_removed_mpjpe_mm``, ``offset_removed_max_frame_error_mm``, ``offset_removed_frame_errors_mm``
+        (F,), ``per_marker_offset_mm`` (name -> [lateral, forward, up] mean offset, mm); with both hips,
+        ``heading_errors_deg`` (F,) (:func:`heading_errors_deg`) and ``backwards_share`` (the share of frames
+        whose heading is more than 90° off); with both legs, ``offset_removed_knee_rmse_deg`` (the knee angles
+        from the estimate's joints moved by their mean offsets).
     """
     X = _poses("poses", poses, model.dof)
     T = _points("truth_markers", truth_markers)
@@ -262,6 +341,16 @@ def score_markers(model, poses, truth_names, truth_markers) -> dict:
            "max_frame_error_mm": float(fe.max()), "worst_frame": int(np.argmax(fe)), "markers": shared,
            "frame_errors_mm": fe, "per_marker_mm": {n: float(v) for n, v in zip(shared, je.mean(axis=0))},
            "knee_rmse_deg": float("nan"), "knee_errors_deg": None}
+    hips = [shared.index(n) for n in ("left_hip", "right_hip") if n in shared]
+    B = body_frames(Pt, *hips) if len(hips) == 2 else None
+    if len(hips) == 2:
+        he = heading_errors_deg(Pe, Pt, *hips)
+        out.update(heading_errors_deg=he, backwards_share=float(np.mean(he > 90.0)))
+    je0, off = offset_removed_errors_mm(Pe, Pt, B)
+    fe0 = je0.mean(axis=1)
+    out.update(offset_removed_mpjpe_mm=float(fe0.mean()), offset_removed_max_frame_error_mm=float(fe0.max()),
+               offset_removed_frame_errors_mm=fe0,
+               per_marker_offset_mm={n: [round(float(c), 1) for c in v] for n, v in zip(shared, off)})
     sides = [s for s in ("left", "right") if all(f"{s}_{j}" in shared for j in ("hip", "knee", "ankle"))]
     if sides:
         def ang(P, s):
@@ -269,4 +358,10 @@ def score_markers(model, poses, truth_names, truth_markers) -> dict:
         ke = np.stack([np.rad2deg(ang(Pe, s) - ang(Pt, s)) for s in sides], axis=1)
         out["knee_rmse_deg"] = float(np.sqrt(np.mean(ke ** 2)))
         out["knee_errors_deg"] = ke
+        # the same angles from the estimate's joints moved by their mean offsets (a hip defined 5 cm further
+        # forward tilts the thigh by ~6°, a bias of definition in every frame's knee angle)
+        R = np.broadcast_to(np.eye(3), (Pe.shape[0], 3, 3)) if B is None else B
+        Pc = Pe - np.einsum("fij,mj->fmi", R, off / 1e3)
+        kc = np.stack([np.rad2deg(ang(Pc, s) - ang(Pt, s)) for s in sides], axis=1)
+        out["offset_removed_knee_rmse_deg"] = float(np.sqrt(np.mean(kc ** 2)))
     return out

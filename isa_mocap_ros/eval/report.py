@@ -78,6 +78,12 @@ def score(model, seq, poses_by_stamp: dict) -> dict | None:
                                   "knee_rmse_deg", "markers")}
         out["frame_errors_mm"] = [round(float(e), 2) for e in sc["frame_errors_mm"]]
         out["per_marker_mm"] = sc["per_marker_mm"]
+        out["offset_removed_mpjpe_mm"] = sc["offset_removed_mpjpe_mm"]
+        out["offset_removed_max_frame_error_mm"] = sc["offset_removed_max_frame_error_mm"]
+        out["per_marker_offset_mm"] = sc["per_marker_offset_mm"]
+        for k in ("backwards_share", "offset_removed_knee_rmse_deg"):
+            if k in sc:
+                out[k] = sc[k]
         out.update(scored_by="markers", stamps=stamps, worst_frame_stamp_ns=int(stamps[sc["worst_frame"]]))
         return out
     if not seq.has_truth:

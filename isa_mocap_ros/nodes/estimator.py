@@ -2,7 +2,8 @@
 
 Subscribes (relative names, launched in ``/mocap``): ``cam<i>/mask`` (mono8, sensor-data QoS),
 ``cam<i>/camera_info``, latched ``cam<i>/extrinsics`` (world -> camera optical frame),
-``prediction/joint_states`` and, with ``publish_overlay``, ``cam<i>/image_raw``.
+``prediction/joint_states``, with ``publish_overlay`` ``cam<i>/image_raw``, and with ``keypoint_weight`` > 0
+the keypoint node's ``cam<i>/keypoints`` (``PolygonStamped``) and ``cam<i>/keypoints_skipped`` (``Header``).
 
 Publishes ``joint_states`` (JointState, ``model.dof_names``; root rotation as roll/pitch/yaw so
 the exported URDF draws it), ``root_pose`` (PoseStamped), ``markers`` (MarkerArray skeleton),
@@ -16,6 +17,15 @@ worker thread runs the tracker so callbacks never block. In real-time mode a fra
 while the tracker is busy is replaced by a newer one and counted as dropped; in lockstep mode every
 set is processed and the estimator waits up to ``prediction_wait_s`` for the prediction node's
 prediction of that frame.
+
+Keypoints (``keypoint_weight`` > 0, docs/keypoints.md): a keypoint message belongs to the frame set of its
+stamp and view; the tracker gets the set's keypoints with its masks. The keypoint node detects on some
+frames only and says so for the others (``keypoints_skipped``): in lockstep the estimator waits up to
+``keypoint_wait_s`` until each view of the set has one or the other (so the player, which waits for
+``estimator/done``, waits for the keypoint node too, and a replay is deterministic); in real time up to
+``keypoint_realtime_wait_s`` (30 ms), then the set is tracked with the keypoints that have arrived. A malformed keypoint message (not 0 or 33 points, a
+non-finite pixel, a confidence outside [0, 1]) or one whose stamp lies far from the frame sets is dropped
+with one line and counted (in lockstep the frame still waits for its view's own message).
 
 Input checks, before anything reaches the synchronizer or the tracker (:mod:`isa_mocap_ros.intake`):
 a view's camera is what a ``camera_info`` and a mask of the same stamp agree on (frame id, size); a
@@ -37,7 +47,7 @@ from collections import deque
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Point, PoseStamped
+from geometry_msgs.msg import Point, PolygonStamped, PoseStamped
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import ColorRGBA, Header, String
@@ -60,9 +70,11 @@ from isa_mocap_ros.vision import Camera
 from isa_mocap_ros.vision.overlay import draw_overlay
 
 
-#: TrackerConfig fields that are not parameters of this node: the keypoint term needs keypoints, which the
-#: node does not take (``isa-mocap track --keypoint-weight`` does)
-NOT_PARAMETERS = ("keypoint_weight", "keypoint_sigma_m")
+#: TrackerConfig fields that are not parameters of this node (none: every setting is one)
+NOT_PARAMETERS: tuple[str, ...] = ()
+
+#: keypoint messages (or skip notices) kept per view while their frame set is on its way
+KEYPOINT_DEPTH = 64
 
 #: distinct child frames kept per view from cam<i>/extrinsics (the one the view's masks name is used)
 MAX_CAMERA_FRAMES = 8
@@ -75,7 +87,8 @@ EXPECTED_NOTES = ("initialized automatically", "heading check", "initialization 
                   "no usable view and no estimate yet", "contour stage: stopped", "limb stage: ",
                   "prediction: the external one follows the estimates from before the heading check")
 _EXPECTED_NOTE_PATTERNS = (re.compile(r"view \d+: empty mask \(nobody in view\)"),
-                           re.compile(r"(pelvis|torso|limb|refinement|contour) stage skipped"))
+                           re.compile(r"(pelvis|torso|limb|refinement|contour) stage skipped"),
+                           re.compile(r"keypoints: (\d+ in \d+ views|none usable)"))
 
 
 def note_is_expected(note: str) -> bool:
@@ -119,6 +132,13 @@ class EstimatorNode(Node):
         degrade_headroom = declare(self, "degrade_headroom", 0.85, "degrade: a budget fits when its step time is "
                                    "below this share of frame_period_s", lo=0.05, hi=1.0)
         self.use_prediction = declare(self, "use_prediction", True, "use prediction/joint_states when it arrives")
+        self.keypoint_wait_s = declare(self, "keypoint_wait_s", 10.0, "lockstep, keypoint_weight > 0: longest wait "
+                                       "for a view's keypoints (or the keypoint node's skip notice) of a frame set",
+                                       lo=0.0, hi=600.0)
+        self.keypoint_realtime_wait_s = declare(
+            self, "keypoint_realtime_wait_s", 0.03, "real time, keypoint_weight > 0: longest wait for a view's "
+            "keypoints or skip notice (a skip notice comes at once, a detection ~10 ms after the mask on an idle "
+            "core; 0 = take what has arrived)", lo=0.0, hi=10.0)
         self.prediction_wait_s = declare(self, "prediction_wait_s", 1.0,
                                          "lockstep: longest wait for a frame's prediction", lo=0.0, hi=60.0)
         self.frame_period_s = declare(self, "frame_period_s", 1.0 / 30.0,
@@ -162,6 +182,10 @@ class EstimatorNode(Node):
         self._camera_changed: str | None = None   # a view's camera changed after the tracker was made
         self._images: list[dict[int, np.ndarray]] = [{} for _ in range(self.n_views)]
         self._predictions: dict[int, np.ndarray] = {}
+        # per view: stamp -> (uv, confidence) or None (looked, nobody / skipped / dropped as bad)
+        self._keypoints: list[dict[int, tuple | None]] = [{} for _ in range(self.n_views)]
+        self.use_keypoints = self.tracker_config.keypoints.keypoint_weight > 0
+        self.keypoint_sets = 0          # frame sets tracked with keypoints
         self._prev_stamp_ns: int | None = None   # stamp of the last frame set given to the tracker
         self.tracker = None
         self.frames_done = 0
@@ -184,6 +208,11 @@ class EstimatorNode(Node):
             if self.overlay:
                 self.create_subscription(Image, f"cam{v}/image_raw", self._image_cb(v), sensor)
         self.create_subscription(JointState, "prediction/joint_states", self._prediction_cb, qos.RELIABLE)
+        if self.use_keypoints:
+            for v in range(self.n_views):
+                self.create_subscription(PolygonStamped, f"cam{v}/keypoints", self._keypoints_cb(v), qos.RELIABLE,
+                                         qos_overriding_options=QOS_OVERRIDES)
+                self.create_subscription(Header, f"cam{v}/keypoints_skipped", self._skipped_cb(v), qos.RELIABLE)
         self.pub_js = self.create_publisher(JointState, "joint_states", qos.RELIABLE,
                                             qos_overriding_options=QOS_OVERRIDES)
         self.pub_root = self.create_publisher(PoseStamped, "root_pose", qos.RELIABLE)
@@ -342,6 +371,62 @@ class EstimatorNode(Node):
                 del self._predictions[min(self._predictions)]
             self._cv.notify_all()
 
+    def _keypoints_cb(self, v: int):
+        def cb(msg: PolygonStamped) -> None:
+            stamp = ma.stamp_to_ns(msg.header)
+            try:
+                kp = ma.polygon_to_keypoints(msg)
+            except ma.AdapterError as exc:
+                self.problems.report(f"keypoints{v}", f"cam{v}/keypoints dropped: {exc}")
+                return
+            self._store_keypoints(v, stamp, kp, f"cam{v}/keypoints")
+        return cb
+
+    def _skipped_cb(self, v: int):
+        def cb(msg: Header) -> None:
+            self._store_keypoints(v, ma.stamp_to_ns(msg), None, f"cam{v}/keypoints_skipped")
+        return cb
+
+    def _store_keypoints(self, v: int, stamp: int, kp, topic: str) -> None:
+        with self._cv:
+            if self._stream.last_ns is not None and (far := self._stream.far(stamp)) is not None:
+                self.problems.report(f"keypoints{v}:stamp", f"{topic} dropped: {far}")
+                return
+            store = self._keypoints[v]
+            if stamp in store and store[stamp] is not None and kp is not None:
+                self.problems.report(f"keypoints{v}:twice", f"{topic} dropped: a second message for stamp {stamp}")
+                return
+            if stamp not in store or kp is not None:
+                store[stamp] = kp
+            while len(store) > KEYPOINT_DEPTH:
+                del store[min(store)]
+            self._cv.notify_all()
+
+    def _keypoints_for(self, frame_set) -> list | None:
+        """(Under ``_cv``.) The set's keypoints per view ((uv, confidence) or None), None when no view has any;
+        after waiting (lockstep ``keypoint_wait_s``, real time ``keypoint_realtime_wait_s``) until every view
+        with a mask has its message (keypoints or skip notice)."""
+        views = [v for v in range(self.n_views) if frame_set.items[v] is not None]
+        stamps = frame_set.stamps_ns
+        wait_s = self.keypoint_wait_s if self.lockstep else self.keypoint_realtime_wait_s
+        deadline = time.monotonic() + wait_s
+        while missing := [v for v in views if stamps[v] not in self._keypoints[v]]:
+            left = deadline - time.monotonic()
+            if left <= 0 or self._stop.is_set():
+                text = (f"frame set {frame_set.stamp_ns}: no keypoints or skip notice from views {missing} within "
+                        f"{wait_s:.3f} s; tracked without them")
+                if self.lockstep:
+                    self.problems.report("nokeypoints", text)
+                else:                       # real time: a late detection is expected under load
+                    self.problems.event("nokeypoints", text)
+                break
+            self._cv.wait(min(left, 0.05))
+        out = [self._keypoints[v].get(stamps[v]) if v in views else None for v in range(self.n_views)]
+        for v in views:         # this set's and older ones are done with
+            for s in [s for s in self._keypoints[v] if s <= stamps[v]]:
+                del self._keypoints[v][s]
+        return out if any(o is not None for o in out) else None
+
     def _poll_partial(self) -> None:
         with self._cv:
             for s in self.sync.poll(time.monotonic()):
@@ -387,11 +472,13 @@ class EstimatorNode(Node):
         self.get_logger().info(f"estimator: ready (warm-up {time.monotonic() - t0:.1f} s)")
 
     def _wait_for_inputs(self) -> None:
-        """Wait (bounded) until the mask and prediction publishers are in the graph, so a replay
+        """Wait (bounded) until the mask, prediction (and keypoint) publishers are in the graph, so a replay
         started on "ready" loses no frame to discovery."""
         deadline = time.monotonic() + self.wait_for_inputs_s
         topics = [f"cam{v}/mask" for v in range(self.n_views)] + (["prediction/joint_states"]
                                                                   if self.use_prediction else [])
+        if self.use_keypoints:       # the keypoint node loads its model: a replay before it would lose frames
+            topics += [f"cam{v}/keypoints" for v in range(self.n_views)]
         missing = topics
         while self.wait_for_inputs_s > 0 and not self._stop.is_set():
             missing = [t for t in topics if self.count_publishers(self.resolve_topic_name(t)) == 0]
@@ -438,8 +525,9 @@ class EstimatorNode(Node):
                     if prediction is None and self.lockstep:
                         self.problems.report("noprediction", f"no prediction for frame {frame_set.stamp_ns} "
                                              f"within {self.prediction_wait_s:.2f} s; using the estimator's own")
+                keypoints = self._keypoints_for(frame_set) if self.use_keypoints else None
             try:
-                self._process(frame_set, prediction, t_ready)
+                self._process(frame_set, prediction, t_ready, keypoints)
                 if self.tracker is not None and self.tracker.initialized and not self.tracker.checking_heading:
                     with self._cv:
                         if self.slot.held:
@@ -454,7 +542,7 @@ class EstimatorNode(Node):
                 except Exception:  # noqa: BLE001 - the context may have gone meanwhile
                     return
 
-    def _process(self, frame_set, prediction_msg, t_ready: float) -> None:
+    def _process(self, frame_set, prediction_msg, t_ready: float, keypoints=None) -> None:
         if self._camera_changed is not None and self.tracker is not None:
             self.tracker = None          # made again below with the new cameras; it initializes itself anew
             self._prev_stamp_ns = None
@@ -493,7 +581,9 @@ class EstimatorNode(Node):
         budget = self.governor.decision() if self.governor is not None else None
         result = self.tracker.step(masks, frame_set.stamp_ns, prediction=prediction, frames_elapsed=gap,
                                    contour_stage=not late and (budget is None or budget.contour_stage),
-                                   evals=None if budget is None or budget.level == 0 else budget.evals)
+                                   evals=None if budget is None or budget.level == 0 else budget.evals,
+                                   keypoints=keypoints)
+        self.keypoint_sets += keypoints is not None
         if self.governor is not None and result.x is not None and not result.initialized:
             self._govern(frame_set.stamp_ns, result)
         self.frames_done += 1
@@ -588,7 +678,7 @@ class EstimatorNode(Node):
             "optimizer": self.tracker_config.search.optimizer, "evals_per_frame": self.tracker_config.search.evals,
             "tracker_threads": self.threads_in_use,
             "energy": getattr(r, "energy", float("nan")), "evaluations": getattr(r, "n_evals", 0),
-            "views_used": getattr(r, "views_used", 0),
+            "views_used": getattr(r, "views_used", 0), "keypoint_sets": self.keypoint_sets,
             "latency_ms_p50": p50, "latency_ms_p95": p95,
             "tracker_ms_p50": t50, "tracker_ms_p95": t95, "init_ms": self.init_ms,
             # the budget under load (isa_mocap_ros.tracking.load): level 0 = full, its evaluations and contour stage

@@ -224,6 +224,8 @@ class ObjectiveConfig:
         Fast energy's sample size: model-template points per view (640).
     n_mask_points : int
         Fast energy's sample size: foreground pixels per view (384).
+    silhouette_core_px : float
+        Term 2 of Eq. 4 counts a foreground pixel by min(1, d / this), d its distance to the background, px: clothes and soft tissue at the silhouette's rim ask less to be covered (0 = Eq. 4 as printed).
     view_weights : bool
         Eq. 5's mean over views weighted by the share of the predicted body each view sees (True).
     prior_eta : float
@@ -236,6 +238,7 @@ class ObjectiveConfig:
     downsample: int = 1
     n_model_points: int = 640
     n_mask_points: int = 384
+    silhouette_core_px: float = 0.0
     view_weights: bool = True
     prior_eta: float = 0.0
     prior_file: str = ""
@@ -245,6 +248,7 @@ class ObjectiveConfig:
         _number("downsample", self.downsample, lo=1, integer=True)
         _number("n_model_points", self.n_model_points, lo=1, integer=True)
         _number("n_mask_points", self.n_mask_points, lo=0, integer=True)
+        _number("silhouette_core_px", self.silhouette_core_px, lo=0.0)
         _bool("view_weights", self.view_weights)
         _number("prior_eta", self.prior_eta, lo=0.0)
         if not isinstance(self.prior_file, (str, Path)):

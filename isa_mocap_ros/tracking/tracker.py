@@ -112,6 +112,7 @@ class Tracker:
             obj = config.objective
             energy = SilhouetteEnergy(model, cams, None, method=obj.energy, downsample=obj.downsample,
                                       n_model_points=obj.n_model_points, n_mask_points=obj.n_mask_points,
+                                      core_px=obj.silhouette_core_px,
                                       rng=np.random.default_rng([config.search.seed, 2**32 - 1]))
         if not (callable(energy) and hasattr(energy, "set_masks")):
             raise TrackerError(f"energy: expected an object with set_masks() and __call__, received "

@@ -1,0 +1,213 @@
+"""The mesh headline bench (issue 33 item 3): skinned human meshes, automatic initialization and shape.
+
+``isa-mocap bench mesh [--quick] [--seeds 0,...,7] [--frames N] [--conditions clean,noise70,occluders35]
+[--subjects slim_woman,average_man,heavy_man] [--jobs N] [--cache DIR] [--out DIR] [--json FILE]``.
+
+What a user meets: a person who is not the tracking model. Each subject (MakeHuman/MPFB2 meshes of
+``isa-mocap synth --subject``: a slim woman 1.60 m, an average man 1.78 m, a heavy man 1.88 m) walks (the
+generated walk, bag seed 0) in the default 4-view rig; the bags are rendered once per condition (clean, 70 %
+pixel noise, 35 occluding rectangles; :mod:`.robustness`'s renderer and cache) and tracked by ``isa-mocap
+track``'s code with **everything automatic**: the shape calibrated from the first frames' silhouettes
+(``--shape auto``), the automatic initialization, h-isa at 1500 evaluations per frame, all other settings the
+tracker's defaults; once per tracker seed (default 0-7; the calibration uses the same seed). Every frame is
+scored against the mesh skeleton's joint centres by name (no ground-truth model): mean joint error (Eq. 20),
+worst frame, knee angle in 3-D, the share of frames tracked facing backwards (hip axis more than 90° off),
+and the mean joint error with each joint's mean offset in the body removed (the mesh rig and the capsule
+model define some joints at different places: ``docs/decisions/012-joint-definitions.md``).
+
+Targets (issue 33; on the per-subject means over the seeds): clean mean joint error ≤ 30 mm, knee RMSE
+≤ 3°, no frame above 100 mm in any run, no run tracked facing backwards (a run counts as backwards when
+more than half of its frames are); 70 % noise and 35 occluders: knee RMSE ≤ 5°.
+
+Results go to ``--json`` (default ``docs/results/mesh.json``), which ``bench all`` renders as the headline
+of ``docs/RESULTS.md``. ``--quick``: one subject, 6 frames of 160x120, 300 evaluations, a 2-round
+calibration on 4 frames, seed 0 (a smoke test: the numbers say nothing).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from isa_mocap_ros.eval.compare import SequenceSpec
+
+from . import robustness as br
+
+SUBJECTS = ("slim_woman", "average_man", "heavy_man")
+CONDITIONS = ("clean", "noise70", "occluders35")
+#: frames tracked per run (2 s at 30 fps: the calibration's 30-frame window and as many again)
+FRAMES = 60
+#: (condition, what, limit, label) on every subject's mean over the seeds
+TARGETS = (("clean", "mpjpe_mm", 30.0, "clean: mean joint error ≤ 30 mm"),
+           ("clean", "knee_rmse_deg", 3.0, "clean: knee RMSE ≤ 3°"),
+           ("clean", "max_frame_error_mm", 100.0, "clean: no frame > 100 mm (worst run)"),
+           ("clean", "backwards_runs", 0.0, "clean: no run tracked facing backwards"),
+           ("noise70", "knee_rmse_deg", 5.0, "70 % pixel noise: knee RMSE ≤ 5°"),
+           ("occluders35", "knee_rmse_deg", 5.0, "35 occluders: knee RMSE ≤ 5°"))
+_QUICK_CALIB = (("calib_frames", 4), ("calib_rounds", 2), ("calib_evals", 120))
+
+
+def make_design(kind: str = "default", *, seeds=None, frames: int | None = None, subjects=None,
+                conditions=None, tracker=()) -> br.RobustDesign:
+    """``"default"`` (3 subjects x 3 conditions x seeds 0-7, 60 frames) or ``"quick"`` (the smoke test);
+    ``tracker``: ``track`` options beyond the defaults, (name, value) pairs (e.g. ``("keypoint_weight", 1.0)``)."""
+    tracker = tuple((str(k), v) for k, v in tracker)
+    subjects = tuple(subjects or (SUBJECTS[1:2] if kind == "quick" else SUBJECTS))
+    conditions = tuple(conditions or (("clean",) if kind == "quick" else CONDITIONS))
+    bad = [s for s in subjects if s not in ("slim_woman", "average_man", "heavy_man", "random")]
+    if bad or not subjects:
+        raise ValueError(f"subjects: expected some of slim_woman, average_man, heavy_man, random, received {bad}")
+    known = [c[0] for c in br.CONDITIONS]
+    if not conditions or any(c not in known for c in conditions):
+        raise ValueError(f"conditions: expected some of {', '.join(known)}, received {list(conditions)}")
+    if kind == "quick":
+        seqs = tuple(SequenceSpec(s, "walk", duration_s=6 / 30, **{**br.SEQUENCE_DEFAULTS, "width": 160, "height": 120},
+                                  subject=s) for s in subjects)
+        seeds = tuple(seeds or (0,))
+        return br.RobustDesign("mesh quick", seqs, conditions, "h-isa", 300, seeds[0], "auto", seeds=seeds,
+                               shape="auto", calib=_QUICK_CALIB, tracker=tracker)
+    if kind != "default":
+        raise ValueError(f"kind: expected 'quick' or 'default', received {kind!r}")
+    n = int(frames or FRAMES)
+    if n < 2:
+        raise ValueError(f"frames: expected an integer >= 2, received {frames!r}")
+    seqs = tuple(SequenceSpec(s, "walk", duration_s=n / 30.0, **br.SEQUENCE_DEFAULTS, subject=s) for s in subjects)
+    seeds = tuple(seeds or br.DEFAULT_SEEDS)
+    return br.RobustDesign("mesh", seqs, conditions, "h-isa", 1500, seeds[0], "auto", seeds=seeds, shape="auto",
+                           tracker=tracker)
+
+
+def summarize(runs: list[dict]) -> dict:
+    """Per condition and subject: means over the seeds (and the worst run's frame); per condition the mean
+    over the subjects; the targets."""
+    out: dict = {"conditions": []}
+    for cond in dict.fromkeys(r["condition"] for r in runs):
+        rs = [r for r in runs if r["condition"] == cond]
+        per: dict = {}
+        for subj in dict.fromkeys(r["sequence"] for r in rs):
+            q = [r for r in rs if r["sequence"] == subj]
+            per[subj] = {"runs": len(q),
+                         "mpjpe_mm": float(np.mean([r["mpjpe_mm"] for r in q])),
+                         "offset_removed_mpjpe_mm": float(np.mean([r["offset_removed_mpjpe_mm"] for r in q])),
+                         "knee_rmse_deg": float(np.mean([r["knee_rmse_deg"] for r in q])),
+                         "offset_removed_knee_rmse_deg": float(np.mean([r.get("offset_removed_knee_rmse_deg", np.nan)
+                                                                        for r in q])),
+                         "max_frame_error_mm": float(max(r["max_frame_error_mm"] for r in q)),
+                         "mpjpe_range_mm": [float(min(r["mpjpe_mm"] for r in q)), float(max(r["mpjpe_mm"] for r in q))],
+                         "backwards_runs": int(sum(r["backwards_share"] > 0.5 for r in q))}
+        mean = {k: float(np.mean([v[k] for v in per.values()]))
+                for k in ("mpjpe_mm", "offset_removed_mpjpe_mm", "knee_rmse_deg", "offset_removed_knee_rmse_deg")}
+        mean["max_frame_error_mm"] = float(max(v["max_frame_error_mm"] for v in per.values()))
+        mean["backwards_runs"] = int(sum(v["backwards_runs"] for v in per.values()))
+        out["conditions"].append({"condition": cond, "label": br._cond(cond)[1], "per_subject": per, **mean})
+    tg = []
+    for cond, what, limit, label in TARGETS:
+        c = next((x for x in out["conditions"] if x["condition"] == cond), None)
+        if c is None:
+            tg.append({"target": label, "measured": None, "met": None})
+            continue
+        vals = {s: v[what] for s, v in c["per_subject"].items()}
+        tg.append({"target": label, "measured": vals, "met": all(v <= limit for v in vals.values())})
+    out["targets"] = tg
+    return out
+
+
+def collect(design: br.RobustDesign, *, cache: Path, out: Path, jobs: int = 2, progress: bool = True) -> dict:
+    res = br.collect(design, cache=cache, out=out, progress=progress, jobs=jobs)
+    return {"design": res["design"], "runs": res["runs"], **summarize(res["runs"]), "seconds": res["seconds"],
+            "jobs": res["jobs"]}
+
+
+def _fmt(v, f="{:.1f}") -> str:
+    return "–" if v is None or not np.isfinite(v) else f.format(v)
+
+
+def render_markdown(res: dict) -> str:
+    """Tables of :func:`collect`'s output: per condition and subject, then the targets."""
+    d = res["design"]
+    seeds = d.get("seeds") or [d["seed"]]
+    L = []
+    if d["name"] == "mesh quick":
+        L += ["> **Smoke run** (`isa-mocap bench mesh --quick`): the numbers say nothing about the tracker.", ""]
+    seq = d["sequences"][0]
+    full = (list(seeds) == list(br.DEFAULT_SEEDS) and list(d["conditions"]) == list(CONDITIONS)
+            and round(seq["duration_s"] * seq["fps"]) == FRAMES and len(d["sequences"]) == len(SUBJECTS))
+    if d["name"] != "mesh quick" and not full:
+        L += [f"> **Reduced run** (`{res.get('command', 'isa-mocap bench mesh')}`): fewer seeds, conditions or frames "
+              f"than the design ({len(SUBJECTS)} subjects x {len(CONDITIONS)} conditions x 8 seeds, {FRAMES} frames); "
+              "`make bench` runs it in full.", ""]
+    L += [f"Skinned human meshes (MakeHuman/MPFB2), generated walk, {round(seq['duration_s'] * seq['fps'])} frames, "
+          f"4 views {seq['width']}x{seq['height']}; shape calibrated from the images, automatic initialization, "
+          f"{d['optimizer']} {d['evals']} evaluations per frame, tracker seeds {', '.join(map(str, seeds))}"
+          + "".join(f", {k} {v}" for k, v in d.get("tracker") or ()) + "; every "
+          "frame scored against the mesh skeleton's joint centres. *Offset removed*: each joint's mean offset in the "
+          "body removed (the two skeletons' joint definitions differ; decision 012).", "",
+          "| condition | subject | mean joint error | offset removed | knee RMSE | offset removed | worst frame (worst run) | "
+          "runs backwards |", "|---|---|---|---|---|---|---|---|"]
+    for c in res["conditions"]:
+        for s, v in c["per_subject"].items():
+            L.append(f"| {c['label']} | {s} | {v['mpjpe_mm']:.1f} mm ({v['mpjpe_range_mm'][0]:.1f}-"
+                     f"{v['mpjpe_range_mm'][1]:.1f}) | {v['offset_removed_mpjpe_mm']:.1f} mm | {v['knee_rmse_deg']:.2f}° | "
+                     f"{_fmt(v.get('offset_removed_knee_rmse_deg'), '{:.2f}')}° | "
+                     f"{v['max_frame_error_mm']:.1f} mm | {v['backwards_runs']} of {v['runs']} |")
+        L.append(f"| {c['label']} | **mean** | **{c['mpjpe_mm']:.1f} mm** | **{c['offset_removed_mpjpe_mm']:.1f} mm** | "
+                 f"**{c['knee_rmse_deg']:.2f}°** | **{_fmt(c.get('offset_removed_knee_rmse_deg'), '{:.2f}')}°** | "
+                 f"{c['max_frame_error_mm']:.1f} mm | {c['backwards_runs']} |")
+    L += ["", "| target (issue 33) | measured (per subject) | status |", "|---|---|---|"]
+    for t in res["targets"]:
+        m = "not run" if t["measured"] is None else ", ".join(f"{s} {_fmt(v, '{:.2f}')}" for s, v in t["measured"].items())
+        L.append(f"| {t['target']} | {m} | {'not tested' if t['met'] is None else ('met' if t['met'] else 'not met')} |")
+    L += ["", f"Wall time {res['seconds'] / 60:.1f} min with {res['jobs']} worker(s) (no speed claims)."]
+    return "\n".join(L)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quick", action="store_true", help="smoke test: one subject, 6 small frames, seed 0")
+    p.add_argument("--seeds", default=None, metavar="A,B", help="tracker seeds (default 0-7)")
+    p.add_argument("--frames", type=int, default=None, metavar="N", help=f"frames per run (default {FRAMES})")
+    p.add_argument("--subjects", default=None, metavar="A,B", help=f"mesh subjects (default {','.join(SUBJECTS)})")
+    p.add_argument("--conditions", default=None, metavar="A,B", help=f"conditions (default {','.join(CONDITIONS)})")
+    p.add_argument("--keypoint-weight", type=float, default=None, metavar="W",
+                   help="track with the learned-keypoint term (docs/keypoints.md; default off)")
+    p.add_argument("--keypoint-every", type=int, default=None, metavar="K",
+                   help="with --keypoint-weight: keypoints on the initialized and every K-th frame (default 0)")
+    p.add_argument("--silhouette-core-px", type=float, default=None, metavar="PX",
+                   help="the tracker's silhouette_core_px (docs/energy.md; default the tracker's)")
+    p.add_argument("--jobs", type=int, default=2, metavar="N", help="worker processes (default 2)")
+    p.add_argument("--cache", default=None, metavar="DIR", help="rendered bags (default OUT/cache)")
+    p.add_argument("--out", default=None, metavar="DIR", help="work directory (default: a temporary one)")
+    p.add_argument("--json", default="docs/results/mesh.json", metavar="FILE", help="where to write the results")
+
+
+def _names(v):
+    return None if v is None else tuple(x.strip() for x in str(v).split(",") if x.strip())
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        seeds = None if args.seeds is None else tuple(int(x) for x in _names(args.seeds))
+        tracker = tuple((k, getattr(args, k)) for k in ("keypoint_weight", "keypoint_every", "silhouette_core_px")
+                        if getattr(args, k, None) is not None)
+        design = make_design("quick" if args.quick else "default", seeds=seeds, frames=args.frames,
+                             subjects=_names(args.subjects), conditions=_names(args.conditions), tracker=tracker)
+        if args.jobs < 1:
+            raise ValueError(f"--jobs: expected an integer >= 1, received {args.jobs}")
+    except ValueError as exc:
+        print(f"isa-mocap bench mesh: error: {exc}", file=sys.stderr)
+        return 2
+    out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="isa_mocap_mesh_"))
+    cache = Path(args.cache) if args.cache else out / "cache"
+    t0 = time.perf_counter()
+    res = collect(design, cache=cache, out=out, jobs=args.jobs)
+    res["seconds"] = round(time.perf_counter() - t0, 1)
+    res["command"] = "isa-mocap bench mesh " + " ".join(sys.argv[3:])
+    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.json).write_text(json.dumps(res, default=float) + "\n")
+    print(render_markdown(res))
+    print(f"bench mesh: wrote {args.json}")
+    return 0

@@ -1,0 +1,48 @@
+"""``isa-mocap bench mesh``: the mesh headline bench (automatic shape and initialization), its smoke run."""
+import json
+
+import numpy as np
+import pytest
+
+from isa_mocap_ros.bench import mesh as bm
+from isa_mocap_ros.cli.main import main
+
+
+def test_quick_runs_the_automatic_path_and_scores_it(tmp_path, capsys):
+    js = tmp_path / "mesh.json"
+    assert main(["bench", "mesh", "--quick", "--jobs", "1", "--out", str(tmp_path / "w"), "--json", str(js)]) == 0
+    res = json.loads(js.read_text())
+    d = res["design"]
+    assert d["shape"] == "auto" and d["init"] == "auto" and d["body"] == "mesh"
+    (run,) = res["runs"]
+    assert run["frames"] == 6 and run["init"] != "ground truth"
+    for k in ("mpjpe_mm", "offset_removed_mpjpe_mm", "knee_rmse_deg", "max_frame_error_mm", "backwards_share"):
+        assert np.isfinite(run[k]), k
+    assert np.isfinite(run["offset_removed_knee_rmse_deg"])
+    assert run["offset_removed_mpjpe_mm"] <= run["mpjpe_mm"]
+    (c,) = res["conditions"]
+    assert c["per_subject"]["average_man"]["mpjpe_mm"] == pytest.approx(run["mpjpe_mm"])
+    assert [t["met"] for t in res["targets"]][-2:] == [None, None]      # noise and occluders not run
+    out = capsys.readouterr().out
+    assert "| target (issue 33) |" in out and "Smoke run" in out
+
+
+def test_design_and_targets():
+    d = bm.make_design("default")
+    assert [s.subject for s in d.sequences] == ["slim_woman", "average_man", "heavy_man"]
+    assert d.seeds == tuple(range(8)) and d.evals == 1500 and d.optimizer == "h-isa"
+    assert d.shape == "auto" and d.init == "auto" and d.conditions == ("clean", "noise70", "occluders35")
+    assert round(d.sequences[0].duration_s * 30) == 60
+    assert dict(bm.make_design("default", tracker=[("keypoint_weight", 1.0)]).tracker) == {"keypoint_weight": 1.0}
+    with pytest.raises(ValueError, match="subjects"):
+        bm.make_design("default", subjects=("giant",))
+    with pytest.raises(ValueError, match="conditions"):
+        bm.make_design("default", conditions=("fog",))
+    run = {"condition": "clean", "mpjpe_mm": 20.0, "offset_removed_mpjpe_mm": 12.0, "knee_rmse_deg": 2.0,
+           "max_frame_error_mm": 90.0, "backwards_share": 0.0}
+    runs = [dict(run, sequence="a"), dict(run, sequence="b", max_frame_error_mm=120.0, backwards_share=0.8)]
+    s = bm.summarize(runs)
+    t = {x["target"]: x["met"] for x in s["targets"]}
+    assert t["clean: mean joint error ≤ 30 mm"] and t["clean: knee RMSE ≤ 3°"]
+    assert not t["clean: no frame > 100 mm (worst run)"] and not t["clean: no run tracked facing backwards"]
+    assert s["conditions"][0]["backwards_runs"] == 1
