@@ -21,8 +21,9 @@ after the other on the same machine:
    the top functions by own CPU time;
 4. **network**: ``isa-mocap run``'s code (:mod:`isa_mocap_ros.cli.run`: segmentation, prediction and
    estimator nodes and a recorder, each its own process, over DDS on localhost) on ``bags/demo``,
-   three times (:data:`NETWORK_MODES`): in real time (rate 1.0: frames the estimator cannot keep up
-   with are dropped), in real time with a CPU-bound process beside it (one core busy,
+   four times (:data:`NETWORK_MODES`): in real time (rate 1.0: frames the estimator cannot keep up
+   with are dropped), the same with segmentation, prediction and estimator in one process
+   (``--single-process``), in real time with a CPU-bound process beside it (one core busy,
    :func:`busy_core`), and in lockstep: frame sets processed per second of replay, the real-time
    factor (that rate over the bag's 30 frames/s), latency p50 / p95 (image received → estimate
    received, the recorder's clock), dropped frame sets (start-up included), and the mean joint error,
@@ -248,7 +249,9 @@ def frame_profile(bag: Path, *, frames: int, evals: int = 1500, optimizer: str =
 
 
 #: The network part's runs: (mode label, lockstep, a CPU-bound process beside it).
-NETWORK_MODES = (("real time", False, False), ("real time, one core busy", False, True), ("lockstep", True, False))
+#: (label, lockstep, one core busy, single process: ``isa-mocap run --single-process``)
+NETWORK_MODES = (("real time", False, False, False), ("real time, single process", False, False, True),
+                 ("real time, one core busy", False, True, False), ("lockstep", True, False, False))
 
 
 @contextlib.contextmanager
@@ -270,7 +273,7 @@ def busy_core(on: bool = True):
 
 
 def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path, lockstep: bool | None = None,
-                  busy: bool = False, shape: str = "auto") -> dict:
+                  busy: bool = False, shape: str = "auto", single: bool = False) -> dict:
     """``isa-mocap run`` on ``bag`` in real time (rate 1.0) or lockstep (``lockstep``, default: ``mode ==
     "lockstep"``), with a CPU-bound process beside it when ``busy`` (:func:`busy_core`), tracking with
     body shape ``shape`` (``isa-mocap run --shape``; the calibration runs before the replay); the
@@ -284,6 +287,7 @@ def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path, lockstep:
     argv = [str(bag), "--out", str(out), "--quiet", "--overlay-frames", "0", "--optimizer", optimizer,
             "--shape", shape]
     argv += ["--lockstep"] if lockstep else ["--rate", "1.0"]
+    argv += ["--single-process"] if single else []
     buf = io.StringIO()
     t0 = time.perf_counter()
     with contextlib.redirect_stdout(buf), busy_core(busy):
@@ -296,7 +300,7 @@ def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path, lockstep:
     bag_fps = _bag_fps(bag)
     keep = ("frame_sets_played", "frames_processed", "frames_estimated", "fps", "latency_ms_p50", "latency_ms_p95",
             "dropped_frames", "dropped_while_initializing", "frames_without_contour_stage", "budget_lowered", "track_resets", "init_ms", "tracker_ms_p50", "tracker_ms_p95", "mpjpe_mm", "knee_rmse_deg", "evals_per_frame", "optimizer")
-    r = {"mode": mode, "busy_core": bool(busy),
+    r = {"mode": mode, "busy_core": bool(busy), "single_process": bool(single),
          "body_shape": str(out / "body.yaml") if (out / "body.yaml").is_file() else (None if shape == "auto" else shape), **{k: s.get(k) for k in keep}, "bag_fps": bag_fps,
          "wall_seconds": round(wall, 1)}
     r["real_time_factor"] = (s["fps"] / bag_fps) if bag_fps and s.get("fps") and np.isfinite(s["fps"]) else None
@@ -342,11 +346,11 @@ def collect(args: argparse.Namespace) -> dict:
             modes = [m for m in NETWORK_MODES if m[1]] if args.quick else list(NETWORK_MODES)
             rows = []
             shape = "auto"          # calibrated by the first run; the others track with the same shape file
-            for label, lockstep, busy in modes:
+            for label, lockstep, busy, single in modes:
                 print(f"bench speed: node network on {nbag.name}, {label} ...", file=sys.stderr, flush=True)
                 try:
                     r = network_speed(nbag, mode=label, optimizer=args.optimizer, work=work, lockstep=lockstep,
-                                      busy=busy, shape=shape)
+                                      busy=busy, shape=shape, single=single)
                 except Exception as exc:  # noqa: BLE001 - one failed run is a row saying so, not a lost bench
                     r = {"mode": label, "busy_core": busy, "error": f"{type(exc).__name__}: {exc}"}
                 if shape == "auto" and r.get("body_shape"):
@@ -406,7 +410,7 @@ def render_markdown(res: dict) -> str:
     if not n["rows"]:
         L.append(f"Skipped ({n.get('skipped')}).")
     else:
-        L += [f"`bags/{n['bag']}`, segmentation + prediction + estimator + recorder processes over DDS (localhost); "
+        L += [f"`bags/{n['bag']}`, segmentation + prediction + estimator + recorder processes over DDS (localhost; single process: the first three in one process, `--single-process`); "
               "one core busy: a CPU-bound process (a Python busy loop) runs beside the network for the whole run. "
               "Dropped: frame sets played and not processed, start-up included (the share in brackets); latency: "
               "image received → joint_states received (the recorder's clock); vs lockstep: mean joint error "
@@ -472,7 +476,7 @@ def plot(res: dict, path: Path) -> Path:
     rows = res["tracker"]["rows"]
     fig, ax = plt.subplots(figsize=(6, 3.6))
     ax.plot([r["evals_per_frame"] for r in rows], [r["frames_per_s"] for r in rows], "bo-", label="offline tracker")
-    for r, st in zip(res["network"]["rows"], ("g--", "r-.", "m:")):
+    for r, st in zip(res["network"]["rows"], ("g--", "c-", "r-.", "m:")):
         if r.get("fps"):
             ax.axhline(r["fps"], color=st[0], ls=st[1:], label=f"network, {r['mode']} ({r.get('evals_per_frame')} evals)")
     ax.set_xlabel("evaluations per frame")
