@@ -199,6 +199,7 @@ class SequenceBuilder:
         self._truth: dict[int, tuple[list, np.ndarray]] = {}
         self._truth_markers: dict[int, np.ndarray] = {}
         self._model_text: str | None = None
+        self._reference_names: tuple | None = None
         self._notes: list[str] = []
 
     @staticmethod
@@ -250,6 +251,26 @@ class SequenceBuilder:
     def set_model_yaml(self, text: str) -> None:
         """The ``/mocap/ground_truth/model`` String."""
         self._model_text = str(text)
+
+    def set_reference_yaml(self, text: str) -> None:
+        """The ``/mocap/ground_truth/reference`` String (``isa-mocap import --reference``): names the
+        ground-truth markers when the bag has no model description naming them. The reference's names
+        (e.g. Pose2Sim's ``RKnee``) are mapped to our joints by
+        :data:`isa_mocap_ros.eval.trc.POSE2SIM_TO_JOINTS`."""
+        import yaml
+
+        from isa_mocap_ros.eval.trc import joint_names_of
+
+        try:
+            info = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            self._notes.append(f"/mocap/ground_truth/reference: not YAML ({str(exc).splitlines()[0]}); ignored")
+            return
+        names = info.get("marker_names") if isinstance(info, dict) else None
+        if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+            self._notes.append("/mocap/ground_truth/reference: expected a list of strings 'marker_names'; ignored")
+            return
+        self._reference_names = joint_names_of(names)
 
     def cameras(self) -> tuple:
         """The calibrated cameras so far (raises :class:`SequenceError` for an incomplete view)."""
@@ -305,6 +326,8 @@ class SequenceBuilder:
         if self._truth_markers:
             m = info.get("model") if isinstance(info, dict) else None
             names = m.get("marker_joints") if isinstance(m, dict) else None
+            if not isinstance(names, list) and self._reference_names is not None:
+                names = list(self._reference_names)
             sizes = {len(p) for p in self._truth_markers.values()}
             if not isinstance(names, list) or sizes != {len(names)}:
                 notes.append("ground-truth markers without names matching them in the model description "

@@ -109,3 +109,73 @@ def test_marker_helpers():
     assert P18.shape == (1, len(names), 3)
     with pytest.raises(MetricsError, match="unknown 'nose'"):
         marker_positions(m39, x, joints=["nose"])
+
+
+def test_offset_removed_error_by_hand():
+    """A constant offset per joint disappears; what changes over the frames stays; NaN = missing."""
+    from isa_mocap_ros.eval import offset_removed_errors_mm
+
+    rng = np.random.default_rng(0)
+    T = rng.normal(size=(6, 3, 3))
+    off = np.array([[0.05, 0, 0], [0, -0.02, 0.01], [0, 0, 0]])
+    P = T + off
+    P[2, 1, 0] += 0.010                             # one joint 10 mm off in one frame
+    e, o = offset_removed_errors_mm(P, T)
+    mean_off = np.array([0.010 / 6, 0, 0])          # that frame's 10 mm shifts the joint's mean offset too
+    want = np.zeros((6, 3))
+    want[:, 1] = 1e3 * np.linalg.norm(np.array([0.010, 0, 0]) * (np.arange(6) == 2)[:, None] - mean_off, axis=1)
+    np.testing.assert_allclose(e, want, atol=1e-9)
+    np.testing.assert_allclose(o[0], 1e3 * off[0], atol=1e-9)
+    T2 = T.copy()
+    T2[0, 0] = np.nan                              # missing in one frame: left out of the mean, NaN error
+    e2 = offset_removed_errors_mm(P, T2)[0]
+    assert np.isnan(e2[0, 0]) and np.allclose(e2[1:, 0], 0, atol=1e-9)
+    T2[:, 2] = np.nan                              # missing everywhere: NaN offset
+    assert np.all(np.isnan(offset_removed_errors_mm(P, T2)[1][2]))
+    with pytest.raises(MetricsError, match="true_joints: expected finite positions or NaN"):
+        offset_removed_errors_mm(P, np.where(T2 == T2, T2, np.inf))
+    with pytest.raises(MetricsError, match="pred_joints: expected finite"):
+        offset_removed_errors_mm(np.where(T2 == T2, T2, np.nan), T)
+
+
+def test_score_markers_reports_offsets_and_skips_missing_points():
+    """Against the model's own joint centres moved by a constant offset: raw error = the offset,
+    offset removed = 0; a missing (NaN) reference point is left out, not an error."""
+    from isa_mocap_ros.eval import marker_positions, score_markers
+
+    m = make_model(39)
+    rng = np.random.default_rng(1)
+    X = np.zeros((5, m.dof))
+    X[:, 2] = 1.0
+    X[:, 6:] = rng.normal(0, 0.2, size=(5, m.dof - 6))
+    names = ["left_knee", "right_knee", "head", "Nose"]     # Nose: no joint of ours, not scored
+    T = np.concatenate([marker_positions(m, X, joints=names[:3]), np.zeros((5, 1, 3))], axis=1)
+    T[:, 0] += [0.03, 0.0, 0.04]                   # 50 mm constant offset of the left knee
+    T[3, 1] = np.nan
+    sc = score_markers(m, X, names, T)
+    assert sc["markers"] == ["head", "left_knee", "right_knee"]
+    assert sc["per_marker_mm"]["left_knee"] == pytest.approx(50.0)
+    assert sc["per_marker_mm"]["right_knee"] == pytest.approx(0.0, abs=1e-9)
+    np.testing.assert_allclose(sc["per_marker_offset_mm"]["left_knee"], [-30.0, 0.0, -40.0])  # no hips: world axes
+    assert sc["offset_removed_mpjpe_mm"] == pytest.approx(0.0, abs=1e-9)
+    # frame 3 has two points; the others three
+    np.testing.assert_allclose(sc["frame_errors_mm"], [50 / 3, 50 / 3, 50 / 3, 25.0, 50 / 3])
+    assert sc["worst_frame"] == 3
+    with pytest.raises(MetricsError, match="NaN \\(missing\\) in every frame"):
+        score_markers(m, X, names, np.full_like(T, np.nan))
+
+
+def test_score_markers_counts_frames_facing_backwards():
+    from isa_mocap_ros.eval import marker_positions, score_markers
+
+    m = make_model(39)
+    X = np.zeros((4, m.dof))
+    X[:, 2] = 1.0
+    names = ["left_hip", "right_hip", "left_shoulder", "right_shoulder"]
+    T = marker_positions(m, X, joints=names)
+    X[2, 5] = np.pi                            # frame 2 turned about the vertical by 180 deg
+    X[3, 5] = np.radians(60)
+    sc = score_markers(m, X, names, T)
+    assert sc["frames_facing_backwards"] == 1
+    assert sc["backwards_share"] == pytest.approx(0.25)
+    np.testing.assert_allclose(sc["heading_errors_deg"], [0, 0, 180, 60], atol=1e-6)

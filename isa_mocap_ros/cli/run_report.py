@@ -132,9 +132,15 @@ def summary_rows(summary: dict) -> list[tuple[str, object]]:
     else one row saying so plainly."""
     if summary.get("ground_truth"):
         acc = [("frames (with ground truth)", summary.get("frames")),
-               ("mean joint error (mm)", summary.get("mpjpe_mm")),
-               ("max frame error (mm)", summary.get("max_frame_error_mm")),
-               ("knee RMSE (deg)", summary.get("knee_rmse_deg"))]
+               ("mean joint error (mm)", summary.get("mpjpe_mm"))]
+        if "offset_removed_mpjpe_mm" in summary:     # scored against named markers
+            acc.append(("  joint offsets removed (mm)", summary["offset_removed_mpjpe_mm"]))
+        acc.append(("max frame error (mm)", summary.get("max_frame_error_mm")))
+        if "offset_removed_max_frame_error_mm" in summary:
+            acc.append(("  joint offsets removed (mm)", summary["offset_removed_max_frame_error_mm"]))
+        acc.append(("knee RMSE (deg)", summary.get("knee_rmse_deg")))
+        if summary.get("frames_facing_backwards") is not None:
+            acc.append(("frames facing backwards", summary["frames_facing_backwards"]))
     else:
         acc = [("accuracy", summary.get("accuracy", "no ground truth"))]
     return acc + [("frames estimated", summary.get("frames_estimated")), ("frames/s", summary["fps"]),
@@ -244,6 +250,10 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
         elif isinstance(v, tuple):
             v = " / ".join(f"{x:.1f}" for x in v)
         print(f"  {k:28s} {v}")
+    if summary.get("scored_by") == "markers":
+        from isa_mocap_ros.eval.report import marker_score_lines
+
+        print("\n".join(marker_score_lines(summary)))
     print(f"run: wrote {out / 'summary.json'}, {out / 'estimates'}"
           + (f", {out / 'knees_and_error.png'}" if (out / 'knees_and_error.png').exists() else ""))
     return 0

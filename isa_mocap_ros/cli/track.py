@@ -54,7 +54,7 @@ def register(sub) -> None:
     p.add_argument("--use-masks", action="store_true", help="use /mocap/cam<i>/mask when the bag has it")
     p.add_argument("--learn-frames", type=int, default=None, metavar="K",
                    help="frames the segmenter learns the background from (default: the bag's empty frames, "
-                        "else 10)")
+                        "else the frames before its first reference marker, else 10)")
     p.add_argument("--shape", default="auto", metavar="auto|default|truth|FILE",
                    help="body shape of the tracking model: 'auto' (default) calibrates it from the silhouettes of "
                         "the first frames (isa-mocap calibrate); 'default' = config/body/default.yaml; FILE = a "
@@ -96,6 +96,13 @@ def register(sub) -> None:
     p.add_argument("--keypoint-dense", type=int, default=None, metavar="N",
                    help="with --keypoint-weight: detect on each view's first N frames with a person (the "
                         "initialization and its heading check; default 4, the keypoint node's dense_frames)")
+    p.add_argument("--refine-masks", action="store_true",
+                   help="model-guided mask refinement: a graph cut (GrabCut) per view seeded by the previous "
+                        "estimate's silhouette (ISA eq. 13.29's shape prior; isa_mocap_ros.vision.refine), for "
+                        "parts the background subtraction misses (dark clothes on a dark floor)")
+    p.add_argument("--overlays", default=None, metavar="DIR",
+                   help="also draw the estimate on every view: DIR/strip.png (a few frames, all views) and "
+                        "DIR/overlay.mp4 (every tracked frame, all views side by side)")
     p.add_argument("--overwrite", action="store_true", help="replace DIR/estimates if it exists")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     from isa_mocap_ros.cli.shape_options import add_calibration_arguments
@@ -127,7 +134,7 @@ def read_sequence(path, *, want_images: bool, want_masks: bool):
                         or (kind == "mask" and want_masks):
                     wanted.append(name)
             elif name in (f"{TOPIC}/ground_truth/joint_states", f"{TOPIC}/ground_truth/model",
-                          f"{TOPIC}/ground_truth/markers"):
+                          f"{TOPIC}/ground_truth/markers", f"{TOPIC}/ground_truth/reference"):
                 wanted.append(name)
         seen_info: set[int] = set()
         for m in bag.messages(wanted):
@@ -150,6 +157,8 @@ def read_sequence(path, *, want_images: bool, want_masks: bool):
                     (b.add_image if kind == "image_raw" else b.add_mask)(v, stamp, arr)
             elif m.topic.endswith("/model"):
                 b.set_model_yaml(from_cdr(m.data, m.type).data)
+            elif m.topic.endswith("/reference"):
+                b.set_reference_yaml(from_cdr(m.data, m.type).data)
             elif m.topic.endswith("/markers"):
                 msg = from_cdr(m.data, m.type)
                 b.add_truth_markers(stamp_to_ns(msg.header),
@@ -159,6 +168,84 @@ def read_sequence(path, *, want_images: bool, want_masks: bool):
                 names, pos = joint_state_to_arrays(msg)
                 b.add_truth(stamp_to_ns(msg.header), names, pos)
     return b.build()
+
+
+def refine_by_model(model, cameras, pose, images, masks) -> list:
+    """``masks`` refined per view by :func:`isa_mocap_ros.vision.refine.refine_mask` with the silhouette
+    of ``pose`` (the previous estimate) as the shape prior; views without an image keep their mask."""
+    from isa_mocap_ros.body import capsule_endpoints
+    from isa_mocap_ros.vision.refine import refine_mask
+    from isa_mocap_ros.vision.render import render_mask
+
+    E = capsule_endpoints(model, np.asarray(pose)[None])[0]
+    out = []
+    for cam, img, m in zip(cameras, images, masks):
+        if img is None or m is None or img.ndim != 3:
+            out.append(m)
+            continue
+        out.append(refine_mask(img, m, render_mask(cam, E, model.capsule_radii)))
+    return out
+
+
+def write_overlay_media(folder: Path, model, seq, tracked: list, *, strip_frames: int = 5,
+                        slow_down: float = 4.0) -> dict:
+    """The estimate drawn on every view: ``folder/strip.png`` (``strip_frames`` frames spread over the
+    tracked ones, one row each, all views side by side) and ``folder/overlay.mp4`` (every tracked
+    frame, played ``slow_down`` times slower than recorded). ``tracked``: (frame index, images, masks
+    used, pose) per tracked frame. The reference's points, when the bag has them, are drawn as red dots."""
+    import cv2
+
+    from isa_mocap_ros.body import capsule_endpoints
+    from isa_mocap_ros.vision.overlay import VideoStrip, overlay_row, write_strip
+
+    by_index = {f.index: f for f in seq.frames}
+    E = capsule_endpoints(model, np.array([t[3] for t in tracked]))
+    stamps = [by_index[t[0]].stamp_ns for t in tracked]
+    fps = (len(stamps) - 1) / ((stamps[-1] - stamps[0]) / 1e9) if len(stamps) > 1 and stamps[-1] > stamps[0] else 30.0
+
+    def row(k):
+        idx, images, masks, _ = tracked[k]
+        r = overlay_row(images, seq.cameras, E[k], model.capsule_radii, masks=masks, label=f"frame {idx}")
+        pts = by_index[idx].truth_markers
+        if pts is not None:
+            P = pts[np.all(np.isfinite(pts), axis=1)]
+            x_off = 0
+            for cam, img in zip(seq.cameras, images):
+                w = img.shape[1] if img is not None else 0
+                if img is not None and len(P):
+                    for u, v in cam.project(P)[cam.depth(P) > 0]:
+                        if 0 <= u < w and 0 <= v < img.shape[0]:
+                            cv2.circle(r, (int(round(u)) + x_off, int(round(v))), 2, (255, 30, 30), -1, cv2.LINE_AA)
+                x_off += w
+        return r
+
+    pick = sorted(set(np.linspace(0, len(tracked) - 1, min(strip_frames, len(tracked))).round().astype(int)))
+    folder.mkdir(parents=True, exist_ok=True)
+    write_strip(folder / "strip.png", [row(k) for k in pick])
+    video = VideoStrip(folder / "overlay.mp4", fps / slow_down)
+    try:
+        for k in range(len(tracked)):
+            video.add(row(k))
+    finally:
+        video.close()
+    return {"strip": str(folder / "strip.png"), "strip_frames": [int(tracked[k][0]) for k in pick],
+            "video": str(folder / "overlay.mp4"), "video_frames": video.frames, "video_fps": round(fps / slow_down, 3)}
+
+
+def reference_coverage(cameras, points, masks) -> float:
+    """Share of the reference points ``(M, 3)`` (world, NaN = missing) that project inside the image
+    and fall on the foreground of that view's mask, over all views (NaN when none is in view)."""
+    hit = n = 0
+    P = np.asarray(points, float)
+    P = P[np.all(np.isfinite(P), axis=1)]
+    for cam, m in zip(cameras, masks):
+        if m is None or not len(P):
+            continue
+        uv = np.round(cam.project(P)).astype(int)
+        ok = (cam.depth(P) > 0) & (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] < m.shape[1]) & (uv[:, 1] < m.shape[0])
+        n += int(ok.sum())
+        hit += int(np.count_nonzero(m[uv[ok, 1], uv[ok, 0]]))
+    return hit / n if n else float("nan")
 
 
 def _table(rows: list[tuple[str, str]]) -> str:
@@ -251,7 +338,10 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     learn = 0
     segmenters = None
     if not use_masks:
-        learn = args.learn_frames if args.learn_frames is not None else (seq.empty_frames or 10)
+        # default: the bag's empty frames, else (an imported recording) the frames before its first
+        # reference marker, as `isa-mocap run` counts them, else 10
+        before_markers = next((f.index for f in seq.frames if f.truth_markers is not None), 0)
+        learn = args.learn_frames if args.learn_frames is not None else (seq.empty_frames or before_markers or 10)
         if learn < 1:
             raise ValueError(f"--learn-frames: expected an integer >= 1, received {learn}")
         segmenters = [BackgroundSegmenter(SegmentationConfig(learn_frames=learn)) for _ in seq.cameras]
@@ -313,6 +403,14 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     if est_path.exists() and not args.overwrite:
         raise FileExistsError(f"--out: {est_path} exists; pass --overwrite to replace it")
     show = not args.no_progress
+    refine = bool(getattr(args, "refine_masks", False))
+    if refine and not seq.frames[first].has_images:
+        raise ValueError("--refine-masks: expected images in the bag (the graph cut needs colours), received "
+                         "masks only")
+    overlay_dir = getattr(args, "overlays", None)
+    overlay_store: list | None = [] if overlay_dir else None
+    refine_seconds: list[float] = []
+    coverage: list[float] = []          # share of the reference points inside the masks, per frame
     estimates: dict[int, np.ndarray] = {}
     energies: dict[int, float] = {}
     step_seconds: dict[int, float] = {}
@@ -367,6 +465,12 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                 masks = [None if img is None else seg.apply(img) for seg, img in zip(segmenters, fr.images)]
             if fr.index < first:
                 continue
+            if refine and tracker.initialized and fr.index % stride == first % stride:
+                t0 = time.perf_counter()
+                masks = refine_by_model(model, seq.cameras, tracker.last_estimate, fr.images, masks)
+                refine_seconds.append(time.perf_counter() - t0)
+            if fr.truth_markers is not None and seq.truth_marker_names:
+                coverage.append(reference_coverage(seq.cameras, fr.truth_markers, masks))
             if (fr.index - first) % stride:
                 bar.update(1)
                 continue
@@ -395,6 +499,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                 step_seconds[fr.index] = dt
                 results.append(r)
                 n_fell_back += int(r.fell_back)
+            if x is not None and overlay_store is not None:
+                overlay_store.append((fr.index, fr.images, masks, x))
             if x is not None:
                 estimates[fr.index] = x
                 if r is not None:
@@ -441,6 +547,15 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                                         else round(energies[k], 6) for k in sorted(estimates)],
                      "notes": notes + sorted({n for r in results for n in r.notes
                                               if not n.startswith("initialized")})[:20]}
+    if overlay_store:
+        summary["overlays"] = write_overlay_media(Path(overlay_dir), model, seq, overlay_store)
+    summary["refine_masks"] = refine
+    if refine_seconds:
+        summary["refine_ms_per_frame_set"] = float(np.mean(refine_seconds) * 1e3)
+    if coverage:
+        # mask quality without exact masks: the share of the reference's points (all of them, in view)
+        # that the masks the tracker used cover
+        summary["mask_reference_coverage"] = float(np.nanmean(coverage))
     if calibration is not None:
         summary["shape_calibration"] = calibration
     inits = [n for r in results for n in r.notes if n.startswith("initialized")]
@@ -470,16 +585,27 @@ def run(args: argparse.Namespace) -> int:
             ("speed", f"{s['fps']:.2f} frames/s")]
     if "mpjpe_mm" in s:
         rows += [("mean joint error (Eq. 20)", f"{s['mpjpe_mm']:.1f} mm over {s['frames']} frames "
-                                               f"(by {s['scored_by'].replace('_', ' ')})"),
-                 ("max frame error", f"{s['max_frame_error_mm']:.1f} mm"),
-                 ("knee-angle RMSE", f"{s['knee_rmse_deg']:.2f} deg")]
+                                               f"(by {s['scored_by'].replace('_', ' ')})")]
         if "offset_removed_mpjpe_mm" in s:
             rows.append(("each joint's mean offset removed", f"{s['offset_removed_mpjpe_mm']:.1f} mm "
                                                             f"(max frame {s['offset_removed_max_frame_error_mm']:.1f} mm"
                                                             + (f", knee {s['offset_removed_knee_rmse_deg']:.2f} deg)"
                                                                if "offset_removed_knee_rmse_deg" in s else ")")))
+        rows.append(("max frame error", f"{s['max_frame_error_mm']:.1f} mm"
+                     + (f" (frame {s['worst_frame_index']} of the scored)" if "worst_frame_index" in s else "")))
+        rows.append(("knee-angle RMSE", f"{s['knee_rmse_deg']:.2f} deg"))
+        if s.get("frames_facing_backwards") is not None:
+            rows.append(("frames facing backwards", f"{s['frames_facing_backwards']} (heading error max "
+                                                    f"{s['max_heading_error_deg']:.0f} deg)"))
     else:
         rows.append(("accuracy", "no ground truth in the bag"))
     print("track: accuracy\n" + _table(rows))
+    if s.get("scored_by") == "markers":
+        from isa_mocap_ros.eval.report import marker_score_lines
+
+        print("\n".join(marker_score_lines(s)))
     print(f"track: wrote {Path(s['out']) / 'estimates'} and {Path(s['out']) / 'summary.json'}")
+    if "overlays" in s:
+        print(f"track: overlays {s['overlays']['strip']} (frames {s['overlays']['strip_frames']}) and "
+              f"{s['overlays']['video']} ({s['overlays']['video_frames']} frames at {s['overlays']['video_fps']} fps)")
     return 0

@@ -16,6 +16,7 @@ the received shape for bad input.
 """
 from __future__ import annotations
 
+import warnings
 from typing import Mapping
 
 import numpy as np
@@ -42,9 +43,23 @@ def _points(name: str, value) -> np.ndarray:
     return a
 
 
-def _pair(pred_joints, true_joints) -> tuple[np.ndarray, np.ndarray]:
+def _points_missing(name: str, value) -> np.ndarray:
+    """As :func:`_points`, but NaN marks a missing point (a peer's marker file); inf is still refused."""
+    a = np.asarray(value, dtype=float)
+    if a.ndim != 3 or a.shape[-1] != 3 or a.shape[0] < 1 or a.shape[1] < 1:
+        raise MetricsError(f"{name}: expected joint positions of shape (F, M, 3) with F, M >= 1, "
+                           f"received shape {a.shape}")
+    if np.any(np.isinf(a)):
+        f, m, _ = np.argwhere(np.isinf(a))[0]
+        raise MetricsError(f"{name}: expected finite positions or NaN (missing), received {a[f, m].tolist()} at "
+                           f"frame {f}, marker {m}")
+    return a
+
+
+def _pair(pred_joints, true_joints, *, missing: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """The two point arrays, checked (``missing``: NaN marks a missing reference point)."""
     P = _points("pred_joints", pred_joints)
-    T = _points("true_joints", true_joints)
+    T = (_points_missing if missing else _points)("true_joints", true_joints)
     if P.shape != T.shape:
         raise MetricsError(f"true_joints: expected the shape of pred_joints {P.shape}, received {T.shape}")
     return P, T
@@ -71,18 +86,18 @@ def body_frames(true_joints, left_hip: int, right_hip: int) -> np.ndarray:
     """Per-frame body axes ``(F, 3, 3)`` from the true hips, world z up: columns ``lateral`` (the
     horizontal direction from the right hip to the left), ``forward`` (``up × lateral``) and ``up``.
 
-    A frame whose hips are vertically aligned (no horizontal hip axis) takes the previous frame's axes
+    A frame whose hips are vertically aligned (no horizontal hip axis) or missing (NaN) takes the previous frame's axes
     (the world axes if it is the first). Used to express a joint's offset in the body, so that an offset of
     definition (the same joint placed differently by two skeletons) stays one vector while the body turns.
     """
-    T = _points("true_joints", true_joints)
+    T = _points_missing("true_joints", true_joints)
     a = T[:, left_hip] - T[:, right_hip]
     a[:, 2] = 0.0
     n = np.linalg.norm(a, axis=-1)
     R = np.empty((T.shape[0], 3, 3))
     last = np.eye(3)
     for f in range(T.shape[0]):
-        if n[f] > 1e-6:
+        if n[f] > 1e-6:                         # False for NaN (a missing hip)
             x = a[f] / n[f]
             last = np.column_stack([x, np.cross([0.0, 0.0, 1.0], x), [0.0, 0.0, 1.0]])
         R[f] = last
@@ -92,8 +107,8 @@ def body_frames(true_joints, left_hip: int, right_hip: int) -> np.ndarray:
 def heading_errors_deg(pred_joints, true_joints, left_hip: int, right_hip: int) -> np.ndarray:
     """Per frame, the angle ``(F,)`` in degrees (0-180) between the estimated and the true horizontal hip
     axes (right hip to left hip): near 180° the body is tracked facing backwards (a silhouette seen from the
-    front looks nearly like one seen from the back)."""
-    P, T = _pair(pred_joints, true_joints)
+    front looks nearly like one seen from the back); NaN where a reference hip is missing."""
+    P, T = _pair(pred_joints, true_joints, missing=True)
     a = (P[:, left_hip] - P[:, right_hip])[:, :2]
     b = (T[:, left_hip] - T[:, right_hip])[:, :2]
     c = np.sum(a * b, axis=1) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-12)
@@ -123,8 +138,17 @@ def offset_removed_errors_mm(pred_joints, true_joints, frames=None) -> tuple[np.
         Millimetres, after removing the offsets.
     offsets : (M, 3) ndarray
         The mean offsets ``o_i`` in the body frame (lateral, forward, up), millimetres.
+
+    A missing reference point (NaN, a peer's file) is left out of its joint's mean offset, and its error is
+    NaN; a joint missing in every frame has a NaN offset.
+
+    Examples
+    --------
+    >>> T = np.zeros((2, 1, 3)); P = T.copy(); P[:, 0, 2] = 0.05   # constant 50 mm offset
+    >>> offset_removed_errors_mm(P, T)[0].tolist()
+    [[0.0], [0.0]]
     """
-    P, T = _pair(pred_joints, true_joints)
+    P, T = _pair(pred_joints, true_joints, missing=True)
     D = P - T
     if frames is None:
         R = np.broadcast_to(np.eye(3), (P.shape[0], 3, 3))
@@ -133,7 +157,11 @@ def offset_removed_errors_mm(pred_joints, true_joints, frames=None) -> tuple[np.
         if R.shape != (P.shape[0], 3, 3):
             raise MetricsError(f"frames: expected shape ({P.shape[0]}, 3, 3), received {R.shape}")
     local = np.einsum("fji,fmj->fmi", R, D)        # R^T d
-    o = local.mean(axis=0)
+    ok = np.all(np.isfinite(local), axis=-1)
+    n = ok.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        o = np.where(ok[..., None], local, 0.0).sum(axis=0) / n[:, None]
+    o[n == 0] = np.nan
     rest = D - np.einsum("fij,mj->fmi", R, o)
     return 1e3 * np.linalg.norm(rest, axis=-1), 1e3 * o
 
@@ -292,12 +320,15 @@ def knee_flexion_from_points(hip, knee, ankle) -> np.ndarray:
 
 
 def score_markers(model, poses, truth_names, truth_markers) -> dict:
-    """Accuracy of pose estimates against ground-truth joint centres matched BY NAME.
+    """Accuracy of pose estimates against ground-truth joint centres (or a peer's keypoints) matched BY NAME.
 
     Needs no ground-truth model: the estimate's joint centres come from ``model`` (the tracking
     model, with the shape it tracked with) by forward kinematics; every ground-truth marker whose
-    name is one of ``model``'s marker joints is compared (Eq. 20 per frame, then the mean). Knee
-    angles are measured in 3-D on both sides (:func:`knee_flexion_from_points`: thigh vs shank).
+    name is one of ``model``'s marker joints is compared (Eq. 20 per frame, then the mean). A
+    missing reference point (NaN) is left out of its frame's mean. Knee angles are measured in 3-D
+    on both sides (:func:`knee_flexion_from_points`: thigh vs shank). The same figures are also
+    given with each joint's mean offset removed (:func:`offset_removed_errors_mm`; keys starting
+    ``offset_removed_``), the measure for a reference whose points are not joint centres.
 
     Parameters
     ----------
@@ -305,9 +336,10 @@ def score_markers(model, poses, truth_names, truth_markers) -> dict:
     poses : (F, D) array_like
         Estimates.
     truth_names : sequence of str
-        Names of the ground-truth markers (the bag's ``model.marker_joints``).
+        Names of the ground-truth markers (the bag's ``model.marker_joints``, or a reference's names
+        mapped to the model's joints).
     truth_markers : (F, M, 3) array_like
-        Ground-truth joint centres, metres, in ``truth_names`` order.
+        Ground-truth joint centres, metres, in ``truth_names`` order (NaN = missing).
 
     Returns
     -------
@@ -318,14 +350,16 @@ def score_markers(model, poses, truth_names, truth_markers) -> dict:
         ``per_marker_mm`` (name -> mean), ``knee_errors_deg`` ((F, 2) estimate - truth, left/right);
         and the same error with each joint's mean offset in the body removed
         (:func:`offset_removed_errors_mm`, body axes from the true hips, else the world axes):
-        ``offset_removed_mpjpe_mm``, ``offset_removed_max_frame_error_mm``, ``offset_removed_frame_errors_mm``
-        (F,), ``per_marker_offset_mm`` (name -> [lateral, forward, up] mean offset, mm); with both hips,
-        ``heading_errors_deg`` (F,) (:func:`heading_errors_deg`) and ``backwards_share`` (the share of frames
-        whose heading is more than 90° off); with both legs, ``offset_removed_knee_rmse_deg`` (the knee angles
-        from the estimate's joints moved by their mean offsets).
+        ``offset_removed_mpjpe_mm``, ``offset_removed_max_frame_error_mm``, ``offset_removed_worst_frame``,
+        ``offset_removed_frame_errors_mm`` (F,), ``offset_removed_per_marker_mm`` (name -> mean),
+        ``per_marker_offset_mm`` (name -> [lateral, forward, up] mean offset, mm); with both hips,
+        ``heading_errors_deg`` (F,) (:func:`heading_errors_deg`), ``backwards_share`` and
+        ``frames_facing_backwards`` (the share and the number of frames whose heading is more than 90° off);
+        with both legs, ``offset_removed_knee_rmse_deg`` (the knee angles from the estimate's joints moved by
+        their mean offsets).
     """
     X = _poses("poses", poses, model.dof)
-    T = _points("truth_markers", truth_markers)
+    T = _points_missing("truth_markers", truth_markers)
     names = list(truth_names)
     if T.ndim != 3 or T.shape[0] != X.shape[0] or T.shape[1] != len(names):
         raise MetricsError(f"truth_markers: expected shape ({X.shape[0]}, {len(names)}, 3), received {T.shape}")
@@ -335,33 +369,43 @@ def score_markers(model, poses, truth_names, truth_markers) -> dict:
         raise MetricsError(f"truth_names: expected some of the model's markers {mine}, received {names}")
     Pe = marker_positions(model, X, joints=shared)
     Pt = T[:, [names.index(n) for n in shared]]
-    je = joint_errors_mm(Pe, Pt)
-    fe = je.mean(axis=1)
-    out = {"frames": int(X.shape[0]), "mpjpe_mm": float(fe.mean()), "median_frame_error_mm": float(np.median(fe)),
-           "max_frame_error_mm": float(fe.max()), "worst_frame": int(np.argmax(fe)), "markers": shared,
-           "frame_errors_mm": fe, "per_marker_mm": {n: float(v) for n, v in zip(shared, je.mean(axis=0))},
-           "knee_rmse_deg": float("nan"), "knee_errors_deg": None}
+    if np.all(np.isnan(Pt).any(axis=-1).all(axis=1)):
+        raise MetricsError("truth_markers: expected some reference points, received NaN (missing) in every frame")
+    je = 1e3 * np.linalg.norm(Pe - Pt, axis=-1)
     hips = [shared.index(n) for n in ("left_hip", "right_hip") if n in shared]
     B = body_frames(Pt, *hips) if len(hips) == 2 else None
+    jr, off = offset_removed_errors_mm(Pe, Pt, B)
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)       # mean of a frame / joint with nothing to compare
+        fe, fr = np.nanmean(je, axis=1), np.nanmean(jr, axis=1)
+        pm, pr = np.nanmean(je, axis=0), np.nanmean(jr, axis=0)
+    scored = np.isfinite(fe)
+    out = {"frames": int(X.shape[0]), "mpjpe_mm": float(fe[scored].mean()),
+           "median_frame_error_mm": float(np.median(fe[scored])),
+           "max_frame_error_mm": float(fe[scored].max()), "worst_frame": int(np.nanargmax(fe)), "markers": shared,
+           "frame_errors_mm": fe, "per_marker_mm": {n: float(v) for n, v in zip(shared, pm)},
+           "offset_removed_mpjpe_mm": float(fr[scored].mean()),
+           "offset_removed_max_frame_error_mm": float(fr[scored].max()),
+           "offset_removed_worst_frame": int(np.nanargmax(fr)), "offset_removed_frame_errors_mm": fr,
+           "offset_removed_per_marker_mm": {n: float(v) for n, v in zip(shared, pr)},
+           "per_marker_offset_mm": {n: [round(float(c), 1) for c in v] for n, v in zip(shared, off)},
+           "knee_rmse_deg": float("nan"), "knee_errors_deg": None}
     if len(hips) == 2:
         he = heading_errors_deg(Pe, Pt, *hips)
-        out.update(heading_errors_deg=he, backwards_share=float(np.mean(he > 90.0)))
-    je0, off = offset_removed_errors_mm(Pe, Pt, B)
-    fe0 = je0.mean(axis=1)
-    out.update(offset_removed_mpjpe_mm=float(fe0.mean()), offset_removed_max_frame_error_mm=float(fe0.max()),
-               offset_removed_frame_errors_mm=fe0,
-               per_marker_offset_mm={n: [round(float(c), 1) for c in v] for n, v in zip(shared, off)})
+        back = he > 90.0                                      # False where a hip is missing (NaN)
+        out.update(heading_errors_deg=he, backwards_share=float(np.mean(back[np.isfinite(he)])),
+                   frames_facing_backwards=int(back.sum()))
     sides = [s for s in ("left", "right") if all(f"{s}_{j}" in shared for j in ("hip", "knee", "ankle"))]
     if sides:
         def ang(P, s):
             return knee_flexion_from_points(*(P[:, shared.index(f"{s}_{j}")] for j in ("hip", "knee", "ankle")))
         ke = np.stack([np.rad2deg(ang(Pe, s) - ang(Pt, s)) for s in sides], axis=1)
-        out["knee_rmse_deg"] = float(np.sqrt(np.mean(ke ** 2)))
+        out["knee_rmse_deg"] = float(np.sqrt(np.nanmean(ke ** 2)))
         out["knee_errors_deg"] = ke
         # the same angles from the estimate's joints moved by their mean offsets (a hip defined 5 cm further
         # forward tilts the thigh by ~6°, a bias of definition in every frame's knee angle)
         R = np.broadcast_to(np.eye(3), (Pe.shape[0], 3, 3)) if B is None else B
         Pc = Pe - np.einsum("fij,mj->fmi", R, off / 1e3)
         kc = np.stack([np.rad2deg(ang(Pc, s) - ang(Pt, s)) for s in sides], axis=1)
-        out["offset_removed_knee_rmse_deg"] = float(np.sqrt(np.mean(kc ** 2)))
+        out["offset_removed_knee_rmse_deg"] = float(np.sqrt(np.nanmean(kc ** 2)))
     return out

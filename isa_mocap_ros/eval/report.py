@@ -78,13 +78,20 @@ def score(model, seq, poses_by_stamp: dict) -> dict | None:
                                   "knee_rmse_deg", "markers")}
         out["frame_errors_mm"] = [round(float(e), 2) for e in sc["frame_errors_mm"]]
         out["per_marker_mm"] = sc["per_marker_mm"]
-        out["offset_removed_mpjpe_mm"] = sc["offset_removed_mpjpe_mm"]
-        out["offset_removed_max_frame_error_mm"] = sc["offset_removed_max_frame_error_mm"]
-        out["per_marker_offset_mm"] = sc["per_marker_offset_mm"]
-        for k in ("backwards_share", "offset_removed_knee_rmse_deg"):
+        # the same with each joint's mean offset removed (a reference whose points are not joint centres)
+        for k in ("offset_removed_mpjpe_mm", "offset_removed_max_frame_error_mm", "offset_removed_per_marker_mm",
+                  "per_marker_offset_mm", "backwards_share", "frames_facing_backwards",
+                  "offset_removed_knee_rmse_deg"):
             if k in sc:
                 out[k] = sc[k]
-        out.update(scored_by="markers", stamps=stamps, worst_frame_stamp_ns=int(stamps[sc["worst_frame"]]))
+        out.update(scored_by="markers", stamps=stamps, worst_frame_stamp_ns=int(stamps[sc["worst_frame"]]),
+                   worst_frame_index=int(sc["worst_frame"]),
+                   offset_removed_worst_frame_index=int(sc["offset_removed_worst_frame"]))
+        if "heading_errors_deg" in sc:
+            out["max_heading_error_deg"] = float(np.nanmax(sc["heading_errors_deg"]))
+        if sc["knee_errors_deg"] is not None:
+            ke = np.asarray(sc["knee_errors_deg"], float)
+            out["knee_mean_abs_error_deg"] = float(np.nanmean(np.abs(ke)))
         return out
     if not seq.has_truth:
         return None
@@ -97,6 +104,20 @@ def score(model, seq, poses_by_stamp: dict) -> dict | None:
     out.update(scored_by="joint_states", stamps=stamps,
                worst_frame_stamp_ns=int(stamps[int(np.argmax(out["frame_errors_mm"]))]))
     return out
+
+
+def marker_score_lines(acc: dict) -> list[str]:
+    """The per-joint table of a marker score (:func:`score` with ``scored_by == "markers"``) as text
+    lines: per joint the mean error raw, with the joint's mean offset removed, and the offset."""
+    pm, pr, off = acc.get("per_marker_mm"), acc.get("offset_removed_per_marker_mm"), acc.get("per_marker_offset_mm")
+    if not pm or not pr:
+        return []
+    off = {n: float(np.linalg.norm(v)) for n, v in off.items()}
+    w = max(len(n) for n in pm)
+    lines = [f"  {'joint':<{w}}  {'raw (mm)':>9}  {'offset removed (mm)':>19}  {'mean offset (mm)':>16}"]
+    for n in pm:
+        lines.append(f"  {n:<{w}}  {pm[n]:9.1f}  {pr[n]:19.1f}  {off[n]:16.1f}")
+    return lines
 
 
 def plot_marker_score(path: Path, model, poses: np.ndarray, truth_names, truth_markers: np.ndarray, *,

@@ -17,12 +17,35 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["TrcError", "Trc", "read_trc", "write_trc", "TRC_TO_WORLD", "UNITS_TO_M"]
+__all__ = ["TrcError", "Trc", "read_trc", "write_trc", "TRC_TO_WORLD", "UNITS_TO_M", "POSE2SIM_TO_JOINTS",
+           "joint_names_of"]
 
 #: world = TRC_TO_WORLD @ trc for Pose2Sim's y-up TRC files (world x = TRC Z, y = TRC X, z = TRC Y)
 TRC_TO_WORLD = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 #: metres per TRC unit
 UNITS_TO_M = {"m": 1.0, "mm": 1e-3, "cm": 1e-2}
+
+#: Pose2Sim keypoint name (its HALPE_26 / BODY_25 skeletons' names, as in its TRC files) -> the joint of our
+#: body models (``BodyModel.joint_names``) the keypoint is scored against. Keypoints are 2-D detector
+#: outputs triangulated, not joint centres: a keypoint sits at a roughly constant offset from the joint
+#: (the scorer reports the error with each joint's mean offset removed as well). ``Neck`` is the
+#: detector's point between the shoulders (our ``neck``: the base of the neck); ``Head`` its point on
+#: the head (our ``head``: the centre of the head). Toes, heels, the nose and the
+#: mid-hip ``Hip`` have no marker joint in our models and are not scored.
+POSE2SIM_TO_JOINTS = {
+    "RHip": "right_hip", "RKnee": "right_knee", "RAnkle": "right_ankle",
+    "LHip": "left_hip", "LKnee": "left_knee", "LAnkle": "left_ankle",
+    "RShoulder": "right_shoulder", "RElbow": "right_elbow", "RWrist": "right_wrist",
+    "LShoulder": "left_shoulder", "LElbow": "left_elbow", "LWrist": "left_wrist",
+    "Neck": "neck", "Head": "head",
+}
+
+
+def joint_names_of(marker_names, name_map: dict | None = None) -> tuple[str, ...]:
+    """The reference's marker names mapped to our joint names (:data:`POSE2SIM_TO_JOINTS` by default);
+    a name the map does not know is kept as it is (and so matches no joint of ours unless it is one)."""
+    m = POSE2SIM_TO_JOINTS if name_map is None else name_map
+    return tuple(m.get(str(n), str(n)) for n in marker_names)
 
 
 class TrcError(ValueError):
