@@ -23,6 +23,7 @@ crashed nodes respawned when configured, escalation SIGINT -> SIGTERM -> SIGKILL
 """
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -60,6 +61,7 @@ class NodeSpec:
     respawn_delay_s: float = 1.0
     extra_args: tuple[str, ...] = ()
     nice: int = 0            # added to the process's niceness (0 = unchanged; > 0 = lower CPU priority)
+    members: tuple["NodeSpec", ...] = ()   # non-empty: one process hosting these nodes on one executor
 
     @property
     def module(self) -> str:
@@ -80,7 +82,21 @@ class NodeSpec:
         return args
 
     def command(self, python: str = sys.executable) -> list[str]:
+        if self.members:     # isa_mocap_ros.cli.compose: the member nodes in one process, one executor
+            return [python, "-m", f"{PACKAGE}.cli.compose", json.dumps([m.to_json() for m in self.members])]
         return [python, "-m", self.module, *self.extra_args, *self.ros_args()]
+
+    def to_json(self) -> dict:
+        """The spec as JSON-able values (:meth:`from_json` reads it back)."""
+        if self.members:
+            raise LaunchError(f"{self.name}: a composed spec cannot be a member of another")
+        return {k: list(map(list, v)) if k in ("params", "remaps") else list(v) if isinstance(v, tuple) else v
+                for k, v in self.__dict__.items() if k != "members"}
+
+    @classmethod
+    def from_json(cls, d: Mapping) -> "NodeSpec":
+        return cls(**{k: tuple(map(tuple, v)) if k in ("params", "remaps") else tuple(v) if isinstance(v, list) else v
+                      for k, v in d.items()})
 
 
 def niceness(increment: int) -> Callable[[], None] | None:

@@ -18,6 +18,11 @@ def test_quick_json(capsys):
         assert r["frames"] == 3 and np.isfinite(r["frames_per_s"]) and r["frames_per_s"] > 0
         assert np.isfinite(r["cpu_ms_per_frame"]) and r["cpu_ms_per_frame"] > 0
     assert res["network"]["rows"] == [] and res["network"]["skipped"] == "--quick"
+    sg = res["segmentation"]
+    assert [r["work_scale"] for r in sg["rows"]] == list(bench_speed.SEGMENTATION_SCALES) and sg["sets"] > 0
+    for r in sg["rows"]:
+        assert r["cpu_ms_per_set"] > 0 and abs(r["cpu_ms_per_view"] * sg["views"] - r["cpu_ms_per_set"]) < 1e-9
+    assert sg["rows"][0]["iou_vs_default"] == 1.0 and 0.5 < sg["rows"][1]["iou_vs_default"] < 1.0
     pr = res["profile"]
     assert pr["frames"] == 3 and pr["evals_per_frame"] == 1500 and pr["cpu_ms_per_frame"] > 0
     stages = {r["stage"]: r for r in pr["by_stage"]}
@@ -30,7 +35,7 @@ def test_quick_json(capsys):
     assert stages["bookkeeping (the rest of the step)"]["share"] < 0.5
     assert len(pr["by_call"]) == 15 and any("silhouette" in r["function"] for r in pr["by_call"])
     md = bench_speed.render_markdown(res)
-    assert "#### Offline tracker" in md and "Skipped (--quick)" in md
+    assert "#### Offline tracker" in md and "Skipped (--quick)" in md and "#### Segmentation" in md
     assert "#### Where a tracked frame's CPU time goes" in md and "| contour stage |" in md
 
 

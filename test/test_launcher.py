@@ -136,3 +136,19 @@ def test_single_process_mode(spawn, tmp_path):
     assert "started in-process" in launch.output()
     with BagReader(out) as r:
         assert r.topics["/test/mocap/cam0/image_raw"].message_count == 5
+
+
+def test_composed_spec_carries_its_members_as_json():
+    from isa_mocap_ros.cli.compose import main as compose_main
+
+    a = NodeSpec(exec="segmentation_node", name="segmentation", namespace="/mocap", params_files=("p.yaml",),
+                 params=(("views", "4"),), remaps=(("cam0/mask", "/m"),), nice=3)
+    b = NodeSpec(exec="estimator_node", name="estimator", namespace="/mocap")
+    both = NodeSpec(exec="compose", name="mocap_nodes", members=(a, b))
+    cmd = both.command("python")
+    assert cmd[:3] == ["python", "-m", "isa_mocap_ros.cli.compose"]
+    import json
+    assert [NodeSpec.from_json(d) for d in json.loads(cmd[3])] == [a, b]
+    with pytest.raises(LaunchError, match="mocap_nodes: a composed spec"):
+        both.to_json()
+    assert compose_main(["not json"]) == 2 and compose_main([]) == 2

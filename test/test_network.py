@@ -26,8 +26,9 @@ SETTINGS = ["--optimizer", "isa", "--evals", "300", "--seed", "3"]
 
 
 
-def _run(out: Path, rosenv: dict) -> dict:
-    res = subprocess.run(CLI + ["run", str(FIXTURE), "--lockstep", "--out", str(out), "--quiet", "--shape", "default", *SETTINGS],
+def _run(out: Path, rosenv: dict, *extra: str) -> dict:
+    res = subprocess.run(CLI + ["run", str(FIXTURE), "--lockstep", "--out", str(out), "--quiet", "--shape", "default",
+                                *SETTINGS, *extra],
                          env=rosenv, capture_output=True, text=True, timeout=400)
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
     return json.loads((out / "summary.json").read_text())
@@ -42,6 +43,8 @@ def runs(tmp_path_factory):
     for k in range(2):
         env = ros_env(next_domain())
         summaries.append(_run(base / f"run{k}", env))
+    # segmentation, prediction and estimator in one process on one executor (isa_mocap_ros.cli.compose)
+    summaries.append(_run(base / "single", ros_env(next_domain()), "--single-process"))
     track = base / "track"
     res = subprocess.run(CLI + ["track", str(FIXTURE), "--out", str(track), "--shape", "default", *SETTINGS],
                          capture_output=True, text=True, timeout=400)
@@ -50,7 +53,7 @@ def runs(tmp_path_factory):
 
 
 def test_run_processes_every_frame_set_and_writes_the_summary(runs):
-    base, (s0, _) = runs
+    base, (s0, *_) = runs
     for key in ("frames", "knee_rmse_deg", "mpjpe_mm", "max_frame_error_mm", "fps", "latency_ms_p50",
                 "latency_ms_p95", "dropped_frames", "optimizer", "evals_per_frame", "model_dof"):
         assert key in s0, key
@@ -83,6 +86,19 @@ def test_two_lockstep_runs_give_identical_joint_states(runs):
     assert a.keys() == b.keys() and len(a) > 0
     for s in a:
         assert np.array_equal(a[s], b[s]), s
+
+
+def test_single_process_run_equals_the_multi_process_run(runs):
+    base, (s0, _, single) = runs
+    log = (base / "single" / "nodes.log").read_text()
+    for name in ("segmentation", "prediction", "estimator"):     # three nodes, one process
+        assert f"[compose] {name} in-process" in log
+    assert log.count("[launch] started") == 2                     # that process and the recorder
+    assert single["frames_processed"] == s0["frames_processed"] and single["dropped_frames"] == 0
+    a, b = joint_states_by_stamp(base / "run0" / "estimates"), joint_states_by_stamp(base / "single" / "estimates")
+    assert a.keys() == b.keys() and len(a) > 0
+    for s in a:
+        assert np.array_equal(a[s], b[s]), (s, np.abs(a[s] - b[s]).max())
 
 
 def test_network_equals_the_offline_tracker(runs):

@@ -21,8 +21,9 @@ after the other on the same machine:
    the top functions by own CPU time;
 4. **network**: ``isa-mocap run``'s code (:mod:`isa_mocap_ros.cli.run`: segmentation, prediction and
    estimator nodes and a recorder, each its own process, over DDS on localhost) on ``bags/demo``,
-   three times (:data:`NETWORK_MODES`): in real time (rate 1.0: frames the estimator cannot keep up
-   with are dropped), in real time with a CPU-bound process beside it (one core busy,
+   four times (:data:`NETWORK_MODES`): in real time (rate 1.0: frames the estimator cannot keep up
+   with are dropped), the same with segmentation, prediction and estimator in one process
+   (``--single-process``), in real time with a CPU-bound process beside it (one core busy,
    :func:`busy_core`), and in lockstep: frame sets processed per second of replay, the real-time
    factor (that rate over the bag's 30 frames/s), latency p50 / p95 (image received → estimate
    received, the recorder's clock), dropped frame sets (start-up included), and the mean joint error,
@@ -64,6 +65,61 @@ def energy_speed(quick: bool) -> dict:
     from isa_mocap_ros.bench._common import json_of
 
     return json_of(bench_energy, ["--quick"] if quick else [])
+
+
+#: working resolutions (``work_scale``) of the segmentation part: the default first, then a reduced one
+SEGMENTATION_SCALES = (1.0, 0.5)
+
+
+def segmentation_speed(bag: Path, *, scales=SEGMENTATION_SCALES, rounds: int = 3) -> dict:
+    """CPU time of the segmentation per frame set and per view, per working resolution, and the masks'
+    agreement with the default's.
+
+    The segmentation node's core (:class:`~isa_mocap_ros.vision.segmentation.BackgroundSegmenter`, one
+    per view, ``pipeline.yaml``'s defaults but ``work_scale``, learning from the bag's empty frames) on
+    every frame set of ``bag``; the scales interleaved in ``rounds`` rounds in this process (after an
+    unreported warm-up round), CPU time of the calling thread (``time.thread_time``) per set after the
+    learning frames: the median over sets, then the median over rounds. IoU: the masks pooled over
+    sets and views against the first scale's (intersection / union of the foreground pixels).
+    """
+    from isa_mocap_ros.cli.track import read_sequence
+    from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig
+
+    seq = read_sequence(bag, want_images=True, want_masks=False)
+    frames = [f for f in seq.frames if all(i is not None for i in f.images)]
+    learn = seq.empty_frames or 10
+    V = len(frames[0].images)
+
+    def one(scale: float):
+        segs = [BackgroundSegmenter(SegmentationConfig(learn_frames=learn, work_scale=scale)) for _ in range(V)]
+        cpu, masks = [], []
+        for f in frames:
+            t0 = time.thread_time()
+            m = [segs[v].apply(f.images[v]) for v in range(V)]
+            cpu.append(time.thread_time() - t0)
+            masks.append(m)
+        return float(np.median(cpu[learn:])), masks[learn:]
+
+    for sc in scales:
+        one(sc)
+    cpu = {sc: [] for sc in scales}
+    masks = {}
+    for _ in range(rounds):
+        for sc in scales:
+            t, masks[sc] = one(sc)
+            cpu[sc].append(t)
+    ref = masks[scales[0]]
+    rows = []
+    for sc in scales:
+        inter = sum(int(np.count_nonzero((a > 0) & (b > 0))) for fa, fb in zip(masks[sc], ref) for a, b in zip(fa, fb))
+        union = sum(int(np.count_nonzero((a > 0) | (b > 0))) for fa, fb in zip(masks[sc], ref) for a, b in zip(fa, fb))
+        ms = 1e3 * float(np.median(cpu[sc]))
+        rows.append({"work_scale": sc, "cpu_ms_per_set": ms, "cpu_ms_per_view": ms / V,
+                     "cpu_ms_per_set_rounds": [1e3 * t for t in cpu[sc]],
+                     "iou_vs_default": inter / union if union else None})
+    h, w = frames[0].images[0].shape[:2]
+    return {"bag": bag.name, "views": V, "image": f"{w}x{h}", "sets": len(frames) - learn, "learn_frames": learn,
+            "rounds": rounds, "rows": rows}
 
 
 def tracker_speed(bag: Path, *, frames: int, budgets=BUDGETS, optimizer: str = "h-isa", use_masks: bool = False,
@@ -193,7 +249,9 @@ def frame_profile(bag: Path, *, frames: int, evals: int = 1500, optimizer: str =
 
 
 #: The network part's runs: (mode label, lockstep, a CPU-bound process beside it).
-NETWORK_MODES = (("real time", False, False), ("real time, one core busy", False, True), ("lockstep", True, False))
+#: (label, lockstep, one core busy, single process: ``isa-mocap run --single-process``)
+NETWORK_MODES = (("real time", False, False, False), ("real time, single process", False, False, True),
+                 ("real time, one core busy", False, True, False), ("lockstep", True, False, False))
 
 
 @contextlib.contextmanager
@@ -215,7 +273,7 @@ def busy_core(on: bool = True):
 
 
 def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path, lockstep: bool | None = None,
-                  busy: bool = False, shape: str = "auto") -> dict:
+                  busy: bool = False, shape: str = "auto", single: bool = False) -> dict:
     """``isa-mocap run`` on ``bag`` in real time (rate 1.0) or lockstep (``lockstep``, default: ``mode ==
     "lockstep"``), with a CPU-bound process beside it when ``busy`` (:func:`busy_core`), tracking with
     body shape ``shape`` (``isa-mocap run --shape``; the calibration runs before the replay); the
@@ -229,6 +287,7 @@ def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path, lockstep:
     argv = [str(bag), "--out", str(out), "--quiet", "--overlay-frames", "0", "--optimizer", optimizer,
             "--shape", shape]
     argv += ["--lockstep"] if lockstep else ["--rate", "1.0"]
+    argv += ["--single-process"] if single else []
     buf = io.StringIO()
     t0 = time.perf_counter()
     with contextlib.redirect_stdout(buf), busy_core(busy):
@@ -241,7 +300,7 @@ def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path, lockstep:
     bag_fps = _bag_fps(bag)
     keep = ("frame_sets_played", "frames_processed", "frames_estimated", "fps", "latency_ms_p50", "latency_ms_p95",
             "dropped_frames", "dropped_while_initializing", "frames_without_contour_stage", "budget_lowered", "track_resets", "init_ms", "tracker_ms_p50", "tracker_ms_p95", "mpjpe_mm", "knee_rmse_deg", "evals_per_frame", "optimizer")
-    r = {"mode": mode, "busy_core": bool(busy),
+    r = {"mode": mode, "busy_core": bool(busy), "single_process": bool(single),
          "body_shape": str(out / "body.yaml") if (out / "body.yaml").is_file() else (None if shape == "auto" else shape), **{k: s.get(k) for k in keep}, "bag_fps": bag_fps,
          "wall_seconds": round(wall, 1)}
     r["real_time_factor"] = (s["fps"] / bag_fps) if bag_fps and s.get("fps") and np.isfinite(s["fps"]) else None
@@ -271,6 +330,8 @@ def collect(args: argparse.Namespace) -> dict:
         print("bench speed: energy ...", file=sys.stderr, flush=True)
         res["energy"] = energy_speed(args.quick)
         tbag = bags / ("fixture" if args.quick else "demo")
+        print(f"bench speed: segmentation on {tbag.name} ...", file=sys.stderr, flush=True)
+        res["segmentation"] = segmentation_speed(tbag, rounds=1 if args.quick else 3)
         print(f"bench speed: tracker on {tbag.name}, {frames} frames per budget ...", file=sys.stderr, flush=True)
         res["tracker"] = {"bag": tbag.name, "optimizer": args.optimizer, "frames": frames,
                           "rows": tracker_speed(tbag, frames=frames, optimizer=args.optimizer,
@@ -285,11 +346,11 @@ def collect(args: argparse.Namespace) -> dict:
             modes = [m for m in NETWORK_MODES if m[1]] if args.quick else list(NETWORK_MODES)
             rows = []
             shape = "auto"          # calibrated by the first run; the others track with the same shape file
-            for label, lockstep, busy in modes:
+            for label, lockstep, busy, single in modes:
                 print(f"bench speed: node network on {nbag.name}, {label} ...", file=sys.stderr, flush=True)
                 try:
                     r = network_speed(nbag, mode=label, optimizer=args.optimizer, work=work, lockstep=lockstep,
-                                      busy=busy, shape=shape)
+                                      busy=busy, shape=shape, single=single)
                 except Exception as exc:  # noqa: BLE001 - one failed run is a row saying so, not a lost bench
                     r = {"mode": label, "busy_core": busy, "error": f"{type(exc).__name__}: {exc}"}
                 if shape == "auto" and r.get("body_shape"):
@@ -328,6 +389,8 @@ def render_markdown(res: dict) -> str:
            if e.get("fast_evals_per_cpu_s") else []),
          f"| exact (raster reference) | {e['exact_evals_per_s']:.0f} |",
          f"| ratio | {e['ratio']:.0f}× |", ""]
+    if res.get("segmentation"):
+        L += render_segmentation(res["segmentation"])
     t = res["tracker"]
     L += ["#### Offline tracker", "",
           f"`bags/{t['bag']}`, {t['optimizer']}, {t['frames']} frames per budget after a ground-truth first frame; "
@@ -347,7 +410,7 @@ def render_markdown(res: dict) -> str:
     if not n["rows"]:
         L.append(f"Skipped ({n.get('skipped')}).")
     else:
-        L += [f"`bags/{n['bag']}`, segmentation + prediction + estimator + recorder processes over DDS (localhost); "
+        L += [f"`bags/{n['bag']}`, segmentation + prediction + estimator + recorder processes over DDS (localhost; single process: the first three in one process, `--single-process`); "
               "one core busy: a CPU-bound process (a Python busy loop) runs beside the network for the whole run. "
               "Dropped: frame sets played and not processed, start-up included (the share in brackets); latency: "
               "image received → joint_states received (the recorder's clock); vs lockstep: mean joint error "
@@ -368,6 +431,20 @@ def render_markdown(res: dict) -> str:
                      f"{_f(r.get('tracker_ms_p95'), '{:.0f}')} | {_f(r['mpjpe_mm'])} | "
                      f"{_f(r.get('mpjpe_vs_lockstep_mm'), '{:+.1f}')} |")
     return "\n".join(L) + "\n"
+
+
+def render_segmentation(sg: dict) -> list[str]:
+    """The markdown lines of :func:`segmentation_speed`'s result."""
+    L = ["#### Segmentation", "",
+         f"`bags/{sg['bag']}`, {sg['views']} views {sg['image']}, {sg['sets']} frame sets after {sg['learn_frames']} "
+         f"learning frames; the segmentation node's core per view (`work_scale` 1 = the default); CPU time of the "
+         f"calling thread, median over sets, median of {sg['rounds']} interleaved rounds; IoU: the masks against the "
+         "default's, pooled.", "",
+         "| work_scale | CPU ms per set | CPU ms per view | IoU vs default |", "|---|---|---|---|"]
+    for r in sg["rows"]:
+        L.append(f"| {r['work_scale']:g} | {r['cpu_ms_per_set']:.2f} | {r['cpu_ms_per_view']:.2f} | "
+                 f"{_f(r['iou_vs_default'], '{:.3f}')} |")
+    return L + [""]
 
 
 def render_profile(pr: dict) -> list[str]:
@@ -399,7 +476,7 @@ def plot(res: dict, path: Path) -> Path:
     rows = res["tracker"]["rows"]
     fig, ax = plt.subplots(figsize=(6, 3.6))
     ax.plot([r["evals_per_frame"] for r in rows], [r["frames_per_s"] for r in rows], "bo-", label="offline tracker")
-    for r, st in zip(res["network"]["rows"], ("g--", "r-.", "m:")):
+    for r, st in zip(res["network"]["rows"], ("g--", "c-", "r-.", "m:")):
         if r.get("fps"):
             ax.axhline(r["fps"], color=st[0], ls=st[1:], label=f"network, {r['mode']} ({r.get('evals_per_frame')} evals)")
     ax.set_xlabel("evaluations per frame")

@@ -66,6 +66,10 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
                         "frames before the replay (as isa-mocap calibrate; written to DIR/body.yaml); 'default' = "
                         "config/body/default.yaml; FILE = a body-shape YAML; 'truth' = the bag's ground-truth "
                         "model's (a diagnostic only)")
+    p.add_argument("--single-process", action="store_true",
+                   help="run segmentation, prediction and estimator (and keypoints with --keypoints) in one process "
+                        "on one executor (isa_mocap_ros.cli.compose) instead of one process each; the recorder "
+                        "stays apart. Lockstep results are the same (docs/nodes.md)")
     p.add_argument("--quiet", action="store_true", help="do not echo node output")
     from isa_mocap_ros.cli.shape_options import add_calibration_arguments
 
@@ -106,10 +110,16 @@ def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
             kp_params += [(f"qos_overrides.{NS}/cam{v}/{t}.subscription.reliability", "reliable")
                           for v in range(n_views) for t in ("image_raw", "mask", "camera_info")]
         kp = [NodeSpec(exec="keypoints_node", name="keypoints", params=tuple(kp_params), nice=nice, **common)]
-    return kp + [
+    work = kp + [
         NodeSpec(exec="segmentation_node", name="segmentation", params=tuple(seg), nice=nice, **common),
         NodeSpec(exec="prediction_node", name="prediction", nice=nice, **common),
         NodeSpec(exec="estimator_node", name="estimator", params=tuple(est), **common),
+    ]
+    if getattr(args, "single_process", False):
+        # one process at the estimator's priority (no niceness: the helpers' share is the tracker's now)
+        work = [NodeSpec(exec="compose", name="mocap_nodes",
+                         members=tuple(NodeSpec(**{**s.__dict__, "nice": 0}) for s in work))]
+    return work + [
         NodeSpec(exec="recorder_node", name="recorder", namespace=NS, nice=nice,
                  params=(("output", str(out / "estimates")), ("overwrite", "true"),
                          ("topics", "[" + ",".join(f"'{t}'" for t in RECORDED) + "]"))),

@@ -94,6 +94,8 @@ _PARAMS = {
     "field_iterations": ("robust mode, vote=field: mean-field iterations", 0, 1000),
     "learn_from": ("colour: frames (the learning frames show the empty scene) or stable (the person may be in "
                    "them: per pixel the frames where the background shows, plus the clean plate)", None, None),
+    "work_scale": ("working resolution of the model as a share of the image side (1 = the image's; the mask "
+                   "is published at the image's size)", 0.05, 1.0),
 }
 
 

@@ -196,19 +196,20 @@ class BackgroundSegmenter:
                 self._cv = cv2.createBackgroundSubtractorKNN(
                     history=c.history, dist2Threshold=float(c.knn_dist2_threshold),
                     detectShadows=bool(c.shadow_suppression))
+        plate = None if self._plate is None else self._reduce(self._plate)
         if self._plate is not None and self.config.learn_from == "stable":
             self._shape = self._plate.shape   # the plate joins the estimate after the learning images
         elif self._plate is not None:
             self._shape = self._plate.shape
             if self._cv is None:
-                self._mu = self._as3(self._plate).astype(np.float32)
+                self._mu = self._as3(plate).astype(np.float32)
                 self._var = np.full_like(self._mu, max(self.config.initial_std, self.config.min_std) ** 2)
                 self._n_learnt = self.config.learn_frames
                 if self.config.robust == "on":   # one plate has no outlier statistics: "auto" is off
                     self._reliable = np.ones(self._mu.shape[:2], np.uint8)
             else:
                 for _ in range(self.config.learn_frames):
-                    self._cv.apply(self._plate, learningRate=-1)
+                    self._cv.apply(plate, learningRate=-1)
                 self._n_learnt = self.config.learn_frames
 
     @property
@@ -242,10 +243,15 @@ class BackgroundSegmenter:
             if self._shape is None:
                 return None
             img = self._cv.getBackgroundImage()
-            return None if img is None else img.reshape(self._shape)
-        if self._mu is None:
+        elif self._mu is None:
             return None
-        return np.clip(np.rint(self._mu), 0, 255).astype(np.uint8).reshape(self._shape)
+        else:
+            img = np.clip(np.rint(self._mu), 0, 255).astype(np.uint8)
+        if img is None:
+            return None
+        if img.shape[:2] != self._shape[:2]:
+            img = cv2.resize(img, (self._shape[1], self._shape[0]), interpolation=cv2.INTER_LINEAR)
+        return img.reshape(self._shape)
 
     # ------------------------------------------------------------------ main call
     def apply(self, image: np.ndarray) -> np.ndarray:
@@ -275,9 +281,28 @@ class BackgroundSegmenter:
                 f"image: expected shape {self._shape} (the size the background was learnt at), "
                 f"got {image.shape}")
         self.frames_seen += 1
-        if self._cv is not None:
-            return self._apply_opencv(image)
-        return self._apply_colour(image)
+        work = self._reduce(image)
+        mask = self._apply_opencv(work) if self._cv is not None else self._apply_colour(work)
+        return self._expand(mask)
+
+    def _reduce(self, image: np.ndarray) -> np.ndarray:
+        """The image at the working resolution (``work_scale``; area average). The image itself at 1."""
+        h, w = self._work_size(image.shape)
+        if (h, w) == image.shape[:2]:
+            return image
+        return cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)
+
+    def _work_size(self, shape) -> tuple[int, int]:
+        s = self.config.work_scale
+        return max(1, int(round(shape[0] * s))), max(1, int(round(shape[1] * s)))
+
+    def _expand(self, mask: np.ndarray) -> np.ndarray:
+        """A working-resolution mask at the image's size (bilinear, thresholded at half: 0 / 255)."""
+        H, W = self._shape[:2]
+        if mask.shape == (H, W):
+            return mask
+        up = cv2.resize(mask, (W, H), interpolation=cv2.INTER_LINEAR)
+        return cv2.threshold(up, 127, 255, cv2.THRESH_BINARY)[1]
 
     # ------------------------------------------------------------------ helpers
     @staticmethod
@@ -298,8 +323,8 @@ class BackgroundSegmenter:
 
     def _clean(self, raw: np.ndarray) -> np.ndarray:
         c = self.config
-        return clean_mask(raw, open_kernel=c.open_kernel, close_kernel=c.close_kernel,
-                          min_blob_area_px=c.min_blob_area_px)
+        area = c.min_blob_area_px if c.work_scale == 1.0 else int(round(c.min_blob_area_px * c.work_scale ** 2))
+        return clean_mask(raw, open_kernel=c.open_kernel, close_kernel=c.close_kernel, min_blob_area_px=area)
 
     def _zero(self) -> np.ndarray:
         return np.zeros(self._shape[:2], np.uint8)
@@ -370,7 +395,7 @@ class BackgroundSegmenter:
         f3 = np.repeat(frames, 3, axis=-1) if grey else frames
         plates = []
         if self._plate is not None:
-            p = self._as3(self._plate)
+            p = self._as3(self._reduce(self._plate))
             plates = [np.repeat(p, 3, axis=-1) if p.shape[-1] == 1 else p]
         est = estimate_background(f3, plates=plates)
         for f in est.frames(self.config.learn_frames, f3):

@@ -105,6 +105,14 @@ class SegmentationConfig:
         (:func:`~isa_mocap_ros.vision.stable_background.estimate_background`: temporal mode, person
         region, the clean plate if given as an image of the empty scene); the model then learns from
         ``learn_frames`` background frames drawn from those.
+    work_scale : float
+        Working resolution of the model as a share of the image's side, in (0, 1]: the image is
+        reduced (area average) to ``round(W * work_scale) x round(H * work_scale)`` before the
+        model sees it, and the mask is brought back to the image's size (bilinear, then
+        thresholded at half). 1 (default) = the image's resolution, the model untouched. Every
+        pixel setting (kernels, margins, ``std_smoothing_px``, ``vote_sigma_px``) then counts
+        working pixels, except ``min_blob_area_px``, which stays in image pixels (scaled by
+        ``work_scale**2``).
     """
 
     method: str = "colour"
@@ -134,6 +142,7 @@ class SegmentationConfig:
     field_coupling: float = 0.3
     field_iterations: int = 8
     learn_from: str = "frames"
+    work_scale: float = 1.0
 
     def __post_init__(self) -> None:
         err = SegmentationError
@@ -167,3 +176,4 @@ class SegmentationConfig:
                      "min_blob_area_px"):
             check_number(name, getattr(self, name), lo=0, integer=True, error=err)
         check_number("history", self.history, lo=1, integer=True, error=err)
+        check_number("work_scale", self.work_scale, lo=0.05, hi=1.0, error=err)
