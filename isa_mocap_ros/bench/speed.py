@@ -82,7 +82,7 @@ def segmentation_speed(bag: Path, *, scales=SEGMENTATION_SCALES, rounds: int = 3
     learning frames: the median over sets, then the median over rounds. IoU: the masks pooled over
     sets and views against the first scale's (intersection / union of the foreground pixels).
     """
-    from isa_mocap_ros.cli.track import read_sequence
+    from isa_mocap_ros.cli.track_io import read_sequence
     from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig
 
     seq = read_sequence(bag, want_images=True, want_masks=False)
