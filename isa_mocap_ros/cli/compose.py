@@ -25,7 +25,7 @@ def run_composed(specs: list[NodeSpec]) -> int:
     from rclpy.executors import ExternalShutdownException
 
     from isa_mocap_ros.cli.launch import node_class
-    from isa_mocap_ros.nodes.common import declare_executor, make_executor, spin_until_shutdown
+    from isa_mocap_ros.nodes.common import close_nodes, declare_executor, make_executor, spin_until_shutdown
 
     rclpy.init()
     nodes = []
@@ -47,12 +47,7 @@ def run_composed(specs: list[NodeSpec]) -> int:
         print(f"compose: {exc}", file=sys.stderr)
         code = 2
     finally:
-        for node in reversed(nodes):
-            close = getattr(node, "close", None)
-            if callable(close):
-                close()
-            node.destroy_node()
-        rclpy.try_shutdown()
+        close_nodes(nodes)
     return code
 
 

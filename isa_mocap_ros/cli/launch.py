@@ -53,6 +53,8 @@ def run_single_process(specs: list[NodeSpec]) -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 
+    from isa_mocap_ros.nodes.common import close_nodes
+
     rclpy.init()
     nodes = []
     executor = MultiThreadedExecutor()
@@ -66,12 +68,7 @@ def run_single_process(specs: list[NodeSpec]) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        for node in reversed(nodes):
-            close = getattr(node, "close", None)
-            if callable(close):
-                close()
-            node.destroy_node()
-        rclpy.try_shutdown()
+        close_nodes(nodes)
     return 0
 
 

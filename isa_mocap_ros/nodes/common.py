@@ -246,10 +246,16 @@ def run_node(factory: Callable[..., Node], args: list[str] | None = None, *,
         print(f"{getattr(factory, '__name__', 'node')}: {exc}", file=sys.stderr)
         code = 2
     finally:
-        if node is not None:
-            close = getattr(node, "close", None)
-            if callable(close):
-                close()
-            node.destroy_node()
-        rclpy.try_shutdown()
+        close_nodes([] if node is None else [node])
     return code
+
+
+def close_nodes(nodes) -> None:
+    """Close (their ``close()``, if any) and destroy ``nodes`` in reverse order, then ``try_shutdown``:
+    the end of every process that spins nodes (one node, a launch, a composed process)."""
+    for node in reversed(list(nodes)):
+        close = getattr(node, "close", None)
+        if callable(close):
+            close()
+        node.destroy_node()
+    rclpy.try_shutdown()
