@@ -211,7 +211,7 @@ def test_bad_images_are_dropped_with_one_line_each_and_good_ones_still_segmented
     assert "encoding 'bgr8', the camera's is 'rgb8'" in text, out
     assert "size 7x3" in text, out            # the stray first image: rejected, never learnt
     assert "WARN" in lines[0], out
-    assert seg.stop() == 0
+    assert seg.stop() == 0, seg.output()      # failed once (exit 1, output not shown): now it is shown
     # one line per kind (rate-limited): the second image of the wrong size is counted, not logged
     dropped = re.search(r"(\d+) images dropped", seg.output())
     assert dropped and 9 <= int(dropped.group(1)) <= 8 + tiny_sent, seg.output()
