@@ -98,8 +98,9 @@ def rodrigues_into(wx, wy, wz, R):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always", fastmath=False)
-def _fk_pose(X, i, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
-    """Rotations ``R[i]`` and positions ``P[i]`` of pose ``X[i]`` (one pose of :func:`_fk_kernel`)."""
+def fk_pose_into(X, i, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
+    """Rotations ``R[i]`` and positions ``P[i]`` of pose ``X[i]`` (one pose of :func:`_fk_kernel`; the
+    compiled keypoint energy, ``energy.keypoint_kernel``, calls it too)."""
     J = parents.shape[0]
     rodrigues_into(X[i, 3], X[i, 4], X[i, 5], R[i, 0])       # root: Eq. 13.20, Taylor series near 0
     for c in range(3):
@@ -128,14 +129,14 @@ def _fk_pose(X, i, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover
 @numba.njit(parallel=True, cache=True, fastmath=False)
 def _fk_kernel(X, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
     for i in numba.prange(X.shape[0]):
-        _fk_pose(X, i, parents, offsets, ptr, dofs, axes, R, P)
+        fk_pose_into(X, i, parents, offsets, ptr, dofs, axes, R, P)
 
 
 @numba.njit(cache=True, fastmath=False)
 def _fk_kernel_serial(X, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
     """:func:`_fk_kernel` on the calling thread (the same operations, so the same bits)."""
     for i in range(X.shape[0]):
-        _fk_pose(X, i, parents, offsets, ptr, dofs, axes, R, P)
+        fk_pose_into(X, i, parents, offsets, ptr, dofs, axes, R, P)
 
 
 #: Batches smaller than this run on the calling thread: a parallel launch for one pose cost more CPU than
