@@ -28,6 +28,9 @@ from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, Si
 from rclpy.node import Node
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
+import msg_adapters as ma
+from isa_mocap_ros.intake import Setting
+
 QOS_OVERRIDES = QoSOverridingOptions.with_default_policies()
 
 
@@ -163,6 +166,31 @@ class ProblemLog:
     @property
     def total(self) -> int:
         return sum(self.counts.values())
+
+
+def camera_info_callback(v: int, problems: ProblemLog, problem_key: Callable[[Exception], str],
+                         take: Callable[[int, Setting, Any], None]) -> Callable[[Any], None]:
+    """The ``cam<v>/camera_info`` callback of the nodes that gate images on it (segmentation, keypoints,
+    estimator): ``take(stamp_ns, Setting(frame_id, width, height), intrinsics)`` per good message; a bad one is
+    reported under ``problem_key(exc)`` (an ``msg_adapters.AdapterError``, naming the field) and dropped. A camera
+    sends the same camera_info with every image, so the intrinsics are converted again only when
+    ``ma.camera_info_key`` changes (~10 µs for the key instead of ~0.2 ms; the same intrinsics bit for bit)."""
+    last = [None, None]         # key and intrinsics of the last good message
+
+    def cb(msg) -> None:
+        try:
+            stamp = ma.stamp_to_ns(msg.header)
+            key = ma.camera_info_key(msg)
+            if key is not None and key == last[0]:
+                intr = last[1]
+            else:
+                intr = ma.camera_info_to_intrinsics(msg)
+                last[:] = key, intr
+        except ma.AdapterError as exc:
+            problems.report(problem_key(exc), f"cam{v}/camera_info dropped: {exc}")
+            return
+        take(stamp, Setting(msg.header.frame_id, intr.width, intr.height), intr)
+    return cb
 
 
 def log_closing(node: Node, text: str) -> None:

@@ -44,7 +44,7 @@ from std_msgs.msg import Header
 import msg_adapters as ma
 from isa_mocap_ros.intake import Setting, ViewGate
 from isa_mocap_ros.nodes import qos
-from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, run_node
+from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, camera_info_callback, declare, run_node
 from isa_mocap_ros.vision.errors import VisionError
 from isa_mocap_ros.vision.landmark_model import ModelUnavailable
 from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, KeypointSchedule, detect_in_mask
@@ -129,16 +129,8 @@ class KeypointNode(Node):
         return cb
 
     def _info_cb(self, v: int):
-        def cb(msg: CameraInfo) -> None:
-            try:
-                stamp = ma.stamp_to_ns(msg.header)
-                intr = ma.camera_info_to_intrinsics(msg)
-            except ma.AdapterError as exc:
-                self.problems.report(f"info{v}:{exc.field}", f"cam{v}/camera_info dropped: {exc}")
-                return
-            self._settle(v, *self.gates[v].add_info(stamp, Setting(msg.header.frame_id, intr.width, intr.height),
-                                                    intr))
-        return cb
+        return camera_info_callback(v, self.problems, lambda exc: f"info{v}:{exc.field}",
+                                    lambda *info: self._settle(v, *self.gates[v].add_info(*info)))
 
     def _settle(self, v: int, accepted, rejected) -> None:
         for r in rejected:
