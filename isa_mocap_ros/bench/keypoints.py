@@ -45,6 +45,7 @@ import numpy as np
 from isa_mocap_ros.bench.keypoints_tracking import (bench_init, bench_peer, bench_track, print_init,
                                                    print_track)
 from isa_mocap_ros.resources import cmu_walk_bvh, shared_data_dir
+from isa_mocap_ros.vision.keypoint_schedule import EVERY_K
 from isa_mocap_ros.vision.landmarks import LANDMARK_NAMES, PoseLandmarker, box_from_mask, box_from_points, upright_angle
 
 _REAL = shared_data_dir() / "real" / "pose2sim_demo"
@@ -74,8 +75,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seeds", default="0,1,2", help="track kind: bag seeds (default 0,1,2)")
     p.add_argument("--track-s", type=float, default=3.0, help="track kind: seconds of each motion (default 3)")
     p.add_argument("--weight", type=float, default=1.0, help="track kind: keypoint weight (default 1)")
-    p.add_argument("--every", type=int, default=6, help="track, cost, peer kinds: after the dense start, every K-th "
-                   "frame with a person (default 6, the keypoint node's)")
+    p.add_argument("--every", type=int, default=EVERY_K, help="track, cost, peer kinds: after the dense start, every "
+                   f"K-th frame with a person (default {EVERY_K}, the keypoint node's)")
     p.add_argument("--body", choices=("capsules", "mesh"), default="capsules",
                    help="track kind: render the generated motions as capsules (the control, default) or meshes")
     p.add_argument("--subjects", default="slim_woman,average_man,heavy_man",

@@ -47,7 +47,7 @@ from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, camera_info_callback, declare, run_node
 from isa_mocap_ros.vision.errors import VisionError
 from isa_mocap_ros.vision.landmark_model import ModelUnavailable
-from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, KeypointSchedule, detect_in_mask
+from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, EVERY_K, KeypointSchedule, detect_in_mask
 from isa_mocap_ros.vision.landmarks import PoseLandmarker
 
 __all__ = ["KeypointNode", "main"]
@@ -62,7 +62,7 @@ class KeypointNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("keypoints", **kwargs)
         self.n_views = declare(self, "views", 4, "number of camera views (cam0 .. cam<views-1>)", lo=1, hi=64)
-        self.every_k = declare(self, "every_k_frames", 6, "after the dense start, detect on every k-th frame "
+        self.every_k = declare(self, "every_k_frames", EVERY_K, "after the dense start, detect on every k-th frame "
                                "with a person of each view (1 = all)", lo=1, hi=10000)
         self.dense_frames = declare(self, "dense_frames", DENSE_FRAMES, "detect on each view's first frames with "
                                     "a person (the automatic initialization and its heading check)", lo=0, hi=10000)
