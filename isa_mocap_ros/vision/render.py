@@ -40,7 +40,7 @@ from .camera import Camera
 from .errors import VisionError
 
 __all__ = ["render", "render_mask", "render_labels", "render_labels_at", "capsule_data", "capsule_contains",
-           "clear_ray_cache", "TILE"]
+           "clear_ray_cache", "pixel_rays", "TILE"]
 
 #: tile edge in pixels for the culling
 TILE = 8
@@ -341,8 +341,11 @@ def _run(camera, cd, caps, bs, nb, mode, colors, light, rgb):
     o, dirs, axes, tcos, tsin, zaxis = cd
     H, W = camera.height, camera.width
     mask = np.zeros((H, W), np.uint8)
-    label = np.full((H, W), -1, np.int32)
-    depth = np.full((H, W), np.nan, np.float32)
+    if mode == 0:       # the mask only: the kernel never writes labels or depths
+        label, depth = np.full((1, 1), -1, np.int32), np.full((1, 1), np.nan, np.float32)
+    else:
+        label = np.full((H, W), -1, np.int32)
+        depth = np.full((H, W), np.nan, np.float32)
     if caps.shape[0]:
         _raycast(o, dirs, H, W, axes, tcos, tsin, caps, bs, nb, mode, colors, light, zaxis, rgb, mask, label, depth)
     return mask, label, depth
@@ -446,6 +449,17 @@ def render_labels_at(camera: Camera, endpoints: Any, radii: Any, pixels: Any, *,
         o, dirs, axes, tcos, tsin, zaxis = cd
         _raycast_at(o, dirs, camera.width, axes, tcos, tsin, caps, bs, nb, zaxis, u, v, label, depth)
     return label, depth
+
+
+def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The renderer's cached rays of ``camera``'s pixel centres: ``origin (3,)`` (the camera centre),
+    ``directions (H*W, 3)`` (unit, world frame, lens distortion removed; row ``v * W + u`` is pixel
+    ``(u, v)``: :meth:`Camera.ray` there) and the optical axis ``(3,)`` (depth = distance × its dot with the
+    direction). Read-only: shared by every render of this camera."""
+    if not isinstance(camera, Camera):
+        raise VisionError(f"camera: expected a Camera, received {type(camera).__name__}")
+    o, dirs, _, _, _, zaxis = _camera_data(camera)
+    return o, dirs, zaxis
 
 
 def capsule_contains(X: Any, endpoints: Any, radii: Any) -> np.ndarray:
