@@ -141,13 +141,13 @@ def _fk_kernel_serial(X, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no
 
 @numba.njit(cache=True, fastmath=False)
 def _fk_axes_kernel(x, parents, offsets, ptr, dofs, axes, R, P, A):  # pragma: no cover - compiled
-    """One pose ``x``: rotations ``R (J, 3, 3)`` and positions ``P (J, 3)`` by :func:`_fk_pose`'s operations
+    """One pose ``x``: rotations ``R (J, 3, 3)`` and positions ``P (J, 3)`` by :func:`fk_pose_into`'s operations
     (the same bits as :func:`forward_kinematics`), and ``A (D, 3)``: the world axis of each joint-angle DOF
     (column ``a`` of the joint's rotation before that DOF's own rotation, as :func:`joint_frames`)."""
     X = x.reshape(1, x.shape[0])
     RR = R.reshape(1, R.shape[0], 3, 3)
     PP = P.reshape(1, P.shape[0], 3)
-    _fk_pose(X, 0, parents, offsets, ptr, dofs, axes, RR, PP)
+    fk_pose_into(X, 0, parents, offsets, ptr, dofs, axes, RR, PP)
     # the axes: replay each joint's chain from its parent's rotation (the same products, in order)
     J = parents.shape[0]
     M = np.empty((3, 3))
