@@ -26,16 +26,7 @@ CLI = [sys.executable, "-m", "isa_mocap_ros.cli.main"]
 SETTINGS = ["--optimizer", "isa", "--evals", "300", "--seed", "3", "--shape", "default"]
 
 
-@pytest.fixture(scope="module")
-def model_file():
-    from isa_mocap_ros.vision.landmark_model import ModelUnavailable, landmark_model_path
-    try:
-        return landmark_model_path()
-    except ModelUnavailable as exc:
-        pytest.skip(f"landmark model not available: {exc}")
-
-
-def test_lockstep_run_with_keypoints_equals_offline_track_under_a_fuzzer(model_file, spawn, rosenv, tmp_path):
+def test_lockstep_run_with_keypoints_equals_offline_track_under_a_fuzzer(landmark_model, spawn, rosenv, tmp_path):
     fuzzer = spawn("fuzzer", str(HERE / "fuzzer.py"), "4", "20", "1", "keypoints")
     assert fuzzer.wait_for_output("sent ", 30), fuzzer.output()
     run = subprocess.run(CLI + ["run", str(FIXTURE), "--lockstep", "--keypoints", "--out", str(tmp_path / "run"),

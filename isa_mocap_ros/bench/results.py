@@ -2,7 +2,9 @@
 
 ``isa-mocap bench all [--quick] [--results PATH] [--out DIR] [--jobs N] [--only A,B] [--render]``. Runs, in
 order, ackley, adapters, render, energy, compare, robustness, speed, mesh_baseline (mesh bodies vs
-capsules, reduced) and mesh (the headline: mesh subjects, automatic shape and initialization) with their default designs (compare and robustness on mesh bodies since issue 32)
+capsules, reduced), mesh (the headline: mesh subjects, automatic shape and initialization) and keypoints (a reduced
+``bench keypoints``: the detector's cost per rate, tracking with and without the term, :mod:`.keypoints_summary`)
+with their default designs (compare and robustness on mesh bodies since issue 32)
 (``--quick``: their ``--quick`` variants), then writes
 
 * ``PATH`` (default ``docs/RESULTS.md`` of the source checkout): every bench's tables, the figures,
@@ -42,7 +44,7 @@ from isa_mocap_ros.bench._common import energy_sizes, json_of
 #: both cores at full load that ackley, compare and robustness take, the node network's real-time run
 #: in ``speed`` dropped 24 of 145 frame sets (tracker 31 ms a frame, p50) where the same bench alone
 #: a minute later dropped 6 (22.7 ms; session 12, docs/evaluation.md).
-ORDER = ("energy", "speed", "adapters", "render", "ackley", "compare", "robustness", "mesh_baseline", "mesh")
+ORDER = ("energy", "speed", "adapters", "render", "ackley", "compare", "robustness", "mesh_baseline", "mesh", "keypoints")
 _SRC_ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -160,6 +162,12 @@ def _bench_mesh(quick: bool, ctx: dict) -> dict:
                       out=ctx["out"] / "mesh", jobs=ctx["jobs"], progress=ctx["progress"])
 
 
+def _bench_keypoints(quick: bool, ctx: dict) -> dict:
+    from isa_mocap_ros.bench import keypoints_summary
+
+    return keypoints_summary.collect(quick=quick, out=ctx["out"])
+
+
 def _bench_speed(quick: bool, ctx: dict) -> dict:
     from isa_mocap_ros.bench import speed as bench_speed
 
@@ -170,7 +178,7 @@ def _bench_speed(quick: bool, ctx: dict) -> dict:
 
 RUNNERS = {"ackley": _bench_ackley, "adapters": _bench_adapters, "render": _bench_render, "energy": _bench_energy,
            "compare": _bench_compare, "robustness": _bench_robustness, "speed": _bench_speed,
-           "mesh_baseline": _bench_mesh_baseline, "mesh": _bench_mesh}
+           "mesh_baseline": _bench_mesh_baseline, "mesh": _bench_mesh, "keypoints": _bench_keypoints}
 
 
 # ------------------------------------------------------------------ markdown sections
@@ -294,6 +302,12 @@ def md_mesh(d: dict) -> str:
         + render_markdown(d) + "\n"
 
 
+def md_keypoints(d: dict) -> str:
+    from isa_mocap_ros.bench.keypoints_summary import render_markdown
+
+    return render_markdown(d)
+
+
 def md_speed(d: dict) -> str:
     from isa_mocap_ros.bench.speed import render_markdown
 
@@ -393,6 +407,7 @@ SECTIONS = (("mesh", "Headline: mesh subjects, automatic shape and initializatio
             ("compare", "Optimizer comparison (EA-vs-PF §5.2-5.4, with pycma and scipy-DE)", md_compare),
             ("robustness", "Robustness: noise and occlusions (ISA §13.4.2)", md_robustness),
             ("mesh_baseline", "Mesh bodies vs capsules (issue 32's baseline)", md_mesh_baseline),
+            ("keypoints", "Learned keypoints: cost and tracking with the term (issue 36)", md_keypoints),
             ("speed", "Speed: energy, tracker, node network", md_speed),
             ("energy", "Silhouette energy speed", md_energy),
             ("render", "Renderer speed", md_render),

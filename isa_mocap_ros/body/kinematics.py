@@ -98,8 +98,9 @@ def rodrigues_into(wx, wy, wz, R):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always", fastmath=False)
-def _fk_pose(X, i, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
-    """Rotations ``R[i]`` and positions ``P[i]`` of pose ``X[i]`` (one pose of :func:`_fk_kernel`)."""
+def fk_pose_into(X, i, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
+    """Rotations ``R[i]`` and positions ``P[i]`` of pose ``X[i]`` (one pose of :func:`_fk_kernel`; the
+    compiled keypoint energy, ``energy.keypoint_kernel``, calls it too)."""
     J = parents.shape[0]
     rodrigues_into(X[i, 3], X[i, 4], X[i, 5], R[i, 0])       # root: Eq. 13.20, Taylor series near 0
     for c in range(3):
@@ -128,25 +129,25 @@ def _fk_pose(X, i, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover
 @numba.njit(parallel=True, cache=True, fastmath=False)
 def _fk_kernel(X, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
     for i in numba.prange(X.shape[0]):
-        _fk_pose(X, i, parents, offsets, ptr, dofs, axes, R, P)
+        fk_pose_into(X, i, parents, offsets, ptr, dofs, axes, R, P)
 
 
 @numba.njit(cache=True, fastmath=False)
 def _fk_kernel_serial(X, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
     """:func:`_fk_kernel` on the calling thread (the same operations, so the same bits)."""
     for i in range(X.shape[0]):
-        _fk_pose(X, i, parents, offsets, ptr, dofs, axes, R, P)
+        fk_pose_into(X, i, parents, offsets, ptr, dofs, axes, R, P)
 
 
 @numba.njit(cache=True, fastmath=False)
 def _fk_axes_kernel(x, parents, offsets, ptr, dofs, axes, R, P, A):  # pragma: no cover - compiled
-    """One pose ``x``: rotations ``R (J, 3, 3)`` and positions ``P (J, 3)`` by :func:`_fk_pose`'s operations
+    """One pose ``x``: rotations ``R (J, 3, 3)`` and positions ``P (J, 3)`` by :func:`fk_pose_into`'s operations
     (the same bits as :func:`forward_kinematics`), and ``A (D, 3)``: the world axis of each joint-angle DOF
     (column ``a`` of the joint's rotation before that DOF's own rotation, as :func:`joint_frames`)."""
     X = x.reshape(1, x.shape[0])
     RR = R.reshape(1, R.shape[0], 3, 3)
     PP = P.reshape(1, P.shape[0], 3)
-    _fk_pose(X, 0, parents, offsets, ptr, dofs, axes, RR, PP)
+    fk_pose_into(X, 0, parents, offsets, ptr, dofs, axes, RR, PP)
     # the axes: replay each joint's chain from its parent's rotation (the same products, in order)
     J = parents.shape[0]
     M = np.empty((3, 3))
