@@ -121,6 +121,17 @@ def spawn(rosenv, tmp_path):
         p.stop(signal.SIGKILL if p.popen.poll() is None else signal.SIGINT, timeout=5)
 
 
+@pytest.fixture(scope="session")
+def landmark_model() -> Path:
+    """The BlazePose landmark model file that `make models` caches (skips, naming what is missing, where it is
+    absent)."""
+    from isa_mocap_ros.vision.landmark_model import ModelUnavailable, landmark_model_path
+    try:
+        return landmark_model_path()
+    except ModelUnavailable as exc:
+        pytest.skip(f"landmark model not available (make models): {exc}")
+
+
 @pytest.fixture
 def cmu_walk() -> Path:
     """The CMU walk BVH from ../shared (skips where it is absent, as DESIGN §6 asks)."""

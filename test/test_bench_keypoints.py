@@ -41,13 +41,9 @@ def test_readers_project_the_peer_keypoints_into_every_view(real):
         assert uv[names.index("Head"), 1] < uv[names.index("RAnkle"), 1]       # head above the feet
 
 
-def test_detector_on_the_real_recording_smoke(real):
-    from isa_mocap_ros.vision.landmark_model import ModelUnavailable, landmark_model_path
+def test_detector_on_the_real_recording_smoke(real, landmark_model):
     from isa_mocap_ros.vision.landmarks import PoseLandmarker
-    try:
-        det = PoseLandmarker(landmark_model_path())
-    except ModelUnavailable as exc:
-        pytest.skip(f"landmark model not available: {exc}")
+    det = PoseLandmarker(landmark_model)
     res = bk.bench_real(det, real, 50, aligned=True)           # frames 0 and 50 of each view
     assert set(res) == {"cam01", "cam02", "cam03", "cam04"}
     for cam, r in res.items():

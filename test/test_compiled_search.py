@@ -72,6 +72,76 @@ def test_compiled_hisa_equals_the_protocol(scene, params, budget):
     assert opt.rng.bit_generator.state == ref_opt.rng.bit_generator.state     # the same draws, in order
 
 
+class _WithKeypoints(_Restrictable):
+    """The tracker's objective with the keypoint term: ``energy(X) + w * keypoints(X)`` (tracking/objective.py)."""
+
+    def __init__(self, energy, term, weight):
+        super().__init__(energy)
+        self.term, self.weight = term, weight
+
+    def __call__(self, X):
+        return self.energy(X) + self.weight * self.term(X)
+
+    def restrict(self, x, coords):
+        data = self.energy.restrict(x, coords)
+        return lambda X: data(X) + self.weight * self.term(X)
+
+
+def _noisy_keypoints(model, cams, x, seed):
+    """The model's joints at ``x`` projected, 3 px of noise, one view's left and right exchanged."""
+    from test_energy_keypoints import true_keypoints
+    from isa_mocap_ros.vision.landmarks import LANDMARK_NAMES
+
+    rng = np.random.default_rng(seed)
+    kp = [(uv + rng.normal(0, 3.0, uv.shape), c * rng.uniform(0.6, 1.0, c.shape))
+          for uv, c in true_keypoints(model, cams, x)]
+    swap = [LANDMARK_NAMES.index(n.replace("left", "R").replace("right", "left").replace("R", "right"))
+            if ("left" in n or "right" in n) else i for i, n in enumerate(LANDMARK_NAMES)]
+    kp[1] = (kp[1][0][swap], kp[1][1][swap])
+    return kp
+
+
+@pytest.mark.parametrize("params, budget, weight", [({}, 1241, 1.0), ({"kernel": "s1", "variance": "population"}, 900, 0.3)])
+def test_compiled_hisa_with_keypoints_equals_the_protocol(scene, params, budget, weight):
+    # the keypoint term inside the compiled search: the protocol on `silhouette + w * keypoints`, bit for bit
+    from isa_mocap_ros.energy import KeypointEnergy
+
+    model, cams, walk, masks = scene
+    energy = SilhouetteEnergy(model, cams, masks[2], rng=np.random.default_rng(3))
+    term = KeypointEnergy(model, cams, _noisy_keypoints(model, cams, walk[2], 7))
+    x = walk[1] + 0.02
+    ref_opt = _hier(model, x, 5, **params)
+    ref = minimize(ref_opt, _WithKeypoints(energy, term, weight), max_evals=budget)
+    n_ref = term.n_evals
+    opt = _hier(model, x, 5, **params)
+    got = compiled_search.search(opt, energy, budget, keypoints=(term, weight))
+    assert term.n_evals == 2 * n_ref
+    for name in ("x", "best_x", "population"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
+    for name in ("energy", "best_energy", "n_evals", "n_iter"):
+        assert getattr(got, name) == getattr(ref, name), name
+    np.testing.assert_array_equal([dataclasses.astuple(h) for h in got.history],
+                                  [dataclasses.astuple(h) for h in ref.history])
+    assert opt.rng.bit_generator.state == ref_opt.rng.bit_generator.state
+    # and the term counts: without it the search ends elsewhere
+    plain = compiled_search.search(_hier(model, x, 5, **params), energy, budget)
+    assert not np.array_equal(plain.x, got.x)
+
+
+def test_tracker_with_keypoints_with_and_without_the_compiled_search(scene):
+    # every frame with keypoints (automatic initialization, its candidates' paused runs, tracked frames)
+    model, cams, walk, masks = scene
+    out = []
+    for compiled in (True, False):
+        tr = Tracker(model, cams, TrackerConfig.from_flat(seed=4, keypoint_weight=1.0))
+        tr.use_compiled_search = compiled
+        out.append([tr.step(masks[k], k, keypoints=_noisy_keypoints(model, cams, walk[k], k)) for k in range(4)])
+    assert any(n.startswith("keypoints:") for n in out[0][1].notes)
+    for a, b in zip(*out):
+        np.testing.assert_array_equal(a.x, b.x)
+        assert (a.energy, a.spread, a.n_evals, a.notes) == (b.energy, b.spread, b.n_evals, b.notes)
+
+
 @pytest.mark.parametrize("init", ["given", "automatic"])
 def test_tracker_with_and_without_the_compiled_search(scene, init):
     # automatic: the first frame's candidate runs pause after their first partition (init_keep)
@@ -117,7 +187,7 @@ def test_what_the_compiled_search_does_not_cover_runs_through_the_protocol(scene
     flat = make_optimizer("isa", x, 0.05, rng=np.random.default_rng(0))
     assert not compiled_search.supported(flat, energy, False)
     # the entry point answers None for each of these: the caller runs the protocol
-    assert compiled_search.search(_hier(model, x, 0), energy, 900, extra_terms=True) is None
+    assert compiled_search.search(_hier(model, x, 0), energy, 900, extra_terms=True) is None        # the prior
     assert compiled_search.search(_hier(model, x, 0, schedule="polynomial"), energy, 900) is None
     assert compiled_search.search(_hier(model, x, 0), exact, 900) is None
     seeded = make_optimizer("isa", x, 0.05, rng=np.random.default_rng(0), initial_population=np.tile(x, (100, 1)))
@@ -132,19 +202,22 @@ def test_cached_code_depends_on_the_kernels_it_calls():
     # changes a kernel recompiles it instead of loading old machine code)
     import hashlib
 
-    from isa_mocap_ros.energy import silhouette_kernel
+    from isa_mocap_ros.body import kinematics
+    from isa_mocap_ros.energy import keypoint_kernel, silhouette_kernel
     from isa_mocap_ros.optim import _fast, _fast_so3
 
+    deps = (silhouette_kernel, keypoint_kernel, kinematics, _fast, _fast_so3)
+    assert set(compiled_search.DEPENDENCIES) == set(deps)
     for fn in (compiled_search._partition, compiled_search.rotation_mean):
         locator = fn._cache._impl.locator
         assert type(locator).__name__ == "_DependentLocator"
         h = hashlib.sha256()
-        for m in (silhouette_kernel, _fast, _fast_so3):
+        for m in compiled_search.DEPENDENCIES:
             h.update(open(m.__file__, "rb").read())
         assert locator.get_source_stamp()[1] == h.hexdigest()
         # and the cache files' names carry the dependencies' module names: an index pickled before one was
         # renamed names a module that is gone, and must be missed rather than loaded (ModuleNotFoundError)
-        names = " ".join(m.__name__ for m in (silhouette_kernel, _fast, _fast_so3))
+        names = " ".join(m.__name__ for m in compiled_search.DEPENDENCIES)
         tag = hashlib.sha256(names.encode()).hexdigest()[:8]
         assert locator.get_disambiguator() == f"{locator._inner.get_disambiguator()}-{tag}"
 

@@ -138,3 +138,37 @@ def test_bad_settings_and_inputs(scene):
         fit.fit(bad, iterations=1)
     with pytest.raises(ContourFitError, match="iterations"):
         fit.fit(x0, iterations=-1)
+
+
+def test_compiled_steps_match_the_numpy_reference(scene):
+    """The fit's compiled per-view steps (back-projection, matching; tracking/contour_kernel.py) give the
+    pairs of the numpy reference (model_points, correspondences with a k-d tree). The pairs are taken at a
+    pose moved off the rendered one, so no projection falls on a pixel centre (there, a distance of exactly
+    max_px or two equidistant contour pixels make either path's pick a matter of rounding)."""
+    from isa_mocap_ros.body.kinematics import frames_and_axes
+
+    model, rig, x0, masks = scene
+    fit = ContourFit(model, rig, n_points=120, max_px=3.0)
+    fit.set_masks(masks)
+    x = x0 + np.random.default_rng(2).normal(0, 0.02, model.dof)
+    R, P, A = frames_and_axes(model, x)
+    T = forward_kinematics(model, x)[0]
+    assert np.array_equal(R, T[:, :3, :3]) and np.array_equal(P, T[:, :3, 3])
+    np.testing.assert_allclose(A[6:], joint_frames(model, x[None], want_axes=True)[2][0][6:], atol=1e-12)
+    ref, new = fit.model_points(x), fit._points(R, P)
+    assert [v for v, _, _ in ref] == [v for v, _, _ in new] == list(range(len(rig)))
+    for (_, f1, l1), (_, f2, l2) in zip(ref, new):
+        assert np.array_equal(f1, f2)
+        np.testing.assert_allclose(l1, l2, atol=1e-12)
+    y = x + np.random.default_rng(3).normal(0, 0.01, model.dof)
+    Ry, Py, _ = frames_and_axes(model, y)
+    a, b = fit.correspondences(y, ref, (Ry, Py)), fit._pairs(ref, Ry, Py)
+    assert len(a[0]) > 200
+    assert np.array_equal(a[0], b[0])
+    for u, w in zip(a[1:], b[1:]):
+        np.testing.assert_allclose(u, w, atol=1e-9)
+    # masks of a new frame replace the old contour pixels (the index images are cleared, not rebuilt)
+    fit.set_masks([np.zeros_like(m) for m in masks])
+    assert fit._pairs(ref, Ry, Py)[0].size == 0
+    fit.set_masks(masks)
+    assert np.array_equal(fit._pairs(ref, Ry, Py)[0], b[0])

@@ -18,11 +18,8 @@ NAMES = ["left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_h
 
 
 @pytest.fixture(scope="module")
-def detector():
-    try:
-        return PoseLandmarker(lmm.landmark_model_path())
-    except lmm.ModelUnavailable as exc:
-        pytest.skip(f"landmark model not available (make models): {exc}")
+def detector(landmark_model):
+    return PoseLandmarker(landmark_model)
 
 
 @pytest.fixture(scope="module")

@@ -2,7 +2,7 @@
 node processes over DDS, the keypoint node among them) while a fuzzer publishes malformed and far keypoint
 messages and skip notices (``test/fuzzer.py keypoints``; its other kinds are test_network_fuzz's), against the offline `isa-mocap track --keypoint-weight`
 with the same settings: the estimates are identical bit for bit, so the estimator took each frame set's
-keypoints (the keypoint node's schedule: the dense start, then every 6th frame) and nothing the fuzzer sent.
+keypoints (the keypoint node's schedule: the dense start, then every 8th frame) and nothing the fuzzer sent.
 """
 from __future__ import annotations
 
@@ -26,16 +26,7 @@ CLI = [sys.executable, "-m", "isa_mocap_ros.cli.main"]
 SETTINGS = ["--optimizer", "isa", "--evals", "300", "--seed", "3", "--shape", "default"]
 
 
-@pytest.fixture(scope="module")
-def model_file():
-    from isa_mocap_ros.vision.landmark_model import ModelUnavailable, landmark_model_path
-    try:
-        return landmark_model_path()
-    except ModelUnavailable as exc:
-        pytest.skip(f"landmark model not available: {exc}")
-
-
-def test_lockstep_run_with_keypoints_equals_offline_track_under_a_fuzzer(model_file, spawn, rosenv, tmp_path):
+def test_lockstep_run_with_keypoints_equals_offline_track_under_a_fuzzer(landmark_model, spawn, rosenv, tmp_path):
     fuzzer = spawn("fuzzer", str(HERE / "fuzzer.py"), "4", "20", "1", "keypoints")
     assert fuzzer.wait_for_output("sent ", 30), fuzzer.output()
     run = subprocess.run(CLI + ["run", str(FIXTURE), "--lockstep", "--keypoints", "--out", str(tmp_path / "run"),
@@ -54,7 +45,7 @@ def test_lockstep_run_with_keypoints_equals_offline_track_under_a_fuzzer(model_f
                                 *SETTINGS], capture_output=True, text=True, timeout=400)
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
     offline = json.loads((tmp_path / "track" / "summary.json").read_text())
-    # 12 frames with a person: the first 4 and every 6th after (frame 6 of them), 4 views each
+    # 12 frames with a person: the first 4 and every 8th after (frame 8 of them), 4 views each
     assert offline["keypoint_frames"] == 5 and offline["keypoint_detections"] == 20, offline
 
     # the keypoint node's messages were recorded (beside the fuzzer's: malformed, or far from the frames):

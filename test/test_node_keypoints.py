@@ -16,7 +16,6 @@ from isa_mocap_ros.body import joint_positions
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.synth import SceneRenderer, make_clip
 from isa_mocap_ros.vision import default_rig
-from isa_mocap_ros.vision.landmark_model import ModelUnavailable, landmark_model_path
 from isa_mocap_ros.vision.landmarks import LANDMARK_NAMES
 from rosnode import ros_node, spin_until
 
@@ -24,15 +23,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.timeout(180)]
 NODE = ["-m", "isa_mocap_ros.nodes.keypoints", "--ros-args", "-r", "__ns:=/mocap"]
 
 
-@pytest.fixture(scope="module")
-def model_file():
-    try:
-        return landmark_model_path()
-    except ModelUnavailable as exc:
-        pytest.skip(f"landmark model not available: {exc}")
-
-
-def test_node_publishes_landmarks_every_k_frames(model_file, rosenv, spawn, tmp_path):
+def test_node_publishes_landmarks_every_k_frames(landmark_model, rosenv, spawn, tmp_path):
     # reliable inputs, as `isa-mocap run --lockstep` sets them (sensor-data QoS drops messages on a loaded machine)
     params = {"views": 2, "every_k_frames": 2, "dense_frames": 1,
               "qos_overrides": {f"/mocap/cam{v}/{t}": {"subscription": {"reliability": "reliable"}}

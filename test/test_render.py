@@ -314,3 +314,21 @@ def test_body_model_in_default_views():
         floor, top = cam.project([[0, 0, 0], [0, 0, (E[..., 2] + model.capsule_radii).max()]])
         expected = floor[1] - top[1]
         assert abs((ys.max() - ys.min()) - expected) < 0.15 * expected
+
+
+def test_mask_any_hit_path_equals_the_nearest_hit_path_on_the_body():
+    """render_mask stops at a pixel's first hit (the capsule that hit the previous pixel tried first, the
+    tangent cone before the balls); render_labels finds the nearest hit: the same pixels, on the body model
+    in varied poses at 320x240 (several super-tiles of candidates)."""
+    from isa_mocap_ros.body import capsule_endpoints, make_model
+
+    model = make_model(39)
+    cam = look_at([3.2, -2.6, 2.0], [0, 0, 0.95], fov_deg=50, width=320, height=240)
+    rng = np.random.default_rng(11)
+    for _ in range(4):
+        x = np.clip(model.rest_pose() + rng.normal(0, 0.5, model.dof), model.lower, model.upper)
+        E = capsule_endpoints(model, x)[0]
+        mask = render_mask(cam, E, model.capsule_radii)
+        labels, _ = render_labels(cam, E, model.capsule_radii)
+        assert mask.sum() > 255 * 500
+        np.testing.assert_array_equal(mask > 0, labels >= 0)

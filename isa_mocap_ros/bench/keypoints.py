@@ -45,6 +45,7 @@ import numpy as np
 from isa_mocap_ros.bench.keypoints_tracking import (bench_init, bench_peer, bench_track, print_init,
                                                    print_track)
 from isa_mocap_ros.resources import cmu_walk_bvh, shared_data_dir
+from isa_mocap_ros.vision.keypoint_schedule import EVERY_K
 from isa_mocap_ros.vision.landmarks import LANDMARK_NAMES, PoseLandmarker, box_from_mask, box_from_points, upright_angle
 
 _REAL = shared_data_dir() / "real" / "pose2sim_demo"
@@ -74,8 +75,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seeds", default="0,1,2", help="track kind: bag seeds (default 0,1,2)")
     p.add_argument("--track-s", type=float, default=3.0, help="track kind: seconds of each motion (default 3)")
     p.add_argument("--weight", type=float, default=1.0, help="track kind: keypoint weight (default 1)")
-    p.add_argument("--every", type=int, default=6, help="track, cost, peer kinds: after the dense start, every K-th "
-                   "frame with a person (default 6, the keypoint node's)")
+    p.add_argument("--every", type=int, default=EVERY_K, help="track, cost, peer kinds: after the dense start, every "
+                   f"K-th frame with a person (default {EVERY_K}, the keypoint node's)")
     p.add_argument("--body", choices=("capsules", "mesh"), default="capsules",
                    help="track kind: render the generated motions as capsules (the control, default) or meshes")
     p.add_argument("--subjects", default="slim_woman,average_man,heavy_man",
@@ -274,8 +275,17 @@ def bench_synth(det: PoseLandmarker, width: int, height: int, step: int, seconds
     return out
 
 
+#: Rates the cost kind reports beside ``--every`` (after the dense start, every K-th frame with a person)
+COST_RATES = (4, 6, 8, 10)
+
+
 def bench_cost(args) -> dict:
-    """CPU time of the detector per detection and per frame set at the keypoint node's rate (module docstring)."""
+    """CPU time of the detector per detection and per frame set at the keypoint node's rate (module docstring).
+
+    One pass: every frame with a person of each view that the schedule of ``--every`` or of a rate in
+    :data:`COST_RATES` picks is detected on once and timed; a rate's CPU per frame set is the sum over the
+    frames its schedule picks, divided by the frame sets (so the rates share their timings).
+    ``args.frames`` (optional): only the first frame sets after the background learning."""
     from isa_mocap_ros.cli.track_io import read_sequence
     from isa_mocap_ros.resources import default_bag
     from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, KeypointSchedule, detect_in_mask
@@ -286,34 +296,46 @@ def bench_cost(args) -> dict:
     det = PoseLandmarker()
     learn = seq.empty_frames or 10
     segs = [BackgroundSegmenter(SegmentationConfig(learn_frames=learn)) for _ in seq.cameras]
-    schedules = [KeypointSchedule(args.every, dense_frames=DENSE_FRAMES) for _ in seq.cameras]
+    rates = sorted(set(COST_RATES) | {int(args.every)})
+    schedules = {k: [KeypointSchedule(k, dense_frames=DENSE_FRAMES) for _ in seq.cameras] for k in rates}
+    picked: dict[int, list[float]] = {k: [] for k in rates}
     cpu_ms, wall_ms, invoke_ms = [], [], []
     sets = 0
+    limit = getattr(args, "frames", None)
     for fr in seq.frames:
-        masks = list(fr.masks) if fr.masks and all(m is not None for m in fr.masks) else \
-            [seg.apply(img) for seg, img in zip(segs, fr.images)]
-        if fr.index < learn and not (fr.masks and all(m is not None for m in fr.masks)):
+        recorded = bool(fr.masks) and all(m is not None for m in fr.masks)
+        masks = list(fr.masks) if recorded else [seg.apply(img) for seg, img in zip(segs, fr.images)]
+        if fr.index < learn and not recorded:
             continue
+        if limit is not None and sets >= limit:
+            break
         sets += 1
         for v, (img, m) in enumerate(zip(fr.images, masks)):
-            if not schedules[v].due(bool(np.any(m))):
+            person = bool(np.any(m))
+            due = [k for k in rates if schedules[k][v].due(person)]
+            if not due:
                 continue
             c0, w0 = time.thread_time(), time.perf_counter()
             detect_in_mask(det, img, m)
             cpu_ms.append((time.thread_time() - c0) * 1e3)
             wall_ms.append((time.perf_counter() - w0) * 1e3)
+            for k in due:
+                picked[k].append(cpu_ms[-1])
     # the model alone (no crop), on one fixed input, 50 times
     x = np.zeros((256, 256, 3), np.float32)
     for _ in range(50):
         c0 = time.thread_time()
         det.run_model(x)
         invoke_ms.append((time.thread_time() - c0) * 1e3)
-    c = np.array(cpu_ms)
+    c = np.array(picked[int(args.every)])
+    per_rate = {str(k): dict(detections=len(picked[k]), detections_per_set=len(picked[k]) / max(sets, 1),
+                             cpu_ms_per_frame_set=float(np.sum(picked[k]) / max(sets, 1))) for k in rates}
     return dict(bag=str(bag), frame_sets=sets, detections=len(c), every_k=args.every, dense_frames=DENSE_FRAMES,
                 detections_per_set=len(c) / max(sets, 1), cpu_ms_per_detection_mean=float(c.mean()),
                 cpu_ms_per_detection_median=float(np.median(c)), wall_ms_per_detection_median=float(np.median(wall_ms)),
                 cpu_ms_per_invoke_median=float(np.median(invoke_ms)),
-                cpu_ms_per_frame_set=float(c.sum() / max(sets, 1)))
+                cpu_ms_per_frame_set=float(c.sum() / max(sets, 1)), rates=per_rate,
+                cpu_ms_per_detection_all_median=float(np.median(cpu_ms)))
 
 
 def _print_cost(res: dict) -> None:
@@ -323,6 +345,9 @@ def _print_cost(res: dict) -> None:
           f"CPU per detection {res['cpu_ms_per_detection_median']:.1f} ms median / {res['cpu_ms_per_detection_mean']:.1f} "
           f"mean (wall {res['wall_ms_per_detection_median']:.1f} median), model invoke alone "
           f"{res['cpu_ms_per_invoke_median']:.1f} ms; CPU per frame set {res['cpu_ms_per_frame_set']:.1f} ms on average")
+    for k, r in res.get("rates", {}).items():
+        print(f"  every {k:>2s}: {r['detections']:4d} detections, {r['detections_per_set']:.2f} per set, "
+              f"{r['cpu_ms_per_frame_set']:.1f} ms CPU per frame set")
 
 
 def _print(kind: str, res: dict) -> None:

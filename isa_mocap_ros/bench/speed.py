@@ -299,7 +299,7 @@ def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path, lockstep:
     s = json.loads((out / "summary.json").read_text())
     bag_fps = _bag_fps(bag)
     keep = ("frame_sets_played", "frames_processed", "frames_estimated", "fps", "latency_ms_p50", "latency_ms_p95",
-            "dropped_frames", "dropped_while_initializing", "frames_without_contour_stage", "budget_lowered", "track_resets", "init_ms", "tracker_ms_p50", "tracker_ms_p95", "mpjpe_mm", "knee_rmse_deg", "evals_per_frame", "optimizer")
+            "dropped_frames", "dropped_while_initializing", "startup_sets_caught_up", "frames_without_contour_stage", "budget_lowered", "track_resets", "init_ms", "tracker_ms_p50", "tracker_ms_p95", "mpjpe_mm", "knee_rmse_deg", "evals_per_frame", "optimizer")
     r = {"mode": mode, "busy_core": bool(busy), "single_process": bool(single),
          "body_shape": str(out / "body.yaml") if (out / "body.yaml").is_file() else (None if shape == "auto" else shape), **{k: s.get(k) for k in keep}, "bag_fps": bag_fps,
          "wall_seconds": round(wall, 1)}
@@ -415,17 +415,17 @@ def render_markdown(res: dict) -> str:
               "Dropped: frame sets played and not processed, start-up included (the share in brackets); latency: "
               "image received → joint_states received (the recorder's clock); vs lockstep: mean joint error "
               "minus the lockstep run's (same body shape, calibrated once by the first run).", "",
-              "| mode | frame sets played | processed | frames/s | real-time factor | latency p50 (ms) | latency p95 (ms) | dropped | of them while initializing | without the contour stage | initialization (ms) | tracker ms per set p50 / p95 | mean joint error (mm) | vs lockstep (mm) |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+              "| mode | frame sets played | processed | frames/s | real-time factor | latency p50 (ms) | latency p95 (ms) | dropped | of them while initializing | caught up after start-up | without the contour stage | initialization (ms) | tracker ms per set p50 / p95 | mean joint error (mm) | vs lockstep (mm) |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in n["rows"]:
             if "error" in r:
-                L.append(f"| {r['mode']} | failed: {r['error']} | | | | | | | | | | | | |")
+                L.append(f"| {r['mode']} | failed: {r['error']} | | | | | | | | | | | | | |")
                 continue
             share = f" ({100 * r['dropped_share']:.0f} %)" if r.get("dropped_share") is not None else ""
             L.append(f"| {r['mode']} | {r['frame_sets_played']} | {r['frames_processed']} | {_f(r['fps'], '{:.2f}')} | "
                      f"{_f(r['real_time_factor'], '{:.2f}')} | {_f(r['latency_ms_p50'], '{:.0f}')} | "
                      f"{_f(r['latency_ms_p95'], '{:.0f}')} | {r['dropped_frames']}{share} | "
-                     f"{_f(r.get('dropped_while_initializing'), '{}')} | "
+                     f"{_f(r.get('dropped_while_initializing'), '{}')} | {_f(r.get('startup_sets_caught_up'), '{}')} | "
                      f"{_f(r.get('frames_without_contour_stage'), '{}')} | {_f(r.get('init_ms'), '{:.0f}')} | "
                      f"{_f(r.get('tracker_ms_p50'), '{:.0f}')} / "
                      f"{_f(r.get('tracker_ms_p95'), '{:.0f}')} | {_f(r['mpjpe_mm'])} | "

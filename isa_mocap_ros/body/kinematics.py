@@ -98,8 +98,9 @@ def rodrigues_into(wx, wy, wz, R):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always", fastmath=False)
-def _fk_pose(X, i, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
-    """Rotations ``R[i]`` and positions ``P[i]`` of pose ``X[i]`` (one pose of :func:`_fk_kernel`)."""
+def fk_pose_into(X, i, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
+    """Rotations ``R[i]`` and positions ``P[i]`` of pose ``X[i]`` (one pose of :func:`_fk_kernel`; the
+    compiled keypoint energy, ``energy.keypoint_kernel``, calls it too)."""
     J = parents.shape[0]
     rodrigues_into(X[i, 3], X[i, 4], X[i, 5], R[i, 0])       # root: Eq. 13.20, Taylor series near 0
     for c in range(3):
@@ -128,14 +129,60 @@ def _fk_pose(X, i, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover
 @numba.njit(parallel=True, cache=True, fastmath=False)
 def _fk_kernel(X, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
     for i in numba.prange(X.shape[0]):
-        _fk_pose(X, i, parents, offsets, ptr, dofs, axes, R, P)
+        fk_pose_into(X, i, parents, offsets, ptr, dofs, axes, R, P)
 
 
 @numba.njit(cache=True, fastmath=False)
 def _fk_kernel_serial(X, parents, offsets, ptr, dofs, axes, R, P):  # pragma: no cover - compiled
     """:func:`_fk_kernel` on the calling thread (the same operations, so the same bits)."""
     for i in range(X.shape[0]):
-        _fk_pose(X, i, parents, offsets, ptr, dofs, axes, R, P)
+        fk_pose_into(X, i, parents, offsets, ptr, dofs, axes, R, P)
+
+
+@numba.njit(cache=True, fastmath=False)
+def _fk_axes_kernel(x, parents, offsets, ptr, dofs, axes, R, P, A):  # pragma: no cover - compiled
+    """One pose ``x``: rotations ``R (J, 3, 3)`` and positions ``P (J, 3)`` by :func:`fk_pose_into`'s operations
+    (the same bits as :func:`forward_kinematics`), and ``A (D, 3)``: the world axis of each joint-angle DOF
+    (column ``a`` of the joint's rotation before that DOF's own rotation, as :func:`joint_frames`)."""
+    X = x.reshape(1, x.shape[0])
+    RR = R.reshape(1, R.shape[0], 3, 3)
+    PP = P.reshape(1, P.shape[0], 3)
+    fk_pose_into(X, 0, parents, offsets, ptr, dofs, axes, RR, PP)
+    # the axes: replay each joint's chain from its parent's rotation (the same products, in order)
+    J = parents.shape[0]
+    M = np.empty((3, 3))
+    for j in range(1, J):
+        p = parents[j]
+        for r in range(3):
+            for c in range(3):
+                M[r, c] = R[p, r, c]
+        for k in range(ptr[j], ptr[j + 1]):
+            a = axes[k]
+            for r in range(3):
+                A[dofs[k], r] = M[r, a]
+            q = x[dofs[k]]
+            co = np.cos(q)
+            si = np.sin(q)
+            u = (a + 1) % 3
+            v = (a + 2) % 3
+            for r in range(3):
+                mu = M[r, u]
+                mv = M[r, v]
+                M[r, u] = mu * co + mv * si
+                M[r, v] = -mu * si + mv * co
+
+
+def frames_and_axes(model: BodyModel, x) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One pose's joint rotations ``(J, 3, 3)``, positions ``(J, 3)`` (the compiled kinematics: the same
+    numbers as :func:`forward_kinematics`) and the world axis of every joint-angle DOF ``(D, 3)`` (rows 0-5
+    zero), in one compiled call: what a local fit of the pose (the contour stage) needs per step."""
+    x = np.ascontiguousarray(model.validate_pose(x, name="x"), dtype=np.float64)
+    if x.ndim != 1:
+        raise BodyError(f"x: expected one pose of shape ({model.dof},), received shape {x.shape}")
+    J = len(model.joint_names)
+    R, P, A = np.empty((J, 3, 3)), np.empty((J, 3)), np.zeros((model.dof, 3))
+    _fk_axes_kernel(x, *kernel_tables(model), R, P, A)
+    return R, P, A
 
 
 #: Batches smaller than this run on the calling thread: a parallel launch for one pose cost more CPU than

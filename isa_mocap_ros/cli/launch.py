@@ -53,7 +53,7 @@ def run_single_process(specs: list[NodeSpec]) -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 
-    from isa_mocap_ros.nodes.common import close_nodes
+    from isa_mocap_ros.nodes.common import close_nodes, spin_until_shutdown
 
     rclpy.init()
     nodes = []
@@ -64,7 +64,7 @@ def run_single_process(specs: list[NodeSpec]) -> int:
             nodes.append(node)
             executor.add_node(node)
             print(f"[launch] {spec.name} started in-process ({spec.module})", flush=True)
-        executor.spin()
+        spin_until_shutdown(executor, nodes[0].context if nodes else None)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -186,6 +186,9 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
         # real time: sets that waited longer than the estimator's catch_up_ms, tracked without the contour
         # stage (from its last 1 Hz diagnostics)
         "frames_without_contour_stage": int(diag.get("frames_without_contour_stage", 0) or 0),
+        # real time: sets that waited during the automatic initialization, tracked after it at the catch-up
+        # budget (the estimator's startup_catch_up) instead of being dropped
+        "startup_sets_caught_up": int(diag.get("startup_sets_caught_up", 0) or 0),
         # Tracker.step per tracked set, the estimator's 1 Hz figure over its last 300 of them
         "tracker_ms_p50": float(diag.get("tracker_ms_p50", "nan")),
         "tracker_ms_p95": float(diag.get("tracker_ms_p95", "nan")),

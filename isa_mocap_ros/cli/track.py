@@ -28,6 +28,35 @@ from pathlib import Path
 import numpy as np
 
 from isa_mocap_ros.cli.track_io import TOPIC, read_sequence, reference_coverage, refine_by_model, write_overlay_media
+from isa_mocap_ros.vision.keypoint_schedule import EVERY_K
+
+
+#: The tracker settings ``track`` takes as valued options: (flag, type, default, metavar, help); a default of None
+#: leaves the tracker's own.
+_TRACKER_OPTIONS = (
+    ("--silhouette-core-px", float, None, "PX",
+     "silhouette energy: a foreground pixel d px from the background counts min(1, d/PX) in the term of foreground "
+     "the model misses (the rim of clothes and soft tissue asks less to be covered; <= 1: Eq. 4 as printed; "
+     "default: the tracker's default)"),
+    ("--gate-margin-px", int, None, "PX",
+     "mask gate: keep only foreground components within PX pixels of the predicted silhouette (0 = off; default: "
+     "the tracker's default)"),
+    ("--init-confirm-frames", int, None, "N",
+     "heading check after the automatic initialization: frames an opposite-heading rival is tracked beside the "
+     "winner (0 = off; default: the tracker's default)"),
+    ("--partition-order", str, None, "NAMES",
+     "comma-separated order of the hierarchy's partitions (default: the tracker's, root,left_arm,right_arm,torso,"
+     "left_leg,right_leg; the paper's: root,torso,left_arm,right_arm,left_leg,right_leg)"),
+    ("--keypoint-weight", float, 0.0, "W",
+     "weight of the learned-keypoint term (BlazePose landmarks on the images, cropped around the mask; "
+     "docs/keypoints.md); 0 = off (default)"),
+    ("--keypoint-every", int, EVERY_K, "K",
+     "with --keypoint-weight: after the dense start, detect keypoints on every K-th frame with a person of each "
+     f"view (0 = the dense start only; default {EVERY_K}, the keypoint node's every_k_frames)"),
+    ("--keypoint-dense", int, None, "N",
+     "with --keypoint-weight: detect on each view's first N frames with a person (the initialization and its "
+     "heading check; default 4, the keypoint node's dense_frames)"),
+)
 
 
 def register(sub) -> None:
@@ -65,36 +94,14 @@ def register(sub) -> None:
     p.add_argument("--prior", default=None, metavar="NPZ", help="Parzen prior file (with --prior-eta)")
     p.add_argument("--prior-eta", type=float, default=0.0, help="prior weight (0 = off)")
     p.add_argument("--energy", choices=("fast", "exact"), default="fast", help="silhouette energy method")
-    p.add_argument("--silhouette-core-px", type=float, default=None, metavar="PX",
-                   help="silhouette energy: a foreground pixel d px from the background counts min(1, d/PX) in "
-                        "the term of foreground the model misses (the rim of clothes and soft tissue asks less "
-                        "to be covered; <= 1: Eq. 4 as printed; default: the tracker's default)")
-    p.add_argument("--gate-margin-px", type=int, default=None, metavar="PX",
-                   help="mask gate: keep only foreground components within PX pixels of the predicted silhouette "
-                        "(0 = off; default: the tracker's default)")
+    for flag, kind, default, metavar, text in _TRACKER_OPTIONS:
+        p.add_argument(flag, type=kind, default=default, metavar=metavar, help=text)
     p.add_argument("--no-hull", action="store_true",
                    help="visual-hull filter off (on by default: foreground pixels the other views do not confirm, "
                         "beyond the predicted silhouette, are dropped)")
     p.add_argument("--no-view-weights", action="store_true",
                    help="count every view alike in the silhouette energy (Eq. 5 as printed; by default a view counts "
                         "by the share of the predicted body inside its image)")
-    p.add_argument("--init-confirm-frames", type=int, default=None, metavar="N",
-                   help="heading check after the automatic initialization: frames an opposite-heading rival is "
-                        "tracked beside the winner (0 = off; default: the tracker's default)")
-    p.add_argument("--partition-order", default=None, metavar="NAMES",
-                   help="comma-separated order of the hierarchy's partitions (default: the tracker's, root,left_arm,"
-                        "right_arm,torso,left_leg,right_leg; the paper's: root,torso,left_arm,right_arm,left_leg,"
-                        "right_leg)")
-    p.add_argument("--keypoint-weight", type=float, default=0.0, metavar="W",
-                   help="weight of the learned-keypoint term (BlazePose landmarks on the images, cropped around "
-                        "the mask; docs/keypoints.md); 0 = off (default)")
-    p.add_argument("--keypoint-every", type=int, default=6, metavar="K",
-                   help="with --keypoint-weight: after the dense start, detect keypoints on every K-th frame with a "
-                        "person of each view (0 = the dense start only; default 6, the keypoint node's "
-                        "every_k_frames)")
-    p.add_argument("--keypoint-dense", type=int, default=None, metavar="N",
-                   help="with --keypoint-weight: detect on each view's first N frames with a person (the "
-                        "initialization and its heading check; default 4, the keypoint node's dense_frames)")
     p.add_argument("--refine-masks", action="store_true",
                    help="model-guided mask refinement: a graph cut (GrabCut) per view seeded by the previous "
                         "estimate's silhouette (ISA eq. 13.29's shape prior; isa_mocap_ros.vision.refine), for "
@@ -164,7 +171,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         has_mask_topics = any(t.endswith("/mask") and t.startswith(f"{TOPIC}/cam") for t in probe.topics)
     use_masks = bool(args.use_masks and has_mask_topics)
     kp_weight = float(getattr(args, "keypoint_weight", 0.0) or 0.0)
-    kp_every = int(getattr(args, "keypoint_every", 6))
+    kp_every = int(getattr(args, "keypoint_every", EVERY_K))
     from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, KeypointSchedule, detect_in_mask
     kp_dense = getattr(args, "keypoint_dense", None)
     kp_dense = DENSE_FRAMES if kp_dense is None else int(kp_dense)
@@ -453,6 +460,10 @@ def run(args: argparse.Namespace) -> int:
     if "mpjpe_mm" in s:
         rows += [("mean joint error (Eq. 20)", f"{s['mpjpe_mm']:.1f} mm over {s['frames']} frames "
                                                f"(by {s['scored_by'].replace('_', ' ')})")]
+        if "mapped_mpjpe_mm" in s:
+            rows.append((f"mapped to the rig ({s.get('joint_map', '')} joint map)",
+                         f"{s['mapped_mpjpe_mm']:.1f} mm (max frame {s['mapped_max_frame_error_mm']:.1f} mm, knee "
+                         f"{s['mapped_knee_rmse_deg']:.2f} deg)"))
         if "offset_removed_mpjpe_mm" in s:
             rows.append(("each joint's mean offset removed", f"{s['offset_removed_mpjpe_mm']:.1f} mm "
                                                             f"(max frame {s['offset_removed_max_frame_error_mm']:.1f} mm"

@@ -33,9 +33,11 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..body import BodyModel, joint_positions
+from ..body.kinematics import kernel_tables
 from ..vision import Camera
 from ..vision.landmarks import LANDMARK_NAMES, N_LANDMARKS
 from .correspondence import plucker_lines
+from .keypoint_kernel import KeypointTerm, keypoint_batch
 from ._checks import EnergyError, _check_cameras, _check_model, _check_poses
 
 __all__ = ["LANDMARK_TO_JOINT", "KeypointEnergy", "geman_mcclure"]
@@ -137,10 +139,10 @@ class KeypointEnergy:
             views.append(np.full(int(ok.sum()), v, dtype=np.int64))
         cat = (lambda a, shape: np.concatenate(a) if a else np.zeros(shape))
         self.joints = cat(joints, (0,)).astype(np.int64)
-        self.directions = cat(dirs, (0, 3))
-        self.moments = cat(moms, (0, 3))
+        self.directions = np.ascontiguousarray(cat(dirs, (0, 3)))
+        self.moments = np.ascontiguousarray(cat(moms, (0, 3)))
         weights = cat(w, (0,))
-        self.weights = weights / weights.sum() if len(weights) else weights
+        self.weights = np.ascontiguousarray(weights / weights.sum() if len(weights) else weights)
         self.views = cat(views, (0,)).astype(np.int64)
         self.n_correspondences = len(self.joints)
         self.n_evals = 0
@@ -156,17 +158,23 @@ class KeypointEnergy:
         return out
 
     def __call__(self, X: Any) -> np.ndarray:
-        """Energies ``(n,)``: Σ w ρ(err²) with the Geman-McClure ρ."""
+        """Energies ``(n,)``: Σ w ρ(err²) with the Geman-McClure ρ (compiled: :mod:`.keypoint_kernel`, the
+        same function the compiled search calls)."""
         X, ok = _check_poses(self.model, X)
         self.n_evals += X.shape[0]
         out = np.where(ok, 0.0, np.inf)
         if not self.n_correspondences or not ok.any():
             return out
-        P = joint_positions(self.model, X[ok])[:, self.joints]
-        err = np.cross(P, self.directions) - self.moments
-        d2 = np.einsum("nki,nki->nk", err, err)
-        out[ok] = geman_mcclure(d2, self.sigma_m) @ self.weights
+        E = np.empty(int(ok.sum()))
+        keypoint_batch(np.ascontiguousarray(X[ok]), *self.kernel_term(1.0)[:-1], E)
+        out[ok] = E
         return out
+
+    def kernel_term(self, scale: float) -> KeypointTerm:
+        """This term weighted by ``scale`` as the compiled kernel takes it (:class:`KeypointTerm`; the compiled
+        search adds ``scale`` times :func:`keypoint_batch` to the silhouette energy)."""
+        return KeypointTerm(*kernel_tables(self.model), self.joints, self.directions, self.moments, self.weights,
+                            self.sigma_m, float(scale))
 
     def __repr__(self) -> str:
         return (f"KeypointEnergy(model={self.model.name!r}, correspondences={self.n_correspondences}, "

@@ -15,8 +15,8 @@ the tracking body model with its shape, the schema of ``/mocap/ground_truth/mode
 Frame sets are synchronized exactly or approximately (:mod:`isa_mocap_ros.tracking.sync`); a
 worker thread runs the tracker so callbacks never block. In real-time mode a frame set that waits
 while the tracker is busy is replaced by a newer one and counted as dropped; in lockstep mode every
-set is processed and the estimator waits up to ``prediction_wait_s`` for the prediction node's
-prediction of that frame.
+set is processed and the estimator waits up to ``prediction_wait_s`` (10 s) for the prediction node's
+prediction of that frame while a prediction node publishes (none: no wait).
 
 Keypoints (``keypoint_weight`` > 0, docs/keypoints.md): a keypoint message belongs to the frame set of its
 stamp and view; the tracker gets the set's keypoints with its masks. The keypoint node detects on some
@@ -67,7 +67,7 @@ from isa_mocap_ros.nodes.estimator_intake import EstimatorIntake
 from isa_mocap_ros.tracking.predict import periods_between
 from isa_mocap_ros.tracking.sync import FrameSynchronizer, LatestSlot
 from isa_mocap_ros.tracking.config import TrackerConfig, field_docs
-from isa_mocap_ros.tracking.load import LoadGovernor, LoadSettings
+from isa_mocap_ros.tracking.load import LoadGovernor, LoadSettings, StartupCatchUp
 from isa_mocap_ros.vision.overlay import draw_overlay
 
 
@@ -119,6 +119,14 @@ class EstimatorNode(EstimatorIntake, Node):
                                    "instead of dropping sets (0 = never)", lo=0.0, hi=60_000.0)
         self.backlog = declare(self, "backlog", 1, "real time: frame sets kept waiting while the tracker is busy "
                                "(the newest; older ones are dropped)", lo=1, hi=100)
+        self.startup_catch_up = declare(
+            self, "startup_catch_up", 12, "real time: frame sets kept waiting, in order, while the tracker initializes "
+            "itself; once initialized it tracks them with degrade_min_evals evaluations and no contour stage until "
+            "none waits, instead of dropping them (0 = keep only the heading check's sets)", lo=0, hi=1000)
+        self.startup_catch_up_ms = declare(
+            self, "startup_catch_up_ms", 1000.0, "startup_catch_up: a caught-up set that waited longer than this, "
+            "or no shorter than the one before (the tracker does not gain on the stream), ends the catch-up (the "
+            "sets still waiting are dropped)", lo=0.0, hi=60_000.0)
         degrade = declare(self, "degrade", True, "real time: while the tracker does not keep up with the frame sets, "
                           "lower its budget (contour stage off, then fewer evaluations) before dropping sets, and "
                           "return to the full budget when it catches up (isa_mocap_ros.tracking.load; lockstep: never)")
@@ -134,8 +142,9 @@ class EstimatorNode(EstimatorIntake, Node):
             self, "keypoint_realtime_wait_s", 0.03, "real time, keypoint_weight > 0: longest wait for a view's "
             "keypoints or skip notice (a skip notice comes at once, a detection ~10 ms after the mask on an idle "
             "core; 0 = take what has arrived)", lo=0.0, hi=10.0)
-        self.prediction_wait_s = declare(self, "prediction_wait_s", 1.0,
-                                         "lockstep: longest wait for a frame's prediction", lo=0.0, hi=60.0)
+        self.prediction_wait_s = declare(self, "prediction_wait_s", 10.0,
+                                         "lockstep: longest wait for a frame's prediction while a prediction node "
+                                         "is there", lo=0.0, hi=60.0)
         self.frame_period_s = declare(self, "frame_period_s", 1.0 / 30.0,
                                       "frame period, to match predictions to frames", lo=1e-4, hi=10.0)
         self.overlay = declare(self, "publish_overlay", False, "publish cam<i>/overlay images")
@@ -185,6 +194,9 @@ class EstimatorNode(EstimatorIntake, Node):
         self.tracker = None
         self.frames_done = 0
         self.frames_caught_up = 0       # real-time sets tracked without the contour stage (catch_up_ms)
+        # real time: the sets that waited during the automatic initialization, tracked after it
+        self.catch_up = StartupCatchUp(sets=self.startup_catch_up, evals=degrade_min_evals,
+                                       limit_ms=self.startup_catch_up_ms)
         self.last_result = None
         # the last 300 of each, for the 1 Hz diagnostics' percentiles
         self.latencies_ms: deque[float] = deque(maxlen=300)
@@ -300,8 +312,8 @@ class EstimatorNode(EstimatorIntake, Node):
                     continue
                 if not self.lockstep and (self.tracker is None or not self.tracker.initialized):
                     # this set may initialize the tracker: keep the sets that follow it in sequence
-                    # for the heading check (Tracker.checking_heading), not only the newest
-                    self.slot.hold(self.tracker_config.heading.init_confirm_frames)
+                    # for the heading check (Tracker.checking_heading) and the catch-up after it
+                    self.slot.hold(self.catch_up.hold(self.tracker_config.heading.init_confirm_frames))
                 elif not self.lockstep and self.tracker.heading_recheck_pending(item[0].items):
                     # the same for a heading re-check (more views see the person): else its check ends at
                     # the gap after the re-check's own, longer frame
@@ -309,7 +321,11 @@ class EstimatorNode(EstimatorIntake, Node):
                 frame_set, t_ready = item
                 prediction = None
                 if self.use_prediction and self._published_any:
-                    deadline = time.monotonic() + (self.prediction_wait_s if self.lockstep else 0.0)
+                    # lockstep waits as long as a prediction node is there to answer (a slow one on a loaded
+                    # machine must not turn the replay into another result), at most prediction_wait_s
+                    wait_s = self.prediction_wait_s if self.lockstep and self.count_publishers(
+                        self.resolve_topic_name("prediction/joint_states")) > 0 else 0.0
+                    deadline = time.monotonic() + wait_s
                     while (prediction := self._prediction_for(frame_set.stamp_ns)) is None:
                         left = deadline - time.monotonic()
                         if left <= 0 or self._stop.is_set():
@@ -317,14 +333,19 @@ class EstimatorNode(EstimatorIntake, Node):
                         self._cv.wait(min(left, 0.05))
                     if prediction is None and self.lockstep:
                         self.problems.report("noprediction", f"no prediction for frame {frame_set.stamp_ns} "
-                                             f"within {self.prediction_wait_s:.2f} s; using the estimator's own")
+                                             + (f"within {wait_s:.2f} s" if wait_s else "(no prediction node)")
+                                             + "; using the estimator's own")
                 keypoints = self._keypoints_for(frame_set) if self.use_keypoints else None
             try:
                 self._process(frame_set, prediction, t_ready, keypoints)
                 if self.tracker is not None and self.tracker.initialized and not self.tracker.checking_heading:
                     with self._cv:
-                        if self.slot.held:
-                            self.slot.hold(0)   # no heading check (left): on with the newest set
+                        # the start-up's sets still waiting are tracked in order (catch-up) until none waits
+                        # or one waited too long; then (or with no catch-up) on with the newest set
+                        going_on = self.catch_up.after(waiting=len(self.slot),
+                                                       waited_ms=(time.monotonic() - t_ready) * 1e3)
+                        if self.slot.held and not going_on:
+                            self.slot.hold(0)
             except Exception as exc:  # noqa: BLE001 - a node must survive any one bad frame set
                 if self._stop.is_set() or not self.context.ok():
                     return  # shutting down: publishers are gone with the context
@@ -372,9 +393,14 @@ class EstimatorNode(EstimatorIntake, Node):
         late = not self.lockstep and 0 < self.catch_up_ms < (time.monotonic() - t_ready) * 1e3
         # under load the governor's lowered budget (isa_mocap_ros.tracking.load)
         budget = self.governor.decision() if self.governor is not None else None
+        evals = self.tracker_config.search.evals if budget is None or budget.level == 0 else budget.evals
+        # the start-up's waiting sets, after the initialization and its heading check: the catch-up budget
+        evals, contour = (self.catch_up.budget(evals, initialized=self.tracker.initialized,
+                                               checking_heading=self.tracker.checking_heading)
+                          if not self.lockstep else (evals, True))
         result = self.tracker.step(masks, frame_set.stamp_ns, prediction=prediction, frames_elapsed=gap,
-                                   contour_stage=not late and (budget is None or budget.contour_stage),
-                                   evals=None if budget is None or budget.level == 0 else budget.evals,
+                                   contour_stage=contour and not late and (budget is None or budget.contour_stage),
+                                   evals=None if evals == self.tracker_config.search.evals else evals,
                                    keypoints=keypoints)
         self.keypoint_sets += keypoints is not None
         if self.governor is not None and result.x is not None and not result.initialized:
@@ -467,6 +493,7 @@ class EstimatorNode(EstimatorIntake, Node):
         values = {
             "frames": self.frames_done, "dropped_frame_sets": self.slot.dropped,
             "frames_without_contour_stage": self.frames_caught_up,
+            "startup_sets_caught_up": self.catch_up.caught_up,
             "sync_dropped_messages": self.sync.dropped, "bad_inputs": self.problems.total,
             "optimizer": self.tracker_config.search.optimizer, "evals_per_frame": self.tracker_config.search.evals,
             "tracker_threads": self.threads_in_use,

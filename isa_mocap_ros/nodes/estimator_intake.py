@@ -11,11 +11,12 @@ import time
 
 import numpy as np
 from geometry_msgs.msg import PolygonStamped, TransformStamped
-from sensor_msgs.msg import CameraInfo, Image, JointState
+from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import Header
 
 import msg_adapters as ma
 from isa_mocap_ros.intake import Setting
+from isa_mocap_ros.nodes.common import camera_info_callback
 from isa_mocap_ros.tracking.sync import SyncError
 from isa_mocap_ros.vision import Camera
 
@@ -33,24 +34,10 @@ class EstimatorIntake:
 
     # -- calibration and masks: checked before they reach the synchronizer (isa_mocap_ros.intake) ----------
     def _info_cb(self, v: int):
-        last = [None, None]  # key and intrinsics of the last good camera info: a camera sends the same one every frame
-
-        def cb(msg: CameraInfo) -> None:
-            key = ma.camera_info_key(msg)
-            try:
-                stamp = ma.stamp_to_ns(msg.header)
-                if key is not None and key == last[0]:
-                    intr = last[1]   # unchanged (bit for bit): the intrinsics are this message's
-                else:
-                    intr = ma.camera_info_to_intrinsics(msg)
-                    last[:] = key, intr
-            except ma.AdapterError as exc:
-                self.problems.report(f"info{v}", f"cam{v}/camera_info dropped: {exc}")
-                return
+        def take(*info) -> None:
             with self._cv:
-                self._settle(v, *self.gates[v].add_info(stamp, Setting(msg.header.frame_id, intr.width, intr.height),
-                                                        intr))
-        return cb
+                self._settle(v, *self.gates[v].add_info(*info))
+        return camera_info_callback(v, self.problems, lambda exc: f"info{v}", take)
 
     def _extr_cb(self, v: int):
         def cb(msg: TransformStamped) -> None:

@@ -44,10 +44,10 @@ from std_msgs.msg import Header
 import msg_adapters as ma
 from isa_mocap_ros.intake import Setting, ViewGate
 from isa_mocap_ros.nodes import qos
-from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, run_node
+from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, camera_info_callback, declare, run_node
 from isa_mocap_ros.vision.errors import VisionError
 from isa_mocap_ros.vision.landmark_model import ModelUnavailable
-from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, KeypointSchedule, detect_in_mask
+from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, EVERY_K, KeypointSchedule, detect_in_mask
 from isa_mocap_ros.vision.landmarks import PoseLandmarker
 
 __all__ = ["KeypointNode", "main"]
@@ -62,7 +62,7 @@ class KeypointNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("keypoints", **kwargs)
         self.n_views = declare(self, "views", 4, "number of camera views (cam0 .. cam<views-1>)", lo=1, hi=64)
-        self.every_k = declare(self, "every_k_frames", 6, "after the dense start, detect on every k-th frame "
+        self.every_k = declare(self, "every_k_frames", EVERY_K, "after the dense start, detect on every k-th frame "
                                "with a person of each view (1 = all)", lo=1, hi=10000)
         self.dense_frames = declare(self, "dense_frames", DENSE_FRAMES, "detect on each view's first frames with "
                                     "a person (the automatic initialization and its heading check)", lo=0, hi=10000)
@@ -129,16 +129,8 @@ class KeypointNode(Node):
         return cb
 
     def _info_cb(self, v: int):
-        def cb(msg: CameraInfo) -> None:
-            try:
-                stamp = ma.stamp_to_ns(msg.header)
-                intr = ma.camera_info_to_intrinsics(msg)
-            except ma.AdapterError as exc:
-                self.problems.report(f"info{v}:{exc.field}", f"cam{v}/camera_info dropped: {exc}")
-                return
-            self._settle(v, *self.gates[v].add_info(stamp, Setting(msg.header.frame_id, intr.width, intr.height),
-                                                    intr))
-        return cb
+        return camera_info_callback(v, self.problems, lambda exc: f"info{v}:{exc.field}",
+                                    lambda *info: self._settle(v, *self.gates[v].add_info(*info)))
 
     def _settle(self, v: int, accepted, rejected) -> None:
         for r in rejected:

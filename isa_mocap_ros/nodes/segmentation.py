@@ -51,7 +51,8 @@ from sensor_msgs.msg import CameraInfo, Image
 import msg_adapters as ma
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.intake import Setting, ViewGate
-from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, log_closing, run_node
+from isa_mocap_ros.nodes.common import (QOS_OVERRIDES, ProblemLog, camera_info_callback, declare, log_closing,
+                                        run_node)
 from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig, SegmentationError
 
 __all__ = ["SegmentationNode", "main", "ENCODINGS"]
@@ -169,23 +170,8 @@ class SegmentationNode(Node):
                 seg.apply(img)
 
     def _info_cb(self, v: int):
-        last = [None, None]  # key and intrinsics of the last good camera info: a camera sends the same one every frame
-
-        def cb(msg: CameraInfo) -> None:
-            try:
-                stamp = ma.stamp_to_ns(msg.header)
-                key = ma.camera_info_key(msg)
-                if key is not None and key == last[0]:
-                    intr = last[1]
-                else:
-                    intr = ma.camera_info_to_intrinsics(msg)
-                    last[:] = key, intr
-            except ma.AdapterError as exc:
-                self.problems.report(f"info{v}:{exc.field}", f"cam{v}/camera_info dropped: {exc}")
-                return
-            self._settle(v, *self.gates[v].add_info(stamp, Setting(msg.header.frame_id, intr.width, intr.height),
-                                                    intr))
-        return cb
+        return camera_info_callback(v, self.problems, lambda exc: f"info{v}:{exc.field}",
+                                    lambda *info: self._settle(v, *self.gates[v].add_info(*info)))
 
     def _image_cb(self, v: int):
         def cb(msg: Image) -> None:

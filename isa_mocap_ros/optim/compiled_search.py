@@ -25,12 +25,18 @@ import numba
 import numpy as np
 from numba.extending import overload
 
+from isa_mocap_ros.body import kinematics as _kinematics
+from isa_mocap_ros.energy import keypoint_kernel as _kp
 from isa_mocap_ros.energy import silhouette_kernel as _k
 from isa_mocap_ros.optim import _fast, _fast_so3
 from isa_mocap_ros.optim._base import GenerationInfo, Result
 from isa_mocap_ros.optim.isa import C_SCALES, VARIANCE_READINGS, covariance_constant
 
 __all__ = ["supported", "run_hisa", "HisaRun", "supported_flat", "run_isa", "rotation_mean"]
+
+
+#: The modules whose compiled functions the functions here call (their hashes key this module's numba cache).
+DEPENDENCIES = (_k, _kp, _kinematics, _fast, _fast_so3)
 
 
 def _register_dependent_cache() -> None:
@@ -51,15 +57,13 @@ def _register_dependent_cache() -> None:
     other file, and numba's own locator list follows unchanged."""
     try:
         from numba.core import caching
-        from isa_mocap_ros.energy import silhouette_kernel
-        from isa_mocap_ros.optim import _fast as fast_mod, _fast_so3 as so3_mod
     except ImportError:                                                    # pragma: no cover
         return
     impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
     if impl is None or not hasattr(caching, "_CacheLocator"):                # pragma: no cover
         return
-    deps = tuple(m.__file__ for m in (silhouette_kernel, fast_mod, so3_mod))
-    dep_names = " ".join(m.__name__ for m in (silhouette_kernel, fast_mod, so3_mod))
+    deps = tuple(m.__file__ for m in DEPENDENCIES)
+    dep_names = " ".join(m.__name__ for m in DEPENDENCIES)
     dep_tag = hashlib.sha256(dep_names.encode()).hexdigest()[:8]
     here = os.path.abspath(__file__)
 
@@ -252,9 +256,11 @@ def _kernel_overload(X, kargs, n_chunks, out):
 
 @numba.njit(cache=True)
 def _partition(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c, rho, population, block,
-               best, best_x, stats, g0, n_evals0, threads8, kargs):  # pragma: no cover - compiled
+               best, best_x, stats, g0, n_evals0, threads8, kargs, kp):  # pragma: no cover - compiled
     """One partition of the hierarchy, evaluated with the full kernel or the restricted one (``kargs``:
-    its arguments between the poses and ``n_chunks``, :func:`_kernel`). Returns (estimate, generations,
+    its arguments between the poses and ``n_chunks``, :func:`_kernel`), plus ``kp.scale`` times the keypoint
+    term ``kp`` (:class:`~isa_mocap_ros.energy.keypoint_kernel.KeypointTerm`; scale 0: none) as the tracker's
+    objective adds it (``E + w * keypoints(X)``). Returns (estimate, generations,
     evaluations, non-finite, last full particles); -1 generations if the kernel flagged a row with a
     negative energy (the restricted kernel's mark of a row off its base pose: never, by construction)."""
     Xs = _start(x0, spread, lo, hi, n, rng)
@@ -269,10 +275,17 @@ def _partition(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c,
         X = _embed(xbase, idx, Xs)
         E = np.empty(n)
         out = np.empty(kk)
-        _kernel(X if kk == n else X[:kk].copy(), kargs, max(1, min(kk, threads8)), out)
+        Xk = X if kk == n else X[:kk].copy()
+        _kernel(Xk, kargs, max(1, min(kk, threads8)), out)
         for i in range(kk):
             if out[i] < 0.0:
                 return x, -1, used, bad, X
+        if kp.scale > 0.0:
+            ek = np.empty(kk)
+            _kp.keypoint_batch(Xk, kp.parents, kp.offsets, kp.ptr, kp.dofs, kp.axes, kp.joints, kp.dirs, kp.moms,
+                               kp.weights, kp.sigma, ek)
+            for i in range(kk):
+                out[i] = out[i] + kp.scale * ek[i]
         E[:kk] = out
         used += kk
         bad += _record(E, kk, X, best, best_x, stats, g, n_evals0 + used)
@@ -288,7 +301,7 @@ class HisaRun:
     partition), :meth:`result` is ``opt.result()`` once every partition ran. The same draws from
     ``opt.rng`` as the protocol. Counts the evaluations in ``energy.n_evals`` as the protocol does."""
 
-    def __init__(self, opt, energy, max_evals: int) -> None:
+    def __init__(self, opt, energy, max_evals: int, keypoints=None) -> None:
         from isa_mocap_ros.optim import split_budget
         from isa_mocap_ros.optim._base import OptimError
 
@@ -304,6 +317,9 @@ class HisaRun:
                              f"c={self.c}, rho={self.rho}")
         self.c = covariance_constant(self.c, p.get("c_scale", C_SCALES[0]))     # Isa.c_cov
         self.opt, self.energy, self.max_evals = opt, energy, int(max_evals)
+        self.keypoint_term = keypoints[0] if keypoints is not None else None
+        self.kp = (self.keypoint_term.kernel_term(keypoints[1]) if keypoints is not None
+                   else _kp.no_keypoints(energy.kin_tables))
         self.parts = opt.partitions
         self.shares = split_budget(self.max_evals, [len(q) for q in self.parts],
                                    [self.n] * len(self.parts) if opt.whole_generations else None)
@@ -345,10 +361,13 @@ class HisaRun:
             args = (self.xbase, idx, x0, np.ascontiguousarray(opt.spread[idx]), lo, hi, self.shares[k], self.n,
                     opt.rng, self.target, self.kernel, self.c, self.rho, self.population, self.blocks[k], self.best,
                     self.best_x, self.stats, self.g, self.n_evals, threads8)
-            x, gens, used, nb, self.X = _partition(*args, energy.kernel_args() if rest.full else rest.kernel_args())
+            x, gens, used, nb, self.X = _partition(*args, energy.kernel_args() if rest.full else rest.kernel_args(),
+                                                   self.kp)
             if gens < 0:
                 raise rest.violation(self.X, np.flatnonzero(np.any(self.X != rest.x_base, axis=1)))
             energy.n_evals += used
+            if self.keypoint_term is not None:
+                self.keypoint_term.n_evals += used
             self.xbase[idx] = x
             self.g += gens
             self.n_evals += used
@@ -367,14 +386,15 @@ class HisaRun:
                       n_nonfinite=self.bad)
 
 
-def search(opt, energy, max_evals: int, *, extra_terms: bool = False, paused: bool = False):
+def search(opt, energy, max_evals: int, *, extra_terms: bool = False, keypoints=None, paused: bool = False):
     """The entry point: ``minimize(opt, energy, max_evals=max_evals)`` compiled, or None when this path does
     not cover ``opt`` and ``energy`` (then run it through the optimizer protocol, :func:`~.minimize`).
 
     An unbound :class:`~isa_mocap_ros.optim.Hierarchical` over ISA on the fast
     :class:`~isa_mocap_ros.energy.silhouette.SilhouetteEnergy` (:func:`supported`; ``extra_terms``: the
-    energy is not the whole objective, a prior or keypoint term is added in Python, so not covered) runs
-    compiled per partition; with ``paused`` it is returned as a :class:`HisaRun` stopped before its first
+    energy is not the whole objective, a prior is added in Python, so not covered) runs
+    compiled per partition, with ``keypoints = (KeypointEnergy, weight)`` adding ``weight`` times that term
+    (compiled too, :mod:`~isa_mocap_ros.energy.keypoint_kernel`); with ``paused`` it is returned as a :class:`HisaRun` stopped before its first
     partition (``advance()``, ``result()``: the first frame's pruned runs). A flat
     :class:`~isa_mocap_ros.optim.Isa` (:func:`supported_flat`) on any batch energy runs with compiled
     generations (:func:`run_isa`). The numbers are the protocol's, bit for bit."""
@@ -383,9 +403,9 @@ def search(opt, energy, max_evals: int, *, extra_terms: bool = False, paused: bo
     if type(opt) is Hierarchical:
         if not supported(opt, energy, extra_terms):
             return None
-        run = HisaRun(opt, energy, max_evals)
+        run = HisaRun(opt, energy, max_evals, keypoints)
         return run if paused else run.advance().result()
-    if paused or extra_terms or not supported_flat(opt):
+    if paused or extra_terms or keypoints is not None or not supported_flat(opt):
         return None
     return run_isa(opt, energy, max_evals)
 

@@ -42,16 +42,25 @@ from scipy.spatial import cKDTree
 
 from ..body import BodyModel
 from ..body import capsule_endpoints, forward_kinematics
-from ..body.kinematics import descendant_mask, joint_frames
+from ..body.kinematics import descendant_mask, frames_and_axes, joint_frames
 from ..energy.correspondence import mask_contour_pixels, capsule_contour_points, capsule_frames, plucker_lines
 from ..geometry import exp_so3, log_so3
 from ..geometry.so3 import nearest_rotvec
-from ..vision import capsule_data
+from ..vision import capsule_data, render_labels_at, render_mask
+from ..vision.render import pixel_rays
+from . import contour_kernel
 
 __all__ = ["ContourFit", "ContourFitError", "ContourFitInfo"]
 
 #: Fewest correspondences (over all views) for a step: fewer leave the 39 coordinates underdetermined.
 MIN_CORRESPONDENCES = 60
+
+
+def _padded_distortion(dist) -> np.ndarray:
+    """A camera's distortion as the 8 numbers ``(k1, k2, p1, p2, k3, k4, k5, k6)`` (zeros after its own)."""
+    out = np.zeros(8)
+    out[: np.size(dist)] = np.ravel(dist)
+    return out
 
 
 class ContourFitError(ValueError):
@@ -163,6 +172,11 @@ class ContourFit:
         self._dof_joint = np.asarray(model.dof_joint)
         self._cap_frames = capsule_frames(model)
         self._images: list = [None] * len(self.cameras)
+        # per camera, built once: the index image of the contour pixels (-1 elsewhere; cleared pixel by
+        # pixel each frame) and the projection's numbers for the compiled matching
+        self._index = [np.full((c.height, c.width), -1, np.int32) for c in self.cameras]
+        self._proj = [(np.ascontiguousarray(c.R, dtype=np.float64), np.ascontiguousarray(c.t, dtype=np.float64),
+                       np.array([c.fx, c.fy, c.cx, c.cy]), _padded_distortion(c.dist), c.has_distortion) for c in self.cameras]
 
     def set_masks(self, masks: Sequence[Any]) -> int:
         """Take this frame's foreground masks (one per camera; None for a view to leave out); return the
@@ -170,19 +184,31 @@ class ContourFit:
         masks = list(masks)
         if len(masks) != len(self.cameras):
             raise ContourFitError(f"masks: expected {len(self.cameras)} (one per camera), received {len(masks)}")
-        self._images = []
         for m, cam in zip(masks, self.cameras):
-            if m is None:
+            if m is not None and np.shape(m) != (cam.height, cam.width):
+                raise ContourFitError(f"masks: expected ({cam.height}, {cam.width}) for this camera, received "
+                                      f"shape {np.shape(m)}")
+        for img, index in zip(self._images, self._index):
+            if img is not None:
+                contour_kernel.mark_pixels(index, img[4], False)
+        self._images = []
+        for m, index, cam in zip(masks, self._index, self.cameras):
+            pix = mask_contour_pixels(np.asarray(m)) if m is not None else np.zeros((0, 2), np.int64)
+            if not len(pix):
                 self._images.append(None)
                 continue
-            m = np.asarray(m)
-            if m.shape != (cam.height, cam.width):
-                raise ContourFitError(f"masks: expected ({cam.height}, {cam.width}) for this camera, received "
-                                      f"shape {m.shape}")
-            c = mask_contour_pixels(m).astype(np.float64)
-            # the contour pixels, their KD-tree and the Plücker line of each (13.30), once per frame
-            self._images.append((c, cKDTree(c), *plucker_lines(cam, c)) if len(c) else None)
+            c = pix.astype(np.float64)
+            contour_kernel.mark_pixels(index, pix, True)
+            # the contour pixels, their KD-tree (the reference matching; built when first asked for), the
+            # Plücker line of each (13.30) and the integer pixels, once per frame
+            self._images.append([c, None, *plucker_lines(cam, c), pix])
         return sum(c is not None for c in self._images)
+
+    def _tree(self, v: int):
+        img = self._images[v]
+        if img[1] is None:
+            img[1] = cKDTree(img[0])
+        return img[1]
 
     def model_points(self, x: np.ndarray) -> list:
         """The model contour points of pose ``x`` in every view with an image contour: a list of
@@ -203,6 +229,48 @@ class ContourFit:
                 out.append((v, fr, loc))
         return out
 
+    def _points(self, R: np.ndarray, P: np.ndarray) -> list:
+        """:meth:`model_points` of the pose with joint rotations ``R`` and positions ``P``
+        (:func:`~isa_mocap_ros.body.kinematics.frames_and_axes`), the back-projection compiled
+        (:func:`.contour_kernel.back_project`)."""
+        out = []
+        if not any(img is not None for img in self._images):
+            return out
+        E = P[np.asarray(self.model.capsules)]
+        radii = self.model.capsule_radii
+        capsules = capsule_data(E, radii)
+        for v, (img, cam) in enumerate(zip(self._images, self.cameras)):
+            if img is None:
+                continue
+            pix = mask_contour_pixels(render_mask(cam, E, radii, capsules=capsules))
+            if len(pix) > self.n_points:
+                pix = pix[np.floor(np.arange(self.n_points) * (len(pix) / self.n_points)).astype(np.int64)]
+            if not len(pix):
+                continue
+            label, depth = render_labels_at(cam, E, radii, pix, capsules=capsules)
+            o, dirs, zaxis = pixel_rays(cam)
+            fr = np.empty(len(pix), np.int64)
+            loc = np.empty((len(pix), 3))
+            k = contour_kernel.back_project(np.ascontiguousarray(pix[:, 0]), np.ascontiguousarray(pix[:, 1]), label,
+                                            depth, o, dirs, cam.width, zaxis, self._cap_frames, R, P, fr, loc)
+            if k:
+                out.append((v, fr[:k], loc[:k]))
+        return out
+
+    def _pairs(self, points: list, R: np.ndarray, P: np.ndarray):
+        """:meth:`correspondences` of the pose with joint rotations ``R`` and positions ``P``, the matching
+        compiled (:func:`.contour_kernel.match`: the same nearest contour pixel within ``max_px``)."""
+        n = sum(len(fr) for _, fr, _ in points)
+        F, L, N, M, Dst = np.empty(n, np.int64), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
+        k = 0
+        for v, fr, loc in points:
+            img = self._images[v]
+            if img is None:             # no image contour in this view (this frame)
+                continue
+            k = contour_kernel.match(fr, loc, R, P, *self._proj[v], self._index[v], self.max_px, img[2], img[3],
+                                     F, L, N, M, Dst, k)
+        return F[:k], L[:k], N[:k], M[:k], Dst[:k]
+
     def correspondences(self, x: np.ndarray, points: list | None = None, fk=None):
         """Pairs of pose ``x`` under the current masks: ``(frames (K,), local (K, 3), n (K, 3), m (K, 3),
         pixel distances (K,))`` — joint frame and position in it of each model point, the Plücker line
@@ -220,7 +288,7 @@ class ContourFit:
         for v, fr, loc in points:
             img = self._images[v]
             X = P[fr] + np.einsum("kij,kj->ki", R[fr], loc)
-            dist, idx = img[1].query(self.cameras[v].project(X))
+            dist, idx = self._tree(v).query(self.cameras[v].project(X))
             ok = dist <= self.max_px
             if not ok.any():
                 continue
@@ -281,10 +349,11 @@ class ContourFit:
         counts, rms = [], []
         points = None
         for _ in range(iterations):
+            R, P, A = frames_and_axes(self.model, x)        # the pose's kinematics, once per step
             if points is None or render_each:
-                points = self.model_points(x)
-            fk = joint_frames(self.model, x[None], want_axes=True)
-            frames, local, n, m, dist = self.correspondences(x, points, (fk[0][0], fk[1][0]))
+                points = self._points(R, P)
+            frames, local, n, m, dist = self._pairs(points, R, P)
+            fk = (R[None], P[None], A[None])
             counts.append(len(frames))
             rms.append(float(np.sqrt(np.mean(dist ** 2))) if len(dist) else float("nan"))
             if len(frames) < MIN_CORRESPONDENCES:

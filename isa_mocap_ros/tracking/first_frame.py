@@ -112,7 +112,8 @@ def initial_runs(tr, ctx, starts: list, notes: list[str] | None, budget: FrameBu
             rng = ctx.rng() if j == 0 else ctx.rng(3, j)
         opt, evals, _, _ = tr.plan_search(pred, rng, budget, INIT_SPREAD_SCALE, notes if j == 0 else None,
                                           stages=False)
-        run = compiled_search.search(opt, tr.energy, evals, extra_terms=ctx.objective.extra_terms, paused=True) \
+        run = compiled_search.search(opt, tr.energy, evals, extra_terms=ctx.objective.extra_terms,
+                                     keypoints=ctx.objective.weighted_keypoints, paused=True) \
             if tr.use_compiled_search else None
         if run is not None:
             # compiled h-isa, bound; the pruning below advances it (the same numbers as the protocol)

@@ -27,9 +27,16 @@ class TotalEnergy:
 
     @property
     def extra_terms(self) -> bool:
-        """Whether a term beside the silhouette energy is active (prior, keypoints): the search then runs
-        through the optimizer protocol on this objective, not the compiled path."""
-        return self.prior_active or self.keypoint_term is not None
+        """Whether a term the compiled search does not take is active (the prior): the search then runs
+        through the optimizer protocol on this objective."""
+        return self.prior_active
+
+    @property
+    def weighted_keypoints(self):
+        """``(keypoint term, its weight)`` for the compiled search, or None (no keypoint term this frame)."""
+        if self.keypoint_term is None:
+            return None
+        return self.keypoint_term, self.tracker.config.keypoints.keypoint_weight
 
     def add_terms(self, X: np.ndarray, E: np.ndarray) -> np.ndarray:
         """``E`` (the data term of ``X``) plus the prior and the weighted keypoint term, if active."""

@@ -314,7 +314,8 @@ class Tracker:
         opt, budget, stage_shares, (lo, hi, spread, base) = self.plan_search(pred, rng, ctx.budget, spread_scale,
                                                                              notes, stages)
         share, torso, limbs, contour = stage_shares
-        res = compiled_search.search(opt, self.energy, budget, extra_terms=ctx.objective.extra_terms) \
+        res = compiled_search.search(opt, self.energy, budget, extra_terms=ctx.objective.extra_terms,
+                                     keypoints=ctx.objective.weighted_keypoints) \
             if self.use_compiled_search else None
         if res is None:                   # not covered by the compiled path (the same numbers through the protocol)
             res = minimize(opt, ctx.objective, max_evals=budget)

@@ -23,11 +23,14 @@ import numpy as np
 from .errors import VisionError
 from .landmarks import Landmarks2D, PoseLandmarker, box_from_mask
 
-__all__ = ["KeypointSchedule", "detect_in_mask", "DENSE_FRAMES"]
+__all__ = ["KeypointSchedule", "detect_in_mask", "DENSE_FRAMES", "EVERY_K"]
 
 #: frames with a person detected on at the start of a view: the initialization's frame and the heading
 #: check's 3 frames after it (TrackerConfig.init_confirm_frames' default)
 DENSE_FRAMES = 4
+#: after the dense start, every EVERY_K-th frame with a person (the keypoint node's and ``track``'s default;
+#: the rate's cost and accuracy: docs/keypoints.md)
+EVERY_K = 8
 
 
 class KeypointSchedule:

@@ -18,8 +18,10 @@ intersected analytically with both spheres and with the tangent cone restricted 
 valid hit is the entry point into the hull. A camera inside a solid does not see that solid.
 
 Speed: the image is cut into 8x8-pixel tiles, each with a cone bounding its pixel rays; a capsule
-is tested only in tiles whose cone meets one of up to four spheres bounding it. Kernels are numba,
-single-threaded and releasing the GIL (one view takes ~1 ms; render views or frames in parallel
+is tested only in tiles whose cone meets one of up to four spheres bounding it, and only in tiles of a
+32x32-pixel super-tile whose cone it meets. A mask alone (:func:`render_mask`) stops at a pixel's first
+hit, trying the capsule that hit the previous pixel first. Kernels are numba,
+single-threaded and releasing the GIL (one body view takes ~0.5 ms; render views or frames in parallel
 threads if needed: a multi-threaded kernel per view was slower and erratic on a loaded 2-core
 machine). Per-camera rays are cached (keyed by the camera's geometry).
 
@@ -40,10 +42,12 @@ from .camera import Camera
 from .errors import VisionError
 
 __all__ = ["render", "render_mask", "render_labels", "render_labels_at", "capsule_data", "capsule_contains",
-           "clear_ray_cache", "TILE"]
+           "clear_ray_cache", "pixel_rays", "TILE"]
 
 #: tile edge in pixels for the culling
 TILE = 8
+#: super-tile edge in tiles: a capsule is tested against a tile's cone only if it meets its super-tile's
+SUPER = 4
 _MAX_BOUND = 4
 _CACHE: "OrderedDict[bytes, tuple]" = OrderedDict()
 _CACHE_SIZE = 32
@@ -68,17 +72,19 @@ def _camera_data(camera: Camera) -> tuple:
     H, W = camera.height, camera.width
     v, u = np.mgrid[0:H, 0:W].astype(np.float64)
     origin, d = camera.ray(u, v)  # (H, W, 3)
-    nty, ntx = -(-H // TILE), -(-W // TILE)
-    iy = np.minimum(np.arange(nty * TILE), H - 1)
-    ix = np.minimum(np.arange(ntx * TILE), W - 1)
-    dp = d[iy][:, ix].reshape(nty, TILE, ntx, TILE, 3)
-    axis = dp.sum(axis=(1, 3))
-    axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
-    cos_min = np.einsum("yaxbk,yxk->yaxb", dp, axis).min(axis=(1, 3))  # (nty, ntx): widest ray of each tile
-    theta = np.arccos(np.clip(cos_min, -1.0, 1.0)) + 1e-6
-    data = (np.ascontiguousarray(origin), np.ascontiguousarray(d.reshape(-1, 3)),
-            np.ascontiguousarray(axis.reshape(-1, 3)), np.cos(theta).ravel(), np.sin(theta).ravel(),
-            camera.R[2].copy())
+    cones = []
+    for size in (TILE, TILE * SUPER):       # tiles, then super-tiles of SUPER x SUPER tiles
+        nty, ntx = -(-H // size), -(-W // size)
+        iy = np.minimum(np.arange(nty * size), H - 1)
+        ix = np.minimum(np.arange(ntx * size), W - 1)
+        dp = d[iy][:, ix].reshape(nty, size, ntx, size, 3)
+        axis = dp.sum(axis=(1, 3))
+        axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+        cos_min = np.einsum("yaxbk,yxk->yaxb", dp, axis).min(axis=(1, 3))  # (nty, ntx): widest ray of each
+        theta = np.arccos(np.clip(cos_min, -1.0, 1.0)) + 1e-6
+        cones.append((np.ascontiguousarray(axis.reshape(-1, 3)), np.cos(theta).ravel(), np.sin(theta).ravel()))
+    data = (np.ascontiguousarray(origin), np.ascontiguousarray(d.reshape(-1, 3)), *cones[0], camera.R[2].copy(),
+            *cones[1])
     _CACHE[key] = data
     if len(_CACHE) > _CACHE_SIZE:
         _CACHE.popitem(last=False)
@@ -195,6 +201,57 @@ def _hit_t(ox, oy, oz, dx, dy, dz, cp):  # pragma: no cover - compiled
     return t
 
 
+@numba.njit(cache=True, inline="always")
+def _sphere_hit(ox, oy, oz, dx, dy, dz, cx, cy, cz, r):  # pragma: no cover - compiled
+    """:func:`_sphere_t` is finite (the same arithmetic, without the root's value)."""
+    px, py, pz = ox - cx, oy - cy, oz - cz
+    b = px * dx + py * dy + pz * dz
+    c = px * px + py * py + pz * pz - r * r
+    disc = b * b - c
+    if disc < 0.0:
+        return False
+    return -b - np.sqrt(disc) > 0.0
+
+
+@numba.njit(cache=True)
+def _any_hit(ox, oy, oz, dx, dy, dz, cp):  # pragma: no cover - compiled
+    """:func:`_hit_t` is finite: the same three tests on the same numbers (so the same answer), stopping at
+    the first that hits; the tangent cone, the likeliest hit of a long capsule, first."""
+    if cp[12] != 0.0:
+        ax, ay, az = cp[0], cp[1], cp[2]
+        ux, uy, uz, L, ra, rb, s, cc = cp[3], cp[4], cp[5], cp[6], cp[7], cp[8], cp[9], cp[11]
+        qx, qy, qz = ox - ax, oy - ay, oz - az
+        y0 = qx * ux + qy * uy + qz * uz
+        yd = dx * ux + dy * uy + dz * uz
+        qd = qx * dx + qy * dy + qz * dz
+        qq = qx * qx + qy * qy + qz * qz
+        w = y0 - ra * s
+        A = cc - yd * yd
+        B = cc * qd - yd * w
+        Cq = cc * (qq - ra * ra) - w * w
+        ylo, yhi = ra * s, L + rb * s
+        if abs(A) < 1e-12:
+            if abs(B) > 1e-300:
+                tc = -Cq / (2.0 * B)
+                if 0.0 < tc < np.inf:
+                    y = y0 + tc * yd
+                    if ylo <= y <= yhi:
+                        return True
+        else:
+            disc = B * B - A * Cq
+            if disc >= 0.0:
+                sq = np.sqrt(disc)
+                r1, r2 = (-B - sq) / A, (-B + sq) / A
+                for tc in (r1, r2):
+                    if 0.0 < tc < np.inf:
+                        y = y0 + tc * yd
+                        if ylo <= y <= yhi:
+                            return True
+    if _sphere_hit(ox, oy, oz, dx, dy, dz, cp[0], cp[1], cp[2], cp[7]):
+        return True
+    return _sphere_hit(ox, oy, oz, dx, dy, dz, cp[13], cp[14], cp[15], cp[8])
+
+
 @numba.njit(cache=True)
 def _normal(px, py, pz, cp):  # pragma: no cover - compiled
     """Outward unit normal of the hull surface at the surface point ``p``."""
@@ -261,41 +318,98 @@ def _nearest_hit(o, dx, dy, dz, caps, cand, nc, first):  # pragma: no cover - co
     return best_t, best_c
 
 
+@numba.njit(cache=True, inline="always")
+def _tile_candidates_of(o, axis, cos_t, sin_t, bs, nb, among, n_among, cand):  # pragma: no cover - compiled
+    """:func:`_tile_candidates` among the capsules ``among[:n_among]`` only (the same test, in order)."""
+    nc = 0
+    for i in range(n_among):
+        c = among[i]
+        for k in range(nb[c]):
+            vx, vy, vz = bs[c, k, 0] - o[0], bs[c, k, 1] - o[1], bs[c, k, 2] - o[2]
+            R = bs[c, k, 3]
+            dist2 = vx * vx + vy * vy + vz * vz
+            if dist2 <= R * R:
+                cand[nc] = c
+                nc += 1
+                break
+            proj = vx * axis[0] + vy * axis[1] + vz * axis[2]
+            perp = np.sqrt(max(0.0, dist2 - proj * proj))
+            if proj * cos_t + perp * sin_t < 0.0:
+                continue
+            if perp * cos_t - proj * sin_t <= R:
+                cand[nc] = c
+                nc += 1
+                break
+    return nc
+
+
 @numba.njit(cache=True, nogil=True)
-def _raycast(o, dirs, H, W, axes, tcos, tsin, caps, bs, nb, mode, colors, light, zaxis,
+def _raycast(o, dirs, H, W, axes, tcos, tsin, saxes, scos, ssin, caps, bs, nb, mode, colors, light, zaxis,
              out_rgb, out_mask, out_label, out_depth):  # pragma: no cover - compiled
-    """mode 0: mask only (any hit); 1: nearest hit -> label + depth; 2: nearest hit -> label, depth, shaded rgb."""
+    """mode 0: mask only (any hit); 1: nearest hit -> label + depth; 2: nearest hit -> label, depth, shaded rgb.
+
+    A capsule is a tile's candidate when its bounding spheres meet the tile's ray cone, tested only for the
+    capsules that meet the cone of the tile's super-tile (which holds every pixel ray of the tile: a capsule
+    left out there hits none of them, so every pixel comes out as without the super-tiles)."""
     ntx = (W + 7) // 8
-    n_tiles = axes.shape[0]
+    nty = (H + 7) // 8
+    sw = 8 * SUPER
+    nsx = (W + sw - 1) // sw
     C = caps.shape[0]
-    for tile in range(n_tiles):
-        cand = np.empty(C, np.int64)
-        nc = _tile_candidates(o, axes[tile], tcos[tile], tsin[tile], bs, nb, cand)
-        if nc == 0:
+    scand = np.empty(C, np.int64)
+    cand = np.empty(C, np.int64)
+    all_caps = np.arange(C)
+    for st in range(saxes.shape[0]):
+        ns = _tile_candidates_of(o, saxes[st], scos[st], ssin[st], bs, nb, all_caps, C, scand)
+        if ns == 0:
             continue
-        ty, tx = tile // ntx, tile % ntx
-        for py in range(ty * 8, min(ty * 8 + 8, H)):
-            for px in range(tx * 8, min(tx * 8 + 8, W)):
-                p = py * W + px
-                dx, dy, dz = dirs[p, 0], dirs[p, 1], dirs[p, 2]
-                best_t, best_c = _nearest_hit(o, dx, dy, dz, caps, cand, nc, mode == 0)
-                if best_c < 0:
+        sy, sx = st // nsx, st % nsx
+        for ty in range(sy * SUPER, min(sy * SUPER + SUPER, nty)):
+            for tx in range(sx * SUPER, min(sx * SUPER + SUPER, ntx)):
+                tile = ty * ntx + tx
+                nc = _tile_candidates_of(o, axes[tile], tcos[tile], tsin[tile], bs, nb, scand, ns, cand)
+                if nc == 0:
                     continue
-                out_mask[py, px] = 255
-                if mode == 0:
+                _raycast_tile(o, dirs, H, W, tx, ty, caps, cand, nc, mode, colors, light, zaxis,
+                              out_rgb, out_mask, out_label, out_depth)
+
+
+@numba.njit(cache=True, inline="always")
+def _raycast_tile(o, dirs, H, W, tx, ty, caps, cand, nc, mode, colors, light, zaxis,
+                  out_rgb, out_mask, out_label, out_depth):  # pragma: no cover - compiled
+    """The pixels of one tile against its ``nc`` candidate capsules (:func:`_raycast`)."""
+    last = -1
+    for py in range(ty * 8, min(ty * 8 + 8, H)):
+        for px in range(tx * 8, min(tx * 8 + 8, W)):
+            p = py * W + px
+            dx, dy, dz = dirs[p, 0], dirs[p, 1], dirs[p, 2]
+            if mode == 0:   # any hit: the capsule that hit the last pixel first (neighbours share one)
+                if last >= 0 and _any_hit(o[0], o[1], o[2], dx, dy, dz, caps[last]):
+                    out_mask[py, px] = 255
                     continue
-                out_label[py, px] = best_c
-                out_depth[py, px] = best_t * (dx * zaxis[0] + dy * zaxis[1] + dz * zaxis[2])
-                if mode == 2:
-                    hx, hy, hz = o[0] + best_t * dx, o[1] + best_t * dy, o[2] + best_t * dz
-                    nx, ny, nz = _normal(hx, hy, hz, caps[best_c])
-                    dl = nx * light[0] + ny * light[1] + nz * light[2]
-                    dv = -(nx * dx + ny * dy + nz * dz)
-                    shade = 0.2 + 0.45 * max(dl, 0.0) + 0.35 * max(dv, 0.0)
-                    if shade > 1.0:
-                        shade = 1.0
-                    for k in range(3):
-                        out_rgb[py, px, k] = np.uint8(min(255.0, colors[best_c, k] * shade + 0.5))
+                for j in range(nc):
+                    c = cand[j]
+                    if c != last and _any_hit(o[0], o[1], o[2], dx, dy, dz, caps[c]):
+                        out_mask[py, px] = 255
+                        last = c
+                        break
+                continue
+            best_t, best_c = _nearest_hit(o, dx, dy, dz, caps, cand, nc, False)
+            if best_c < 0:
+                continue
+            out_mask[py, px] = 255
+            out_label[py, px] = best_c
+            out_depth[py, px] = best_t * (dx * zaxis[0] + dy * zaxis[1] + dz * zaxis[2])
+            if mode == 2:
+                hx, hy, hz = o[0] + best_t * dx, o[1] + best_t * dy, o[2] + best_t * dz
+                nx, ny, nz = _normal(hx, hy, hz, caps[best_c])
+                dl = nx * light[0] + ny * light[1] + nz * light[2]
+                dv = -(nx * dx + ny * dy + nz * dz)
+                shade = 0.2 + 0.45 * max(dl, 0.0) + 0.35 * max(dv, 0.0)
+                if shade > 1.0:
+                    shade = 1.0
+                for k in range(3):
+                    out_rgb[py, px, k] = np.uint8(min(255.0, colors[best_c, k] * shade + 0.5))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -338,13 +452,17 @@ def _prepare(camera: Any, endpoints: Any, radii: Any, capsules: tuple | None = N
 
 
 def _run(camera, cd, caps, bs, nb, mode, colors, light, rgb):
-    o, dirs, axes, tcos, tsin, zaxis = cd
+    o, dirs, axes, tcos, tsin, zaxis, saxes, scos, ssin = cd
     H, W = camera.height, camera.width
     mask = np.zeros((H, W), np.uint8)
-    label = np.full((H, W), -1, np.int32)
-    depth = np.full((H, W), np.nan, np.float32)
+    if mode == 0:       # the mask only: the kernel never writes labels or depths
+        label, depth = np.full((1, 1), -1, np.int32), np.full((1, 1), np.nan, np.float32)
+    else:
+        label = np.full((H, W), -1, np.int32)
+        depth = np.full((H, W), np.nan, np.float32)
     if caps.shape[0]:
-        _raycast(o, dirs, H, W, axes, tcos, tsin, caps, bs, nb, mode, colors, light, zaxis, rgb, mask, label, depth)
+        _raycast(o, dirs, H, W, axes, tcos, tsin, saxes, scos, ssin, caps, bs, nb, mode, colors, light, zaxis, rgb,
+                 mask, label, depth)
     return mask, label, depth
 
 
@@ -443,9 +561,20 @@ def render_labels_at(camera: Camera, endpoints: Any, radii: Any, pixels: Any, *,
     label = np.full(len(u), -1, np.int32)
     depth = np.full(len(u), np.nan, np.float32)
     if caps.shape[0] and len(u):
-        o, dirs, axes, tcos, tsin, zaxis = cd
+        o, dirs, axes, tcos, tsin, zaxis = cd[:6]
         _raycast_at(o, dirs, camera.width, axes, tcos, tsin, caps, bs, nb, zaxis, u, v, label, depth)
     return label, depth
+
+
+def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The renderer's cached rays of ``camera``'s pixel centres: ``origin (3,)`` (the camera centre),
+    ``directions (H*W, 3)`` (unit, world frame, lens distortion removed; row ``v * W + u`` is pixel
+    ``(u, v)``: :meth:`Camera.ray` there) and the optical axis ``(3,)`` (depth = distance × its dot with the
+    direction). Read-only: shared by every render of this camera."""
+    if not isinstance(camera, Camera):
+        raise VisionError(f"camera: expected a Camera, received {type(camera).__name__}")
+    o, dirs, _, _, _, zaxis = _camera_data(camera)[:6]
+    return o, dirs, zaxis
 
 
 def capsule_contains(X: Any, endpoints: Any, radii: Any) -> np.ndarray:

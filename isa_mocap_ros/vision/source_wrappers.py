@@ -67,8 +67,36 @@ class DistortedSource:
         self.source.close()
 
 
+# ------------------------------------------------------------------------- wrappers with their own events
+class _ReportingWrapper:
+    """A wrapper of ``source`` that drops frames with a warning of its own (kept in :attr:`events`, the last
+    1000, and passed to ``on_event``), reported by :meth:`drain_events` after the wrapped source's events."""
+
+    def __init__(self, source: FrameSource, on_event: Callable[[SourceEvent], None] | None) -> None:
+        self.source = source
+        self.n_views = source.n_views
+        self._on_event = on_event
+        self.events: list[SourceEvent] = []
+
+    def drain_events(self) -> list[SourceEvent]:
+        drain = getattr(self.source, "drain_events", None)
+        out = (drain() if drain else []) + self.events
+        self.events = []
+        return out
+
+    def _warn(self, v: int, text: str) -> None:
+        ev = SourceEvent("warning", v, text)
+        self.events.append(ev)
+        del self.events[:-1000]
+        if self._on_event is not None:
+            self._on_event(ev)
+
+    def close(self) -> None:
+        self.source.close()
+
+
 # ------------------------------------------------------------------------------------- resizing
-class ResizedSource:
+class ResizedSource(_ReportingWrapper):
     """Any source with its images brought to the rig's sizes.
 
     An image of another size but the same aspect ratio (within 1 %) is resized (``INTER_AREA``
@@ -88,17 +116,8 @@ class ResizedSource:
         if len(sizes) != source.n_views:
             raise SourceError(f"sizes: expected one (width, height) per view ({source.n_views}), received "
                               f"{len(sizes)}")
-        self.source = source
-        self.n_views = source.n_views
+        super().__init__(source, on_event)
         self.sizes = [(int(w), int(h)) for w, h in sizes]
-        self._on_event = on_event
-        self.events: list[SourceEvent] = []
-
-    def drain_events(self) -> list[SourceEvent]:
-        drain = getattr(self.source, "drain_events", None)
-        out = (drain() if drain else []) + self.events
-        self.events = []
-        return out
 
     def read(self) -> list[np.ndarray | None]:
         """The wrapped source's frame set at the rig's sizes."""
@@ -110,24 +129,17 @@ class ResizedSource:
                 continue
             ih, iw = img.shape[:2]
             if abs(iw * h - ih * w) > 0.01 * iw * h:
-                ev = SourceEvent("warning", v, f"view {v}: image is {iw}x{ih}, the calibration {w}x{h} "
-                                               "(another aspect ratio); frame dropped")
-                self.events.append(ev)
-                del self.events[:-1000]
-                if self._on_event is not None:
-                    self._on_event(ev)
+                self._warn(v, f"view {v}: image is {iw}x{ih}, the calibration {w}x{h} (another aspect ratio); "
+                              "frame dropped")
                 out.append(None)
                 continue
             interp = cv2.INTER_AREA if iw > w else cv2.INTER_LINEAR
             out.append(cv2.resize(img, (w, h), interpolation=interp))
         return out
 
-    def close(self) -> None:
-        self.source.close()
-
 
 # ------------------------------------------------------------------------------- adapted (real) sources
-class AdaptedSource:
+class AdaptedSource(_ReportingWrapper):
     """Video / image-folder frames brought to the calibration: letterbox removed, resized, with the
     matching cameras (:mod:`.adapt`).
 
@@ -154,10 +166,7 @@ class AdaptedSource:
         if len(sensors) != source.n_views:
             raise SourceError(f"sensors: expected one calibrated camera per view ({source.n_views}), received "
                               f"{len(sensors)}")
-        self.source = source
-        self.n_views = source.n_views
-        self._on_event = on_event
-        self.events: list[SourceEvent] = []
+        super().__init__(source, on_event)
         try:
             first = source.read()
         except EndOfSource as exc:
@@ -193,12 +202,6 @@ class AdaptedSource:
         """One line per view: the geometry found and the published size."""
         return [f"{g.describe()} -> {w}x{h}" for g, (w, h) in zip(self.geometries, self.sizes)]
 
-    def drain_events(self) -> list[SourceEvent]:
-        drain = getattr(self.source, "drain_events", None)
-        out = (drain() if drain else []) + self.events
-        self.events = []
-        return out
-
     def read(self) -> list[np.ndarray | None]:
         """The next frame set, adapted."""
         from .adapt import adapt_frame
@@ -209,15 +212,8 @@ class AdaptedSource:
         for v, img in enumerate(images):
             g = self.geometries[v]
             if img is not None and img.shape[:2] != (g.frame_h, g.frame_w):
-                ev = SourceEvent("warning", v, f"view {v}: frame is {img.shape[1]}x{img.shape[0]}, the first was "
-                                               f"{g.frame_w}x{g.frame_h}; frame dropped")
-                self.events.append(ev)
-                del self.events[:-1000]
-                if self._on_event is not None:
-                    self._on_event(ev)
+                self._warn(v, f"view {v}: frame is {img.shape[1]}x{img.shape[0]}, the first was "
+                              f"{g.frame_w}x{g.frame_h}; frame dropped")
                 img = None
             out.append(None if img is None else adapt_frame(img, g, self.sizes[v]))
         return out
-
-    def close(self) -> None:
-        self.source.close()

@@ -1,0 +1,115 @@
+"""Compiled steps of the contour stage (:mod:`.contour`): the back-projection of a rendered silhouette's
+contour pixels onto the capsules, and the matching of model contour points to the image contour.
+
+Both do per view, in one compiled call, what :meth:`.contour.ContourFit.model_points` and
+:meth:`.contour.ContourFit.correspondences` (the numpy reference, kept and tested against these) do with
+a dozen array operations each:
+
+* :func:`back_project`: the hit point ``X = o + (z / (d·ẑ)) d`` of each contour pixel's ray (``z`` the
+  renderer's camera-frame depth, ``d`` the pixel's unit ray, ``ẑ`` the optical axis), stored in the frame
+  of the joint that carries its capsule: ``R_fᵀ (X − p_f)``;
+* :func:`match`: each model point moved with its joint (``X = p_f + R_f l``), projected with the lens
+  distortion (as :meth:`~isa_mocap_ros.vision.Camera.project`), paired with the closest image contour
+  pixel within ``max_px`` (an exact search of the integer pixels around it in an index image that holds
+  each contour pixel's row: the nearest neighbour a k-d tree gives, without building one per frame).
+
+Pure numba (no ROS).
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+__all__ = ["back_project", "match", "mark_pixels"]
+
+
+@numba.njit(cache=True)
+def back_project(px, py, label, depth, o, dirs, W, zaxis, cap_frames, R, P,
+                 frames, local):  # pragma: no cover - compiled
+    """Rows ``frames (k,)``, ``local (k, 3)`` of the contour pixels ``(px, py)`` whose ray hit capsule
+    ``label`` at camera-frame depth ``depth`` (float32, as the renderer gives it); pixels without a hit
+    (label < 0) are left out. Returns the number of rows written."""
+    k = 0
+    for i in range(px.shape[0]):
+        c = label[i]
+        if c < 0:
+            continue
+        p = py[i] * W + px[i]
+        dx, dy, dz = dirs[p, 0], dirs[p, 1], dirs[p, 2]
+        s = np.float64(depth[i]) / (dx * zaxis[0] + dy * zaxis[1] + dz * zaxis[2])
+        X0, X1, X2 = o[0] + s * dx, o[1] + s * dy, o[2] + s * dz
+        f = cap_frames[c]
+        e0, e1, e2 = X0 - P[f, 0], X1 - P[f, 1], X2 - P[f, 2]
+        for r in range(3):                          # R^T (X - p)
+            local[k, r] = R[f, 0, r] * e0 + R[f, 1, r] * e1 + R[f, 2, r] * e2
+        frames[k] = f
+        k += 1
+    return k
+
+
+@numba.njit(cache=True)
+def mark_pixels(index, pix, value_is_row):  # pragma: no cover - compiled
+    """``index[v, u] ← row`` for each contour pixel ``pix[row] = (u, v)`` (``value_is_row`` False: ← -1,
+    clearing the marks of an earlier frame)."""
+    for i in range(pix.shape[0]):
+        index[pix[i, 1], pix[i, 0]] = i if value_is_row else -1
+
+
+@numba.njit(cache=True)
+def match(frames, local, R, P, cam_R, cam_t, K4, D8, hasd, index, max_px, lines_n, lines_m, out_f, out_l, out_n,
+          out_m, out_d, k0):  # pragma: no cover - compiled
+    """For each model point (joint frame ``frames[i]``, position ``local[i]`` in it) of a pose with joint
+    rotations ``R`` and positions ``P``: the closest image contour pixel (``index``: its row at each contour
+    pixel, -1 elsewhere) within ``max_px`` of the point's projection (``cam_R``, ``cam_t``;
+    ``K4 = (fx, fy, cx, cy)``; ``D8``: the OpenCV distortion (k1, k2, p1, p2, k3, k4, k5, k6), used when
+    ``hasd``). Each pair found is appended from row ``k0`` on: the point's ``out_f``, ``out_l``, the
+    pixel's Plücker line ``out_n``, ``out_m`` (rows of ``lines_n``, ``lines_m``) and their distance
+    ``out_d``; returns the row after the last one written."""
+    H, W = index.shape
+    r = int(np.ceil(max_px))
+    lim = max_px * max_px
+    k1, k2, p1, p2, k3, k4, k5, k6 = D8[0], D8[1], D8[2], D8[3], D8[4], D8[5], D8[6], D8[7]
+    k = k0
+    for i in range(frames.shape[0]):
+        f = frames[i]
+        X = np.empty(3)
+        for a in range(3):
+            X[a] = P[f, a] + R[f, a, 0] * local[i, 0] + R[f, a, 1] * local[i, 1] + R[f, a, 2] * local[i, 2]
+        xc = cam_R[0, 0] * X[0] + cam_R[0, 1] * X[1] + cam_R[0, 2] * X[2] + cam_t[0]
+        yc = cam_R[1, 0] * X[0] + cam_R[1, 1] * X[1] + cam_R[1, 2] * X[2] + cam_t[1]
+        zc = cam_R[2, 0] * X[0] + cam_R[2, 1] * X[1] + cam_R[2, 2] * X[2] + cam_t[2]
+        x, y = xc / zc, yc / zc
+        if hasd:
+            r2 = x * x + y * y
+            radial = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+            x, y = (x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
+                    y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y)
+        u = K4[0] * x + K4[2]
+        v = K4[1] * y + K4[3]
+        if not (np.isfinite(u) and np.isfinite(v)):
+            continue
+        cu, cv = int(np.floor(u + 0.5)), int(np.floor(v + 0.5))
+        if cu < -r or cv < -r or cu >= W + r or cv >= H + r:
+            continue
+        best, row = np.inf, -1
+        for yy in range(max(0, cv - r - 1), min(H, cv + r + 2)):
+            dyy = yy - v
+            if dyy * dyy > lim:
+                continue
+            for xx in range(max(0, cu - r - 1), min(W, cu + r + 2)):
+                j = index[yy, xx]
+                if j < 0:
+                    continue
+                dxx = xx - u
+                d2 = dxx * dxx + dyy * dyy
+                if d2 < best:
+                    best, row = d2, j
+        if row >= 0 and best <= lim:
+            out_f[k] = f
+            for a in range(3):
+                out_l[k, a] = local[i, a]
+                out_n[k, a] = lines_n[row, a]
+                out_m[k, a] = lines_m[row, a]
+            out_d[k] = np.sqrt(best)
+            k += 1
+    return k
