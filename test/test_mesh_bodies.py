@@ -225,7 +225,7 @@ def test_offset_removed_error_removes_a_definition_offset_that_turns_with_the_bo
     F = 40
     yaw = np.linspace(0, 2 * np.pi, F, endpoint=False)
     lat = np.stack([np.cos(yaw), np.sin(yaw), np.zeros(F)], axis=1)
-    fwd = np.stack([-np.sin(yaw), np.cos(yaw), np.zeros(F)], axis=1)
+    fwd = np.stack([np.sin(yaw), -np.cos(yaw), np.zeros(F)], axis=1)    # left = lat: facing lat turned -90°
     centre = np.array([0.5, -0.2, 1.0])
     # markers: left hip, right hip, a shoulder
     T = np.stack([centre + 0.1 * lat, centre - 0.1 * lat, centre + 0.5 * np.array([0, 0, 1.0]) + 0.2 * lat], axis=1)

@@ -107,3 +107,22 @@ def test_run_tracks_the_imported_recording_through_the_network(demo_bag, tmp_pat
     assert s["frames_estimated"] == FRAMES and s["scored_by"] == "markers", s
     assert s["frames_processed"] == s["frame_sets_played"]          # lockstep: none dropped
     assert np.isfinite(s["offset_removed_mpjpe_mm"])
+    # lockstep equals the offline tracker with the same settings, frame by frame (a 60 fps recording: the
+    # prediction node and the estimator work with the bag's frame period, not the parameter file's 1/30 s)
+    assert cli(["track", str(demo_bag), "--out", str(tmp_path / "track"), "--no-progress", *QUICK]) == 0
+    t = json.loads((tmp_path / "track" / "summary.json").read_text())
+    assert s["frame_errors_mm"] == t["frame_errors_mm"], (s["frame_errors_mm"], t["frame_errors_mm"])
+    log = (out / "nodes.log").read_text()
+    assert "no prediction" not in log, log[-3000:]
+
+
+def test_run_gives_the_nodes_the_bags_frame_period(demo_bag):
+    import argparse
+
+    from isa_mocap_ros.cli.run import _inspect, _network
+
+    views, learn, period_s = _inspect(demo_bag)
+    assert (views, learn) == (4, 3) and period_s == pytest.approx(1 / 60, abs=1e-9)
+    ns = argparse.Namespace(lockstep=True, optimizer=None, evals=None, model=None, seed=None, helper_nice=0)
+    specs = {s.name: dict(s.params) for s in _network(ns, "p.yaml", demo_bag, views, learn, frame_period_s=period_s)}
+    assert float(specs["estimator"]["frame_period_s"]) == float(specs["prediction"]["frame_period_s"]) == period_s

@@ -4,6 +4,7 @@
 order, ackley, adapters, render, energy, compare, robustness, speed, mesh_baseline (mesh bodies vs
 capsules, reduced), mesh (the headline: mesh subjects, automatic shape and initialization) and keypoints (a reduced
 ``bench keypoints``: the detector's cost per rate, tracking with and without the term, :mod:`.keypoints_summary`)
+and real (the Pose2Sim recording offline and in lockstep, :mod:`.real`)
 with their default designs (compare and robustness on mesh bodies since issue 32)
 (``--quick``: their ``--quick`` variants), then writes
 
@@ -44,7 +45,8 @@ from isa_mocap_ros.bench._common import energy_sizes, json_of
 #: both cores at full load that ackley, compare and robustness take, the node network's real-time run
 #: in ``speed`` dropped 24 of 145 frame sets (tracker 31 ms a frame, p50) where the same bench alone
 #: a minute later dropped 6 (22.7 ms; session 12, docs/evaluation.md).
-ORDER = ("energy", "speed", "adapters", "render", "ackley", "compare", "robustness", "mesh_baseline", "mesh", "keypoints")
+ORDER = ("energy", "speed", "adapters", "render", "ackley", "compare", "robustness", "mesh_baseline", "mesh", "keypoints",
+         "real")
 _SRC_ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -168,6 +170,14 @@ def _bench_keypoints(quick: bool, ctx: dict) -> dict:
     return keypoints_summary.collect(quick=quick, out=ctx["out"])
 
 
+def _bench_real(quick: bool, ctx: dict) -> dict:
+    from isa_mocap_ros.bench import real
+
+    if quick:      # a smoke test: the default shape offline, no network run
+        return real.collect(quick=True, out=ctx["out"] / "real", configs=("default",), lockstep=None)
+    return real.collect(quick=False, out=ctx["out"] / "real")
+
+
 def _bench_speed(quick: bool, ctx: dict) -> dict:
     from isa_mocap_ros.bench import speed as bench_speed
 
@@ -178,7 +188,8 @@ def _bench_speed(quick: bool, ctx: dict) -> dict:
 
 RUNNERS = {"ackley": _bench_ackley, "adapters": _bench_adapters, "render": _bench_render, "energy": _bench_energy,
            "compare": _bench_compare, "robustness": _bench_robustness, "speed": _bench_speed,
-           "mesh_baseline": _bench_mesh_baseline, "mesh": _bench_mesh, "keypoints": _bench_keypoints}
+           "mesh_baseline": _bench_mesh_baseline, "mesh": _bench_mesh, "keypoints": _bench_keypoints,
+           "real": _bench_real}
 
 
 # ------------------------------------------------------------------ markdown sections
@@ -308,6 +319,12 @@ def md_keypoints(d: dict) -> str:
     return render_markdown(d)
 
 
+def md_real(d: dict) -> str:
+    from isa_mocap_ros.bench.real import render_markdown
+
+    return render_markdown(d)
+
+
 def md_speed(d: dict) -> str:
     from isa_mocap_ros.bench.speed import render_markdown
 
@@ -345,9 +362,15 @@ def headlines(data: dict) -> list[str]:
     out = []
     me = data.get("mesh")
     if me and me.get("conditions"):
-        out.append("**mesh subjects, everything automatic** (shape, initialization; bench mesh): " + "; ".join(
-            f"{x['label']} {x['mpjpe_mm']:.1f} mm ({x['offset_removed_mpjpe_mm']:.1f} mm offset removed), knee "
-            f"{x['knee_rmse_deg']:.2f}°, {x['backwards_runs']} run(s) backwards" for x in me["conditions"]))
+        def one(x):
+            if x.get("mapped_mpjpe_mm") is not None and np.isfinite(x["mapped_mpjpe_mm"]):
+                return (f"{x['label']} {x['mapped_mpjpe_mm']:.1f} mm mapped ({x['mpjpe_mm']:.1f} raw, "
+                        f"{x['offset_removed_mpjpe_mm']:.1f} offset removed), knee {x['mapped_knee_rmse_deg']:.2f}° "
+                        f"mapped, {x['backwards_runs']} run(s) backwards")
+            return (f"{x['label']} {x['mpjpe_mm']:.1f} mm ({x['offset_removed_mpjpe_mm']:.1f} mm offset removed), knee "
+                    f"{x['knee_rmse_deg']:.2f}°, {x['backwards_runs']} run(s) backwards")
+        out.append("**mesh subjects, everything automatic** (shape, initialization; bench mesh): "
+                   + "; ".join(one(x) for x in me["conditions"]))
     c = data.get("compare")
     if c and c.get("mean_over_sequences_mm"):
         from isa_mocap_ros.eval.compare import PEER_ALGORITHMS, label
@@ -408,6 +431,7 @@ SECTIONS = (("mesh", "Headline: mesh subjects, automatic shape and initializatio
             ("robustness", "Robustness: noise and occlusions (ISA §13.4.2)", md_robustness),
             ("mesh_baseline", "Mesh bodies vs capsules (issue 32's baseline)", md_mesh_baseline),
             ("keypoints", "Learned keypoints: cost and tracking with the term (issue 36)", md_keypoints),
+            ("real", "The real recording: Pose2Sim demo against the peer's keypoints (issue 34)", md_real),
             ("speed", "Speed: energy, tracker, node network", md_speed),
             ("energy", "Silhouette energy speed", md_energy),
             ("render", "Renderer speed", md_render),

@@ -17,6 +17,8 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
+
 from isa_mocap_ros.bag import BagReader
 from isa_mocap_ros.launcher import NodeSpec, Supervisor, niceness
 from isa_mocap_ros.resources import default_bag, resource_dir
@@ -60,7 +62,7 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--keypoint-weight", type=float, default=1.0, metavar="W",
                    help="with --keypoints: weight of the keypoint term (default 1.0; 0 = detect and record only)")
     p.add_argument("--keypoint-every", type=int, default=None, metavar="K",
-                   help="with --keypoints: the keypoint node's every_k_frames (default: the parameter file's, 6)")
+                   help="with --keypoints: the keypoint node's every_k_frames (default: the parameter file's, 8)")
     p.add_argument("--shape", default="auto", metavar="auto|default|truth|FILE",
                    help="body shape the estimator tracks with: 'auto' (default) calibrates it from the bag's first "
                         "frames before the replay (as isa-mocap calibrate; written to DIR/body.yaml); 'default' = "
@@ -77,8 +79,13 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
-             learn_frames: int | None, body_shape: str | None = None) -> list[NodeSpec]:
-    est = [*([("body_shape", body_shape)] if body_shape else []),
+             learn_frames: int | None, body_shape: str | None = None, *,
+             frame_period_s: float | None = None) -> list[NodeSpec]:
+    # the bag's frame period: the prediction node stamps its prediction for frame k + 1 with t_k + period and
+    # the estimator matches it to the frame within half a period; the parameter file's 1/30 s on a 60 fps
+    # recording made the lockstep estimator miss the prediction (or take the one made a frame earlier)
+    period = [("frame_period_s", repr(float(frame_period_s)))] if frame_period_s else []
+    est = [*([("body_shape", body_shape)] if body_shape else []), *period,
            ("views", str(n_views)), ("lockstep", "true" if args.lockstep else "false"), ("wait_for_inputs_s", "60.0"),
            # lockstep: wait for every view (a partial set would make results depend on machine load)
            *([("view_timeout_s", "0.0")] if args.lockstep else [])]
@@ -112,7 +119,7 @@ def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
         kp = [NodeSpec(exec="keypoints_node", name="keypoints", params=tuple(kp_params), nice=nice, **common)]
     work = kp + [
         NodeSpec(exec="segmentation_node", name="segmentation", params=tuple(seg), nice=nice, **common),
-        NodeSpec(exec="prediction_node", name="prediction", nice=nice, **common),
+        NodeSpec(exec="prediction_node", name="prediction", params=tuple(period), nice=nice, **common),
         NodeSpec(exec="estimator_node", name="estimator", params=tuple(est), **common),
     ]
     if getattr(args, "single_process", False):
@@ -126,21 +133,24 @@ def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
     ]
 
 
-def _inspect(bag: Path) -> tuple[int, int | None]:
-    """Views in the bag, and how many frames come before its first ground truth (background only)."""
+def _inspect(bag: Path) -> tuple[int, int | None, float | None]:
+    """Views in the bag, how many frames come before its first ground truth (background only), and its
+    frame period in seconds (the median step between view 0's image stamps; None with fewer than 2)."""
     import msg_adapters as ma
     with BagReader(bag) as r:
         n = sum(1 for t in r.topics if t.startswith("/mocap/cam") and t.endswith("/image_raw"))
         if n == 0:
             raise SystemExit(f"isa-mocap run: {bag} has no /mocap/cam<i>/image_raw topics")
+        stamps = sorted({ma.header_stamp_ns_from_cdr(m.data) for m in r.messages(["/mocap/cam0/image_raw"])})
+        period_s = float(np.median(np.diff(stamps))) / 1e9 if len(stamps) > 1 else None
         gt = "/mocap/ground_truth/joint_states"
         if gt not in r.topics:       # a mesh bag or an imported real recording may have markers only
             gt = "/mocap/ground_truth/markers"
         if gt not in r.topics:
-            return n, None
+            return n, None, period_s
         first_truth = next((ma.header_stamp_ns_from_cdr(m.data) for m in r.messages([gt])), None)
-        stamps = {ma.header_stamp_ns_from_cdr(m.data) for m in r.messages(["/mocap/cam0/image_raw"])}
-    return n, (sum(1 for s in stamps if s < first_truth) or None) if first_truth is not None else None
+    learn = (sum(1 for s in stamps if s < first_truth) or None) if first_truth is not None else None
+    return n, learn, period_s
 
 
 def _body_shape(args: argparse.Namespace, bag: Path, out: Path, learn: int | None) -> str | None:
@@ -199,7 +209,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     params = args.params or str(resource_dir("config") / "pipeline.yaml")
-    n_views, empty = _inspect(bag)
+    n_views, empty, period_s = _inspect(bag)
     learn = args.learn_frames if args.learn_frames is not None else empty
     env = ros_env(keep_caller_domain=True)
     log = open(out / "nodes.log", "w")
@@ -220,7 +230,7 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"isa-mocap run: error: {exc}", file=sys.stderr)
         return 2
-    specs = _network(args, params, out, n_views, learn, body_shape)
+    specs = _network(args, params, out, n_views, learn, body_shape, frame_period_s=period_s)
     sup = Supervisor(specs, env=env, out=on_line)
     runner = threading.Thread(target=sup.run, daemon=True)
     print(f"run: {bag} ({n_views} views) -> {out}; ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}", flush=True)

@@ -84,7 +84,8 @@ def joint_errors_mm(pred_joints, true_joints) -> np.ndarray:
 
 def body_frames(true_joints, left_hip: int, right_hip: int) -> np.ndarray:
     """Per-frame body axes ``(F, 3, 3)`` from the true hips, world z up: columns ``lateral`` (the
-    horizontal direction from the right hip to the left), ``forward`` (``up × lateral``) and ``up``.
+    horizontal direction from the right hip to the left), ``forward`` (``lateral × up``: the way a body whose
+    left is ``lateral`` faces) and ``up``.
 
     A frame whose hips are vertically aligned (no horizontal hip axis) or missing (NaN) takes the previous frame's axes
     (the world axes if it is the first). Used to express a joint's offset in the body, so that an offset of
@@ -99,7 +100,7 @@ def body_frames(true_joints, left_hip: int, right_hip: int) -> np.ndarray:
     for f in range(T.shape[0]):
         if n[f] > 1e-6:                         # False for NaN (a missing hip)
             x = a[f] / n[f]
-            last = np.column_stack([x, np.cross([0.0, 0.0, 1.0], x), [0.0, 0.0, 1.0]])
+            last = np.column_stack([x, np.cross(x, [0.0, 0.0, 1.0]), [0.0, 0.0, 1.0]])
         R[f] = last
     return R
 
@@ -319,7 +320,7 @@ def knee_flexion_from_points(hip, knee, ankle) -> np.ndarray:
     return np.arccos(np.clip(c, -1.0, 1.0))
 
 
-def score_markers(model, poses, truth_names, truth_markers) -> dict:
+def score_markers(model, poses, truth_names, truth_markers, *, joint_map=None) -> dict:
     """Accuracy of pose estimates against ground-truth joint centres (or a peer's keypoints) matched BY NAME.
 
     Needs no ground-truth model: the estimate's joint centres come from ``model`` (the tracking
@@ -356,7 +357,10 @@ def score_markers(model, poses, truth_names, truth_markers) -> dict:
         ``heading_errors_deg`` (F,) (:func:`heading_errors_deg`), ``backwards_share`` and
         ``frames_facing_backwards`` (the share and the number of frames whose heading is more than 90° off);
         with both legs, ``offset_removed_knee_rmse_deg`` (the knee angles from the estimate's joints moved by
-        their mean offsets).
+        their mean offsets). With ``joint_map`` (:class:`.joint_map.JointMap`, fitted on other runs): the
+        estimate's virtual markers of that map scored alike, ``mapped_mpjpe_mm``, ``mapped_median_frame_error_mm``,
+        ``mapped_max_frame_error_mm``, ``mapped_frame_errors_mm`` (F,), ``mapped_per_marker_mm``,
+        ``mapped_knee_rmse_deg``, ``mapped_knee_errors_deg`` and ``joint_map`` (its rig name).
     """
     X = _poses("poses", poses, model.dof)
     T = _points_missing("truth_markers", truth_markers)
@@ -408,4 +412,19 @@ def score_markers(model, poses, truth_names, truth_markers) -> dict:
         Pc = Pe - np.einsum("fij,mj->fmi", R, off / 1e3)
         kc = np.stack([np.rad2deg(ang(Pc, s) - ang(Pt, s)) for s in sides], axis=1)
         out["offset_removed_knee_rmse_deg"] = float(np.sqrt(np.nanmean(kc ** 2)))
+    if joint_map is not None:
+        from .joint_map import mapped_markers
+
+        Pm = mapped_markers(joint_map, model, X, shared)
+        jm = 1e3 * np.linalg.norm(Pm - Pt, axis=-1)
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            fm, pmm = np.nanmean(jm, axis=1), np.nanmean(jm, axis=0)
+        out.update(joint_map=joint_map.rig, mapped_mpjpe_mm=float(fm[scored].mean()),
+                   mapped_median_frame_error_mm=float(np.median(fm[scored])),
+                   mapped_max_frame_error_mm=float(fm[scored].max()), mapped_frame_errors_mm=fm,
+                   mapped_per_marker_mm={n: float(v) for n, v in zip(shared, pmm)})
+        if sides:
+            km = np.stack([np.rad2deg(ang(Pm, s) - ang(Pt, s)) for s in sides], axis=1)
+            out.update(mapped_knee_rmse_deg=float(np.sqrt(np.nanmean(km ** 2))), mapped_knee_errors_deg=km)
     return out

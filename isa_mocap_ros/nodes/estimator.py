@@ -15,8 +15,8 @@ the tracking body model with its shape, the schema of ``/mocap/ground_truth/mode
 Frame sets are synchronized exactly or approximately (:mod:`isa_mocap_ros.tracking.sync`); a
 worker thread runs the tracker so callbacks never block. In real-time mode a frame set that waits
 while the tracker is busy is replaced by a newer one and counted as dropped; in lockstep mode every
-set is processed and the estimator waits up to ``prediction_wait_s`` for the prediction node's
-prediction of that frame.
+set is processed and the estimator waits up to ``prediction_wait_s`` (10 s) for the prediction node's
+prediction of that frame while a prediction node publishes (none: no wait).
 
 Keypoints (``keypoint_weight`` > 0, docs/keypoints.md): a keypoint message belongs to the frame set of its
 stamp and view; the tracker gets the set's keypoints with its masks. The keypoint node detects on some
@@ -142,8 +142,9 @@ class EstimatorNode(EstimatorIntake, Node):
             self, "keypoint_realtime_wait_s", 0.03, "real time, keypoint_weight > 0: longest wait for a view's "
             "keypoints or skip notice (a skip notice comes at once, a detection ~10 ms after the mask on an idle "
             "core; 0 = take what has arrived)", lo=0.0, hi=10.0)
-        self.prediction_wait_s = declare(self, "prediction_wait_s", 1.0,
-                                         "lockstep: longest wait for a frame's prediction", lo=0.0, hi=60.0)
+        self.prediction_wait_s = declare(self, "prediction_wait_s", 10.0,
+                                         "lockstep: longest wait for a frame's prediction while a prediction node "
+                                         "is there", lo=0.0, hi=60.0)
         self.frame_period_s = declare(self, "frame_period_s", 1.0 / 30.0,
                                       "frame period, to match predictions to frames", lo=1e-4, hi=10.0)
         self.overlay = declare(self, "publish_overlay", False, "publish cam<i>/overlay images")
@@ -320,7 +321,11 @@ class EstimatorNode(EstimatorIntake, Node):
                 frame_set, t_ready = item
                 prediction = None
                 if self.use_prediction and self._published_any:
-                    deadline = time.monotonic() + (self.prediction_wait_s if self.lockstep else 0.0)
+                    # lockstep waits as long as a prediction node is there to answer (a slow one on a loaded
+                    # machine must not turn the replay into another result), at most prediction_wait_s
+                    wait_s = self.prediction_wait_s if self.lockstep and self.count_publishers(
+                        self.resolve_topic_name("prediction/joint_states")) > 0 else 0.0
+                    deadline = time.monotonic() + wait_s
                     while (prediction := self._prediction_for(frame_set.stamp_ns)) is None:
                         left = deadline - time.monotonic()
                         if left <= 0 or self._stop.is_set():
@@ -328,7 +333,8 @@ class EstimatorNode(EstimatorIntake, Node):
                         self._cv.wait(min(left, 0.05))
                     if prediction is None and self.lockstep:
                         self.problems.report("noprediction", f"no prediction for frame {frame_set.stamp_ns} "
-                                             f"within {self.prediction_wait_s:.2f} s; using the estimator's own")
+                                             + (f"within {wait_s:.2f} s" if wait_s else "(no prediction node)")
+                                             + "; using the estimator's own")
                 keypoints = self._keypoints_for(frame_set) if self.use_keypoints else None
             try:
                 self._process(frame_set, prediction, t_ready, keypoints)

@@ -1,0 +1,34 @@
+"""``isa-mocap bench real``: the real recording's section of the results page (a smoke run on 8 frames at 160 px;
+the figures come from the full bench, docs/RESULTS.md). Reads the recording from ../shared, skipped when absent."""
+import json
+
+import numpy as np
+import pytest
+
+from isa_mocap_ros.bench import BENCHES
+from isa_mocap_ros.bench import real as bench_real
+from isa_mocap_ros.cli.main import main
+
+
+def test_real_is_a_bench_and_refuses_unknown_configurations(capsys):
+    assert "real" in BENCHES
+    assert main(["bench", "real", "--configs", "default,nope", "--lockstep", "none"]) == 2
+    assert "expected names of default, keypoints, auto" in capsys.readouterr().err
+
+
+def test_quick_run_scores_every_frame_against_the_peer(tmp_path):
+    if not (bench_real.demo_dir() / "calibration" / "Calib_scene_checkerboard.toml").is_file():
+        pytest.skip(f"Pose2Sim demo not found at {bench_real.demo_dir()} (set ISA_MOCAP_SHARED to the shared/ folder)")
+    out = tmp_path / "json" / "real.json"
+    assert main(["bench", "real", "--quick", "--configs", "default", "--lockstep", "none", "--out", str(tmp_path / "w"),
+                 "--json", str(out)]) == 0
+    d = json.loads(out.read_text())
+    r = d["runs"]["default"]
+    assert d["quick"] and r["frames_tracked"] == r["frames"] == 8 and len(r["frame_errors_mm"]) == 8
+    assert 0 < r["offset_removed_mpjpe_mm"] <= r["mpjpe_mm"] and np.isfinite(r["knee_rmse_deg"])
+    assert len(r["offset_removed_per_marker_mm"]) == 14
+    md = bench_real.render_markdown(d)
+    assert "| default shape | 8 |" in md and "Quick run" in md and "nan" not in md.lower()
+    # the bag is cached in the work directory: a second run does not import again
+    assert (tmp_path / "w" / "demo_bag_160_8" / "metadata.yaml").is_file()
+    assert bench_real.render_markdown({"skipped": "x"}) == "Not run: x.\n"
