@@ -271,6 +271,41 @@ def test_distorted_camera_runs_and_is_small_at_truth(scene):
     assert e[0] < 0.05 and e[1] > e[0] + 0.1
 
 
+
+@pytest.mark.parametrize("settings", [{}, {"downsample": 2}, {"core_px": 3.0}, {"method": "exact"}])
+def test_prepared_masks_give_the_same_bits_for_any_model(scene, spread, settings):
+    # what prepare_masks keeps does not depend on the model or the random sample: energies of two models
+    # (other segment lengths: another template, so another random stream after it) built on masks prepared
+    # by a third are the bits of the same energies given the raw masks; distorted views and a skipped one
+    model, _, x0, _ = scene
+    cams = [look_at((3.0, -1.5, 2.0), (0, 0, 1.0), fov_deg=70, dist=(-0.2, 0.05, 0.001, -0.001, 0.0), name="d0"),
+            look_at((-3.0, 1.0, 1.5), (0, 0, 1.0), fov_deg=70, dist=(0.1, -0.02, 0.0, 0.0, 0.0), name="d1"),
+            look_at((0.5, 3.2, 1.8), (0, 0, 1.0), fov_deg=60, name="p2")]
+    E = capsule_endpoints(model, x0)[0]
+    masks = [render_mask(c, E, model.capsule_radii) for c in cams[:2]] + [None]
+    shp = {k: dict(v) for k, v in model.shape.items() if k in ("offsets", "radii")}
+    shp["offsets"]["left_knee"] = shp["offsets"]["right_knee"] = [0.0, 0.0, -0.5]
+    long_legs = make_model(39, shape=shp)
+    pre = SilhouetteEnergy(make_model(28), cams, **settings).prepare_masks(masks)
+    assert pre.used == (0, 1) and pre.skipped[0][0] == 2
+    for m in (model, long_legs):
+        X = spread if m.dof == 39 else spread[:, :m.dof]
+        a = SilhouetteEnergy(m, cams, rng=np.random.default_rng(4), **settings)
+        b = SilhouetteEnergy(m, cams, rng=np.random.default_rng(4), **settings)
+        for frame in range(2):                          # the second frame draws a new sample from the rng
+            a.set_masks(masks)
+            b.set_masks(pre)
+            assert b.skipped_views == a.skipped_views and b.n_views_used == 2
+            assert np.array_equal(a(X), b(X))
+    with pytest.raises(EnergyError, match="prepared for other cameras"):
+        SilhouetteEnergy(model, cams[::-1], **settings).set_masks(pre)
+    other = {"method": "exact"} if settings.get("method") != "exact" else {}
+    with pytest.raises(EnergyError, match="prepared for method, downsample, core_px"):
+        SilhouetteEnergy(model, cams, **other).set_masks(pre)
+    with pytest.raises(EnergyError, match="expected at least one usable view"):
+        SilhouetteEnergy(model, cams, **settings).set_masks(
+            SilhouetteEnergy(model, cams, **settings).prepare_masks([None] * 3))
+
 _HASH_SCRIPT = """
 import hashlib, numpy as np
 from isa_mocap_ros.body import capsule_endpoints, make_model

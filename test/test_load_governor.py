@@ -176,12 +176,22 @@ def test_startup_catch_up_holds_the_sets_then_tracks_them_cheaply_until_none_wai
     assert c.budget(1500, initialized=True, checking_heading=False) == (300, False)
     assert c.budget(200, initialized=True, checking_heading=False) == (200, False)
     assert c.after(waiting=5, waited_ms=250.0) is True
+    c.budget(1500, initialized=True, checking_heading=False)
+    assert c.after(waiting=3, waited_ms=200.0) is True                       # gaining
+    c.budget(1500, initialized=True, checking_heading=False)
     assert c.after(waiting=0, waited_ms=40.0) is False and not c.active       # caught up
     assert c.budget(1500, initialized=True, checking_heading=False) == (1500, True)
-    assert c.caught_up == 2
-    # a set that waited too long ends it (the tracker does not gain on the stream)
+    assert c.caught_up == 4
+    # a caught-up set that waited too long, or no shorter than the one before, ends it (not gaining)
     c.hold(3)
+    c.budget(1500, initialized=True, checking_heading=False)
     assert c.after(waiting=8, waited_ms=700.0) is False
+    c.hold(3)
+    assert c.after(waiting=8, waited_ms=300.0) is True        # a heading-check set (full budget): not compared
+    c.budget(1500, initialized=True, checking_heading=False)
+    assert c.after(waiting=8, waited_ms=320.0) is True
+    c.budget(1500, initialized=True, checking_heading=False)
+    assert c.after(waiting=9, waited_ms=330.0) is False
     # off: only the heading check's sets are held
     off = StartupCatchUp(sets=0, evals=300, limit_ms=600.0)
     assert off.hold(3) == 3 and not off.active

@@ -2,7 +2,7 @@
 node processes over DDS, the keypoint node among them) while a fuzzer publishes malformed and far keypoint
 messages and skip notices (``test/fuzzer.py keypoints``; its other kinds are test_network_fuzz's), against the offline `isa-mocap track --keypoint-weight`
 with the same settings: the estimates are identical bit for bit, so the estimator took each frame set's
-keypoints (the keypoint node's schedule: the dense start, then every 6th frame) and nothing the fuzzer sent.
+keypoints (the keypoint node's schedule: the dense start, then every 8th frame) and nothing the fuzzer sent.
 """
 from __future__ import annotations
 
@@ -45,7 +45,7 @@ def test_lockstep_run_with_keypoints_equals_offline_track_under_a_fuzzer(landmar
                                 *SETTINGS], capture_output=True, text=True, timeout=400)
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
     offline = json.loads((tmp_path / "track" / "summary.json").read_text())
-    # 12 frames with a person: the first 4 and every 6th after (frame 6 of them), 4 views each
+    # 12 frames with a person: the first 4 and every 8th after (frame 8 of them), 4 views each
     assert offline["keypoint_frames"] == 5 and offline["keypoint_detections"] == 20, offline
 
     # the keypoint node's messages were recorded (beside the fuzzer's: malformed, or far from the frames):

@@ -36,8 +36,8 @@ __all__ = ["CONFIGS", "collect", "render_markdown", "add_arguments", "run"]
 #: configuration name -> (label, extra ``isa-mocap track`` / ``run`` arguments)
 CONFIGS = {
     "default": ("default shape", ["--shape", "default"]),
-    "keypoints": ("default shape + keypoint term (weight 1, every 6th frame)", ["--shape", "default",
-                                                                                  "--keypoint-weight", "1"]),
+    "keypoints": ("default shape + keypoint term (weight 1, the default rate: every 8th frame)",
+                  ["--shape", "default", "--keypoint-weight", "1"]),
     "auto": ("shape calibrated from the first 30 frames", ["--shape", "auto"]),
 }
 _KEEP = ("frames", "frames_tracked", "frames_fell_back", "mpjpe_mm", "offset_removed_mpjpe_mm", "max_frame_error_mm",

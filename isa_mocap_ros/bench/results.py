@@ -362,9 +362,15 @@ def headlines(data: dict) -> list[str]:
     out = []
     me = data.get("mesh")
     if me and me.get("conditions"):
-        out.append("**mesh subjects, everything automatic** (shape, initialization; bench mesh): " + "; ".join(
-            f"{x['label']} {x['mpjpe_mm']:.1f} mm ({x['offset_removed_mpjpe_mm']:.1f} mm offset removed), knee "
-            f"{x['knee_rmse_deg']:.2f}°, {x['backwards_runs']} run(s) backwards" for x in me["conditions"]))
+        def one(x):
+            if x.get("mapped_mpjpe_mm") is not None and np.isfinite(x["mapped_mpjpe_mm"]):
+                return (f"{x['label']} {x['mapped_mpjpe_mm']:.1f} mm mapped ({x['mpjpe_mm']:.1f} raw, "
+                        f"{x['offset_removed_mpjpe_mm']:.1f} offset removed), knee {x['mapped_knee_rmse_deg']:.2f}° "
+                        f"mapped, {x['backwards_runs']} run(s) backwards")
+            return (f"{x['label']} {x['mpjpe_mm']:.1f} mm ({x['offset_removed_mpjpe_mm']:.1f} mm offset removed), knee "
+                    f"{x['knee_rmse_deg']:.2f}°, {x['backwards_runs']} run(s) backwards")
+        out.append("**mesh subjects, everything automatic** (shape, initialization; bench mesh): "
+                   + "; ".join(one(x) for x in me["conditions"]))
     c = data.get("compare")
     if c and c.get("mean_over_sequences_mm"):
         from isa_mocap_ros.eval.compare import PEER_ALGORITHMS, label

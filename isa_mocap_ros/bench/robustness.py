@@ -208,7 +208,9 @@ def track_condition(bag: Path, out: Path, design: RobustDesign, seed: int | None
 
         names = list(got["truth_marker_names"])
         TM = np.array([truth[k] for k in idx])
-        acc = score_markers(model, P, names, TM)
+        from isa_mocap_ros.eval.joint_map import mesh_rig_map
+
+        acc = score_markers(model, P, names, TM, joint_map=mesh_rig_map())   # synth's meshes: the cmu_mb rig
         acc["frame_errors_mm"] = [round(float(e), 2) for e in acc["frame_errors_mm"]]
         legs = [f"{s}_{j}" for s in ("left", "right") for j in ("hip", "knee", "ankle")]
         Pe = marker_positions(model, P, joints=legs)
@@ -231,7 +233,9 @@ def track_condition(bag: Path, out: Path, design: RobustDesign, seed: int | None
                  "offset_removed_max_frame_error_mm": acc["offset_removed_max_frame_error_mm"],
                  "backwards_share": acc.get("backwards_share", float("nan")),
                  "offset_removed_knee_rmse_deg": acc.get("offset_removed_knee_rmse_deg", float("nan")),
-                 "per_marker_offset_mm": acc["per_marker_offset_mm"]}
+                 "per_marker_offset_mm": acc["per_marker_offset_mm"],
+                 **{k: acc[k] for k in ("mapped_mpjpe_mm", "mapped_max_frame_error_mm", "mapped_knee_rmse_deg")
+                    if k in acc}}
     return {**extra, "seed": int(s["seed"]), "gate_margin_px": s.get("gate_margin_px"),
             "frames": acc["frames"], "mpjpe_mm": acc["mpjpe_mm"], "max_frame_error_mm": acc["max_frame_error_mm"],
             "knee_rmse_deg": acc["knee_rmse_deg"], "fps": s["fps"], "frames_fell_back": s["frames_fell_back"],

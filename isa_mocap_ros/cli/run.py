@@ -62,7 +62,7 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--keypoint-weight", type=float, default=1.0, metavar="W",
                    help="with --keypoints: weight of the keypoint term (default 1.0; 0 = detect and record only)")
     p.add_argument("--keypoint-every", type=int, default=None, metavar="K",
-                   help="with --keypoints: the keypoint node's every_k_frames (default: the parameter file's, 6)")
+                   help="with --keypoints: the keypoint node's every_k_frames (default: the parameter file's, 8)")
     p.add_argument("--shape", default="auto", metavar="auto|default|truth|FILE",
                    help="body shape the estimator tracks with: 'auto' (default) calibrates it from the bag's first "
                         "frames before the replay (as isa-mocap calibrate; written to DIR/body.yaml); 'default' = "

@@ -460,6 +460,10 @@ def run(args: argparse.Namespace) -> int:
     if "mpjpe_mm" in s:
         rows += [("mean joint error (Eq. 20)", f"{s['mpjpe_mm']:.1f} mm over {s['frames']} frames "
                                                f"(by {s['scored_by'].replace('_', ' ')})")]
+        if "mapped_mpjpe_mm" in s:
+            rows.append((f"mapped to the rig ({s.get('joint_map', '')} joint map)",
+                         f"{s['mapped_mpjpe_mm']:.1f} mm (max frame {s['mapped_max_frame_error_mm']:.1f} mm, knee "
+                         f"{s['mapped_knee_rmse_deg']:.2f} deg)"))
         if "offset_removed_mpjpe_mm" in s:
             rows.append(("each joint's mean offset removed", f"{s['offset_removed_mpjpe_mm']:.1f} mm "
                                                             f"(max frame {s['offset_removed_max_frame_error_mm']:.1f} mm"

@@ -23,6 +23,7 @@ pixels the model misses; ``f`` is minimised and lies in ``[0, 1]``.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Sequence
 
 import cv2
@@ -35,7 +36,7 @@ from . import silhouette_kernel as _k
 from ._checks import EnergyError, _check_cameras, _check_model, _check_poses
 from .restricted import RestrictedSilhouetteEnergy
 
-__all__ = ["EnergyError", "SilhouetteEnergy", "RestrictedSilhouetteEnergy", "exact_view_energy",
+__all__ = ["EnergyError", "PreparedMasks", "SilhouetteEnergy", "RestrictedSilhouetteEnergy", "exact_view_energy",
            "kinematic_tables"]
 
 #: default size of the model-point template per view (split over the capsules by area)
@@ -209,6 +210,26 @@ def _template(model: BodyModel, n_points: int,
             np.array(strata, dtype=np.int64))
 
 
+@dataclass(frozen=True, eq=False)
+class PreparedMasks:
+    """One frame's masks as :meth:`SilhouetteEnergy.prepare_masks` prepared them for the energies with
+    ``cameras``, ``method``, ``downsample`` and ``core_px``: the usable views ``used`` (and ``skipped``, as
+    :attr:`SilhouetteEnergy.skipped_views`), per used view the foreground ``F``, its pixel count ``n_fg``
+    and term-2 weights ``core``, and (fast method) the kernel inputs no model or random draw changes
+    (``static``). Read-only: energies share its arrays."""
+
+    cameras: tuple
+    method: str
+    downsample: int
+    core_px: float
+    used: tuple
+    skipped: tuple
+    F: dict
+    n_fg: dict
+    core: dict
+    static: dict | None
+
+
 # ---------------------------------------------------------------------- the batch energy
 class SilhouetteEnergy:
     """Batch silhouette energy ``f(x)`` of Eq. 5 (mean over usable views of Eq. 4), minimised, in [0, 1].
@@ -336,23 +357,22 @@ class SilhouetteEnergy:
         """Whether masks with at least one usable view are set (the energy can be evaluated)."""
         return self._frame is not None
 
-    def set_masks(self, masks: Sequence[Any], weights: Sequence[float] | None = None) -> None:
-        """Take the foreground masks of a new frame, one per camera (``None`` allowed).
+    def prepare_masks(self, masks: Sequence[Any]) -> "PreparedMasks":
+        """One frame's masks checked and reduced to what depends neither on the body model nor on the
+        random foreground sample: the usable views, foreground images, their pixels and normalized area
+        (with lens distortion the costly part: every foreground pixel undistorted four times), the
+        coverage images and camera tables.
 
-        A view whose mask is ``None``, empty, not a numeric 2-D array or not of its camera's size
-        is skipped and listed in :attr:`skipped_views` as ``(view index, reason)``.
-
-        ``weights`` (one finite number >= 0 per camera, optional) turn Eq. 5's mean over the views
-        into ``sum_v w_v f_v / sum_v w_v``; None (all ones) is Eq. 5 itself, to the bit. The tracker
-        uses them to count a view by the share of the body it sees (``TrackerConfig.objective.view_weights``).
+        :meth:`set_masks` of this energy, or of any other with the same cameras, ``method``,
+        ``downsample`` and ``core_px`` (whatever its model), takes the result in place of the masks and
+        gives the same bits as from the masks themselves. For a caller that scores the same frames with
+        many models (the shape calibration).
 
         Raises
         ------
         EnergyError
-            ``masks`` is not a sequence of one entry per camera, no view is usable, or ``weights``
-            is not one finite number >= 0 per camera with a positive sum over the usable views.
+            ``masks`` is not a sequence of one entry per camera.
         """
-        w = _view_weights(weights, len(self.cameras))
         try:
             masks = list(masks)
         except TypeError as exc:
@@ -368,6 +388,38 @@ class SilhouetteEnergy:
                 used.append(v)
             else:
                 skipped.append((v, problem))
+        F = {v: _foreground(masks[v]) for v in used}
+        core = {v: core_weights(F[v], self.core_px) for v in used}
+        static = self._fast_static(used, F) if self.method == "fast" and used else None
+        return PreparedMasks(cameras=tuple(self.cameras), method=self.method, downsample=self.downsample,
+                             core_px=self.core_px, used=tuple(used), skipped=tuple(skipped), F=F,
+                             n_fg={v: int(np.count_nonzero(F[v])) for v in used}, core=core, static=static)
+
+    def set_masks(self, masks: Sequence[Any] | "PreparedMasks", weights: Sequence[float] | None = None) -> None:
+        """Take the foreground masks of a new frame, one per camera (``None`` allowed).
+
+        A view whose mask is ``None``, empty, not a numeric 2-D array or not of its camera's size
+        is skipped and listed in :attr:`skipped_views` as ``(view index, reason)``. ``masks`` may also be
+        what :meth:`prepare_masks` returned for them (same result, without preparing them again).
+
+        ``weights`` (one finite number >= 0 per camera, optional) turn Eq. 5's mean over the views
+        into ``sum_v w_v f_v / sum_v w_v``; None (all ones) is Eq. 5 itself, to the bit. The tracker
+        uses them to count a view by the share of the body it sees (``TrackerConfig.objective.view_weights``).
+
+        Raises
+        ------
+        EnergyError
+            ``masks`` is not a sequence of one entry per camera, no view is usable, ``weights``
+            is not one finite number >= 0 per camera with a positive sum over the usable views, or
+            prepared masks were prepared for other cameras or settings.
+        """
+        w = _view_weights(weights, len(self.cameras))
+        if isinstance(masks, PreparedMasks):
+            pre = masks
+            self._check_prepared(pre)
+        else:
+            pre = self.prepare_masks(masks)
+        skipped, used = list(pre.skipped), list(pre.used)
         if not used:
             self._frame = None
             self.skipped_views, self._used, self.n_views_used = skipped, [], 0
@@ -377,11 +429,10 @@ class SilhouetteEnergy:
         if not view_w.sum() > 0:
             raise EnergyError(f"weights: expected a positive sum over the usable views {used}, received "
                               f"{view_w.tolist()}")
-        F = {v: _foreground(masks[v]) for v in used}
-        frame: dict = {"F": F, "n_fg": {v: int(np.count_nonzero(F[v])) for v in used}, "view_w": view_w,
-                       "core": {v: core_weights(F[v], self.core_px) for v in used}}
+        frame: dict = {"F": pre.F, "n_fg": pre.n_fg, "view_w": view_w, "core": pre.core}
         if self.method == "fast":
-            frame.update(self._fast_frame(used, F, frame["core"]))
+            frame.update(pre.static)
+            frame.update(self._fast_sample(used, pre))
             # the kernels' argument bundles of these masks (_k.Views, _k.Foreground)
             frame["views"] = _k.Views(*(frame[k] for k in _k.Views._fields))
             frame["fg"] = _k.Foreground(*(frame[k] for k in _k.Foreground._fields))
@@ -389,25 +440,28 @@ class SilhouetteEnergy:
         self._threads = numba.get_num_threads()      # per set_masks: the call costs ~20 µs
         self.skipped_views, self._used, self.n_views_used = skipped, used, len(used)
 
-    def _fast_frame(self, used: list[int], F: dict, core: dict) -> dict:
+    def _check_prepared(self, pre: "PreparedMasks") -> None:
+        mine = (self.method, self.downsample, self.core_px)
+        theirs = (pre.method, pre.downsample, pre.core_px)
+        if theirs != mine:
+            raise EnergyError(f"masks: prepared for method, downsample, core_px = {theirs}, this energy has {mine}")
+        if len(pre.cameras) != len(self.cameras) or not all(
+                a is b or a == b for a, b in zip(pre.cameras, self.cameras)):
+            raise EnergyError("masks: prepared for other cameras ("
+                              + ", ".join(c.name for c in pre.cameras) + ") than this energy's ("
+                              + ", ".join(c.name for c in self.cameras) + ")")
+
+    def _fast_static(self, used: list[int], F: dict) -> dict:
+        """The fast kernel's inputs of these masks that no random draw changes: camera tables, coverage
+        images, and per view the foreground pixels ``(v, u)`` in raster order and their normalized area."""
         V = len(used)
-        M = self.n_mask_points
-        S = _N_STRIPS
         small = [self._small[v] for v in used]
         Hmax = max(c.height for c in small)
         Wmax = max(c.width for c in small)
         # full resolution: the mask itself as uint8 0/1 (4x less memory to read than float32)
         cov = np.zeros((V, Hmax, Wmax), np.uint8 if self.downsample == 1 else np.float32)
-        # foreground sample: per view S strips of Ms points (whole 8-lane vectors; the padding lies
-        # far outside the image), each strip sorted by y and binned
-        Ms = max(8, (-(-M // S) + 7) // 8 * 8)
-        fg_x = np.full((V * S, Ms), 1e6, np.float32)
-        fg_y = np.full((V * S, Ms), 1e6, np.float32)
-        fg_n = np.zeros(V, np.int64)
         fg_area = np.zeros(V)
-        fg_tab = np.zeros((V * S, _N_BINS + 1), np.int64)
-        fg_bins = np.zeros((V * S, 2))
-        fg_xr = np.tile([np.inf, -np.inf], (V * S, 1))
+        pixels = []
         for k, v in enumerate(used):
             cam, sc = self.cameras[v], small[k]
             if self.downsample == 1:
@@ -416,12 +470,41 @@ class SilhouetteEnergy:
                 cov[k, :sc.height, :sc.width] = cv2.resize(F[v].astype(np.float32), (sc.width, sc.height),
                                                            interpolation=cv2.INTER_AREA)
             vv, uu = np.divmod(np.flatnonzero(F[v]), F[v].shape[1])   # np.nonzero(F[v]) (raster order), 10x faster
-            n = vv.size
             fg_area[k] = _normalized_area(cam, uu, vv)
+            pixels.append((vv, uu))
+        return {"cam_R": np.ascontiguousarray([self.cameras[v].R for v in used]),
+                "cam_t": np.ascontiguousarray([self.cameras[v].t for v in used]),
+                "cam_K": np.ascontiguousarray([[c.fx, c.fy, c.cx, c.cy, 1.0] for c in small]),
+                "cam_D": np.ascontiguousarray([np.pad(c.dist, (0, 8 - c.dist.size)) for c in small]),
+                "cam_hasd": np.array([c.has_distortion for c in small]),
+                # 8 zeros after the pixels: the kernel reads the last one for the points it does not count
+                "cov": np.concatenate([cov.reshape(V, Hmax * Wmax), np.zeros((V, 8), cov.dtype)], axis=1),
+                "cov_wh": np.array([[c.width, c.height, Wmax] for c in small], np.int64),
+                "fg_area": fg_area, "pixels": tuple(pixels)}
+
+    def _fast_sample(self, used: list[int], pre: "PreparedMasks") -> dict:
+        """The fast kernel's foreground sample of these masks (drawn from :attr:`rng`): per view ``S`` strips
+        of points sorted by y and binned."""
+        V = len(used)
+        M = self.n_mask_points
+        S = _N_STRIPS
+        # foreground sample: per view S strips of Ms points (whole 8-lane vectors; the padding lies
+        # far outside the image), each strip sorted by y and binned
+        Ms = max(8, (-(-M // S) + 7) // 8 * 8)
+        fg_x = np.full((V * S, Ms), 1e6, np.float32)
+        fg_y = np.full((V * S, Ms), 1e6, np.float32)
+        fg_n = np.zeros(V, np.int64)
+        fg_tab = np.zeros((V * S, _N_BINS + 1), np.int64)
+        fg_bins = np.zeros((V * S, 2))
+        fg_xr = np.tile([np.inf, -np.inf], (V * S, 1))
+        for k, v in enumerate(used):
             if M == 0:
                 continue
-            if core[v] is not None:                         # systematic sample in proportion to the weights
-                cum = np.cumsum(core[v][vv, uu])
+            cam = self.cameras[v]
+            vv, uu = pre.static["pixels"][k]
+            n = vv.size
+            if pre.core[v] is not None:                     # systematic sample in proportion to the weights
+                cum = np.cumsum(pre.core[v][vv, uu])
                 pos = (self.rng.random() + np.arange(M)) * (cum[-1] / M)
                 idx = np.minimum(np.searchsorted(cum, pos, side="right"), n - 1)
                 vv, uu = vv[idx], uu[idx]
@@ -446,16 +529,8 @@ class SilhouetteEnergy:
                 fg_bins[r] = ys[0], 1.0 / dy
                 fg_tab[r] = np.searchsorted(ys, ys[0] + dy * np.arange(_N_BINS + 1), side="left")
                 fg_tab[r, -1] = ys.size
-        return {"cam_R": np.ascontiguousarray([self.cameras[v].R for v in used]),
-                "cam_t": np.ascontiguousarray([self.cameras[v].t for v in used]),
-                "cam_K": np.ascontiguousarray([[c.fx, c.fy, c.cx, c.cy, 1.0] for c in small]),
-                "cam_D": np.ascontiguousarray([np.pad(c.dist, (0, 8 - c.dist.size)) for c in small]),
-                "cam_hasd": np.array([c.has_distortion for c in small]),
-                # 8 zeros after the pixels: the kernel reads the last one for the points it does not count
-                "cov": np.concatenate([cov.reshape(V, Hmax * Wmax), np.zeros((V, 8), cov.dtype)], axis=1),
-                "cov_wh": np.array([[c.width, c.height, Wmax] for c in small], np.int64),
-                "fg_x": fg_x.ravel(), "fg_y": fg_y.ravel(), "fg_n": fg_n, "fg_tab": fg_tab, "fg_bins": fg_bins,
-                "fg_xr": fg_xr, "fg_area": fg_area}
+        return {"fg_x": fg_x.ravel(), "fg_y": fg_y.ravel(), "fg_n": fg_n, "fg_tab": fg_tab, "fg_bins": fg_bins,
+                "fg_xr": fg_xr}
 
     # ------------------------------------------------------------------ evaluation
     def __call__(self, X: Any) -> np.ndarray:

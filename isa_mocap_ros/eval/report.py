@@ -73,7 +73,8 @@ def score(model, seq, poses_by_stamp: dict) -> dict | None:
             return None
         by = {f.stamp_ns: f.truth_markers for f in seq.frames}
         P = np.array([poses_by_stamp[s] for s in stamps])
-        sc = score_markers(model, P, seq.truth_marker_names, np.array([by[s] for s in stamps]))
+        sc = score_markers(model, P, seq.truth_marker_names, np.array([by[s] for s in stamps]),
+                           joint_map=rig_joint_map(seq))
         out = {k: sc[k] for k in ("frames", "mpjpe_mm", "max_frame_error_mm", "median_frame_error_mm",
                                   "knee_rmse_deg", "markers")}
         out["frame_errors_mm"] = [round(float(e), 2) for e in sc["frame_errors_mm"]]
@@ -81,7 +82,8 @@ def score(model, seq, poses_by_stamp: dict) -> dict | None:
         # the same with each joint's mean offset removed (a reference whose points are not joint centres)
         for k in ("offset_removed_mpjpe_mm", "offset_removed_max_frame_error_mm", "offset_removed_per_marker_mm",
                   "per_marker_offset_mm", "backwards_share", "frames_facing_backwards",
-                  "offset_removed_knee_rmse_deg"):
+                  "offset_removed_knee_rmse_deg", "joint_map", "mapped_mpjpe_mm", "mapped_median_frame_error_mm",
+                  "mapped_max_frame_error_mm", "mapped_per_marker_mm", "mapped_knee_rmse_deg"):
             if k in sc:
                 out[k] = sc[k]
         out.update(scored_by="markers", stamps=stamps, worst_frame_stamp_ns=int(stamps[sc["worst_frame"]]),
@@ -106,6 +108,17 @@ def score(model, seq, poses_by_stamp: dict) -> dict | None:
     return out
 
 
+def rig_joint_map(seq):
+    """The shipped joint map of the sequence's reference rig (the mesh bodies' MakeHuman ``cmu_mb`` rig), else None
+    (a rig without a fitted map is scored raw and offset-removed only)."""
+    from .joint_map import mesh_rig_map
+
+    body = seq.truth_info.get("body") if isinstance(seq.truth_info, dict) else None
+    if seq.body_kind == "mesh" and isinstance(body, dict) and "cmu_mb" in str(body.get("assets", "")):
+        return mesh_rig_map()
+    return None
+
+
 def marker_score_lines(acc: dict) -> list[str]:
     """The per-joint table of a marker score (:func:`score` with ``scored_by == "markers"``) as text
     lines: per joint the mean error raw, with the joint's mean offset removed, and the offset."""
@@ -113,10 +126,13 @@ def marker_score_lines(acc: dict) -> list[str]:
     if not pm or not pr:
         return []
     off = {n: float(np.linalg.norm(v)) for n, v in off.items()}
+    mm = acc.get("mapped_per_marker_mm") or {}
     w = max(len(n) for n in pm)
-    lines = [f"  {'joint':<{w}}  {'raw (mm)':>9}  {'offset removed (mm)':>19}  {'mean offset (mm)':>16}"]
+    lines = [f"  {'joint':<{w}}  {'raw (mm)':>9}" + (f"  {'mapped (mm)':>11}" if mm else "")
+             + f"  {'offset removed (mm)':>19}  {'mean offset (mm)':>16}"]
     for n in pm:
-        lines.append(f"  {n:<{w}}  {pm[n]:9.1f}  {pr[n]:19.1f}  {off[n]:16.1f}")
+        lines.append(f"  {n:<{w}}  {pm[n]:9.1f}" + (f"  {mm.get(n, float('nan')):11.1f}" if mm else "")
+                     + f"  {pr[n]:19.1f}  {off[n]:16.1f}")
     return lines
 
 

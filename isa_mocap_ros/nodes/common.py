@@ -237,21 +237,23 @@ def make_executor(kind: str):
     return SingleThreadedExecutor()
 
 
-def spin_until_shutdown(executor, context=None) -> None:
+def spin_until_shutdown(executor, context=None, *, until: Callable[[], bool] | None = None,
+                        step_s: float = 0.5) -> None:
     """``executor.spin()``, for either kind: the EventsExecutor's own ``spin()`` busy-waits on the
     rclpy wheels of Jazzy (a full core while idle) and misses the shutdown, so it is spun with bounded
-    ``spin_once`` calls until the context is shut down (a shutdown wakes it at once).
+    ``spin_once`` calls (``step_s``) until the context is shut down (a shutdown wakes it at once), or until
+    ``until()`` holds (the player: its bag is played).
 
     An error raised by a callback once the context is shut down ends the spin as the shutdown does: at
     Ctrl-C rclpy's signal handler shuts the context down on a thread of its own, so a callback running at
     that moment can fail to publish ("publisher's context is invalid", seen as exit code 1 of a node stopped
     by SIGINT in 1 of 25 tries: a diagnostics timer). Errors while the context is up propagate."""
     try:
-        if isinstance(executor, (SingleThreadedExecutor, MultiThreadedExecutor)):
+        if until is None and isinstance(executor, (SingleThreadedExecutor, MultiThreadedExecutor)):
             executor.spin()
             return
-        while rclpy.ok(context=context):
-            executor.spin_once(timeout_sec=0.5)
+        while rclpy.ok(context=context) and not (until is not None and until()):
+            executor.spin_once(timeout_sec=step_s)
     except Exception:
         if rclpy.ok(context=context):
             raise

@@ -124,9 +124,9 @@ class EstimatorNode(EstimatorIntake, Node):
             "itself; once initialized it tracks them with degrade_min_evals evaluations and no contour stage until "
             "none waits, instead of dropping them (0 = keep only the heading check's sets)", lo=0, hi=1000)
         self.startup_catch_up_ms = declare(
-            self, "startup_catch_up_ms", 600.0, "startup_catch_up: a set that waited longer than this ends the "
-            "catch-up (the sets still waiting are dropped: the tracker does not gain on the stream)", lo=0.0,
-            hi=60_000.0)
+            self, "startup_catch_up_ms", 1000.0, "startup_catch_up: a caught-up set that waited longer than this, "
+            "or no shorter than the one before (the tracker does not gain on the stream), ends the catch-up (the "
+            "sets still waiting are dropped)", lo=0.0, hi=60_000.0)
         degrade = declare(self, "degrade", True, "real time: while the tracker does not keep up with the frame sets, "
                           "lower its budget (contour stage off, then fewer evaluations) before dropping sets, and "
                           "return to the full budget when it catches up (isa_mocap_ros.tracking.load; lockstep: never)")

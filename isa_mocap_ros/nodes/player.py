@@ -25,7 +25,7 @@ from isa_mocap_ros.bag import BagError, BagMessage, BagReader
 from isa_mocap_ros.bag.playback import (PlaybackOptions, first_field_is_header, frames,
                                         parse_remaps, select_topics)
 from isa_mocap_ros.nodes import qos
-from isa_mocap_ros.nodes.common import declare, declare_executor, make_executor
+from isa_mocap_ros.nodes.common import declare, declare_executor, make_executor, spin_until_shutdown
 
 
 class BagPlayer(Node):
@@ -258,8 +258,7 @@ def play(args: list[str] | None = None, *, parameter_overrides=None) -> dict | N
         node = BagPlayer(parameter_overrides=parameter_overrides or [])
         executor = make_executor(declare_executor(node))
         executor.add_node(node)
-        while not node.done.is_set() and rclpy.ok():
-            executor.spin_once(timeout_sec=0.05)
+        spin_until_shutdown(executor, node.context, until=node.done.is_set, step_s=0.05)
         return node.summary
     except (KeyboardInterrupt, ExternalShutdownException):
         return None

@@ -260,25 +260,16 @@ class ContourFit:
     def _pairs(self, points: list, R: np.ndarray, P: np.ndarray):
         """:meth:`correspondences` of the pose with joint rotations ``R`` and positions ``P``, the matching
         compiled (:func:`.contour_kernel.match`: the same nearest contour pixel within ``max_px``)."""
-        F, L, N, M, Dst = [], [], [], [], []
+        n = sum(len(fr) for _, fr, _ in points)
+        F, L, N, M, Dst = np.empty(n, np.int64), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
+        k = 0
         for v, fr, loc in points:
             img = self._images[v]
-            row = np.empty(len(fr), np.int64)
-            dist = np.empty(len(fr))
-            contour_kernel.match(fr, loc, R, P, *self._proj[v], self._index[v], self.max_px, row, dist)
-            ok = row >= 0
-            if not ok.any():
+            if img is None:             # no image contour in this view (this frame)
                 continue
-            F.append(fr[ok])
-            L.append(loc[ok])
-            N.append(img[2][row[ok]])
-            M.append(img[3][row[ok]])
-            Dst.append(dist[ok])
-        if not F:
-            z = np.zeros((0, 3))
-            return np.zeros(0, dtype=np.int64), z, z, z, np.zeros(0)
-        return (np.concatenate(F), np.concatenate(L), np.concatenate(N), np.concatenate(M),
-                np.concatenate(Dst))
+            k = contour_kernel.match(fr, loc, R, P, *self._proj[v], self._index[v], self.max_px, img[2], img[3],
+                                     F, L, N, M, Dst, k)
+        return F[:k], L[:k], N[:k], M[:k], Dst[:k]
 
     def correspondences(self, x: np.ndarray, points: list | None = None, fk=None):
         """Pairs of pose ``x`` under the current masks: ``(frames (K,), local (K, 3), n (K, 3), m (K, 3),

@@ -56,20 +56,21 @@ def mark_pixels(index, pix, value_is_row):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def match(frames, local, R, P, cam_R, cam_t, K4, D8, hasd, index, max_px, out_row,
-          out_dist):  # pragma: no cover - compiled
+def match(frames, local, R, P, cam_R, cam_t, K4, D8, hasd, index, max_px, lines_n, lines_m, out_f, out_l, out_n,
+          out_m, out_d, k0):  # pragma: no cover - compiled
     """For each model point (joint frame ``frames[i]``, position ``local[i]`` in it) of a pose with joint
-    rotations ``R`` and positions ``P``: the row of the closest image contour pixel (``index``: that row at
-    each contour pixel, -1 elsewhere) within ``max_px`` of its projection (``cam_R``, ``cam_t``;
+    rotations ``R`` and positions ``P``: the closest image contour pixel (``index``: its row at each contour
+    pixel, -1 elsewhere) within ``max_px`` of the point's projection (``cam_R``, ``cam_t``;
     ``K4 = (fx, fy, cx, cy)``; ``D8``: the OpenCV distortion (k1, k2, p1, p2, k3, k4, k5, k6), used when
-    ``hasd``), written to ``out_row[i]`` (-1: none) with the distance ``out_dist[i]``."""
+    ``hasd``). Each pair found is appended from row ``k0`` on: the point's ``out_f``, ``out_l``, the
+    pixel's Plücker line ``out_n``, ``out_m`` (rows of ``lines_n``, ``lines_m``) and their distance
+    ``out_d``; returns the row after the last one written."""
     H, W = index.shape
     r = int(np.ceil(max_px))
     lim = max_px * max_px
     k1, k2, p1, p2, k3, k4, k5, k6 = D8[0], D8[1], D8[2], D8[3], D8[4], D8[5], D8[6], D8[7]
+    k = k0
     for i in range(frames.shape[0]):
-        out_row[i] = -1
-        out_dist[i] = np.inf
         f = frames[i]
         X = np.empty(3)
         for a in range(3):
@@ -104,5 +105,11 @@ def match(frames, local, R, P, cam_R, cam_t, K4, D8, hasd, index, max_px, out_ro
                 if d2 < best:
                     best, row = d2, j
         if row >= 0 and best <= lim:
-            out_row[i] = row
-            out_dist[i] = np.sqrt(best)
+            out_f[k] = f
+            for a in range(3):
+                out_l[k, a] = local[i, a]
+                out_n[k, a] = lines_n[row, a]
+                out_m[k, a] = lines_m[row, a]
+            out_d[k] = np.sqrt(best)
+            k += 1
+    return k

@@ -202,8 +202,9 @@ class StartupCatchUp:
     up to ``sets`` of them waiting in order (:meth:`hold`, for :class:`~.sync.LatestSlot.hold`); once the
     tracker is initialized (and its heading check, which needs consecutive sets, is done) it tracks them
     with ``evals`` evaluations and no contour stage (:meth:`budget`), a fraction of a frame period each, so it
-    gains on the stream, until none waits or one waited longer than ``limit_ms`` (:meth:`after`: then the
-    rest is dropped, as a tracker that does not gain would only fall further behind). A pure policy: the
+    gains on the stream, until none waits (:meth:`after`). It gives up, and the rest is dropped, when a
+    caught-up set waited longer than ``limit_ms`` or no shorter than the caught-up set before it: a tracker
+    that does not gain on the stream (a loaded machine) would only fall further behind. A pure policy: the
     caller passes the waiting count and the times.
 
     Examples
@@ -226,17 +227,21 @@ class StartupCatchUp:
         self.sets, self.evals, self.limit_ms = int(sets), int(evals), float(limit_ms)
         self.active = False             # catching up (from an initialization until caught up or given up)
         self.caught_up = 0              # sets tracked at the catch-up budget (all initializations)
+        self._cheap = False             # the last budget given was the catch-up budget
+        self._last_wait = None          # the wait of the last caught-up set, ms
 
     def hold(self, heading_sets: int) -> int:
         """The tracker is about to initialize: how many waiting sets to keep in order (at least the
         heading check's ``heading_sets``)."""
         self.active = self.sets > 0
+        self._cheap, self._last_wait = False, None
         return max(int(heading_sets), self.sets)
 
     def budget(self, evals: int, *, initialized: bool, checking_heading: bool) -> tuple[int, bool]:
         """``(evaluations, contour stage allowed)`` of the next set, whose budget would otherwise be
         ``evals``; a set tracked at the catch-up budget is counted."""
-        if not (self.active and initialized and not checking_heading):
+        self._cheap = self.active and initialized and not checking_heading
+        if not self._cheap:
             return int(evals), True
         self.caught_up += 1
         return min(int(evals), self.evals), False
@@ -244,6 +249,13 @@ class StartupCatchUp:
     def after(self, *, waiting: int, waited_ms: float) -> bool:
         """After a tracked set that ``waited_ms`` before its step, with ``waiting`` sets left: whether to go
         on catching up (False: keep only the newest set from now on)."""
-        if self.active and (waiting <= 0 or waited_ms > self.limit_ms):
+        if not self.active:
+            return False
+        if self._cheap:
+            not_gaining = self._last_wait is not None and waited_ms >= self._last_wait
+            if waited_ms > self.limit_ms or not_gaining:
+                self.active = False
+            self._last_wait = waited_ms
+        if waiting <= 0:
             self.active = False
         return self.active

@@ -206,7 +206,8 @@ def bone_errors(estimated: Mapping[str, float], truth: Mapping[str, float]) -> d
 class _ShapeEnergy:
     """Mean silhouette energy over the calibration frames of a batch of shape vectors ``Z (n, P+3K)``:
     log factors (``P``) and changes of the pose coordinates ``coords`` (root height, the coupled joint
-    angles) of each frame, on the poses ``X (K, D)`` otherwise fixed."""
+    angles) of each frame, on the poses ``X (K, D)`` otherwise fixed. ``masks`` are the frames' masks as
+    :func:`_prepared_masks` prepared them once (what does not depend on the candidate shape)."""
 
     def __init__(self, dof, base, cameras, masks, X, cfg: ShapeCalibrationConfig, rng_seed, coords=(2,)):
         self.dof, self.base, self.cameras, self.masks = dof, base, cameras, masks
@@ -232,19 +233,13 @@ class _ShapeEnergy:
 
     def frame_energy(self, model, k: int, x) -> float:
         """Silhouette energy of pose ``x`` of model ``model`` on calibration frame ``k``."""
-        from isa_mocap_ros.energy import SilhouetteEnergy
-
-        f = SilhouetteEnergy(model, self.cameras, self.masks[k], n_model_points=self.cfg.n_model_points,
-                             n_mask_points=self.cfg.n_mask_points, rng=np.random.default_rng(self.seed))
+        f = _energy(model, self.cameras, self.cfg, self.seed)
+        f.set_masks(self.masks[k])
         return float(f(np.asarray(x, dtype=float)[None, :])[0])
 
     def one(self, z) -> float:
-        from isa_mocap_ros.energy import SilhouetteEnergy
-
-        model = self.model(z)
-        # the same generator state for every shape: common random numbers between the candidates
-        f = SilhouetteEnergy(model, self.cameras, None, n_model_points=self.cfg.n_model_points,
-                             n_mask_points=self.cfg.n_mask_points, rng=np.random.default_rng(self.seed))
+        # the same generator seed for every shape
+        f = _energy(self.model(z), self.cameras, self.cfg, self.seed)
         X = self.poses(z)
         e = 0.0
         for k, masks in enumerate(self.masks):
@@ -257,6 +252,23 @@ class _ShapeEnergy:
         Z = np.atleast_2d(np.asarray(Z, dtype=float))
         self.n_evals += len(Z)
         return np.array([self.one(z) if np.all(np.isfinite(z)) else np.inf for z in Z])
+
+
+def _energy(model, cameras, cfg: ShapeCalibrationConfig, seed):
+    """The shape fit's silhouette energy of ``model`` (no masks set)."""
+    from isa_mocap_ros.energy import SilhouetteEnergy
+
+    return SilhouetteEnergy(model, cameras, None, n_model_points=cfg.n_model_points,
+                            n_mask_points=cfg.n_mask_points, rng=np.random.default_rng(seed))
+
+
+def _prepared_masks(dof, cameras, masks, cfg: ShapeCalibrationConfig) -> list:
+    """Each calibration frame's masks prepared once for the shape fit's energies (the foreground pixels and,
+    with lens distortion, their undistorted area: the same for every candidate shape)."""
+    from isa_mocap_ros.body import make_model
+
+    f = _energy(make_model(dof), cameras, cfg, 0)
+    return [f.prepare_masks(m) for m in masks]
 
 
 def _tracker(model, cameras, tracker_config):
@@ -323,7 +335,7 @@ def calibrate_shape(dof: int, cameras: Sequence, frames: Sequence[tuple[int, Seq
     pick = np.unique(np.round(np.linspace(0, len(keys) - 1, min(config.n_frames, len(keys)))).astype(int))
     cal_keys = [keys[i] for i in pick]
     masks_of = {int(k): m for k, m in frames}
-    cal_masks = [masks_of[k] for k in cal_keys]
+    cal_masks = _prepared_masks(dof, cameras, [masks_of[k] for k in cal_keys], config)
     X = np.array([poses[k] for k in cal_keys])
     P = len(SHAPE_PARAMS)
     m0 = make_model(dof)

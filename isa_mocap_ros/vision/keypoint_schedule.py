@@ -30,7 +30,7 @@ __all__ = ["KeypointSchedule", "detect_in_mask", "DENSE_FRAMES", "EVERY_K"]
 DENSE_FRAMES = 4
 #: after the dense start, every EVERY_K-th frame with a person (the keypoint node's and ``track``'s default;
 #: the rate's cost and accuracy: docs/keypoints.md)
-EVERY_K = 6
+EVERY_K = 8
 
 
 class KeypointSchedule:
