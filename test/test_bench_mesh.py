@@ -10,11 +10,21 @@ from isa_mocap_ros.cli.main import main
 
 def test_quick_runs_the_automatic_path_and_scores_it(tmp_path, capsys):
     js = tmp_path / "mesh.json"
-    assert main(["bench", "mesh", "--quick", "--jobs", "1", "--out", str(tmp_path / "w"), "--json", str(js)]) == 0
+    assert main(["bench", "mesh", "--quick", "--seeds", "0,1", "--jobs", "1", "--out", str(tmp_path / "w"),
+                 "--json", str(js)]) == 0
     res = json.loads(js.read_text())
     d = res["design"]
     assert d["shape"] == "auto" and d["init"] == "auto" and d["body"] == "mesh"
-    (run,) = res["runs"]
+    # one calibration for the bag, both seeds tracked with its file; a bench run again finds it in the cache
+    (cal,) = res["calibrations"]
+    assert np.isfinite(cal["bone_error_mm"]) and np.isfinite(cal["bone_error_default_shape_mm"])
+    shape_file = tmp_path / "w" / "cache" / cal["shape_file"]
+    assert all(r["shape"] == str(shape_file) for r in res["runs"])
+    from isa_mocap_ros.bench import robustness as br
+    stamp = shape_file.stat().st_mtime_ns
+    assert br.calibrate_bag(shape_file.parent / cal["bag"], bm.make_design("quick", seeds=(0, 1)))["shape_file"] \
+        == cal["shape_file"] and shape_file.stat().st_mtime_ns == stamp
+    run = res["runs"][0]
     assert run["frames"] == 6 and run["init"] != "ground truth"
     for k in ("mpjpe_mm", "offset_removed_mpjpe_mm", "knee_rmse_deg", "max_frame_error_mm", "backwards_share",
               "mapped_mpjpe_mm", "mapped_knee_rmse_deg", "mapped_max_frame_error_mm"):
@@ -22,11 +32,12 @@ def test_quick_runs_the_automatic_path_and_scores_it(tmp_path, capsys):
     assert np.isfinite(run["offset_removed_knee_rmse_deg"])
     assert run["offset_removed_mpjpe_mm"] <= run["mpjpe_mm"]
     (c,) = res["conditions"]
-    assert c["per_subject"]["average_man"]["mpjpe_mm"] == pytest.approx(run["mpjpe_mm"])
-    assert c["per_subject"]["average_man"]["mapped_mpjpe_mm"] == pytest.approx(run["mapped_mpjpe_mm"])
+    assert c["per_subject"]["average_man"]["mpjpe_mm"] == pytest.approx(np.mean([r["mpjpe_mm"] for r in res["runs"]]))
+    assert c["per_subject"]["average_man"]["mapped_mpjpe_mm"] == pytest.approx(
+        np.mean([r["mapped_mpjpe_mm"] for r in res["runs"]]))
     assert [t["met"] for t in res["targets"]][-2:] == [None, None]      # noise and occluders not run
     out = capsys.readouterr().out
-    assert "| target (issue 33) |" in out and "Smoke run" in out
+    assert "| target (issue 33) |" in out and "Smoke run" in out and "calibrated once per bag" in out
 
 
 def test_design_and_targets():

@@ -9,7 +9,10 @@ generated walk, bag seed 0) in the default 4-view rig; the bags are rendered onc
 pixel noise, 35 occluding rectangles; :mod:`.robustness`'s renderer and cache) and tracked by ``isa-mocap
 track``'s code with **everything automatic**: the shape calibrated from the first frames' silhouettes
 (``--shape auto``), the automatic initialization, h-isa at 1500 evaluations per frame, all other settings the
-tracker's defaults; once per tracker seed (default 0-7; the calibration uses the same seed). Every frame is
+tracker's defaults; once per tracker seed (default 0-7). The shape is calibrated once per bag (``isa-mocap
+calibrate``'s code with the first seed, kept beside the bag in the cache under a key of the calibration's
+options and code, :func:`.robustness.calibrate_bag`) and every seed tracks with that file, as a user who
+calibrates once and tracks with ``--shape FILE``. Every frame is
 scored against the mesh skeleton's joint centres by name (no ground-truth model): mean joint error (Eq. 20),
 worst frame, knee angle in 3-D, the share of frames tracked facing backwards (hip axis more than 90° off);
 each raw (the model's joint centres), **mapped** (the headline: the estimate's virtual markers of the shipped
@@ -121,8 +124,8 @@ def summarize(runs: list[dict]) -> dict:
 
 def collect(design: br.RobustDesign, *, cache: Path, out: Path, jobs: int = 2, progress: bool = True) -> dict:
     res = br.collect(design, cache=cache, out=out, progress=progress, jobs=jobs)
-    return {"design": res["design"], "runs": res["runs"], **summarize(res["runs"]), "seconds": res["seconds"],
-            "jobs": res["jobs"]}
+    return {"design": res["design"], "runs": res["runs"], "calibrations": res.get("calibrations", []),
+            **summarize(res["runs"]), "seconds": res["seconds"], "jobs": res["jobs"]}
 
 
 def _fmt(v, f="{:.1f}") -> str:
@@ -172,6 +175,13 @@ def render_markdown(res: dict) -> str:
     for t in res["targets"]:
         m = "not run" if t["measured"] is None else ", ".join(f"{s} {_fmt(v, '{:.2f}')}" for s, v in t["measured"].items())
         L.append(f"| {t['target']} | {m} | {'not tested' if t['met'] is None else ('met' if t['met'] else 'not met')} |")
+    cal = res.get("calibrations") or []
+    if cal:
+        L += ["", "Body shape calibrated once per bag (`isa-mocap calibrate`, calibration seed "
+              f"{seeds[0]}; every tracker seed tracks with it); mean bone-length error against the mesh "
+              "skeleton's joint centres:", "", "| bag | calibrated | default shape |", "|---|---|---|"]
+        L += [f"| {c['bag']} | {_fmt(c['bone_error_mm'])} mm | {_fmt(c['bone_error_default_shape_mm'])} mm |"
+              for c in cal]
     L += ["", f"Wall time {res['seconds'] / 60:.1f} min with {res['jobs']} worker(s) (no speed claims)."]
     return "\n".join(L)
 

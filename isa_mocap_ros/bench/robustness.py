@@ -177,9 +177,51 @@ def prepare_bag(seq: SequenceSpec, cond: str, cache: Path) -> Path:
     return path
 
 
-def track_condition(bag: Path, out: Path, design: RobustDesign, seed: int | None = None) -> dict:
-    """Track one bag with ``isa-mocap track``'s code (tracker seed ``seed``, default ``design.seed``);
-    score the frames (not the truth-initialized one)."""
+def calibration_path(bag: Path, design: RobustDesign) -> Path:
+    """Where :func:`calibrate_bag` keeps ``bag``'s calibrated body shape: beside the bag in the cache, named by
+    what the calibration depends on (the calibration options and seed, the model, the calibration module's
+    source) and not by the tracker seed, so every seed and later runs of the bench reuse it."""
+    import hashlib
+
+    from isa_mocap_ros.tracking import shape_calibration
+
+    key = repr((sorted(dict(design.calib).items()), design.seeds[0] if design.seeds else design.seed, 39))
+    src = Path(shape_calibration.__file__).read_bytes()
+    h = hashlib.sha256(key.encode() + src).hexdigest()[:12]
+    return bag.parent / f"{bag.name}.shape_{h}.yaml"
+
+
+def calibrate_bag(bag: Path, design: RobustDesign) -> dict:
+    """The body shape of ``bag`` calibrated once (``isa-mocap calibrate``'s code, calibration seed
+    ``design.seeds[0]``) into :func:`calibration_path`, unless it is there; returns its report (bone-length
+    errors against the bag's joint centres when it has them)."""
+    from isa_mocap_ros.cli.calibrate import run as calibrate
+
+    path = calibration_path(bag, design)
+    report = path.with_suffix(".json")
+    if not (path.is_file() and report.is_file()):
+        t0 = time.perf_counter()
+        tmp = path.with_suffix(".tmp.yaml")
+        ns = argparse.Namespace(bag=str(bag), out=str(tmp), model=39, seed=design.seeds[0] if design.seeds else design.seed,
+                                start=0, use_masks=False, learn_frames=None, report=str(report), overwrite=True,
+                                **{"calib_frames": None, "calib_rounds": None, "calib_evals": None, **dict(design.calib)})
+        if calibrate(ns) != 0:
+            raise ValueError(f"{bag}: the shape calibration failed (isa-mocap calibrate's message above)")
+        r = json.loads(report.read_text())
+        r["seconds"] = round(time.perf_counter() - t0, 1)
+        report.write_text(json.dumps(r, indent=2) + "\n")
+        tmp.rename(path)
+    r = json.loads(report.read_text())
+    return {"bag": bag.name, "shape_file": path.name, "seconds": r.get("seconds"),
+            "bone_error_mm": (r.get("bone_error") or {}).get("mean_mm"),
+            "bone_error_default_shape_mm": (r.get("bone_error_default_shape") or {}).get("mean_mm"),
+            "per_bone_mm": (r.get("bone_error") or {}).get("per_bone_mm"), "params": r.get("params")}
+
+
+def track_condition(bag: Path, out: Path, design: RobustDesign, seed: int | None = None, *,
+                    shape: str | None = None) -> dict:
+    """Track one bag with ``isa-mocap track``'s code (tracker seed ``seed``, default ``design.seed``;
+    ``shape`` a body-shape file in place of ``design.shape``); score the frames (not the truth-initialized one)."""
     from isa_mocap_ros.cli.track import track_bag
     from isa_mocap_ros.eval import knee_errors_deg
     from isa_mocap_ros.eval.report import accuracy
@@ -187,7 +229,7 @@ def track_condition(bag: Path, out: Path, design: RobustDesign, seed: int | None
     ns = argparse.Namespace(
         bag=str(bag), out=str(out), optimizer=design.optimizer, evals=design.evals, params=None, model=None,
         seed=design.seed if seed is None else int(seed), frames=None, start=0, use_masks=False, learn_frames=None,
-        shape=getattr(design, "shape", "truth"), init=design.init, predictor=None, prior=None, prior_eta=0.0,
+        shape=shape or getattr(design, "shape", "truth"), init=design.init, predictor=None, prior=None, prior_eta=0.0,
         energy="fast", overwrite=True, no_progress=True, gate_margin_px=design.gate_margin_px,
         **dict(getattr(design, "calib", ())), **dict(getattr(design, "tracker", ())))
     got: dict = {}
@@ -236,7 +278,7 @@ def track_condition(bag: Path, out: Path, design: RobustDesign, seed: int | None
                  "per_marker_offset_mm": acc["per_marker_offset_mm"],
                  **{k: acc[k] for k in ("mapped_mpjpe_mm", "mapped_max_frame_error_mm", "mapped_knee_rmse_deg")
                     if k in acc}}
-    return {**extra, "seed": int(s["seed"]), "gate_margin_px": s.get("gate_margin_px"),
+    return {**extra, "seed": int(s["seed"]), "gate_margin_px": s.get("gate_margin_px"), "shape": s.get("shape"),
             "frames": acc["frames"], "mpjpe_mm": acc["mpjpe_mm"], "max_frame_error_mm": acc["max_frame_error_mm"],
             "knee_rmse_deg": acc["knee_rmse_deg"], "fps": s["fps"], "frames_fell_back": s["frames_fell_back"],
             "seconds": round(seconds, 2), "init": s.get("init", "ground truth" if design.init == "truth" else ""),
@@ -246,9 +288,11 @@ def track_condition(bag: Path, out: Path, design: RobustDesign, seed: int | None
 
 
 def _track_job(job: tuple) -> dict:
-    """One run (a worker process's job): ``(bag, out, design, seed, sequence, condition, synth_seconds)``."""
+    """One run (a worker process's job): ``(bag, out, design, seed, sequence, condition, synth_seconds)``;
+    with ``design.shape == "auto"`` tracked with the bag's shape calibrated once (:func:`calibrate_bag`)."""
     bag, out, design, seed, seq, cond, t_synth = job
-    r = track_condition(bag, out, design, seed)
+    shape = str(calibration_path(bag, design)) if getattr(design, "shape", "truth") == "auto" else None
+    r = track_condition(bag, out, design, seed, shape=shape)
     r.update(sequence=seq, condition=cond, synth_seconds=t_synth)
     return r
 
@@ -286,8 +330,11 @@ def collect(design: RobustDesign, *, cache: Path, out: Path, progress: bool = Tr
                   f"{r['knee_rmse_deg']:6.2f} deg, {r['mpjpe_mm']:6.1f} mm over {r['frames']} frames "
                   f"({r['fps']:.1f} frames/s)", file=sys.stderr, flush=True)
 
+    # the calibrations first (one per bag, whatever the seeds), then the runs
+    bags = list(dict.fromkeys(job[0] for job in todo)) if getattr(design, "shape", "truth") == "auto" else []
     jobs = max(1, min(int(jobs), len(todo)))
     if jobs == 1:
+        calibrations = [calibrate_bag(b, design) for b in bags]
         runs = []
         for job in todo:
             runs.append(_track_job(job))
@@ -299,13 +346,15 @@ def collect(design: RobustDesign, *, cache: Path, out: Path, progress: bool = Tr
         os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
         # spawn: numba's threading layer is not fork-safe once initialized
         with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn"), initializer=_worker_init) as ex:
+            calibrations = list(ex.map(calibrate_bag, bags, [design] * len(bags)))
             futs = {ex.submit(_track_job, job): k for k, job in enumerate(todo)}
             done: dict = {}
             for f in as_completed(futs):
                 done[futs[f]] = f.result()
                 report(done[futs[f]])
         runs = [done[k] for k in range(len(todo))]
-    return {"design": design.to_dict(), "runs": runs, "conditions": summarize_conditions(runs),
+    return {"design": design.to_dict(), "runs": runs, "calibrations": calibrations,
+            "conditions": summarize_conditions(runs),
             "targets": check_targets(runs), "seconds": round(time.perf_counter() - t0, 1), "jobs": jobs}
 
 
