@@ -203,6 +203,14 @@ def test_shape_round_trip_and_errors(tmp_path):
     save_shape(shape, path)
     loaded = load_shape(path)
     np.testing.assert_allclose(loaded["offsets"]["right_knee"], [0, 0, -0.5])  # mirrored from left
+    # every number comes back exactly (a calibrated shape handed on as a file is the same shape)
+    odd = default_shape()
+    odd["offsets"]["left_elbow"] = np.array([0.0, 1e-9 / 3, -0.2912345678912345])
+    odd["radii"]["left_thigh"] = np.array([0.0812345678912345, 0.055])
+    save_shape(odd, tmp_path / "odd.yaml")
+    back = load_shape(tmp_path / "odd.yaml")
+    assert back["offsets"]["left_elbow"].tolist() == odd["offsets"]["left_elbow"].tolist()
+    assert back["radii"]["left_thigh"].tolist() == odd["radii"]["left_thigh"].tolist()
     m = make_model(39, shape=path)
     assert m.name == "body39@tall"
     assert np.linalg.norm(m.offsets[m.joint_index("right_knee")]) == pytest.approx(0.5)

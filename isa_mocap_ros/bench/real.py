@@ -7,12 +7,12 @@
    ``DIR/demo_bag``;
 2. tracks every frame offline (``isa-mocap track``, h-isa 1500, seed 0, automatic initialization) per
    configuration (:data:`CONFIGS`: the default shape, the default shape with the keypoint term, the shape
-   calibrated from the first frames); scored against Pose2Sim's keypoints mapped to our joints: mean error
+   calibrated from the first frames, without and with the keypoint term); scored against Pose2Sim's keypoints mapped to our joints: mean error
    raw and with each joint's mean offset removed, the worst frame, the knee angle, frames facing backwards,
    per joint;
-3. with ``--lockstep CONFIG`` (default: the first configuration) the same through the node network
-   (``isa-mocap run --lockstep``) and how many frames differ from the offline run (the lockstep replay must
-   not depend on machine load).
+3. the same through the node network (``isa-mocap run --lockstep``; ``--lockstep CONFIG``, default the calibrated
+   shape when it is tracked, else the first configuration) and how many frames differ from the offline run of
+   that configuration (the lockstep replay must not depend on machine load).
 
 ``--quick``: the first 8 frames at 160 px, 300 evaluations. Without ``../shared`` nothing runs and the
 section says so. The recording is third-party data (BSD-3, perfanalytics): neither the bag nor overlays
@@ -39,6 +39,8 @@ CONFIGS = {
     "keypoints": ("default shape + keypoint term (weight 1, the default rate: every 8th frame)",
                   ["--shape", "default", "--keypoint-weight", "1"]),
     "auto": ("shape calibrated from the first 30 frames", ["--shape", "auto"]),
+    "auto_keypoints": ("calibrated shape + keypoint term (weight 1, every 8th frame)",
+                       ["--shape", "auto", "--keypoint-weight", "1"]),
 }
 _KEEP = ("frames", "frames_tracked", "frames_fell_back", "mpjpe_mm", "offset_removed_mpjpe_mm", "max_frame_error_mm",
          "offset_removed_max_frame_error_mm", "knee_rmse_deg", "offset_removed_knee_rmse_deg", "frames_facing_backwards",
@@ -98,7 +100,7 @@ def _lockstep(bag: Path, out: Path, extra: list[str]) -> dict:
     return r
 
 
-def collect(*, quick: bool, out: Path, configs=tuple(CONFIGS), lockstep: str | None = "first") -> dict:
+def collect(*, quick: bool, out: Path, configs=tuple(CONFIGS), lockstep: str | None = "default_choice") -> dict:
     """The section's measurements (module docstring)."""
     if not (demo_dir() / "calibration" / "Calib_scene_checkerboard.toml").is_file():
         return {"skipped": f"the Pose2Sim demo is not at {demo_dir()} (set ISA_MOCAP_SHARED)"}
@@ -116,7 +118,7 @@ def collect(*, quick: bool, out: Path, configs=tuple(CONFIGS), lockstep: str | N
         res["runs"][name] = {"label": label, "command": "isa-mocap track BAG " + " ".join(extra + common),
                              **_track(bag, out / f"track_{name}", extra + common)}
     if lockstep:
-        name = configs[0] if lockstep == "first" else lockstep
+        name = lockstep if lockstep != "default_choice" else ("auto" if "auto" in configs else configs[0])
         print(f"bench real: run --lockstep {name} ...", file=sys.stderr, flush=True)
         r = _lockstep(bag, out / f"run_{name}", CONFIGS[name][1] + common)
         if "frame_errors_mm" in r and name in res["runs"]:
@@ -169,9 +171,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quick", action="store_true", help="8 frames at 160 px, 300 evaluations (a smoke test)")
     p.add_argument("--configs", default=",".join(CONFIGS), metavar="A,B",
                    help=f"configurations to track (of {', '.join(CONFIGS)}; default all)")
-    p.add_argument("--lockstep", default="first", metavar="CONFIG",
-                   help="also run the network in lockstep with this configuration ('first' = the first of --configs, "
-                        "default; 'none' = no network run)")
+    p.add_argument("--lockstep", default=None, metavar="CONFIG",
+                   help="also run the network in lockstep with this configuration (default: auto, the calibrated shape, "
+                        "when it is among --configs, else the first; 'none' = no network run)")
     p.add_argument("--out", default=None, metavar="DIR", help="work directory: the bag, tracks (default: a temporary one)")
     p.add_argument("--json", default="docs/results/real.json", metavar="FILE", help="where to write the results")
 
@@ -179,8 +181,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     configs = tuple(c.strip() for c in args.configs.split(",") if c.strip())
     bad = [c for c in configs if c not in CONFIGS]
-    lockstep = None if args.lockstep == "none" else args.lockstep
-    if bad or not configs or (lockstep not in (None, "first") and lockstep not in CONFIGS):
+    lockstep = None if args.lockstep == "none" else (args.lockstep or "default_choice")
+    if bad or not configs or (lockstep not in (None, "default_choice") and lockstep not in CONFIGS):
         print(f"isa-mocap bench real: error: --configs / --lockstep: expected names of {', '.join(CONFIGS)}, received "
               f"{args.configs!r} / {args.lockstep!r}", file=sys.stderr)
         return 2

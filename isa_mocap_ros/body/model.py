@@ -160,11 +160,14 @@ def load_shape(path) -> dict:
 
 
 def save_shape(shape: Mapping, path) -> None:
-    """Write a body shape (as returned by :func:`load_shape` or ``model.shape``) to YAML."""
+    """Write a body shape (as returned by :func:`load_shape` or ``model.shape``) to YAML, every number exactly
+    (``load_shape`` gives the same floats back: a shape calibrated by ``isa-mocap run`` and handed to the
+    estimator as a file tracks as the same shape in ``isa-mocap track``; rounding to micrometres made the two
+    part from the first frame)."""
     shape = complete_shape(shape, source="shape")
     data = {"name": shape["name"],
-            "offsets": {k: [round(float(v), 6) for v in val] for k, val in shape["offsets"].items()},
-            "radii": {k: [round(float(v), 6) for v in val] for k, val in shape["radii"].items()}}
+            "offsets": {k: [float(v) for v in val] for k, val in shape["offsets"].items()},
+            "radii": {k: [float(v) for v in val] for k, val in shape["radii"].items()}}
     Path(path).write_text(yaml.safe_dump(data, sort_keys=False))
 
 
