@@ -58,7 +58,6 @@ TARGETS = (("clean", "mapped_mpjpe_mm", 30.0, "clean: mean joint error ≤ 30 mm
 #: per-run figures averaged over the seeds
 _MEANS = ("mpjpe_mm", "mapped_mpjpe_mm", "offset_removed_mpjpe_mm", "knee_rmse_deg", "mapped_knee_rmse_deg",
           "offset_removed_knee_rmse_deg")
-_QUICK_CALIB = (("calib_frames", 4), ("calib_rounds", 2), ("calib_evals", 120))
 
 
 def make_design(kind: str = "default", *, seeds=None, frames: int | None = None, subjects=None,
@@ -79,7 +78,7 @@ def make_design(kind: str = "default", *, seeds=None, frames: int | None = None,
                                   subject=s) for s in subjects)
         seeds = tuple(seeds or (0,))
         return br.RobustDesign("mesh quick", seqs, conditions, "h-isa", 300, seeds[0], "auto", seeds=seeds,
-                               shape="auto", calib=_QUICK_CALIB, tracker=tracker)
+                               shape="auto", calib=br.QUICK_CALIB, tracker=tracker)
     if kind != "default":
         raise ValueError(f"kind: expected 'quick' or 'default', received {kind!r}")
     n = int(frames or FRAMES)
