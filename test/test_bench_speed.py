@@ -2,6 +2,7 @@
 import json
 
 import numpy as np
+import pytest
 
 from isa_mocap_ros.bench import speed as bench_speed
 from isa_mocap_ros.cli.main import main
@@ -42,3 +43,24 @@ def test_quick_json(capsys):
 def test_bad_frames(capsys):
     assert main(["bench", "speed", "--quick", "--frames", "0"]) == 2
     assert "--frames" in capsys.readouterr().err
+
+
+def test_network_rows_change_estimator_parameters_in_a_copy_of_the_parameter_file(tmp_path):
+    """The network part's A/B rows (NETWORK_MODES' last field) run with config/pipeline.yaml's estimator
+    parameters changed in a copy: only that parameter, only the estimator's."""
+    import yaml
+
+    from isa_mocap_ros.bench.speed import NETWORK_MODES, _params_with
+    from isa_mocap_ros.resources import resource_dir
+
+    assert any(m[4] == {"startup_catch_up": 0} and not m[1] for m in NETWORK_MODES)
+    orig = yaml.safe_load((resource_dir("config") / "pipeline.yaml").read_text())
+    got = yaml.safe_load(_params_with({"startup_catch_up": 0, "degrade": False}, tmp_path / "p.yaml").read_text())
+    est, ref = got["/mocap/estimator"]["ros__parameters"], orig["/mocap/estimator"]["ros__parameters"]
+    assert est["startup_catch_up"] == 0 and est["degrade"] is False and ref["startup_catch_up"] > 0
+    assert {k: v for k, v in est.items() if k not in ("startup_catch_up", "degrade")} == \
+        {k: v for k, v in ref.items() if k not in ("startup_catch_up", "degrade")}
+    assert {k: v for k, v in got.items() if k != "/mocap/estimator"} == \
+        {k: v for k, v in orig.items() if k != "/mocap/estimator"}
+    with pytest.raises(ValueError, match="no_such_parameter"):
+        _params_with({"no_such_parameter": 1}, tmp_path / "q.yaml")

@@ -58,6 +58,14 @@ def collect(*, quick: bool, out: Path) -> dict:
     return res
 
 
+def _shown(text: str) -> str:
+    """``text`` with this checkout's and the shared data's absolute paths written as the README writes them."""
+    from isa_mocap_ros.resources import shared_data_dir
+
+    root = Path(__file__).resolve().parents[2]
+    return text.replace(str(shared_data_dir()), "../shared/data").replace(str(root) + "/", "")
+
+
 def _f(v: float, fmt: str = "{:.1f}") -> str:
     return fmt.format(v) if v is not None and np.isfinite(v) else "n/a"
 
@@ -68,7 +76,7 @@ def render_markdown(d: dict) -> str:
     c = d["cost"]
     L = ["`isa-mocap bench keypoints` reduced (`isa_mocap_ros/bench/keypoints_summary.py`; the full measurements and "
          "the detector's limits: docs/keypoints.md).", "",
-         f"**Cost** (`--kinds cost`, {c['bag']}, {c['frame_sets']} frame sets, the keypoint node's schedule: each view's "
+         f"**Cost** (`--kinds cost`, {_shown(c['bag'])}, {c['frame_sets']} frame sets, the keypoint node's schedule: each view's "
          f"first {c['dense_frames']} frames with a person, then every K-th): CPU time of the calling thread "
          f"(`time.thread_time`) per detection {_f(c['cpu_ms_per_detection_median'])} ms median (model invoke alone "
          f"{_f(c['cpu_ms_per_invoke_median'])} ms); on a loaded machine these are inflated (cache, SMT).", "",
@@ -80,7 +88,7 @@ def render_markdown(d: dict) -> str:
           "backwards: the torso heading more than 90° from the truth's; leg swap: the left knee and ankle closer to "
           "the true right ones):", ""]
     for label, t in d["track"].items():
-        L += [f"{label} (`{t['command']}`):", "",
+        L += [f"{label} (`{_shown(t['command'])}`):", "",
               "| configuration | runs | mean joint error (mm) | backwards frames | runs with a backwards frame | leg-swap frames |",
               "|---|---|---|---|---|---|"]
         for name, runs in t["runs"].items():

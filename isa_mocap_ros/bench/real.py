@@ -59,7 +59,8 @@ def import_demo(bag: Path, *, width: int, frames: int | None) -> None:
     argv = ["import", str(bag), *[str(D / "balancing" / f"cam0{i}.mp4") for i in range(1, 5)],
             "--calibration", str(D / "calibration" / "Calib_scene_checkerboard.toml"),
             "--background", str(D / "calibration" / "extrinsics"),
-            "--reference", str(D / "reference" / "balancing_pose2sim.trc"), "--width", str(width), "--no-progress"]
+            "--reference", str(D / "reference" / "balancing_pose2sim.trc"), "--width", str(width), "--no-progress",
+            "--overwrite"]          # a bag left unfinished (no metadata.yaml) is made again
     argv += ["--frames", str(frames)] if frames else []
     args = build_parser().parse_args(argv)
     with contextlib.redirect_stdout(io.StringIO()):

@@ -21,8 +21,9 @@ after the other on the same machine:
    the top functions by own CPU time;
 4. **network**: ``isa-mocap run``'s code (:mod:`isa_mocap_ros.cli.run`: segmentation, prediction and
    estimator nodes and a recorder, each its own process, over DDS on localhost) on ``bags/demo``,
-   four times (:data:`NETWORK_MODES`): in real time (rate 1.0: frames the estimator cannot keep up
-   with are dropped), the same with segmentation, prediction and estimator in one process
+   five times (:data:`NETWORK_MODES`): in real time (rate 1.0: frames the estimator cannot keep up
+   with are dropped), the same without the estimator's start-up catch-up (``startup_catch_up: 0``), the
+   same with segmentation, prediction and estimator in one process
    (``--single-process``), in real time with a CPU-bound process beside it (one core busy,
    :func:`busy_core`), and in lockstep: frame sets processed per second of replay, the real-time
    factor (that rate over the bag's 30 frames/s), latency p50 / p95 (image received → estimate
@@ -248,10 +249,13 @@ def frame_profile(bag: Path, *, frames: int, evals: int = 1500, optimizer: str =
             "by_call": by_call}
 
 
-#: The network part's runs: (mode label, lockstep, a CPU-bound process beside it).
-#: (label, lockstep, one core busy, single process: ``isa-mocap run --single-process``)
-NETWORK_MODES = (("real time", False, False, False), ("real time, single process", False, False, True),
-                 ("real time, one core busy", False, True, False), ("lockstep", True, False, False))
+#: The network part's runs: (label, lockstep, one core busy (a CPU-bound process beside it), single process:
+#: ``isa-mocap run --single-process``, estimator parameters changed from ``config/pipeline.yaml``'s). The
+#: second run is the first without the start-up catch-up (``startup_catch_up: 0``): its A/B in one bench.
+NETWORK_MODES = (("real time", False, False, False, {}),
+                 ("real time, no start-up catch-up", False, False, False, {"startup_catch_up": 0}),
+                 ("real time, single process", False, False, True, {}),
+                 ("real time, one core busy", False, True, False, {}), ("lockstep", True, False, False, {}))
 
 
 @contextlib.contextmanager
@@ -273,7 +277,7 @@ def busy_core(on: bool = True):
 
 
 def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path, lockstep: bool | None = None,
-                  busy: bool = False, shape: str = "auto", single: bool = False) -> dict:
+                  busy: bool = False, shape: str = "auto", single: bool = False, estimator: dict | None = None) -> dict:
     """``isa-mocap run`` on ``bag`` in real time (rate 1.0) or lockstep (``lockstep``, default: ``mode ==
     "lockstep"``), with a CPU-bound process beside it when ``busy`` (:func:`busy_core`), tracking with
     body shape ``shape`` (``isa-mocap run --shape``; the calibration runs before the replay); the
@@ -288,6 +292,8 @@ def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path, lockstep:
             "--shape", shape]
     argv += ["--lockstep"] if lockstep else ["--rate", "1.0"]
     argv += ["--single-process"] if single else []
+    if estimator:
+        argv += ["--params", str(_params_with(estimator, work / ("params_" + out.name + ".yaml")))]
     buf = io.StringIO()
     t0 = time.perf_counter()
     with contextlib.redirect_stdout(buf), busy_core(busy):
@@ -305,6 +311,24 @@ def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path, lockstep:
          "wall_seconds": round(wall, 1)}
     r["real_time_factor"] = (s["fps"] / bag_fps) if bag_fps and s.get("fps") and np.isfinite(s["fps"]) else None
     return r
+
+
+def _params_with(estimator: dict, path: Path) -> Path:
+    """``config/pipeline.yaml`` with the estimator's parameters ``estimator`` (name -> value) changed,
+    written to ``path`` (each parameter's line rewritten in place: the file's comments and layout kept)."""
+    import re
+
+    from isa_mocap_ros.resources import resource_dir
+
+    text = (resource_dir("config") / "pipeline.yaml").read_text()
+    head, sep, rest = text.partition("/mocap/estimator:")
+    for name, value in estimator.items():
+        v = str(value).lower() if isinstance(value, bool) else str(value)
+        rest, n = re.subn(rf"^(\s+{re.escape(name)}:)\s*[^\s#]+", rf"\g<1> {v}", rest, count=1, flags=re.M)
+        if not n:
+            raise ValueError(f"config/pipeline.yaml: no estimator parameter {name!r} to change")
+    path.write_text(head + sep + rest)
+    return path
 
 
 def _bag_fps(bag: Path) -> float | None:
@@ -346,11 +370,11 @@ def collect(args: argparse.Namespace) -> dict:
             modes = [m for m in NETWORK_MODES if m[1]] if args.quick else list(NETWORK_MODES)
             rows = []
             shape = "auto"          # calibrated by the first run; the others track with the same shape file
-            for label, lockstep, busy, single in modes:
+            for label, lockstep, busy, single, estimator in modes:
                 print(f"bench speed: node network on {nbag.name}, {label} ...", file=sys.stderr, flush=True)
                 try:
                     r = network_speed(nbag, mode=label, optimizer=args.optimizer, work=work, lockstep=lockstep,
-                                      busy=busy, shape=shape, single=single)
+                                      busy=busy, shape=shape, single=single, estimator=estimator)
                 except Exception as exc:  # noqa: BLE001 - one failed run is a row saying so, not a lost bench
                     r = {"mode": label, "busy_core": busy, "error": f"{type(exc).__name__}: {exc}"}
                 if shape == "auto" and r.get("body_shape"):
@@ -476,7 +500,7 @@ def plot(res: dict, path: Path) -> Path:
     rows = res["tracker"]["rows"]
     fig, ax = plt.subplots(figsize=(6, 3.6))
     ax.plot([r["evals_per_frame"] for r in rows], [r["frames_per_s"] for r in rows], "bo-", label="offline tracker")
-    for r, st in zip(res["network"]["rows"], ("g--", "c-", "r-.", "m:")):
+    for r, st in zip(res["network"]["rows"], ("g--", "y--", "c-", "r-.", "m:")):
         if r.get("fps"):
             ax.axhline(r["fps"], color=st[0], ls=st[1:], label=f"network, {r['mode']} ({r.get('evals_per_frame')} evals)")
     ax.set_xlabel("evaluations per frame")

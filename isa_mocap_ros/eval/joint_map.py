@@ -78,10 +78,10 @@ _FLIP = np.array([1.0, -1.0, 1.0])
 
 def _local_residuals(model, poses, names, truth) -> dict:
     """Per marker the (F, 3) residuals ``R_pᵀ (T − X) / L`` (scaled later) and the segment length."""
-    from isa_mocap_ros.body.kinematics import _as_batch, _rot_pos
+    from isa_mocap_ros.body.kinematics import forward_kinematics
 
-    X = _as_batch(model, np.asarray(poses, dtype=float))
-    R, P = _rot_pos(model, X, "numba")
+    W = forward_kinematics(model, np.asarray(poses, dtype=float))
+    R, P = W[..., :3, :3], W[..., :3, 3]
     T = np.asarray(truth, dtype=float)
     out = {}
     for m, n in enumerate(names):
@@ -130,11 +130,11 @@ def fit_joint_map(runs, *, scaled: bool = False, symmetric: bool = True, rig: st
 def mapped_markers(jmap: JointMap, model, poses, names) -> np.ndarray:
     """Virtual markers ``(F, M, 3)`` of ``names`` (model joints) for poses ``(F, D)``: joint centre + its
     parent segment's rotation times the offset (× the segment length when the map is scaled)."""
-    from isa_mocap_ros.body.kinematics import _as_batch, _rot_pos
+    from isa_mocap_ros.body.kinematics import forward_kinematics
 
-    X = _as_batch(model, np.asarray(poses, dtype=float))
-    R, P = _rot_pos(model, X, "numba")
-    out = np.empty((X.shape[0], len(names), 3))
+    W = forward_kinematics(model, np.asarray(poses, dtype=float))
+    R, P = W[..., :3, :3], W[..., :3, 3]
+    out = np.empty((P.shape[0], len(names), 3))
     for m, n in enumerate(names):
         if n not in model.joint_names:
             raise JointMapError(f"joint map: model {model.name!r} has no joint {n!r}")

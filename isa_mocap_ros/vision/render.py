@@ -277,30 +277,6 @@ def _normal(px, py, pz, cp):  # pragma: no cover - compiled
     return nx / n, ny / n, nz / n
 
 
-@numba.njit(cache=True)
-def _tile_candidates(o, axis, cos_t, sin_t, bs, nb, cand):  # pragma: no cover - compiled
-    """Indices of capsules whose bounding spheres meet the tile's ray cone; returns their count."""
-    nc = 0
-    for c in range(bs.shape[0]):
-        for k in range(nb[c]):
-            vx, vy, vz = bs[c, k, 0] - o[0], bs[c, k, 1] - o[1], bs[c, k, 2] - o[2]
-            R = bs[c, k, 3]
-            dist2 = vx * vx + vy * vy + vz * vz
-            if dist2 <= R * R:
-                cand[nc] = c
-                nc += 1
-                break
-            proj = vx * axis[0] + vy * axis[1] + vz * axis[2]
-            perp = np.sqrt(max(0.0, dist2 - proj * proj))
-            if proj * cos_t + perp * sin_t < 0.0:
-                continue  # nearest cone point is the apex, and the sphere does not contain it
-            if perp * cos_t - proj * sin_t <= R:
-                cand[nc] = c
-                nc += 1
-                break
-    return nc
-
-
 @numba.njit(cache=True, inline="always")
 def _nearest_hit(o, dx, dy, dz, caps, cand, nc, first):  # pragma: no cover - compiled
     """Ray parameter and index of the nearest of the ``nc`` candidate capsules the ray meets (``first``:
@@ -320,7 +296,8 @@ def _nearest_hit(o, dx, dy, dz, caps, cand, nc, first):  # pragma: no cover - co
 
 @numba.njit(cache=True, inline="always")
 def _tile_candidates_of(o, axis, cos_t, sin_t, bs, nb, among, n_among, cand):  # pragma: no cover - compiled
-    """:func:`_tile_candidates` among the capsules ``among[:n_among]`` only (the same test, in order)."""
+    """Those of the capsules ``among[:n_among]`` whose bounding spheres meet the tile's ray cone (apex ``o``,
+    ``axis``, half-angle cosine/sine), in order, into ``cand``; returns their count."""
     nc = 0
     for i in range(n_among):
         c = among[i]
@@ -421,11 +398,12 @@ def _raycast_at(o, dirs, W, axes, tcos, tsin, caps, bs, nb, zaxis, px, py, out_l
     ntx = (W + 7) // 8
     C = caps.shape[0]
     cand = np.empty(C, np.int64)
+    all_caps = np.arange(C)
     last, nc = -1, 0
     for i in range(px.shape[0]):
         tile = (py[i] // 8) * ntx + px[i] // 8
         if tile != last:
-            nc = _tile_candidates(o, axes[tile], tcos[tile], tsin[tile], bs, nb, cand)
+            nc = _tile_candidates_of(o, axes[tile], tcos[tile], tsin[tile], bs, nb, all_caps, C, cand)
             last = tile
         p = py[i] * W + px[i]
         dx, dy, dz = dirs[p, 0], dirs[p, 1], dirs[p, 2]
