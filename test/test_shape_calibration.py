@@ -50,6 +50,8 @@ def test_marker_bone_lengths_are_the_median_distance_and_errors_compare_by_name(
     assert got == pytest.approx({"left_thigh": 0.42, "left_shin": 0.40})
     err = bone_errors({"left_thigh": 0.43, "left_shin": 0.40, "right_thigh": 1.0}, got)
     assert err["per_bone_mm"] == {"left_thigh": 10.0, "left_shin": 0.0} and err["mean_mm"] == pytest.approx(5.0)
+    err = bone_errors({"left_thigh": 0.43, "hip_width": 0.25}, {"left_thigh": 0.42, "hip_width": 0.20})
+    assert err["mean_mm"] == pytest.approx(30.0) and err["limbs_mean_mm"] == pytest.approx(10.0)
     with pytest.raises(ShapeCalibrationError, match=r"markers: expected shape \(F, 3, 3\)"):
         marker_bone_lengths(names, np.zeros((2, 4, 3)))
 

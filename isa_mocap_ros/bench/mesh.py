@@ -178,8 +178,10 @@ def render_markdown(res: dict) -> str:
     if cal:
         L += ["", "Body shape calibrated once per bag (`isa-mocap calibrate`, calibration seed "
               f"{seeds[0]}; every tracker seed tracks with it); mean bone-length error against the mesh "
-              "skeleton's joint centres:", "", "| bag | calibrated | default shape |", "|---|---|---|"]
-        L += [f"| {c['bag']} | {_fmt(c['bone_error_mm'])} mm | {_fmt(c['bone_error_default_shape_mm'])} mm |"
+              "skeleton's joint centres (12 bones; the 8 limb bones, whose joints both skeletons define alike):", "",
+              "| bag | calibrated | default shape | limbs calibrated | limbs default shape |", "|---|---|---|---|---|"]
+        L += [f"| {c['bag']} | {_fmt(c['bone_error_mm'])} mm | {_fmt(c['bone_error_default_shape_mm'])} mm | "
+              f"{_fmt(c.get('limb_bone_error_mm'))} mm | {_fmt(c.get('limb_bone_error_default_shape_mm'))} mm |"
               for c in cal]
     L += ["", f"Wall time {res['seconds'] / 60:.1f} min with {res['jobs']} worker(s) (no speed claims)."]
     return "\n".join(L)

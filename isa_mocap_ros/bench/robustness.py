@@ -227,6 +227,8 @@ def calibrate_bag(bag: Path, design: RobustDesign) -> dict:
     return {"bag": bag.name, "shape_file": path.name, "seconds": r.get("seconds"),
             "bone_error_mm": (r.get("bone_error") or {}).get("mean_mm"),
             "bone_error_default_shape_mm": (r.get("bone_error_default_shape") or {}).get("mean_mm"),
+            "limb_bone_error_mm": (r.get("bone_error") or {}).get("limbs_mean_mm"),
+            "limb_bone_error_default_shape_mm": (r.get("bone_error_default_shape") or {}).get("limbs_mean_mm"),
             "per_bone_mm": (r.get("bone_error") or {}).get("per_bone_mm"), "params": r.get("params")}
 
 
