@@ -18,6 +18,7 @@ def test_quick_runs_the_automatic_path_and_scores_it(tmp_path, capsys):
     # one calibration for the bag, both seeds tracked with its file; a bench run again finds it in the cache
     (cal,) = res["calibrations"]
     assert np.isfinite(cal["bone_error_mm"]) and np.isfinite(cal["bone_error_default_shape_mm"])
+    assert np.isfinite(cal["limb_bone_error_mm"]) and np.isfinite(cal["limb_bone_error_default_shape_mm"])
     shape_file = tmp_path / "w" / "cache" / cal["shape_file"]
     assert all(r["shape"] == str(shape_file) for r in res["runs"])
     from isa_mocap_ros.bench import robustness as br

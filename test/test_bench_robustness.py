@@ -23,7 +23,10 @@ def test_quick_json(tmp_path, capsys):
         assert len(r["knee_est_deg"]) == len(r["t_s"]) == r["frames"]
     # one cached bag per condition, tracked with `isa-mocap track`'s code (its summary.json is there)
     assert len([p for p in cache.iterdir() if (p / "metadata.yaml").is_file()]) == 4
-    assert all((tmp_path / "o" / p.name / "summary.json").is_file() for p in cache.iterdir())
+    assert all((tmp_path / "o" / p.name / "summary.json").is_file() for p in cache.iterdir() if p.is_dir())
+    # the shape calibrated once per bag, every run tracked with it
+    assert len(res["calibrations"]) == 4 and all(r["shape"].endswith(".yaml") for r in res["runs"])
+    assert "calibrated once per bag" in br.render_markdown(res)
     assert {t["condition"] for t in res["targets"]} == {"clean", "noise70", "occluders35"}
     md = br.render_markdown(res)
     assert "70 % pixel noise" in md and "4.51°" in md
@@ -58,9 +61,10 @@ def test_seeds_are_summarized_with_their_spread():
     assert t["values"] == {"walk": 23.0} and t["met"]          # targets on the mean over the seeds
     d = br.make_design("default", cmu_path=None)
     assert d.seeds == br.DEFAULT_SEEDS == tuple(range(8)) and d.seed == 0 and d.gate_margin_px is None
+    assert d.shape == "auto" and br.make_design("quick", shape="truth").calib == ()
     q = br.make_design("quick", seeds=(4, 5), gate_margin_px=0)
     assert q.seeds == (4, 5) and q.seed == 4 and q.gate_margin_px == 0 and br.make_design("quick").seeds == (0,)
-    for bad in ({"seeds": ()}, {"seeds": (1, 1)}, {"seeds": (-1,)}, {"gate_margin_px": -2}, {"gate_margin_px": 1.5}):
+    for bad in ({"shape": "default"}, {"seeds": ()}, {"seeds": (1, 1)}, {"seeds": (-1,)}, {"gate_margin_px": -2}, {"gate_margin_px": 1.5}):
         with pytest.raises(ValueError):
             br.make_design("quick", **bad)
     md = br.render_markdown({"design": d.to_dict(), "runs": [dict(r, frames=10, max_frame_error_mm=1.0, fps=5.0,

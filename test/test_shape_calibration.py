@@ -50,6 +50,8 @@ def test_marker_bone_lengths_are_the_median_distance_and_errors_compare_by_name(
     assert got == pytest.approx({"left_thigh": 0.42, "left_shin": 0.40})
     err = bone_errors({"left_thigh": 0.43, "left_shin": 0.40, "right_thigh": 1.0}, got)
     assert err["per_bone_mm"] == {"left_thigh": 10.0, "left_shin": 0.0} and err["mean_mm"] == pytest.approx(5.0)
+    err = bone_errors({"left_thigh": 0.43, "hip_width": 0.25}, {"left_thigh": 0.42, "hip_width": 0.20})
+    assert err["mean_mm"] == pytest.approx(30.0) and err["limbs_mean_mm"] == pytest.approx(10.0)
     with pytest.raises(ShapeCalibrationError, match=r"markers: expected shape \(F, 3, 3\)"):
         marker_bone_lengths(names, np.zeros((2, 4, 3)))
 
@@ -210,3 +212,33 @@ def test_run_shape_option_gives_the_estimator_a_body_file(tmp_path):
     assert load_shape(truth)["offsets"].keys() == default_shape()["offsets"].keys()
     with pytest.raises(ValueError, match="--shape: expected auto, default, truth or a body-shape YAML"):
         _body_shape(p.parse_args(["run", "--shape", str(tmp_path / "nope.yaml")]), FIXTURE, tmp_path, 3)
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_run_on_a_mesh_bag_reports_what_track_reports(tmp_path, rosenv):
+    # the main job with its defaults (automatic shape and initialization; a short calibration and budget to
+    # stay small) through the node network in lockstep, against the offline tracker on the same bag: the same
+    # calibrated shape and the same per-frame errors against the mesh skeleton's joint centres
+    import subprocess
+    import sys
+
+    bag = tmp_path / "mesh"
+    assert main(["synth", "walk", str(bag), "--width", "160", "--height", "120", "--duration-s", "0.2",
+                 "--empty-frames", "10", "--subject", "average_man", "--no-progress"]) == 0
+    opts = ["--evals", "200", "--calib-frames", "4", "--calib-rounds", "1", "--calib-evals", "40"]
+    res = subprocess.run([sys.executable, "-m", "isa_mocap_ros.cli.main", "run", str(bag), "--lockstep", "--out",
+                          str(tmp_path / "run"), "--quiet", *opts], env=rosenv, capture_output=True, text=True,
+                         timeout=500)
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    assert main(["track", str(bag), "--out", str(tmp_path / "track"), "--no-progress", *opts]) == 0
+    r = json.loads((tmp_path / "run" / "summary.json").read_text())
+    t = json.loads((tmp_path / "track" / "summary.json").read_text())
+    assert t["shape"] == "auto" and t["scored_by"] == r["scored_by"] == "markers"
+    assert json.loads((tmp_path / "run" / "shape_calibration.json").read_text())["params"] \
+        == t["shape_calibration"]["params"]
+    assert r["frames_processed"] == r["frame_sets_played"] and r["frames_estimated"] == t["frames"] == 6
+    assert r["frame_errors_mm"] == t["frame_errors_mm"]
+    for k in ("mpjpe_mm", "mapped_mpjpe_mm", "knee_rmse_deg"):
+        assert r[k] == pytest.approx(t[k], rel=1e-9, abs=1e-9), k

@@ -9,7 +9,8 @@ tracking model (``--body capsules``, the control, scored against the ground-trut
 
 * robustness (:mod:`.robustness`): the default sequences (CMU walk from 1 s if present, generated
   walk, jog), cut to ``--frames`` (default 30) frames, the four conditions, tracker seeds
-  ``--seeds`` (default 0,1), h-isa 1500, initialized from the ground truth;
+  ``--seeds`` (default 0,1), h-isa 1500, initialized from the ground truth, the shape calibrated once per
+  bag from its images (robustness's default);
 * comparison (:mod:`isa_mocap_ros.eval.compare`): the default design's sequences, algorithms
   h-isa, isa, cmaes and pycma at 39 DOF and 1500 evaluations, seed 0, the first
   ``--compare-frames`` (default 10) frames.

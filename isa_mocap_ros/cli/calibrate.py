@@ -82,7 +82,9 @@ def run(args: argparse.Namespace) -> int:
           f"{report['energy']:.4f} over {report['frames']} frames; factors "
           + ", ".join(f"{k} {v:.3f}" for k, v in report["params"].items()))
     if "bone_error" in report:
-        print(f"calibrate: mean bone-length error against the bag's joint centres {report['bone_error']['mean_mm']:.1f} mm "
-              f"(default shape {report['bone_error_default_shape']['mean_mm']:.1f} mm)")
+        e, e0 = report["bone_error"], report["bone_error_default_shape"]
+        print(f"calibrate: mean bone-length error against the bag's joint centres {e['mean_mm']:.1f} mm "
+              f"(default shape {e0['mean_mm']:.1f} mm); the 8 limb bones {e['limbs_mean_mm']:.1f} mm "
+              f"(default shape {e0['limbs_mean_mm']:.1f} mm)")
     print(f"calibrate: wrote {out}")
     return 0

@@ -265,7 +265,12 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                 progress=None if args.no_progress else (lambda line: print(line, file=sys.stderr, flush=True)))
         except ShapeCalibrationError as exc:
             raise ValueError(f"--shape auto: {exc}; pass --shape default or a body-shape FILE") from None
-        model = make_model(dof, shape=res.shape)
+        # tracked with the shape as written to DIR/body.yaml (1 µm rounding), as `run` and `calibrate` give it
+        from isa_mocap_ros.body import save_shape
+
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        save_shape({**dict(res.shape), "name": f"calibrated:{bag_path.name}"}, Path(args.out) / "body.yaml")
+        model = make_model(dof, shape=Path(args.out) / "body.yaml")
     tracker = Tracker(model, seq.cameras, cfg, prior=prior)
     # as the node network: the prediction travels as JointState (roll/pitch/yaw root) and the
     # frame key is the stamp in ns, so `isa-mocap track` reproduces the estimator node's numbers

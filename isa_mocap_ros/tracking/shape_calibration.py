@@ -32,7 +32,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["SHAPE_PARAMS", "BONES", "ShapeCalibrationConfig", "ShapeCalibrationResult", "ShapeCalibrationError",
+__all__ = ["SHAPE_PARAMS", "BONES", "LIMB_BONES", "ShapeCalibrationConfig", "ShapeCalibrationResult", "ShapeCalibrationError",
            "shape_from_params", "bone_lengths", "marker_bone_lengths", "bone_errors", "calibrate_shape"]
 
 #: shape parameters: (name, lower, upper) bounds of the factor on the base shape
@@ -196,11 +196,20 @@ def marker_bone_lengths(names: Sequence[str], markers) -> dict[str, float]:
     return out
 
 
+#: the bones whose two joints the capsule model and a mesh skeleton define alike (hip, knee, ankle, shoulder,
+#: elbow, wrist centres); the trunk's (hip and shoulder widths, pelvis-neck, neck-head) join points the two
+#: skeletons place differently (docs/decisions/012-joint-definitions.md)
+LIMB_BONES: tuple[str, ...] = tuple(b for b, _, _ in BONES[:8])
+
+
 def bone_errors(estimated: Mapping[str, float], truth: Mapping[str, float]) -> dict:
-    """Per-bone absolute error (mm) over the bones both have, and their mean (``mean_mm``)."""
+    """Per-bone absolute error (mm) over the bones both have, their mean (``mean_mm``) and the mean over the
+    :data:`LIMB_BONES` among them (``limbs_mean_mm``: the like-with-like figure against a mesh skeleton)."""
     common = [b for b, _, _ in BONES if b in estimated and b in truth]
     per = {b: round(1e3 * abs(estimated[b] - truth[b]), 1) for b in common}
-    return {"per_bone_mm": per, "mean_mm": float(np.mean(list(per.values()))) if per else float("nan")}
+    limbs = [per[b] for b in LIMB_BONES if b in per]
+    return {"per_bone_mm": per, "mean_mm": float(np.mean(list(per.values()))) if per else float("nan"),
+            "limbs_mean_mm": float(np.mean(limbs)) if limbs else float("nan")}
 
 
 class _ShapeEnergy:
@@ -335,7 +344,8 @@ def calibrate_shape(dof: int, cameras: Sequence, frames: Sequence[tuple[int, Seq
     pick = np.unique(np.round(np.linspace(0, len(keys) - 1, min(config.n_frames, len(keys)))).astype(int))
     cal_keys = [keys[i] for i in pick]
     masks_of = {int(k): m for k, m in frames}
-    cal_masks = _prepared_masks(dof, cameras, [masks_of[k] for k in cal_keys], config)
+    cal_raw = [masks_of[k] for k in cal_keys]                    # the tracker's
+    cal_masks = _prepared_masks(dof, cameras, cal_raw, config)     # the shape fit's energies'
     X = np.array([poses[k] for k in cal_keys])
     P = len(SHAPE_PARAMS)
     m0 = make_model(dof)
@@ -367,7 +377,7 @@ def calibrate_shape(dof: int, cameras: Sequence, frames: Sequence[tuple[int, Seq
                             X[i] = r.x
             # 2: tracker steps on each calibration frame from its last pose
             tr = _tracker(model, cameras, tcfg)
-            for i, (k, masks) in enumerate(zip(cal_keys, cal_masks)):
+            for i, (k, masks) in enumerate(zip(cal_keys, cal_raw)):
                 try:
                     tr.initialize(pose=X[i])
                 except TrackerError as exc:
