@@ -446,7 +446,7 @@ def figures(data: dict, fig_dir: Path) -> dict:
         from isa_mocap_ros.eval.compare import plot_summary
         out["compare"] = [plot_summary(data["compare"], fig_dir / "compare_error_vs_budget.png")]
     if "robustness" in data and data["robustness"].get("runs"):
-        from isa_mocap_ros.bench.robustness import plot, plot_bars
+        from isa_mocap_ros.bench.robustness_plots import plot, plot_bars
         out["robustness"] = [plot_bars(data["robustness"], fig_dir / "robustness_knee_rmse.png"),
                              plot(data["robustness"], fig_dir / "robustness_knees.png")]
     if "speed" in data:
