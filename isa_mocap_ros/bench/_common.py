@@ -5,6 +5,7 @@ import argparse
 import contextlib
 import io
 import json
+from pathlib import Path
 
 
 def json_of(mod, argv: list[str]) -> dict:
@@ -35,3 +36,13 @@ def energy_sizes(d: dict) -> str:
     if d.get("threads") is not None:
         parts.append(f"{d['threads']} threads")
     return "; fast energy: " + ", ".join(parts) if parts else ""
+
+
+def write_result(bench: str, res: dict, json_path, markdown: str) -> int:
+    """Write a bench's results ``res`` as one line of JSON to ``json_path``, print its markdown and where the
+    JSON went; the bench's exit code (0)."""
+    Path(json_path).parent.mkdir(parents=True, exist_ok=True)
+    Path(json_path).write_text(json.dumps(res, default=float) + "\n")
+    print(markdown)
+    print(f"bench {bench}: wrote {json_path}")
+    return 0

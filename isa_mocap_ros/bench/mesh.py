@@ -31,7 +31,6 @@ calibration on 4 frames, seed 0 (a smoke test: the numbers say nothing).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 import time
@@ -42,6 +41,7 @@ import numpy as np
 from isa_mocap_ros.eval.compare import SequenceSpec
 
 from . import robustness as br
+from isa_mocap_ros.bench._common import write_result
 
 SUBJECTS = ("slim_woman", "average_man", "heavy_man")
 CONDITIONS = ("clean", "noise70", "occluders35")
@@ -227,8 +227,4 @@ def run(args: argparse.Namespace) -> int:
     res = collect(design, cache=cache, out=out, jobs=args.jobs)
     res["seconds"] = round(time.perf_counter() - t0, 1)
     res["command"] = "isa-mocap bench mesh " + " ".join(sys.argv[3:])
-    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.json).write_text(json.dumps(res, default=float) + "\n")
-    print(render_markdown(res))
-    print(f"bench mesh: wrote {args.json}")
-    return 0
+    return write_result("mesh", res, args.json, render_markdown(res))

@@ -21,12 +21,12 @@ renders into ``docs/RESULTS.md`` ("Mesh bodies vs capsules").
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
+from isa_mocap_ros.bench._common import write_result
 
 BODIES = ("mesh", "capsules")
 COMPARE_ALGORITHMS = ("h-isa", "isa", "cmaes", "pycma")
@@ -116,8 +116,4 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="isa_mocap_mesh_baseline_"))
     res = collect(frames=args.frames, seeds=seeds, compare_frames=args.compare_frames, jobs=args.jobs, out=out)
     res["command"] = "isa-mocap bench mesh_baseline " + " ".join(sys.argv[3:])
-    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.json).write_text(json.dumps(res) + "\n")
-    print(render_markdown(res))
-    print(f"bench mesh_baseline: wrote {args.json}")
-    return 0
+    return write_result("mesh_baseline", res, args.json, render_markdown(res))

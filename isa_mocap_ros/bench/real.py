@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from isa_mocap_ros.bench._common import write_result
 
 __all__ = ["CONFIGS", "collect", "render_markdown", "add_arguments", "run"]
 
@@ -189,8 +190,4 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="isa_mocap_real_"))
     res = collect(quick=args.quick, out=out, configs=configs, lockstep=lockstep)
     res["command"] = "isa-mocap bench real " + " ".join(sys.argv[3:])
-    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.json).write_text(json.dumps(res) + "\n")
-    print(render_markdown(res))
-    print(f"bench real: wrote {args.json}")
-    return 0
+    return write_result("real", res, args.json, render_markdown(res))
