@@ -265,7 +265,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                 progress=None if args.no_progress else (lambda line: print(line, file=sys.stderr, flush=True)))
         except ShapeCalibrationError as exc:
             raise ValueError(f"--shape auto: {exc}; pass --shape default or a body-shape FILE") from None
-        # tracked with the shape as written to DIR/body.yaml (1 µm rounding), as `run` and `calibrate` give it
+        # tracked with the shape read back from DIR/body.yaml (written exactly), as `run` and `calibrate` give it
         from isa_mocap_ros.body import save_shape
 
         Path(args.out).mkdir(parents=True, exist_ok=True)
