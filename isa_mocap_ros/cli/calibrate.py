@@ -15,7 +15,7 @@ import json
 import sys
 from pathlib import Path
 
-from isa_mocap_ros.cli.shape_options import add_calibration_arguments, calibrate_sequence
+from isa_mocap_ros.cli.shape_options import add_calibration_arguments, calibrate_sequence, save_calibrated_shape
 
 
 def register(sub) -> None:
@@ -39,7 +39,6 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from isa_mocap_ros.body import save_shape
     from isa_mocap_ros.cli.track_io import read_sequence
     from isa_mocap_ros.bag import BagReader
     from isa_mocap_ros.tracking.shape_calibration import ShapeCalibrationError
@@ -71,10 +70,7 @@ def run(args: argparse.Namespace) -> int:
                                          progress=lambda s: print(s, file=sys.stderr, flush=True))
     except (ValueError, ShapeCalibrationError) as exc:
         return fail(str(exc))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    shape = dict(res.shape)
-    shape["name"] = f"calibrated:{bag.name}"
-    save_shape(shape, out)
+    save_calibrated_shape(res, bag.name, out)
     report.update(bag=str(bag), out=str(out))
     if args.report:
         Path(args.report).write_text(json.dumps(report, indent=2) + "\n")

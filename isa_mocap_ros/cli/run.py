@@ -177,7 +177,7 @@ def _body_shape(args: argparse.Namespace, bag: Path, out: Path, learn: int | Non
             raise ValueError("--shape truth: expected a ground-truth model in the bag, received none")
         save_shape(dict(seq.truth_model.shape), path)
         return str(path.resolve())
-    from isa_mocap_ros.cli.shape_options import calibrate_sequence
+    from isa_mocap_ros.cli.shape_options import calibrate_sequence, save_calibrated_shape
     from isa_mocap_ros.tracking.shape_calibration import ShapeCalibrationError
 
     n_learn = learn or 10
@@ -188,9 +188,7 @@ def _body_shape(args: argparse.Namespace, bag: Path, out: Path, learn: int | Non
                                          first=n_learn, progress=lambda line: print(f"run: {line}", flush=True))
     except ShapeCalibrationError as exc:
         raise ValueError(f"--shape auto: {exc}; pass --shape default or a body-shape FILE") from None
-    shape_dict = dict(res.shape)
-    shape_dict["name"] = f"calibrated:{bag.name}"
-    save_shape(shape_dict, path)
+    save_calibrated_shape(res, bag.name, path)
     (out / "shape_calibration.json").write_text(json.dumps(report, indent=2) + "\n")
     print(f"run: calibrated body shape -> {path}", flush=True)
     return str(path.resolve())

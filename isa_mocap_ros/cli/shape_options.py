@@ -46,6 +46,18 @@ def calibration_frames(seq, *, use_masks: bool, learn: int, first: int, n: int) 
     return out
 
 
+def save_calibrated_shape(res, bag_name: str, path):
+    """Write a calibration's shape (``res.shape``), named ``calibrated:<bag_name>``, to the body-shape YAML
+    ``path`` (its folder made; exact numbers, :func:`~isa_mocap_ros.body.save_shape`): what ``calibrate``
+    writes, and what ``track`` and ``run`` track with."""
+    from pathlib import Path
+
+    from isa_mocap_ros.body import save_shape
+
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    save_shape({**dict(res.shape), "name": f"calibrated:{bag_name}"}, path)
+
+
 def calibrate_sequence(seq, args, *, dof: int, use_masks: bool, learn: int, first: int, tracker_config=None,
                        progress=None):
     """Run the calibration on a read sequence; returns (result, report dict)."""

@@ -255,7 +255,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     cfg = TrackerConfig.from_flat(**cfg_kw)
     calibration = None
     if shape_arg == "auto":
-        from isa_mocap_ros.cli.shape_options import calibrate_sequence
+        from isa_mocap_ros.cli.shape_options import calibrate_sequence, save_calibrated_shape
         from isa_mocap_ros.tracking.shape_calibration import ShapeCalibrationError
 
         try:
@@ -266,10 +266,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         except ShapeCalibrationError as exc:
             raise ValueError(f"--shape auto: {exc}; pass --shape default or a body-shape FILE") from None
         # tracked with the shape read back from DIR/body.yaml (written exactly), as `run` and `calibrate` give it
-        from isa_mocap_ros.body import save_shape
-
-        Path(args.out).mkdir(parents=True, exist_ok=True)
-        save_shape({**dict(res.shape), "name": f"calibrated:{bag_path.name}"}, Path(args.out) / "body.yaml")
+        save_calibrated_shape(res, bag_path.name, Path(args.out) / "body.yaml")
         model = make_model(dof, shape=Path(args.out) / "body.yaml")
     tracker = Tracker(model, seq.cameras, cfg, prior=prior)
     # as the node network: the prediction travels as JointState (roll/pitch/yaw root) and the
