@@ -160,8 +160,8 @@ def _with_person(frames: np.ndarray, person: np.ndarray, plates: Sequence[np.nda
                  radius: float, min_free: int, grow: float) -> BackgroundEstimate:
     """:func:`estimate_background` with the person given in every frame (module docstring)."""
     N, H, W, _ = frames.shape
-    g = max(1, int(round(grow * W)))
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * g + 1, 2 * g + 1))
+    g = max(0, int(round(grow * W)))
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * g + 1, 2 * g + 1))   # 1x1 for g = 0: no growth
     covered = np.stack([cv2.dilate(p.view(np.uint8), kernel) for p in person]).astype(bool)
     mu, count, n_free = _masked_mode_numba(np.ascontiguousarray(frames), ~covered, float(radius))
     unknown = n_free < min_free
