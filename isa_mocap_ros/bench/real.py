@@ -173,11 +173,12 @@ def collect(*, quick: bool, out: Path, configs=DEFAULT_CONFIGS, lockstep: str | 
         name = lockstep if lockstep != "default_choice" else next(
             (c for c in ("auto_keypoints", "auto") if c in configs), configs[0])
         print(f"bench real: run --lockstep {name} ...", file=sys.stderr, flush=True)
-        r = _lockstep(bag, out / f"run_{name}", CONFIGS[name][1] + common)
+        net = CONFIGS[name][1] + (["--keypoints"] if "--keypoint-weight" in CONFIGS[name][1] else [])   # the keypoint node
+        r = _lockstep(bag, out / f"run_{name}", net + common)
         if "frame_errors_mm" in r and name in res["runs"]:
             a, b = np.asarray(r["frame_errors_mm"]), np.asarray(res["runs"][name]["frame_errors_mm"])
             r["frames_differing_from_track"] = int(np.sum(a != b)) if a.shape == b.shape else None
-        res["lockstep"] = {"config": name, "command": "isa-mocap run BAG --lockstep " + " ".join(CONFIGS[name][1] + common),
+        res["lockstep"] = {"config": name, "command": "isa-mocap run BAG --lockstep " + " ".join(net + common),
                            **r}
     res["wall_seconds"] = round(time.perf_counter() - t0, 1)
     return res
