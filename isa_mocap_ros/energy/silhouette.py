@@ -516,7 +516,9 @@ class SilhouetteEnergy:
 
     def _fast(self, X: np.ndarray) -> np.ndarray:
         out = np.empty(X.shape[0])
-        n_chunks = max(1, min(X.shape[0], 8 * self._threads))
+        # one work unit per thread: numba splits a parallel loop statically (equal blocks per thread), so more
+        # chunks only repeat each chunk's scratch set-up (docs/energy.md)
+        n_chunks = max(1, min(X.shape[0], self._threads))
         # a few poses (a stage's final pose, the contour stage's pair) on this thread: a parallel launch
         # costs more than they do (the same bits either way)
         kernel = _k.silhouette_batch_serial if X.shape[0] < _k.SERIAL_BELOW else _k.silhouette_batch
