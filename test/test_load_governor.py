@@ -149,11 +149,13 @@ def test_same_inputs_same_decisions():
 
 @pytest.mark.parametrize("kw, match", [
     (dict(evals=0), "evals: expected an integer >= 1"),
-    (dict(period_s=0.0), "period_s: expected a number"),
-    (dict(headroom=1.5), "headroom: expected a number"),
-    (dict(down_after=True), "down_after: expected an integer"),
-    (dict(lost_factor=0.5), "lost_factor"),
-    (dict(max_backoff=0), "max_backoff"),
+    (dict(evals=1500.0), r"evals: expected an integer >= 1, received 1500\.0"),
+    (dict(period_s=0.0), r"period_s: expected a finite number > 0\.0, received 0\.0"),
+    (dict(period_s=float("inf")), "period_s: expected a finite number > 0"),
+    (dict(headroom=1.5), r"headroom: expected a finite number in \(0\.0, 1\.0\], received 1\.5"),
+    (dict(down_after=True), "down_after: expected an integer >= 1, received True"),
+    (dict(lost_factor=0.5), r"lost_factor: expected a finite number > 1\.0"),
+    (dict(max_backoff=0), "max_backoff: expected an integer >= 1, received 0"),
 ])
 def test_bad_settings(kw, match):
     base = dict(evals=1500, period_s=PERIOD)
@@ -161,6 +163,12 @@ def test_bad_settings(kw, match):
         LoadSettings(**{**base, **kw})
     with pytest.raises(LoadError, match="settings: expected LoadSettings"):
         LoadGovernor({"evals": 1500})
+
+
+def test_numpy_numbers_are_settings_too():
+    # a budget read from an array (np.int64) is an integer; a numpy float a number
+    g = LoadGovernor(LoadSettings(evals=np.int64(1500), period_s=np.float64(PERIOD), min_evals=np.int32(150)))
+    assert g.decision().evals == 1500
 
 
 def test_startup_catch_up_holds_the_sets_then_tracks_them_cheaply_until_none_waits():
@@ -198,9 +206,12 @@ def test_startup_catch_up_holds_the_sets_then_tracks_them_cheaply_until_none_wai
     assert off.budget(1500, initialized=True, checking_heading=False) == (1500, True)
 
 
-@pytest.mark.parametrize("kwargs, match", [(dict(sets=-1, evals=300, limit_ms=1.0), "sets"),
-                                           (dict(sets=2, evals=0, limit_ms=1.0), "evals"),
-                                           (dict(sets=2, evals=10, limit_ms=float("nan")), "limit_ms")])
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(sets=-1, evals=300, limit_ms=1.0), "sets: expected an integer >= 0, received -1"),
+    (dict(sets=2, evals=0, limit_ms=1.0), "evals: expected an integer >= 1, received 0"),
+    (dict(sets=2, evals=True, limit_ms=1.0), "evals: expected an integer >= 1, received True"),
+    (dict(sets=2, evals=10, limit_ms=float("nan")), "limit_ms: expected a finite number >= 0"),
+    (dict(sets=2, evals=10, limit_ms=-1.0), "limit_ms: expected a finite number >= 0")])
 def test_startup_catch_up_bad_settings(kwargs, match):
     from isa_mocap_ros.tracking.load import LoadError, StartupCatchUp
 

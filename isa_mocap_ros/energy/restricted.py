@@ -143,7 +143,7 @@ class RestrictedSilhouetteEnergy:
 
     def _fast(self, X: np.ndarray) -> np.ndarray:
         out = np.empty(X.shape[0])
-        _k.silhouette_restricted(X, *self._args, max(1, min(X.shape[0], 8 * self.energy.threads)), out)
+        _k.silhouette_restricted(X, *self._args, max(1, min(X.shape[0], self.energy.threads)), out)
         return out
 
     def __repr__(self) -> str:

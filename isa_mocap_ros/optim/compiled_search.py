@@ -256,7 +256,7 @@ def _kernel_overload(X, kargs, n_chunks, out):
 
 @numba.njit(cache=True)
 def _partition(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c, rho, population, block,
-               best, best_x, stats, g0, n_evals0, threads8, kargs, kp):  # pragma: no cover - compiled
+               best, best_x, stats, g0, n_evals0, threads, kargs, kp):  # pragma: no cover - compiled
     """One partition of the hierarchy, evaluated with the full kernel or the restricted one (``kargs``:
     its arguments between the poses and ``n_chunks``, :func:`_kernel`), plus ``kp.scale`` times the keypoint
     term ``kp`` (:class:`~isa_mocap_ros.energy.keypoint_kernel.KeypointTerm`; scale 0: none) as the tracker's
@@ -276,7 +276,7 @@ def _partition(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c,
         E = np.empty(n)
         out = np.empty(kk)
         Xk = X if kk == n else X[:kk].copy()
-        _kernel(Xk, kargs, max(1, min(kk, threads8)), out)
+        _kernel(Xk, kargs, max(1, min(kk, threads)), out)   # a chunk per thread (energy._fast)
         for i in range(kk):
             if out[i] < 0.0:
                 return x, -1, used, bad, X
@@ -350,7 +350,6 @@ class HisaRun:
     def advance(self, to: int | None = None) -> "HisaRun":
         """Run the partitions up to (not including) ``to`` (default: all)."""
         energy, opt = self.energy, self.opt
-        threads8 = 8 * energy.threads
         stop = len(self.parts) if to is None else min(int(to), len(self.parts))
         while self.k < stop:
             k = self.k
@@ -360,7 +359,7 @@ class HisaRun:
             rest = energy.restrict(self.xbase.copy(), idx.copy())
             args = (self.xbase, idx, x0, np.ascontiguousarray(opt.spread[idx]), lo, hi, self.shares[k], self.n,
                     opt.rng, self.target, self.kernel, self.c, self.rho, self.population, self.blocks[k], self.best,
-                    self.best_x, self.stats, self.g, self.n_evals, threads8)
+                    self.best_x, self.stats, self.g, self.n_evals, energy.threads)
             x, gens, used, nb, self.X = _partition(*args, energy.kernel_args() if rest.full else rest.kernel_args(),
                                                    self.kp)
             if gens < 0:

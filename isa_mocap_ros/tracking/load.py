@@ -25,6 +25,8 @@ from collections import deque
 
 import numpy as np
 
+from isa_mocap_ros.config_checks import check_number
+
 #: The budget ladder: (share of the configured evaluations, contour stage on). Level 0 is the full
 #: budget; each level down saves more of the step's time (the contour stage is the costliest stage per
 #: evaluation, ``isa-mocap bench speed``'s profile).
@@ -63,13 +65,10 @@ class LoadSettings:
 
     def __post_init__(self) -> None:
         for name in ("evals", "down_after", "up_after", "min_evals", "reset_after", "window", "max_backoff"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise LoadError(f"{name}: expected an integer >= 1, received {v!r}")
-        for name, lo, hi in (("period_s", 0.0, np.inf), ("headroom", 0.0, 1.0), ("lost_factor", 1.0, np.inf)):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and lo < v <= hi):
-                raise LoadError(f"{name}: expected a number in ({lo}, {hi}], received {v!r}")
+            check_number(name, getattr(self, name), lo=1, integer=True, error=LoadError)
+        check_number("period_s", self.period_s, lo=0.0, lo_open=True, error=LoadError)
+        check_number("headroom", self.headroom, lo=0.0, hi=1.0, lo_open=True, error=LoadError)
+        check_number("lost_factor", self.lost_factor, lo=1.0, lo_open=True, error=LoadError)
 
 
 class LoadGovernor:
@@ -219,11 +218,9 @@ class StartupCatchUp:
     """
 
     def __init__(self, *, sets: int, evals: int, limit_ms: float) -> None:
-        for name, v in (("sets", sets), ("evals", evals)):
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < (0 if name == "sets" else 1):
-                raise LoadError(f"{name}: expected an integer >= {0 if name == 'sets' else 1}, received {v!r}")
-        if not (isinstance(limit_ms, (int, float, np.floating)) and np.isfinite(limit_ms) and limit_ms >= 0):
-            raise LoadError(f"limit_ms: expected a number >= 0, received {limit_ms!r}")
+        check_number("sets", sets, lo=0, integer=True, error=LoadError)
+        check_number("evals", evals, lo=1, integer=True, error=LoadError)
+        check_number("limit_ms", limit_ms, lo=0.0, error=LoadError)
         self.sets, self.evals, self.limit_ms = int(sets), int(evals), float(limit_ms)
         self.active = False             # catching up (from an initialization until caught up or given up)
         self.caught_up = 0              # sets tracked at the catch-up budget (all initializations)
