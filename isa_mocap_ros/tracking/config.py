@@ -428,6 +428,9 @@ class MaskConfig:
         Foreground within this many px of the predicted silhouette is kept unconfirmed (3).
     hull_pad_m : float
         Growth of the predicted joints' box in which the hull filter looks, m (0.35).
+    first_frame_hull : bool
+        Before the first estimate, keep only the foreground of the visual hull's largest blob (tracking/init_hull.py;
+        with ``hull_filter``): occluders no view confirms do not reach the initialization (False).
     """
 
     gate_margin_px: int = 10
@@ -435,6 +438,7 @@ class MaskConfig:
     hull_dilate_px: int = 2
     hull_keep_px: int = 3
     hull_pad_m: float = 0.35
+    first_frame_hull: bool = False
 
     def __post_init__(self) -> None:
         _number("gate_margin_px", self.gate_margin_px, lo=0, integer=True)
@@ -442,6 +446,7 @@ class MaskConfig:
         _number("hull_dilate_px", self.hull_dilate_px, lo=0, integer=True)
         _number("hull_keep_px", self.hull_keep_px, lo=0, integer=True)
         _number("hull_pad_m", self.hull_pad_m, lo=0.0, strict=True)
+        _bool("first_frame_hull", self.first_frame_hull)
 
 
 @dataclass(frozen=True)
