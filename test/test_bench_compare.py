@@ -24,6 +24,18 @@ def test_quick_json_resume_and_results(tmp_path, capsys):
     assert all(r["frames"] == 3 and np.isfinite(r["mpjpe_mm"]) for r in recs)
     md = res.read_text()
     assert "Smoke run" in md and "Fried. Stat." in md and "command:" in md and "machine:" in md
+    # the automatic shape (default): calibrated once from the sequence's silhouettes, reported against the truth
+    assert s["shape"] == "auto" and all(r["shape"] == "auto" for r in recs) and len(s["calibrations"]) == 1
+    cal = s["calibrations"][0]
+    assert cal["sequence"] == "walk" and cal["bone_error_mm"] >= 0 and (out / "cache" / cal["shape_file"]).is_file()
+    assert "body shape: calibrated once per sequence" in md
+    from isa_mocap_ros.eval.compare_shape import calibrate_sequence_shape
+    npz = next((out / "cache").glob("*.npz"))
+    assert calibrate_sequence_shape(npz, make_design("quick").calib, 0) == cal        # cached, not run again
+    # cells tracked with another shape are never resumed into this run
+    assert main(["bench", "compare", "--quick", "--shape", "truth", "--resume", str(out), "--jobs", "1",
+                 "--no-progress"]) == 2
+    assert "shape auto; now" in capsys.readouterr().err
     # resume: drop one finished cell, only that one runs again (in process), with the same result
     (out / "cells.jsonl").write_text(lines[0] + "\n")
     assert main(["bench", "compare", "--quick", "--json", "--resume", str(out), "--jobs", "1", "--no-progress"]) == 0

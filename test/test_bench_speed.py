@@ -12,7 +12,7 @@ def test_quick_json(capsys):
     assert main(["bench", "speed", "--quick", "--json"]) == 0
     res = json.loads(capsys.readouterr().out)
     e = res["energy"]
-    assert e["fast_evals_per_s"] > 0 and e["exact_evals_per_s"] > 0
+    assert e["fast_evals_per_s"] > 0 and e["exact_evals_per_s"] > 0 and e["search_evals_per_s"] > 0
     rows = res["tracker"]["rows"]
     assert [r["evals_per_frame"] for r in rows] == [500, 1500, 3000]
     for r in rows:
@@ -36,6 +36,7 @@ def test_quick_json(capsys):
     assert stages["bookkeeping (the rest of the step)"]["share"] < 0.5
     assert len(pr["by_call"]) == 15 and any("silhouette" in r["function"] for r in pr["by_call"])
     md = bench_speed.render_markdown(res)
+    assert "| the tracker's h-isa search (360 evaluations in generations of 30" in md
     assert "#### Offline tracker" in md and "Skipped (--quick)" in md and "#### Segmentation" in md
     assert "#### Where a tracked frame's CPU time goes" in md and "| contour stage |" in md
 

@@ -16,7 +16,9 @@ def test_bench_energy_quick_json(capsys):
     assert bench_energy.run(p.parse_args(["--quick", "--json"])) == 0
     out = json.loads(capsys.readouterr().out)
     assert list(out) == ["views", "dof", "batch", "fast_evals_per_s", "exact_evals_per_s", "fast_evals_per_cpu_s",
-                         "ratio", "exact_batch",
+                         "ratio", "search_evals_per_s", "search_evals_per_cpu_s", "search_evals", "search_generation",
+                         "search_restricted_share", "search_coarse_evals_per_s", "search_coarse_evals_per_cpu_s",
+                         "search_ratio", "exact_batch",
                          "n_model_points", "n_template", "n_mask_points", "downsample", "threads"]
     tc = TrackerConfig()                 # measured with the tracker's sample sizes
     obj = tc.objective
@@ -26,3 +28,8 @@ def test_bench_energy_quick_json(capsys):
     assert out["views"] == 4 and out["dof"] == 39 and out["batch"] == 64 and out["exact_batch"] == 4
     assert out["fast_evals_per_s"] > 0 and out["exact_evals_per_s"] > 0 and out["fast_evals_per_cpu_s"] > 0
     assert out["ratio"] > 0
+    # the tracker's search: its generations, most of it on the restricted kernel (every partition but the root's)
+    assert out["search_evals"] == 360 and out["search_generation"] == 30
+    assert 0.5 < out["search_restricted_share"] < 1
+    assert out["search_evals_per_s"] > 0 and out["search_evals_per_cpu_s"] > 0 and out["search_ratio"] > 0
+    assert out["search_coarse_evals_per_s"] > 0 and out["search_coarse_evals_per_cpu_s"] > 0

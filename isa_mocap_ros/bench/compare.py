@@ -40,6 +40,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="mesh (default): skinned human sequences; capsules: the tracking model's own (control)")
     p.add_argument("--seeds", type=int, default=None, metavar="N", help="use the first N seeds of the design")
     p.add_argument("--frames", type=int, default=None, metavar="N", help="track only the first N frames of each sequence")
+    p.add_argument("--shape", choices=("auto", "truth"), default="auto",
+                   help="tracking model's shape: auto (default) calibrated once per sequence from its images (isa-mocap "
+                        "calibrate's code); truth = the sequence's ground-truth shape (a diagnostic only)")
 
 
 def _init_worker() -> None:
@@ -49,10 +52,10 @@ def _init_worker() -> None:
         os.environ[k] = "1"
 
 
-def _work(cell: dict, cache: str) -> dict:
+def _work(cell: dict, cache: str, shape_file: str | None = None) -> dict:
     from isa_mocap_ros.eval.compare import run_cell
 
-    return run_cell(cell, cache)
+    return run_cell(cell, cache, shape_file)
 
 
 def _machine() -> str:
@@ -79,12 +82,25 @@ def run_design(design, out: Path, *, jobs: int = 2, progress: bool = True) -> li
     new = json.loads(json.dumps(design.to_dict()))
     if jl.exists() and (out / "design.json").exists():
         old = json.loads((out / "design.json").read_text())
-        if old.get("sequences") != new["sequences"]:
+        if old.get("sequences") != new["sequences"] or old.get("shape", "truth") != new["shape"]:
             raise ValueError(f"{out} holds the cells of other sequences (design {old.get('name')!r}: "
-                             f"{_seq_summary(old.get('sequences'))}; now {_seq_summary(new['sequences'])}); "
+                             f"{_seq_summary(old.get('sequences'))}, shape {old.get('shape', 'truth')}; now "
+                             f"{_seq_summary(new['sequences'])}, shape {new['shape']}); "
                              "resume only the same design, or give a new --out")
     (out / "design.json").write_text(json.dumps(new, indent=2) + "\n")
     cache = {s.name: str(prepare_sequence(s, out / "cache")) for s in design.sequences}
+    shapes = {s.name: None for s in design.sequences}
+    if design.shape == "auto":
+        # the shape calibrated once per sequence from its silhouettes (the design's first seed); every cell tracks with it
+        from isa_mocap_ros.eval.compare_shape import calibrate_sequence_shape
+
+        cal = []
+        for s in design.sequences:
+            if progress:
+                print(f"bench compare: calibrating the body shape of {s.name}", file=sys.stderr, flush=True)
+            cal.append(calibrate_sequence_shape(cache[s.name], design.calib, design.seeds[0]))
+            shapes[s.name] = str(Path(cache[s.name]).parent / cal[-1]["shape_file"])
+        (out / "calibrations.json").write_text(json.dumps(cal, indent=2) + "\n")
     done: dict[str, dict] = {}
     if jl.exists():
         for ln in jl.read_text().splitlines():
@@ -108,12 +124,12 @@ def run_design(design, out: Path, *, jobs: int = 2, progress: bool = True) -> li
 
         if jobs <= 1:
             for c in todo:
-                finish(_work(c, cache[c["sequence"]]))
+                finish(_work(c, cache[c["sequence"]], shapes[c["sequence"]]))
         else:
             # spawn, not fork: the parent has used OpenMP (synthesis), which forked children cannot
             with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
                                      initializer=_init_worker) as ex:
-                futs = [ex.submit(_work, c, cache[c["sequence"]]) for c in todo]
+                futs = [ex.submit(_work, c, cache[c["sequence"]], shapes[c["sequence"]]) for c in todo]
                 for f in as_completed(futs):
                     finish(f.result())
     bar.close()
@@ -130,13 +146,24 @@ def _seq_summary(seqs) -> str:
         return repr(seqs)
 
 
-def collect(kind: str, out: Path, *, jobs: int = 2, progress: bool = True, algorithms=None):
+def _add_calibrations(summary: dict, out: Path, design) -> None:
+    """The shape calibrations of a ``shape="auto"`` run (``OUT/calibrations.json``) into ``summary``."""
+    summary["shape"] = design.shape
+    f = out / "calibrations.json"
+    if design.shape == "auto" and f.is_file():
+        from isa_mocap_ros.eval.compare_shape import bone_error_summary
+
+        summary["calibrations"] = json.loads(f.read_text())
+        summary["calibration_bone_error"] = bone_error_summary(summary["calibrations"])
+
+
+def collect(kind: str, out: Path, *, jobs: int = 2, progress: bool = True, algorithms=None, shape: str = "auto"):
     """Run (or resume) design ``kind`` in ``out``; return ``(summary, design, seconds)`` (``bench all``)."""
     from dataclasses import replace
 
     from isa_mocap_ros.eval.compare import make_design, summarize
 
-    design = make_design(kind)
+    design = make_design(kind, shape=shape)
     if algorithms:
         design = replace(design, algorithms=tuple(algorithms))
     for n in design.notes:
@@ -147,6 +174,7 @@ def collect(kind: str, out: Path, *, jobs: int = 2, progress: bool = True, algor
     summary = summarize(records)
     summary["design"] = design.to_dict()
     summary["out"] = str(out)
+    _add_calibrations(summary, Path(out), design)
     (Path(out) / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary, design, seconds
 
@@ -167,10 +195,21 @@ def results_markdown(summary: dict, design, *, command: str, seconds: float) -> 
              f"{design.sequences[0].body if design.sequences else '?'}"
              + (f"; first {design.frames} frames" if design.frames else ""),
              f"- wall time: {seconds:.0f} s; records: {summary['records']}; frames that fell back: "
-             f"{summary['fell_back_frames']}", "- protocol: see [docs/evaluation.md](evaluation.md)", ""]
+             f"{summary['fell_back_frames']}", "- protocol: see [docs/evaluation.md](evaluation.md)", shape_line(summary),
+             ""]
     for n in design.notes:
         head.append(f"- note: {n}")
     return "\n".join(head) + "\n" + render_markdown(summary)
+
+
+def shape_line(summary: dict) -> str:
+    if summary.get("shape", "truth") == "truth":
+        return "- body shape: the sequences' ground truth (**a diagnostic**: a user has no true shape)"
+    e = summary.get("calibration_bone_error") or {}
+    per = ", ".join(f"{c['sequence']} {c['bone_error_mm']:.1f}" for c in summary.get("calibrations", []))
+    return ("- body shape: calibrated once per sequence from its silhouettes (`isa-mocap calibrate`'s code, the "
+            f"first seed); mean bone-length error {e.get('bone_error_mm', float('nan')):.1f} mm ({per}; the default "
+            f"shape's {e.get('bone_error_default_shape_mm', float('nan')):.1f} mm)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -180,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"isa-mocap bench compare: error: --jobs: expected an integer >= 1, received {args.jobs}", file=sys.stderr)
         return 2
     kind = "quick" if args.quick else "full" if args.full else "default"
-    design = make_design(kind, body=getattr(args, "body", "mesh"))
+    design = make_design(kind, body=getattr(args, "body", "mesh"), shape=getattr(args, "shape", "auto"))
     from dataclasses import replace
     if getattr(args, "seeds", None):
         design = replace(design, seeds=design.seeds[:args.seeds])
@@ -210,6 +249,7 @@ def run(args: argparse.Namespace) -> int:
     summary = summarize(records)
     summary["design"] = design.to_dict()
     summary["out"] = str(out)
+    _add_calibrations(summary, Path(out), design)
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     command = "isa-mocap bench compare " + " ".join(a for a in sys.argv[3:] if a) if sys.argv[1:3] == ["bench", "compare"] \
         else f"isa-mocap bench compare{' --quick' if args.quick else ' --full' if args.full else ''}"

@@ -10,6 +10,17 @@ cache), the exact reference (``render_mask`` per pose and view, pixel counting) 
 poses and scaled (it is linear in the batch size). Wall-clock time, all numba threads; the fast
 kernel also per CPU second of the process (``fast_evals_per_cpu_s``, every thread counted: the figure
 other processes' load leaves alone, for before/after comparisons on a shared machine).
+
+The batch of 1500 poses in one call is the kernel's best case, not what the tracker's search asks of it:
+its main search (h-isa, compiled per partition, ``optim/compiled_search.py``) calls the kernel once per
+generation of 30 particles, and in every partition but the root's with the *restricted* kernel (only the
+capsules the partition moves are recomputed). So the bench also runs that search — the tracker's
+optimizer, parameters, partitions and search box (``Tracker.search_box``) around the scene's pose, from a
+start 2 cm / 0.1 rad off it, ``--search-evals`` evaluations — and reports its **effective rate**:
+evaluations per second of the whole search (kernels, launches, the optimizer's compiled steps),
+wall clock and per CPU second (``search_*``), and the same with half of each partition's generations on the
+energy's coarse level (two of the four views, ``search_coarse_*``; ``SearchConfig.coarse_fraction``, off in the
+tracker by default).
 """
 from __future__ import annotations
 
@@ -26,12 +37,17 @@ from isa_mocap_ros.tracking.tracker import TrackerConfig
 from isa_mocap_ros.vision import default_rig, render_mask
 
 
+#: The share of the search's generations on the coarse level in the ``search_coarse_*`` figures.
+COARSE_FRACTION = 0.5
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--views", type=int, default=4)
     p.add_argument("--dof", type=int, default=39, choices=(18, 28, 39))
     p.add_argument("--batch", type=int, default=1500, help="poses per call of the fast energy")
     p.add_argument("--exact-batch", type=int, default=100, help="poses timed with the exact reference")
     p.add_argument("--repeats", type=int, default=9, help="timed calls of the fast energy (median)")
+    p.add_argument("--search-evals", type=int, default=1500, help="evaluations of the timed h-isa search")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--quick", action="store_true", help="small sizes (for tests)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -40,6 +56,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.quick:
         args.batch, args.exact_batch, args.repeats = min(args.batch, 64), min(args.exact_batch, 4), 2
+        args.search_evals = min(args.search_evals, 360)
     model = make_model(args.dof)
     rig = default_rig(n_views=args.views)
     x0 = model.rest_pose()
@@ -70,6 +87,9 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     exact(X[:nb])
     t_exact = time.perf_counter() - t0
+    search = search_rate(model, rig, fast, x0, args.search_evals, args.repeats, args.seed)
+    search.update(search_rate(model, rig, fast, x0, args.search_evals, args.repeats, args.seed, COARSE_FRACTION,
+                              "search_coarse"))
     fast_rate = args.batch / t_fast
     exact_rate = nb / t_exact
     out = {"views": args.views, "dof": args.dof, "batch": args.batch, "fast_evals_per_s": round(fast_rate, 1),
@@ -77,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
            # per CPU second of the process (every thread): what other processes' load does not change
            "fast_evals_per_cpu_s": round(args.batch / float(np.median(cpu)), 1) if np.median(cpu) > 0 else None,
            "ratio": round(fast_rate / exact_rate, 1),
-           "exact_batch": nb, "n_model_points": tc.objective.n_model_points, "n_template": fast.n_template,
+           **search, "search_ratio": round(search["search_evals_per_s"] / exact_rate, 1), "exact_batch": nb, "n_model_points": tc.objective.n_model_points, "n_template": fast.n_template,
            "n_mask_points": fast.n_mask_points, "downsample": fast.downsample, "threads": numba.get_num_threads()}
     if args.json:
         print(json.dumps(out))
@@ -90,4 +110,56 @@ def run(args: argparse.Namespace) -> int:
               f"fastest call {args.batch / min(times):.0f} evals/s)")
         print(f"  exact : {exact_rate:12.0f} evals/s  (measured on {nb} poses)")
         print(f"  ratio : {fast_rate / exact_rate:12.0f}x")
+        print(f"  search: {search['search_evals_per_s']:12.0f} evals/s  (the tracker's h-isa, "
+              f"{search['search_evals']} evaluations in generations of {search['search_generation']}, restricted "
+              f"kernel in {search['search_restricted_share']:.0%} of them; {search['search_evals_per_cpu_s']:.0f} per "
+              f"CPU second; median of {args.repeats}; {search['search_evals_per_s'] / exact_rate:.0f}x the exact)")
+        print(f"  search, {COARSE_FRACTION:.0%} of its generations on two views: {search['search_coarse_evals_per_s']:.0f} "
+              f"evals/s ({search['search_coarse_evals_per_cpu_s']:.0f} per CPU second)")
     return 0
+
+
+def search_rate(model, rig, energy, x_true, evals: int, repeats: int, seed: int, coarse_fraction: float = 0.0,
+                key: str = "search") -> dict:
+    """The effective rate of the tracker's main search on ``energy`` (module docstring): the median over
+    ``repeats`` runs (the same start and draws each time) after one warm-up run; ``coarse_fraction`` of each
+    partition's generations on the energy's coarse level (two views, ``SearchConfig.coarse_fraction``)."""
+    from isa_mocap_ros.optim import compiled_search, make_optimizer
+    from isa_mocap_ros.tracking.tracker import Tracker
+
+    tr = Tracker(model, rig, TrackerConfig(), energy=energy)
+    rng = np.random.default_rng([seed, 1])
+    start = x_true.copy()
+    start[:3] += rng.normal(0.0, 0.02, 3)
+    start[3:] += rng.normal(0.0, 0.1, model.dof - 3)
+    lo, hi, spread = tr.search_box(start)
+    start = np.clip(start, lo, hi)
+    params = tr.config.search.params()
+    params.update(partitions=tr.partitions, whole_generations=True)
+
+    def once():
+        opt = make_optimizer(tr.config.search.optimizer, start, spread, rng=np.random.default_rng([seed, 2]),
+                             bounds=(lo, hi), rotation_blocks=model.rotation_blocks, **params)
+        run = compiled_search.search(opt, energy, evals, paused=True, coarse_fraction=coarse_fraction)
+        if run is None:
+            raise RuntimeError(f"bench energy: the tracker's optimizer {tr.config.search.optimizer!r} does not run "
+                               "compiled on this energy")
+        return opt, run, run.advance().result()
+
+    opt, run, res = once()
+    wall, cpu = [], []
+    for _ in range(max(1, repeats)):
+        t0, c0 = time.perf_counter(), time.process_time()
+        once()
+        cpu.append(time.process_time() - c0)
+        wall.append(time.perf_counter() - t0)
+    n = res.n_evals
+    # the partitions without a root coordinate run the restricted kernel (RestrictedSilhouetteEnergy.full)
+    restricted = sum(s for q, s in zip(run.parts, run.shares) if not np.any(np.asarray(q) < 6))
+    c = float(np.median(cpu))
+    out = {f"{key}_evals_per_s": round(n / float(np.median(wall)), 1),
+           f"{key}_evals_per_cpu_s": round(n / c, 1) if c > 0 else None}
+    if coarse_fraction == 0.0:
+        out.update({"search_evals": int(n), "search_generation": int(opt.params.get("n_particles", 0)),
+                    "search_restricted_share": round(restricted / n, 3)})
+    return out

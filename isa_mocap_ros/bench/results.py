@@ -272,6 +272,9 @@ def md_compare(d: dict) -> str:
                         f"{s['width']}×{s['height']})" for s in ds["sequences"])
             + f"; {d['records']} runs in {d.get('seconds', 0):.0f} s; frames that fell back: {d['fell_back_frames']}. "
             "Protocol: [docs/evaluation.md](evaluation.md).", ""]
+    from isa_mocap_ros.bench.compare import shape_line
+
+    head += [shape_line(d), ""]
     for n in ds.get("notes", []):
         head += [f"- note: {n}", ""]
     return "\n".join(head) + "\n" + render_markdown(d)

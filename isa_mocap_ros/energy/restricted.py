@@ -96,13 +96,26 @@ class RestrictedSilhouetteEnergy:
         body, views, tmpl, fg = energy.kernel_args()
         stage = _k.Stage(*_k.restrict_prepare(x, body, views, tmpl, fg, moving))
         # the kernel's arguments between X and (n_chunks, out)
+        self._moving = moving
         self._args = (_k.Restriction(x, self._fixed, self._fk_joints, self._cam_joints, self.moving_capsules,
                                      self._mov_ci, self._moving_ci), body, views, tmpl, fg, stage)
+        self._coarse = None
 
     def kernel_args(self) -> tuple:
         """The arguments of the restricted kernel between the poses and ``(n_chunks, out)`` (for the
         tracker's compiled search)."""
         return self._args
+
+    def coarse_kernel_args(self) -> tuple:
+        """:meth:`kernel_args` on the parent's coarse views (:meth:`SilhouetteEnergy.coarse_kernel_args`)."""
+        if self._coarse is None:
+            body, views, tmpl, fg = self.energy.coarse_kernel_args()
+            if views is self._args[2]:
+                self._coarse = self._args
+            else:
+                stage = _k.Stage(*_k.restrict_prepare(self.x_base, body, views, tmpl, fg, self._moving))
+                self._coarse = (self._args[0], body, views, tmpl, fg, stage)
+        return self._coarse
 
     def violation(self, X: np.ndarray, rows: np.ndarray) -> EnergyError:
         """The error for rows ``rows`` of ``X`` that move coordinates outside :attr:`coords`."""
@@ -143,7 +156,7 @@ class RestrictedSilhouetteEnergy:
 
     def _fast(self, X: np.ndarray) -> np.ndarray:
         out = np.empty(X.shape[0])
-        _k.silhouette_restricted(X, *self._args, max(1, min(X.shape[0], 8 * self.energy.threads)), out)
+        _k.silhouette_restricted(X, *self._args, max(1, min(X.shape[0], self.energy.threads)), out)
         return out
 
     def __repr__(self) -> str:

@@ -34,6 +34,7 @@ from ..body import BodyModel, capsule_endpoints
 from ..vision import Camera
 from ..vision.camera import PixelAreas
 from . import silhouette_kernel as _k
+from .coarse import coarse_views, view_subset
 from ._checks import EnergyError, _check_cameras, _check_model, _check_poses
 from .restricted import RestrictedSilhouetteEnergy
 from .silhouette_exact import _foreground, _view_terms, core_weights, exact_view_energy, mask_problem
@@ -511,9 +512,27 @@ class SilhouetteEnergy:
         fr = self._frame
         return self._body, fr["views"], self._template_args, fr["fg"]
 
+    def coarse_kernel_args(self) -> tuple:
+        """:meth:`kernel_args` of the coarse level: the two usable views whose optical axes are closest to
+        perpendicular (:func:`.coarse.coarse_views`) with their foreground samples; the kernel then returns their
+        weighted mean of Eq. 4, the same quantity from fewer views at about half the cost (all the views' bundles
+        with fewer than three usable). Built once per frame. For the compiled search's early generations
+        (``SearchConfig.coarse_fraction``, docs/energy.md)."""
+        fr = self._frame
+        if "coarse" not in fr:
+            k = self.coarse_views()
+            fr["coarse"] = self._kernel_args() if len(k) == len(self._used) else view_subset(self._kernel_args(), k)
+        return fr["coarse"]
+
+    def coarse_views(self) -> np.ndarray:
+        """Positions (among the used views) of :meth:`coarse_kernel_args`' views."""
+        return coarse_views([self.cameras[v] for v in self._used], self._frame["view_w"])
+
     def _fast(self, X: np.ndarray) -> np.ndarray:
         out = np.empty(X.shape[0])
-        n_chunks = max(1, min(X.shape[0], 8 * self._threads))
+        # one work unit per thread: numba splits a parallel loop statically (equal blocks per thread), so more
+        # chunks only repeat each chunk's scratch set-up (docs/energy.md)
+        n_chunks = max(1, min(X.shape[0], self._threads))
         # a few poses (a stage's final pose, the contour stage's pair) on this thread: a parallel launch
         # costs more than they do (the same bits either way)
         kernel = _k.silhouette_batch_serial if X.shape[0] < _k.SERIAL_BELOW else _k.silhouette_batch

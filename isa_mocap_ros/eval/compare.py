@@ -15,7 +15,9 @@ Protocol choices (documented in ``docs/evaluation.md``):
   segmentation) and starts from the ground truth of the first frame, projected onto the tracking
   model by DOF name ("manually initialized to fit the subject in the first frame", §5.1); the
   first frame is not scored;
-* the tracking model has the subject's body shape (a calibrated subject, as the papers');
+* the tracking model's body shape is calibrated from the sequence's silhouettes (``shape="auto"``, the default:
+  :mod:`.compare_shape`, once per sequence); ``shape="truth"`` (the subject's own shape, as the papers'
+  calibrated subjects) is a diagnostic;
 * every algorithm gets exactly ``budget`` evaluations per frame (the optimizer driver's budget),
   the same energy, search box (0.5 rad joints, the tracker's defaults) and prediction;
 * error = EA-vs-PF Eq. 20 over the markers both models share, averaged over the frames.
@@ -36,14 +38,17 @@ from isa_mocap_ros.resources import cmu_walk_bvh
 
 from .stats import StatsError, ranking_table
 
-__all__ = ["ALGORITHMS", "PEER_ALGORITHMS", "HIERARCHICAL_PAIRS", "SequenceSpec", "Design", "make_design",
-           "cell_key", "prepare_sequence", "run_cell", "summarize", "label", "findings", "peer_targets",
+__all__ = ["ALGORITHMS", "PEER_ALGORITHMS", "HIERARCHICAL_PAIRS", "SHAPES", "QUICK_CALIB", "SequenceSpec", "Design",
+           "make_design", "cell_key", "prepare_sequence", "run_cell", "summarize", "label", "findings", "peer_targets",
            "plot_summary"]
 
 ALGORITHMS = ("isa", "h-isa", "apf", "psapf", "cmaes", "h-cmaes", "de", "h-de", "pso", "h-pso")
 PEER_ALGORITHMS = ("pycma", "scipy-de")
 #: (holistic, hierarchical) pairs of the paper's §3.3 (PSAPF is the hierarchical APF)
 HIERARCHICAL_PAIRS = (("isa", "h-isa"), ("apf", "psapf"), ("cmaes", "h-cmaes"), ("de", "h-de"), ("pso", "h-pso"))
+#: the tracking model's shape: calibrated from the images (default, .compare_shape) or the truth (diagnostic)
+SHAPES = ("auto", "truth")
+QUICK_CALIB = (("window_frames", 4), ("n_frames", 2), ("rounds", 2), ("shape_evals", 120))  # the quick design's
 #: the CMU walk in the shared data beside the checkout (or $ISA_MOCAP_SHARED); may be absent
 CMU_WALK = cmu_walk_bvh()
 
@@ -90,6 +95,8 @@ class Design:
     sequences: tuple
     frames: int | None = None
     notes: tuple = field(default_factory=tuple)
+    shape: str = "auto"     # the model's shape: auto (calibrated from the images, .compare_shape) or truth
+    calib: tuple = ()       # with auto: ShapeCalibrationConfig settings beyond the defaults, (name, value) pairs
 
     def cells(self) -> list[dict]:
         """Every run, ordered so that partial results cover all algorithms early (seed-major)."""
@@ -100,7 +107,7 @@ class Design:
                     for dof in self.models:
                         for alg in self.algorithms:
                             out.append({"algorithm": alg, "model": int(dof), "budget": int(budget), "seed": int(seed),
-                                        "sequence": seq.name, "frames": self.frames})
+                                        "sequence": seq.name, "frames": self.frames, "shape": self.shape})
         return out
 
     def to_dict(self) -> dict:
@@ -109,7 +116,8 @@ class Design:
         return d
 
 
-def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK, body: str = "mesh") -> Design:
+def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK, body: str = "mesh",
+                shape: str = "auto") -> Design:
     """The three designs of ``isa-mocap bench compare``.
 
     * ``"quick"``: 2 algorithms (isa, pycma), 39 DOF, 200 evaluations, 1 seed, the generated walk for
@@ -120,15 +128,19 @@ def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK
       session 12: too short, see docs/evaluation.md).
     * ``"full"``: as default with 30 seeds and 2 s at 30 fps (60 frames) in 4 views of 320 × 240.
 
-    ``body``: what every sequence shows (``mesh`` default, ``capsules`` the control).
+    ``body``: what every sequence shows (``mesh`` default, ``capsules`` the control). ``shape``: the tracking
+    model's (``auto`` default: calibrated from each sequence's images; ``truth``: a diagnostic).
     """
     if body not in ("mesh", "capsules"):
         raise ValueError(f"body: expected 'mesh' or 'capsules', received {body!r}")
+    if shape not in SHAPES:
+        raise ValueError(f"shape: expected one of {', '.join(SHAPES)}, received {shape!r}")
     notes = []
     gen = ("walk", "jog", "wave", "box")
     if kind == "quick":
         seqs = (SequenceSpec("walk", "walk", duration_s=0.14, fps=30.0, width=96, height=72, views=2, body=body),)
-        return Design("quick", ("isa", "pycma"), (39,), (200,), (0,), seqs, None, ())
+        return Design("quick", ("isa", "pycma"), (39,), (200,), (0,), seqs, None, (), shape,
+                      QUICK_CALIB if shape == "auto" else ())
     if kind == "default":
         dur, fps, w, h, seeds = 31 / 30, 30.0, 128, 96, (0, 1, 2)
     elif kind == "full":
@@ -143,7 +155,7 @@ def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK
         notes.append(f"CMU walk skipped: {cmu_path} not found")
     seqs += [SequenceSpec(g, g, duration_s=dur, fps=fps, width=w, height=h, body=body) for g in gen]
     return Design(kind, ALGORITHMS + PEER_ALGORITHMS, (28, 39), (500, 1500, 3000), seeds, tuple(seqs), None,
-                  tuple(notes))
+                  tuple(notes), shape)
 
 
 def cell_key(cell: dict) -> str:
@@ -222,8 +234,9 @@ def _project(x_from: np.ndarray, model_from, model_to) -> np.ndarray:
     return np.clip(x, model_to.lower, model_to.upper)
 
 
-def run_cell(cell: dict, cache_path: Path | str) -> dict:
-    """Track one cell's sequence (cached at ``cache_path``) and return its record.
+def run_cell(cell: dict, cache_path: Path | str, shape_file: Path | str | None = None) -> dict:
+    """Track one cell's sequence (cached at ``cache_path``) with the body shape of ``shape_file`` (calibrated,
+    :func:`.compare_shape.calibrate_sequence_shape`; default the sequence's true shape); return its record.
 
     The record holds the cell, ``mpjpe_mm`` (Eq. 20 over the scored frames), ``knee_rmse_deg``,
     ``max_frame_error_mm``, ``frames`` (scored), ``fell_back``, ``evals_per_frame`` (measured mean),
@@ -241,6 +254,10 @@ def run_cell(cell: dict, cache_path: Path | str) -> dict:
     n = len(truth) if not cell.get("frames") else min(len(truth), int(cell["frames"]))
     if n < 2:
         raise ValueError(f"cell {cell_key(cell)}: expected >= 2 frames, received {n}")
+    if shape_file is not None:
+        from isa_mocap_ros.body import load_shape
+
+        shape = load_shape(shape_file)
     model = make_model(int(cell["model"]), shape=shape)
     cfg = TrackerConfig.from_flat(optimizer=cell["algorithm"], evals=int(cell["budget"]), seed=int(cell["seed"]))
     tracker = Tracker(model, rig.cameras, cfg)

@@ -256,11 +256,13 @@ def _kernel_overload(X, kargs, n_chunks, out):
 
 @numba.njit(cache=True)
 def _partition(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c, rho, population, block,
-               best, best_x, stats, g0, n_evals0, threads8, kargs, kp):  # pragma: no cover - compiled
+               best, best_x, stats, g0, n_evals0, threads, kargs, kp, kargs_c, n_coarse):  # pragma: no cover - compiled
     """One partition of the hierarchy, evaluated with the full kernel or the restricted one (``kargs``:
     its arguments between the poses and ``n_chunks``, :func:`_kernel`), plus ``kp.scale`` times the keypoint
     term ``kp`` (:class:`~isa_mocap_ros.energy.keypoint_kernel.KeypointTerm`; scale 0: none) as the tracker's
-    objective adds it (``E + w * keypoints(X)``). Returns (estimate, generations,
+    objective adds it (``E + w * keypoints(X)``). The first ``n_coarse`` generations are evaluated with ``kargs_c``
+    instead (the coarse level, :meth:`~isa_mocap_ros.energy.silhouette.SilhouetteEnergy.coarse_kernel_args`; the
+    same kernel kind) and leave the best particle alone. Returns (estimate, generations,
     evaluations, non-finite, last full particles); -1 generations if the kernel flagged a row with a
     negative energy (the restricted kernel's mark of a row off its base pose: never, by construction)."""
     Xs = _start(x0, spread, lo, hi, n, rng)
@@ -276,7 +278,11 @@ def _partition(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c,
         E = np.empty(n)
         out = np.empty(kk)
         Xk = X if kk == n else X[:kk].copy()
-        _kernel(Xk, kargs, max(1, min(kk, threads8)), out)
+        coarse = g - g0 < n_coarse
+        if coarse:
+            _kernel(Xk, kargs_c, max(1, min(kk, threads)), out)
+        else:
+            _kernel(Xk, kargs, max(1, min(kk, threads)), out)   # a chunk per thread (energy._fast)
         for i in range(kk):
             if out[i] < 0.0:
                 return x, -1, used, bad, X
@@ -288,7 +294,10 @@ def _partition(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c,
                 out[i] = out[i] + kp.scale * ek[i]
         E[:kk] = out
         used += kk
-        bad += _record(E, kk, X, best, best_x, stats, g, n_evals0 + used)
+        if coarse:      # a coarse energy is not compared with the full ones
+            bad += _record(E, kk, X, np.full(1, np.inf), X[0].copy(), stats, g, n_evals0 + used)
+        else:
+            bad += _record(E, kk, X, best, best_x, stats, g, n_evals0 + used)
         Xs, x, beta, _, _ = _tell(np.asfortranarray(Xs), E, rng, beta, target, kernel, c, rho, lo, hi, population,
                                   block)
         g += 1
@@ -301,7 +310,7 @@ class HisaRun:
     partition), :meth:`result` is ``opt.result()`` once every partition ran. The same draws from
     ``opt.rng`` as the protocol. Counts the evaluations in ``energy.n_evals`` as the protocol does."""
 
-    def __init__(self, opt, energy, max_evals: int, keypoints=None) -> None:
+    def __init__(self, opt, energy, max_evals: int, keypoints=None, coarse_fraction: float = 0.0) -> None:
         from isa_mocap_ros.optim import split_budget
         from isa_mocap_ros.optim._base import OptimError
 
@@ -317,6 +326,9 @@ class HisaRun:
                              f"c={self.c}, rho={self.rho}")
         self.c = covariance_constant(self.c, p.get("c_scale", C_SCALES[0]))     # Isa.c_cov
         self.opt, self.energy, self.max_evals = opt, energy, int(max_evals)
+        if not 0.0 <= coarse_fraction < 1.0:
+            raise OptimError(f"coarse_fraction: expected a fraction in [0, 1), received {coarse_fraction!r}")
+        self.coarse_fraction = float(coarse_fraction)
         self.keypoint_term = keypoints[0] if keypoints is not None else None
         self.kp = (self.keypoint_term.kernel_term(keypoints[1]) if keypoints is not None
                    else _kp.no_keypoints(energy.kin_tables))
@@ -350,7 +362,6 @@ class HisaRun:
     def advance(self, to: int | None = None) -> "HisaRun":
         """Run the partitions up to (not including) ``to`` (default: all)."""
         energy, opt = self.energy, self.opt
-        threads8 = 8 * energy.threads
         stop = len(self.parts) if to is None else min(int(to), len(self.parts))
         while self.k < stop:
             k = self.k
@@ -360,9 +371,12 @@ class HisaRun:
             rest = energy.restrict(self.xbase.copy(), idx.copy())
             args = (self.xbase, idx, x0, np.ascontiguousarray(opt.spread[idx]), lo, hi, self.shares[k], self.n,
                     opt.rng, self.target, self.kernel, self.c, self.rho, self.population, self.blocks[k], self.best,
-                    self.best_x, self.stats, self.g, self.n_evals, threads8)
-            x, gens, used, nb, self.X = _partition(*args, energy.kernel_args() if rest.full else rest.kernel_args(),
-                                                   self.kp)
+                    self.best_x, self.stats, self.g, self.n_evals, energy.threads)
+            kargs = energy.kernel_args() if rest.full else rest.kernel_args()
+            n_coarse = int(self.coarse_fraction * (-(-self.shares[k] // self.n)))
+            kargs_c = kargs if n_coarse == 0 else (energy.coarse_kernel_args() if rest.full
+                                                   else rest.coarse_kernel_args())
+            x, gens, used, nb, self.X = _partition(*args, kargs, self.kp, kargs_c, n_coarse)
             if gens < 0:
                 raise rest.violation(self.X, np.flatnonzero(np.any(self.X != rest.x_base, axis=1)))
             energy.n_evals += used
@@ -386,7 +400,8 @@ class HisaRun:
                       n_nonfinite=self.bad)
 
 
-def search(opt, energy, max_evals: int, *, extra_terms: bool = False, keypoints=None, paused: bool = False):
+def search(opt, energy, max_evals: int, *, extra_terms: bool = False, keypoints=None, paused: bool = False,
+           coarse_fraction: float = 0.0):
     """The entry point: ``minimize(opt, energy, max_evals=max_evals)`` compiled, or None when this path does
     not cover ``opt`` and ``energy`` (then run it through the optimizer protocol, :func:`~.minimize`).
 
@@ -395,7 +410,9 @@ def search(opt, energy, max_evals: int, *, extra_terms: bool = False, keypoints=
     energy is not the whole objective, a prior is added in Python, so not covered) runs
     compiled per partition, with ``keypoints = (KeypointEnergy, weight)`` adding ``weight`` times that term
     (compiled too, :mod:`~isa_mocap_ros.energy.keypoint_kernel`); with ``paused`` it is returned as a :class:`HisaRun` stopped before its first
-    partition (``advance()``, ``result()``: the first frame's pruned runs). A flat
+    partition (``advance()``, ``result()``: the first frame's pruned runs); ``coarse_fraction`` of each partition's
+    generations (rounded down) are evaluated on the energy's coarse level first (two views,
+    :meth:`~isa_mocap_ros.energy.silhouette.SilhouetteEnergy.coarse_kernel_args`; 0: none, the protocol's numbers). A flat
     :class:`~isa_mocap_ros.optim.Isa` (:func:`supported_flat`) on any batch energy runs with compiled
     generations (:func:`run_isa`). The numbers are the protocol's, bit for bit."""
     from isa_mocap_ros.optim import Hierarchical
@@ -403,7 +420,7 @@ def search(opt, energy, max_evals: int, *, extra_terms: bool = False, keypoints=
     if type(opt) is Hierarchical:
         if not supported(opt, energy, extra_terms):
             return None
-        run = HisaRun(opt, energy, max_evals, keypoints)
+        run = HisaRun(opt, energy, max_evals, keypoints, coarse_fraction)
         return run if paused else run.advance().result()
     if paused or extra_terms or keypoints is not None or not supported_flat(opt):
         return None

@@ -1,5 +1,5 @@
 """The frame's masks: checks (each unusable view skipped with a note), the mask gate and the visual-hull
-filter around the prediction, and handing the usable masks (with view weights) to the energy.
+filter around the prediction (before the first estimate: the largest blob of the visual hull), and handing the usable masks (with view weights) to the energy.
 """
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import numpy as np
 from . import frame_prediction
 from .gate import gate_masks, predicted_silhouettes
 from .hull import hull_filter, pose_box
+from .init_hull import person_masks
 from .config import GATE_NOTE_SHARE, frame_rng
 
 
@@ -97,6 +98,15 @@ def filter_masks(tr, ctx) -> None:
     cfg = tr.config
     usable = ctx.raw_masks
     ctx.masks = tr.track.masks_now = usable
+    if cfg.masks.hull_filter and cfg.masks.first_frame_hull and tr.track.last is None \
+            and sum(m is not None for m in usable) >= 2:
+        # no estimate yet: the person is the largest blob of the visual hull (.init_hull)
+        usable, note = person_masks(usable, tr.cameras)
+        if note:
+            ctx.notes.append(note)
+        usable = [None if m is not None and not np.any(m) else m for m in usable]     # a view left empty: skipped
+        ctx.masks = tr.track.masks_now = usable
+        return
     if not (cfg.masks.gate_margin_px > 0 or cfg.masks.hull_filter) or tr.track.last is None \
             or not any(m is not None for m in usable):
         return

@@ -315,7 +315,8 @@ class Tracker:
                                                                              notes, stages)
         share, torso, limbs, contour = stage_shares
         res = compiled_search.search(opt, self.energy, budget, extra_terms=ctx.objective.extra_terms,
-                                     keypoints=ctx.objective.weighted_keypoints) \
+                                     keypoints=ctx.objective.weighted_keypoints,
+                                     coarse_fraction=self.config.search.coarse_fraction) \
             if self.use_compiled_search else None
         if res is None:                   # not covered by the compiled path (the same numbers through the protocol)
             res = minimize(opt, ctx.objective, max_evals=budget)

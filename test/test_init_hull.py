@@ -1,0 +1,70 @@
+"""The first frame's mask filter (tracking/init_hull.py): ISA's occluding rectangles, drawn into each view
+independently, go; the person, seen by every view, stays; the tracker runs it before its first estimate only."""
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from isa_mocap_ros.tracking import Tracker, TrackerConfig
+from isa_mocap_ros.tracking.init_hull import capture_volume, person_masks
+from isa_mocap_ros.vision import occluders
+
+from walk_scene import walk_scene
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return walk_scene(width=320, height=240, frames=2, duration_s=0.2, seed=0)
+
+
+def _occluded(masks, seed):
+    """Each view's mask with 35 rectangles (ISA §13.4.2: edges 1-40 px, random grey; grey 0 is background)."""
+    rng = np.random.default_rng(seed)
+    return [np.where(occluders(m, 35, rng=rng) > 0, 255, 0).astype(np.uint8) for m in masks]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_occluders_away_from_the_person_go_and_the_person_stays(scene, seed):
+    model, cams, poses, masks = scene
+    person = [m > 0 for m in masks[0]]
+    noisy = _occluded(masks[0], seed)
+    out, note = person_masks(noisy, cams)
+    assert note and note.startswith("first-frame hull: the person's blob")
+    for v, (o, p, n) in enumerate(zip(out, person, noisy)):
+        assert o.dtype == np.uint8 and o.shape == p.shape
+        assert not np.any((o > 0) & ~(n > 0)), f"view {v}: foreground was added"
+        kept = (o > 0)[p].mean()
+        assert kept > 0.99, f"view {v}: only {kept:.3f} of the person kept"
+        far = (n > 0) & ~ndimage.binary_dilation(p, iterations=25)
+        if far.sum() > 200:
+            removed = 1.0 - (o > 0)[far].mean()
+            assert removed > 0.85, f"view {v}: only {removed:.2f} of the occluders beyond 25 px removed"
+
+
+def test_clean_masks_come_back_unchanged_and_too_few_views_are_left_alone(scene):
+    model, cams, poses, masks = scene
+    out, note = person_masks(masks[1], cams)
+    for o, m in zip(out, masks[1]):
+        np.testing.assert_array_equal(o, m)
+    assert "removed: none" in note
+    one = [masks[1][0], None, None, None]
+    out, note = person_masks(one, cams)
+    assert note is None and out[0] is one[0] and out[1:] == [None, None, None]
+
+
+def test_the_capture_volume_holds_the_rig_s_middle(scene):
+    _, cams, poses, _ = scene
+    lo, hi = capture_volume(cams)
+    assert np.all(lo[:2] < poses[0][:2]) and np.all(poses[0][:2] < hi[:2])
+    assert lo[2] < 0 < 2.0 < hi[2]
+
+
+def test_the_tracker_filters_the_first_frame_only_and_only_when_asked(scene):
+    model, cams, poses, masks = scene
+    noisy = [_occluded(masks[k], 10 + k) for k in range(2)]
+    on = Tracker(model, cams, TrackerConfig.from_flat(evals=300, seed=0, first_frame_hull=True, init_confirm_frames=0))
+    r0 = on.step(noisy[0], 0)
+    assert any(n.startswith("first-frame hull") for n in r0.notes)
+    r1 = on.step(noisy[1], 1)
+    assert not any(n.startswith("first-frame hull") for n in r1.notes)
+    off = Tracker(model, cams, TrackerConfig.from_flat(evals=300, seed=0, first_frame_hull=False, init_confirm_frames=0))
+    assert not any(n.startswith("first-frame hull") for n in off.step(noisy[0], 0).notes)
