@@ -49,6 +49,17 @@ def test_the_coarse_level_is_the_energy_of_its_two_views(scene):
     K.silhouette_restricted(Xr, *rest.coarse_kernel_args(), 2, out)
     np.testing.assert_array_equal(out, ref(Xr))
     assert en.coarse_kernel_args() is en.coarse_kernel_args()      # built once per frame
+    # the second pair: the other two views (the search alternates the pairs)
+    k2 = en.coarse_views(second=True)
+    assert sorted(k2.tolist() + k.tolist()) == [0, 1, 2, 3]
+    w2 = np.zeros(4)
+    w2[k2] = 1.0
+    ref2 = SilhouetteEnergy(model, rig, None, n_model_points=320, n_mask_points=192, rng=np.random.default_rng(3))
+    ref2.set_masks(masks, weights=w2)
+    K.silhouette_batch(X, *en.coarse_kernel_args(second=True), 2, out)
+    np.testing.assert_array_equal(out, ref2(X))
+    K.silhouette_restricted(Xr, *rest.coarse_kernel_args(second=True), 2, out)
+    np.testing.assert_array_equal(out, ref2(Xr))
 
 
 def test_the_search_evaluates_its_early_generations_coarse(scene):

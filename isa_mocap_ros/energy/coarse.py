@@ -9,18 +9,23 @@ from . import silhouette_kernel as _k
 __all__ = ["coarse_views", "view_subset"]
 
 
-def coarse_views(cameras, view_w: np.ndarray) -> np.ndarray:
+def coarse_views(cameras, view_w: np.ndarray, second: bool = False) -> np.ndarray:
     """Positions of the two views among ``cameras`` (the used ones, with weights ``view_w``) whose optical axes
     are closest to perpendicular (two views see depth best that way; the larger weight product among equals),
-    or all positions with fewer than three views or fewer than two of positive weight."""
+    or all positions with fewer than three views or fewer than two of positive weight. ``second``: the pair
+    chosen the same way among the pairs with at least one view outside the first pair (the other two views
+    of a ring of four), so that alternating the two pairs uses every view."""
     n = len(cameras)
     if n < 3:
         return np.arange(n)
+    first = coarse_views(cameras, view_w) if second else None
     axes = [np.asarray(c.R)[2] for c in cameras]      # the optical axis in the world: row 3 of world -> camera
     best, pick = None, None
     for a in range(n):
         for b in range(a + 1, n):
             if view_w[a] <= 0 or view_w[b] <= 0:
+                continue
+            if first is not None and (a in first) + (b in first) > (0 if n - len(first) >= 2 else 1):
                 continue
             key = (round(abs(float(np.dot(axes[a], axes[b]))), 6), -float(view_w[a] * view_w[b]))
             if best is None or key < best:

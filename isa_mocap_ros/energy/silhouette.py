@@ -512,21 +512,22 @@ class SilhouetteEnergy:
         fr = self._frame
         return self._body, fr["views"], self._template_args, fr["fg"]
 
-    def coarse_kernel_args(self) -> tuple:
+    def coarse_kernel_args(self, second: bool = False) -> tuple:
         """:meth:`kernel_args` of the coarse level: the two usable views whose optical axes are closest to
-        perpendicular (:func:`.coarse.coarse_views`) with their foreground samples; the kernel then returns their
-        weighted mean of Eq. 4, the same quantity from fewer views at about half the cost (all the views' bundles
-        with fewer than three usable). Built once per frame. For the compiled search's early generations
-        (``SearchConfig.coarse_fraction``, docs/energy.md)."""
+        perpendicular (:func:`.coarse.coarse_views`; ``second``: the other pair, among the remaining views) with
+        their foreground samples; the kernel then returns their weighted mean of Eq. 4, the same quantity from
+        fewer views at about half the cost (all the views' bundles with fewer than three usable). Built once per
+        frame. For the compiled search's early generations (``SearchConfig.coarse_fraction``, docs/energy.md)."""
         fr = self._frame
-        if "coarse" not in fr:
-            k = self.coarse_views()
-            fr["coarse"] = self._kernel_args() if len(k) == len(self._used) else view_subset(self._kernel_args(), k)
-        return fr["coarse"]
+        key = "coarse2" if second else "coarse"
+        if key not in fr:
+            k = self.coarse_views(second)
+            fr[key] = self._kernel_args() if len(k) == len(self._used) else view_subset(self._kernel_args(), k)
+        return fr[key]
 
-    def coarse_views(self) -> np.ndarray:
+    def coarse_views(self, second: bool = False) -> np.ndarray:
         """Positions (among the used views) of :meth:`coarse_kernel_args`' views."""
-        return coarse_views([self.cameras[v] for v in self._used], self._frame["view_w"])
+        return coarse_views([self.cameras[v] for v in self._used], self._frame["view_w"], second)
 
     def _fast(self, X: np.ndarray) -> np.ndarray:
         out = np.empty(X.shape[0])

@@ -256,13 +256,14 @@ def _kernel_overload(X, kargs, n_chunks, out):
 
 @numba.njit(cache=True)
 def _partition(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c, rho, population, block,
-               best, best_x, stats, g0, n_evals0, threads, kargs, kp, kargs_c, n_coarse):  # pragma: no cover - compiled
+               best, best_x, stats, g0, n_evals0, threads, kargs, kp, kargs_c, kargs_c2, n_coarse):  # pragma: no cover
     """One partition of the hierarchy, evaluated with the full kernel or the restricted one (``kargs``:
     its arguments between the poses and ``n_chunks``, :func:`_kernel`), plus ``kp.scale`` times the keypoint
     term ``kp`` (:class:`~isa_mocap_ros.energy.keypoint_kernel.KeypointTerm`; scale 0: none) as the tracker's
     objective adds it (``E + w * keypoints(X)``). The first ``n_coarse`` generations are evaluated with ``kargs_c``
-    instead (the coarse level, :meth:`~isa_mocap_ros.energy.silhouette.SilhouetteEnergy.coarse_kernel_args`; the
-    same kernel kind) and leave the best particle alone. Returns (estimate, generations,
+    and ``kargs_c2`` in turn instead (the coarse level's two pairs of views,
+    :meth:`~isa_mocap_ros.energy.silhouette.SilhouetteEnergy.coarse_kernel_args`; the same kernel kind) and leave the
+    best particle alone. Returns (estimate, generations,
     evaluations, non-finite, last full particles); -1 generations if the kernel flagged a row with a
     negative energy (the restricted kernel's mark of a row off its base pose: never, by construction)."""
     Xs = _start(x0, spread, lo, hi, n, rng)
@@ -279,7 +280,9 @@ def _partition(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c,
         out = np.empty(kk)
         Xk = X if kk == n else X[:kk].copy()
         coarse = g - g0 < n_coarse
-        if coarse:
+        if coarse and (g - g0) % 2 == 1:
+            _kernel(Xk, kargs_c2, max(1, min(kk, threads)), out)
+        elif coarse:
             _kernel(Xk, kargs_c, max(1, min(kk, threads)), out)
         else:
             _kernel(Xk, kargs, max(1, min(kk, threads)), out)   # a chunk per thread (energy._fast)
@@ -374,9 +377,9 @@ class HisaRun:
                     self.best_x, self.stats, self.g, self.n_evals, energy.threads)
             kargs = energy.kernel_args() if rest.full else rest.kernel_args()
             n_coarse = int(self.coarse_fraction * (-(-self.shares[k] // self.n)))
-            kargs_c = kargs if n_coarse == 0 else (energy.coarse_kernel_args() if rest.full
-                                                   else rest.coarse_kernel_args())
-            x, gens, used, nb, self.X = _partition(*args, kargs, self.kp, kargs_c, n_coarse)
+            kc = [kargs if n_coarse <= i else (energy.coarse_kernel_args(i == 1) if rest.full
+                                               else rest.coarse_kernel_args(i == 1)) for i in (0, 1)]
+            x, gens, used, nb, self.X = _partition(*args, kargs, self.kp, kc[0], kc[1], n_coarse)
             if gens < 0:
                 raise rest.violation(self.X, np.flatnonzero(np.any(self.X != rest.x_base, axis=1)))
             energy.n_evals += used
@@ -411,7 +414,7 @@ def search(opt, energy, max_evals: int, *, extra_terms: bool = False, keypoints=
     compiled per partition, with ``keypoints = (KeypointEnergy, weight)`` adding ``weight`` times that term
     (compiled too, :mod:`~isa_mocap_ros.energy.keypoint_kernel`); with ``paused`` it is returned as a :class:`HisaRun` stopped before its first
     partition (``advance()``, ``result()``: the first frame's pruned runs); ``coarse_fraction`` of each partition's
-    generations (rounded down) are evaluated on the energy's coarse level first (two views,
+    generations (rounded down) are evaluated on the energy's coarse level first (two views, the two pairs in turn,
     :meth:`~isa_mocap_ros.energy.silhouette.SilhouetteEnergy.coarse_kernel_args`; 0: none, the protocol's numbers). A flat
     :class:`~isa_mocap_ros.optim.Isa` (:func:`supported_flat`) on any batch energy runs with compiled
     generations (:func:`run_isa`). The numbers are the protocol's, bit for bit."""
