@@ -14,7 +14,10 @@ Topics (the layout of ``isa-mocap synth``; ``i`` = view index):
 * ``--background-frames K`` (default 10): K background-only frames first, made from the recording
   by :func:`isa_mocap_ros.vision.stable_background.estimate_background` (per pixel, the frames where
   the background shows; ``--background DIR`` adds images of the empty scene, one per view), so the
-  segmentation's learn-from-empty-frames start works on a recording where the person never leaves
+  segmentation's learn-from-empty-frames start works on a recording where the person never leaves;
+  ``--find-person auto`` (default; ``on``/``off``): the person found in each frame by the BlazePose
+  model's segmentation (:mod:`isa_mocap_ros.vision.person_masks`) when the model is installed, the
+  background per pixel from the frames where it is not
 * ``--reference FILE.trc``: ``/mocap/ground_truth/markers`` (``geometry_msgs/PoseArray`` in ``world``,
   one pose per TRC marker in file order, identity orientation, NaN for a missing marker) for every
   recording frame (TRC row ``start + j`` for frame ``j``), axes mapped by ``--reference-axes``

@@ -430,7 +430,7 @@ class MaskConfig:
         Growth of the predicted joints' box in which the hull filter looks, m (0.35).
     first_frame_hull : bool
         Before the first estimate, keep only the foreground of the visual hull's largest blob (tracking/init_hull.py;
-        with ``hull_filter``): occluders no view confirms do not reach the initialization (False).
+        with ``hull_filter``): occluders no other view confirms do not reach the initialization (True).
     """
 
     gate_margin_px: int = 10
@@ -438,7 +438,7 @@ class MaskConfig:
     hull_dilate_px: int = 2
     hull_keep_px: int = 3
     hull_pad_m: float = 0.35
-    first_frame_hull: bool = False
+    first_frame_hull: bool = True
 
     def __post_init__(self) -> None:
         _number("gate_margin_px", self.gate_margin_px, lo=0, integer=True)
