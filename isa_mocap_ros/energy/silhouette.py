@@ -34,6 +34,7 @@ from ..body import BodyModel, capsule_endpoints
 from ..vision import Camera
 from ..vision.camera import PixelAreas
 from . import silhouette_kernel as _k
+from .coarse import coarse_views, view_subset
 from ._checks import EnergyError, _check_cameras, _check_model, _check_poses
 from .restricted import RestrictedSilhouetteEnergy
 from .silhouette_exact import _foreground, _view_terms, core_weights, exact_view_energy, mask_problem
@@ -510,6 +511,23 @@ class SilhouetteEnergy:
         what the tracker's compiled search passes it)."""
         fr = self._frame
         return self._body, fr["views"], self._template_args, fr["fg"]
+
+    def coarse_kernel_args(self, second: bool = False) -> tuple:
+        """:meth:`kernel_args` of the coarse level: the two usable views whose optical axes are closest to
+        perpendicular (:func:`.coarse.coarse_views`; ``second``: the other pair, among the remaining views) with
+        their foreground samples; the kernel then returns their weighted mean of Eq. 4, the same quantity from
+        fewer views at about half the cost (all the views' bundles with fewer than three usable). Built once per
+        frame. For the compiled search's early generations (``SearchConfig.coarse_fraction``, docs/energy.md)."""
+        fr = self._frame
+        key = "coarse2" if second else "coarse"
+        if key not in fr:
+            k = self.coarse_views(second)
+            fr[key] = self._kernel_args() if len(k) == len(self._used) else view_subset(self._kernel_args(), k)
+        return fr[key]
+
+    def coarse_views(self, second: bool = False) -> np.ndarray:
+        """Positions (among the used views) of :meth:`coarse_kernel_args`' views."""
+        return coarse_views([self.cameras[v] for v in self._used], self._frame["view_w"], second)
 
     def _fast(self, X: np.ndarray) -> np.ndarray:
         out = np.empty(X.shape[0])

@@ -10,9 +10,10 @@ switched).
 Shape from silhouette, coarsely: the capture volume (:func:`capture_volume`) is cut into ``voxel_m`` cubes;
 a cube is kept when every usable view that sees its centre sees foreground there (the masks dilated by
 ``dilate_px``) and at least ``min_views`` views see it. What one camera alone reports has no such cube; the
-person, seen by all, is one connected blob. :func:`person_masks` keeps the largest 26-connected blob and, per
-view, the foreground within its projection (each cube drawn as a disc of its projected half-diagonal plus
-``margin_px``). Cost: one pass over the volume's cubes per view (the frame is the first one, once).
+person, seen by all, is one connected blob. :func:`person_masks` takes the largest 26-connected blob, grows it
+by the cubes within ``pad_m`` that two views confirm and none denies (a limb a third view does not see) connected to
+it, and keeps per view the foreground within its projection (each cube drawn as a disc of its projected
+half-diagonal plus ``margin_px``). Cost: one pass over the volume's cubes per view (the frame is the first one, once).
 """
 from __future__ import annotations
 
@@ -50,7 +51,7 @@ def capture_volume(cameras: Sequence, *, height_m: float = 2.3) -> tuple[np.ndar
 
 
 def person_masks(masks: Sequence, cameras: Sequence, *, voxel_m: float = 0.08, dilate_px: int = 1,
-                 margin_px: int = 4, min_views: int = 3, box=None) -> tuple[list, str | None]:
+                 margin_px: int = 6, min_views: int = 3, pad_m: float = 0.6, box=None) -> tuple[list, str | None]:
     """The masks cut to the largest blob of the visual hull (see the module docstring).
 
     Parameters
@@ -67,7 +68,7 @@ def person_masks(masks: Sequence, cameras: Sequence, *, voxel_m: float = 0.08, d
         The masks with the foreground outside the blob's projection set to 0 (same dtype), None kept; unchanged
         when fewer than ``min_views`` views have masks or no blob of ``MIN_CUBES`` cubes is found.
     note : str or None
-        What was done, for ``FrameResult.notes``.
+        What was removed, for ``FrameResult.notes`` (None when nothing was).
     """
     idx = [v for v, m in enumerate(masks) if m is not None]
     if len(idx) < 2:
@@ -82,7 +83,15 @@ def person_masks(masks: Sequence, cameras: Sequence, *, voxel_m: float = 0.08, d
         return list(masks), (f"first-frame hull: no blob of {MIN_CUBES} cubes is foreground in every view that sees "
                              "it; masks kept")
     blob = G[labels == int(np.argmax(sizes)) + 1]
-    C = blob
+    # 2. its extent: around the blob, cubes two views confirm and no view denies (a limb a third view does not
+    # see), connected to it; a grid aligned with the first one, so the blob's cubes are cubes of it
+    lo2 = lo + voxel_m * np.floor((blob.min(axis=0) - pad_m - lo) / voxel_m)
+    hi2 = blob.max(axis=0) + pad_m
+    G2, n2, _, labels2 = _blobs(F, cameras, lo2, hi2, voxel_m, 2, misses=0)
+    at = np.rint((blob - lo2) / voxel_m - 0.5).astype(int)
+    ok = np.all((at >= 0) & (at < n2), axis=1)
+    keep = np.setdiff1d(np.unique(labels2[np.ravel_multi_index(at[ok].T, n2)]), [0])
+    C = np.vstack([blob, G2[np.isin(labels2, keep)]])
     out = list(masks)
     removed = []
     half = 0.5 * np.sqrt(3.0) * voxel_m
@@ -93,6 +102,8 @@ def person_masks(masks: Sequence, cameras: Sequence, *, voxel_m: float = 0.08, d
         front = z > 1e-6
         uv = cam.project(C[front])
         r = np.ceil(max(cam.fx, cam.fy) * half / z[front]).astype(int) + margin_px
+        ok = np.isfinite(uv).all(axis=1) & (np.abs(uv) < 1e5).all(axis=1)
+        uv, r = uv[ok], r[ok]
         for (u, w), rr in zip(np.rint(uv).astype(int), r):
             cv2.circle(S, (int(u), int(w)), int(rr), 1, -1)
         fg = m > 0
@@ -100,6 +111,8 @@ def person_masks(masks: Sequence, cameras: Sequence, *, voxel_m: float = 0.08, d
         out[v] = np.where(cut, np.zeros((), m.dtype), m)
         removed.append((v, int(cut.sum()), int(fg.sum())))
     text = ", ".join(f"view {v} {c} of {t}" for v, c, t in removed if c)
+    if not text:            # nothing beyond the person: no note (the estimator counts notes as problems)
+        return out, None
     return out, (f"first-frame hull: the person's blob ({len(blob)} cubes of {voxel_m * 100:.0f} cm) kept; foreground "
                  f"removed: {text or 'none'}")
 
@@ -128,9 +141,10 @@ def _blobs(F: dict, cameras: Sequence, lo: np.ndarray, hi: np.ndarray, voxel_m: 
     for j, v in enumerate(views):
         cam, Fv = cameras[v], F[v]
         front = np.flatnonzero(_depth(cam, G) > 1e-6)
-        uv = np.rint(UV[j, front]).astype(int)
-        on = (uv[:, 0] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
-        inside, uv = front[on], uv[on]
+        uv = UV[j, front]
+        with np.errstate(invalid="ignore"):     # far outside a distorted camera's field: not finite, not seen
+            on = (uv[:, 0] > -0.5) & (uv[:, 0] < cam.width - 0.5) & (uv[:, 1] > -0.5) & (uv[:, 1] < cam.height - 0.5)
+        inside, uv = front[on], np.rint(uv[on]).astype(int)
         ok = Fv[uv[:, 1], uv[:, 0]]
         seen[inside] += 1
         denied[inside[~ok]] += 1
