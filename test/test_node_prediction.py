@@ -38,15 +38,21 @@ class Harness:
         self.pub = node.create_publisher(JointState, "/mocap/joint_states", qos.RELIABLE)
         self.got: dict[int, JointState] = {}
         self.count = 0
-        node.create_subscription(JointState, "/mocap/prediction/joint_states", self._on, qos.RELIABLE)
+        self.sub = node.create_subscription(JointState, "/mocap/prediction/joint_states", self._on, qos.RELIABLE)
 
     def _on(self, msg: JointState) -> None:
         self.got[ma.stamp_to_ns(msg.header)] = msg
         self.count += 1
 
     def connected(self) -> bool:
-        return self.pub.get_subscription_count() > 0 and self.node.count_publishers(
-            "/mocap/prediction/joint_states") > 0
+        # both directions matched on this side; the node's publisher may match our subscription a moment
+        # later (a prediction published before that is lost), hence the settling spin in wait_connected
+        return self.pub.get_subscription_count() > 0 and self.sub.get_publisher_count() > 0
+
+    def wait_connected(self) -> bool:
+        ok = spin_until(self.ex, self.connected, 20)
+        spin_until(self.ex, lambda: False, 0.5)
+        return ok
 
     def send(self, msg: JointState, *, expect: bool = True) -> JointState | None:
         want = ma.stamp_to_ns(msg.header) + PERIOD_NS
@@ -76,7 +82,7 @@ def test_constant_twist_sequence_is_extrapolated_exactly_for_the_next_stamp(spaw
     perm = np.random.default_rng(1).permutation(len(names))
     with ros_node(rosenv, "pred_test") as (node, ex):
         h = Harness(node, ex)
-        assert spin_until(ex, h.connected, 20)
+        assert h.wait_connected()
         for k in range(8):
             stamp = T0 + k * PERIOD_NS
             if k in (4, 6):   # joints listed in another order: reordered by name
@@ -100,7 +106,7 @@ def test_estimates_with_dropped_frames_still_give_the_exact_next_frame(spawn, ro
     names = list(model.dof_names)
     with ros_node(rosenv, "pred_gap_test") as (node, ex):
         h = Harness(node, ex)
-        assert spin_until(ex, h.connected, 20)
+        assert h.wait_connected()
         for i, k in enumerate([0, 1, 3, 4, 7, 9]):
             pred = h.send(ma.arrays_to_joint_state(names, Q[k], stamp_ns=T0 + k * PERIOD_NS, frame_id="world"))
             if i:
@@ -116,7 +122,7 @@ def test_nan_out_of_order_and_wrong_names_are_dropped_and_good_estimates_still_p
                                                            stamp_ns=kw.get("stamp", T0 + k * PERIOD_NS))
     with ros_node(rosenv, "pred_test") as (node, ex):
         h = Harness(node, ex)
-        assert spin_until(ex, h.connected, 20)
+        assert h.wait_connected()
         for k in range(3):
             h.send(js(k))
         nan = js(3)
