@@ -84,9 +84,9 @@ class ShapeCalibrationConfig:
     n_mask_points: int = 600        # the fit compares shapes that differ by a few pixels)
     translation_m: float = 0.15     # bound of each frame's root height change in the shape fit
     angle_rad: float = 0.3          # bound of each frame's change of the coupled joint angles in the shape fit
-    coupled_dofs: tuple = ("left_hip_x", "right_hip_x", "left_shoulder_x", "right_shoulder_x")
-                                    # joint angles also free in the shape fit: the abductions, which trade against the
-                                    # hip and shoulder widths (knee, hip and elbow all free: too many dimensions)
+    coupled_dofs: tuple = ()        # joint angles also free in the shape fit (e.g. the abductions left/right_hip_x,
+                                    # left/right_shoulder_x: truer bones on capsule renders, but on 6-frame mesh
+                                    # calibrations 24 more dimensions leave the silhouette fit unconverged; off)
     retrack: bool = True            # later rounds re-track the whole window with the new shape first
     regularization: float = 2e-3    # weight of sum(log factor^2): decides only flat directions
     arm_split_prior: float = 0.05   # weight of (log upper_arm - log forearm)^2: a straight arm shows only the sum
