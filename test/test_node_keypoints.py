@@ -91,9 +91,27 @@ def test_node_publishes_landmarks_every_k_frames(landmark_model, rosenv, spawn, 
         assert spin_until(ex, lambda: stamp in skipped[0] and stamp in skipped[1], 30), proc.output()
         assert proc.wait_for_output("cam1/mask dropped: frame 'cam1_optical_frame', 10x10, is not the view's", 30), \
             proc.output()
+        # a NaN camera_info and an image of another encoding: one line each, and the node goes on
+        bad = ma.intrinsics_to_camera_info(intr, stamp_ns=stamp + 2 * 33_333_333, frame_id="cam0_optical_frame")
+        bad.d = [float("nan")] * 5
+        info_pubs[0].publish(bad)
+        mono = ma.array_to_image(images[0][:, :, 0].copy(), "mono8", stamp_ns=stamp + 3 * 33_333_333,
+                                 frame_id="cam0_optical_frame")
+        img_pubs[0].publish(mono)
+        assert proc.wait_for_output("cam0/camera_info dropped: CameraInfo.d: expected finite numbers", 30), proc.output()
+        last = stamp + 4 * 33_333_333
+        for v in range(2):
+            im = ma.array_to_image(images[v], "rgb8", stamp_ns=last, frame_id=f"cam{v}_optical_frame")
+            mk = ma.array_to_image(masks[v], "mono8", stamp_ns=last, frame_id=f"cam{v}_optical_frame")
+            info(v, last)
+            img_pubs[v].publish(im)
+            spin_until(ex, lambda: False, 0.05)
+            mask_pubs[v].publish(mk)
+        assert spin_until(ex, lambda: all(last in g for g in got), 60), proc.output()
+        assert proc.wait_for_output("encoding 'mono8', the camera's is 'rgb8'", 30), proc.output()
     # the first frame and every 2nd after (0 and 2) per view, with the image's header; 1 and 3 skipped
     for v in range(2):
-        assert sorted(got[v]) == [stamps[0], stamps[2]]
+        assert sorted(got[v]) == [stamps[0], stamps[2], last]      # view 1's 10x10 mask counted nothing
         assert skipped[v] == [stamps[1], stamps[3], stamp]
         assert got[v][stamps[0]].header.frame_id == f"cam{v}_optical_frame"
         for f in (0, 2):
