@@ -190,9 +190,14 @@ class Camera:
     __hash__ = None  # type: ignore[assignment]
 
     def key(self) -> bytes:
-        """Bytes identifying the geometry (size, K, dist, R, t): a cache key for per-camera data."""
-        return (np.array([self.width, self.height], dtype=np.int64).tobytes() + self.K.tobytes()
-                + _dist8(self.dist).tobytes() + self.R.tobytes() + self.t.tobytes())
+        """Bytes identifying the geometry (size, K, dist, R, t): a cache key for per-camera data (made once: the
+        camera is frozen and its arrays read-only; the renderer, gate and hull ask for it ~50 times a frame)."""
+        k = self.__dict__.get("_key")
+        if k is None:
+            k = (np.array([self.width, self.height], dtype=np.int64).tobytes() + self.K.tobytes()
+                 + _dist8(self.dist).tobytes() + self.R.tobytes() + self.t.tobytes())
+            object.__setattr__(self, "_key", k)
+        return k
 
     # ------------------------------------------------------------------ properties
     @property
