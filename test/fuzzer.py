@@ -16,8 +16,11 @@ view's camera, another frame id, a camera_info with no image of its stamp, a sta
 stream, extrinsics from another parent frame or for another child frame, predictions far from the
 frame sets, keypoints of another count than 0 or 33, with NaN or a confidence above 1 (on the next frame's
 own stamp: a lockstep estimator must still wait for that view's real message), keypoints and skip notices
-far from the stream. It never sends what a network cannot tell from the camera itself: an image and a
-camera_info of one stamp that agree, or a well-formed mask / prediction right in the stream.
+far from the stream, and, until it hears the stream, images and camera infos that agree, each view at a stamp
+of its own (one view alone is no frame set of the rig: the segmentation node segments them, the estimator and
+the keypoint node's schedule must not count them). It never sends what a network cannot tell from the cameras
+themselves: every view's image and camera_info of one stamp that agree, or a well-formed mask / prediction right
+in the stream.
 
 Prints ``sent <kind> <n>`` lines every second and a total per kind at exit (SIGINT/SIGTERM).
 """
@@ -58,6 +61,7 @@ class Fuzzer(Node):
         self.last_real_ns = 1_700_000_000_000_000_000   # until the stream is heard: the project's bags' epoch
         self.size = (320, 240)
         self.unique = 0
+        self.heard = False                       # a real camera_info of cam0 came
         self.own_info_stamps: set[int] = set()   # its own camera infos come back to its subscription
         self.create_subscription(CameraInfo, "cam0/camera_info", self._heard, rel)
         self.kinds = [k for k in dir(self) if k.startswith("k_" + prefix)]
@@ -75,6 +79,7 @@ class Fuzzer(Node):
         if msg.header.frame_id == "cam0_optical_frame" and msg.width > 16 and abs(s - self.last_real_ns) < HOUR_NS:
             self.last_real_ns = max(self.last_real_ns, s)
             self.size = (msg.width, msg.height)
+            self.heard = True
 
     # -- stamps ------------------------------------------------------------------------------------
     def near(self) -> int:
@@ -104,6 +109,26 @@ class Fuzzer(Node):
         w, h = self.size
         return self.img[v], ma.array_to_image(self.rng.integers(0, 255, (h, w, 3), dtype=np.uint8), "rgb8",
                                               stamp_ns=self.far(), frame_id=self.frame(v))
+
+    def k_image_and_info_before_stream(self, v):
+        """Until the stream is heard: on every view an image and a camera_info that agree, each view at a stamp of its
+        own (no frame set of the rig: one view each, like a lone camera starting); after: a lone image far in time."""
+        w, h = self.size
+        if self.heard:
+            return self.img[v], ma.array_to_image(self.rng.integers(0, 255, (h, w, 3), dtype=np.uint8), "rgb8",
+                                                  stamp_ns=self.far(), frame_id=self.frame(v))
+        mine = None
+        for u in range(self.views):
+            self.unique += 1
+            stamp = 5 * 10**9 + self.unique * 1_000_000 + u
+            self.info[u].publish(self._info(u, w, h, stamp, self.frame(u)))
+            msg = ma.array_to_image(self.rng.integers(0, 255, (h, w, 3), dtype=np.uint8), "rgb8", stamp_ns=stamp,
+                                    frame_id=self.frame(u))
+            if u == v:
+                mine = msg
+            else:
+                self.img[u].publish(msg)
+        return self.img[v], mine
 
     def k_image_other_frame(self, v):
         w, h = self.size

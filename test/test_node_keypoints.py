@@ -1,7 +1,8 @@
 """Keypoint node as a real process: BlazePose landmarks of a rendered person on cam<i>/keypoints on the
 frames its schedule picks (the dense start, then every k-th), image and mask paired in either order,
-source headers; every other frame (not picked, empty mask, bad mask: dropped with a line) on
-cam<i>/keypoints_skipped, so each frame gets exactly one message."""
+source headers, once both views' pairs of a stamp are in (the estimator's frame set); every other view of a
+set (not picked, empty mask) on cam<i>/keypoints_skipped, so each gets exactly one message; a bad mask is dropped
+with a line."""
 from __future__ import annotations
 
 import numpy as np
@@ -75,24 +76,43 @@ def test_node_publishes_landmarks_every_k_frames(landmark_model, rosenv, spawn, 
                 second[v].publish(im if f == 2 else mk)
             spin_until(ex, lambda: False, 0.05)
         assert spin_until(ex, lambda: all(len(g) >= 2 for g in got), 120), (got, proc.output())
-        # an empty mask: "looked, nobody"; a mask of the wrong size: dropped with a log line
+        # empty masks: "looked, nobody"; then a mask of the wrong size: dropped with a log line
         stamp = stamps[-1] + 10 * 33_333_333
-        for v, mask in ((0, np.zeros((360, 480), np.uint8)), (1, np.zeros((10, 10), np.uint8))):
+        for v, mask, t in ((0, np.zeros((360, 480), np.uint8), stamp), (1, np.zeros((360, 480), np.uint8), stamp),
+                           (1, np.zeros((10, 10), np.uint8), stamp + 33_333_333)):
             im = ma.array_to_image(images[v], "rgb8")
-            im.header = ma.make_header(stamp, f"cam{v}_optical_frame")
+            im.header = ma.make_header(t, f"cam{v}_optical_frame")
             mk = ma.array_to_image(mask, "mono8")
             mk.header = im.header
-            info(v, stamp)
+            info(v, t)
             img_pubs[v].publish(im)
             spin_until(ex, lambda: False, 0.05)
             mask_pubs[v].publish(mk)
-        assert spin_until(ex, lambda: stamp in skipped[0], 30), proc.output()
+        assert spin_until(ex, lambda: stamp in skipped[0] and stamp in skipped[1], 30), proc.output()
         assert proc.wait_for_output("cam1/mask dropped: frame 'cam1_optical_frame', 10x10, is not the view's", 30), \
             proc.output()
+        # a NaN camera_info and an image of another encoding: one line each, and the node goes on
+        bad = ma.intrinsics_to_camera_info(intr, stamp_ns=stamp + 2 * 33_333_333, frame_id="cam0_optical_frame")
+        bad.d = [float("nan")] * 5
+        info_pubs[0].publish(bad)
+        mono = ma.array_to_image(images[0][:, :, 0].copy(), "mono8", stamp_ns=stamp + 3 * 33_333_333,
+                                 frame_id="cam0_optical_frame")
+        img_pubs[0].publish(mono)
+        assert proc.wait_for_output("cam0/camera_info dropped: CameraInfo.d: expected finite numbers", 30), proc.output()
+        last = stamp + 4 * 33_333_333
+        for v in range(2):
+            im = ma.array_to_image(images[v], "rgb8", stamp_ns=last, frame_id=f"cam{v}_optical_frame")
+            mk = ma.array_to_image(masks[v], "mono8", stamp_ns=last, frame_id=f"cam{v}_optical_frame")
+            info(v, last)
+            img_pubs[v].publish(im)
+            spin_until(ex, lambda: False, 0.05)
+            mask_pubs[v].publish(mk)
+        assert spin_until(ex, lambda: all(last in g for g in got), 60), proc.output()
+        assert proc.wait_for_output("encoding 'mono8', the camera's is 'rgb8'", 30), proc.output()
     # the first frame and every 2nd after (0 and 2) per view, with the image's header; 1 and 3 skipped
     for v in range(2):
-        assert sorted(got[v]) == [stamps[0], stamps[2]]
-        assert skipped[v] == [stamps[1], stamps[3]] + ([stamp] if v == 0 else [])
+        assert sorted(got[v]) == [stamps[0], stamps[2], last]      # view 1's 10x10 mask counted nothing
+        assert skipped[v] == [stamps[1], stamps[3], stamp]
         assert got[v][stamps[0]].header.frame_id == f"cam{v}_optical_frame"
         for f in (0, 2):
             uv, conf = ma.polygon_to_keypoints(got[v][stamps[f]])

@@ -113,7 +113,8 @@ def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
         if getattr(args, "keypoint_every", None) is not None:
             kp_params.append(("every_k_frames", str(args.keypoint_every)))
         est.append(("keypoint_weight", repr(float(getattr(args, "keypoint_weight", 1.0)))))
-        if args.lockstep:
+        if args.lockstep:     # the estimator's frame sets: no partial ones in lockstep (isa_mocap_ros.keypoint_intake)
+            kp_params += [("view_timeout_s", "0.0")]
             kp_params += [(f"qos_overrides.{NS}/cam{v}/{t}.subscription.reliability", "reliable")
                           for v in range(n_views) for t in ("image_raw", "mask", "camera_info")]
         kp = [NodeSpec(exec="keypoints_node", name="keypoints", params=tuple(kp_params), nice=nice, **common)]

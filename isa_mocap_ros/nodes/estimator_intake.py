@@ -114,8 +114,8 @@ class EstimatorIntake:
             except SyncError as exc:
                 self.problems.report(f"order{v}", f"cam{v}/mask dropped: {exc}")
                 continue
-            self._stream.accept(a.stamp_ns)
-            for fs in sets:
+            for fs in sets:   # the frame sets' stream: one view's mask far in time (its own pair) makes no set
+                self._stream.accept(fs.stamp_ns)
                 self.slot.put((fs, time.monotonic()))
         if accepted:
             self._cv.notify_all()
@@ -211,6 +211,7 @@ class EstimatorIntake:
             for s in self.sync.poll(time.monotonic()):
                 self.problems.report("partial", f"frame set {s.stamp_ns} without views {list(s.missing)} "
                                                 f"after {self.view_timeout_s:.1f} s; tracking with the others")
+                self._stream.accept(s.stamp_ns)
                 self.slot.put((s, time.monotonic()))
             self._cv.notify_all()
 

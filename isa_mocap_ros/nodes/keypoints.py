@@ -12,28 +12,35 @@ network without it (or without the model file) runs as before.
 
 Per view ``i`` it pairs ``cam<i>/image_raw`` and ``cam<i>/mask`` (sensor-data QoS) by stamp (the
 segmentation node copies the image header; either may arrive first, the last 8 unpaired of each are
-kept). For a pair the schedule picks (:class:`~isa_mocap_ros.vision.keypoint_schedule.KeypointSchedule`:
-the view's first ``dense_frames`` frames with a person, then every ``every_k_frames``-th), it crops the
+kept), and synchronizes the views' pairs into frame sets as the estimator does (its ``sync``, ``queue_size``,
+``slop_s``, ``view_timeout_s``, ``min_views``: keep them equal; ``isa-mocap run --lockstep`` sets
+``view_timeout_s`` 0 for both). Only a completed frame set moves the schedule
+(:class:`~isa_mocap_ros.vision.keypoint_schedule.KeypointSchedule`: the view's first ``dense_frames`` frames with a
+person, then every ``every_k_frames``-th), so the node counts the frames the estimator tracks
+(:mod:`isa_mocap_ros.keypoint_intake`). For each view of a set the schedule picks, it crops the
 square around the mask's foreground, runs
 :class:`~isa_mocap_ros.vision.landmarks.PoseLandmarker` and publishes ``cam<i>/keypoints``
 (``geometry_msgs/PolygonStamped``, x=u, y=v, z=confidence, the image's header; an empty polygon when
-the pose score is below ``min_score``; msg_adapters/keypoints.py). Every other pair it handled (not
+the pose score is below ``min_score``; msg_adapters/keypoints.py). Every other view of a set (not
 picked, or dropped as bad) gets its header on ``cam<i>/keypoints_skipped`` (``std_msgs/Header``): each
-pair gets exactly one message on one of the two topics, so an estimator in lockstep knows, per frame and
-view, whether keypoints come, without a second copy of the schedule.
+view of a frame set gets exactly one message on one of the two topics, so an estimator in lockstep knows, per
+frame and view, whether keypoints come, without a second copy of the schedule. The detection starts when the
+set is complete (the last view's mask), not at each view's own mask.
 
 Input checks as the segmentation node's (:mod:`isa_mocap_ros.intake`): an image is taken only when a
 ``cam<i>/camera_info`` of its stamp agrees with it (or it agrees with the view's camera and its stamp lies
-within ``max_stamp_gap_s`` of the view's stream), and a mask only when its frame id and size are the view's
-camera's and its stamp is near the stream; so stray images and masks (another size, frame, a far stamp)
-neither get detected on nor move the schedule. Bad input (undecodable image, unsupported encoding, a mask
-of another size than its image, the checks above) is dropped for that view with one rate-limited log line.
+within ``max_stamp_gap_s`` of the view's stream), and a mask only when it is mono8, its frame id and size are the
+view's camera's and its stamp is near the frame sets' stream. A pair that forms no frame set (one view's image
+and camera_info that agree at a far stamp, and the segmentation node's mask of it) neither gets published
+keypoints the estimator would use nor moves the schedule. Bad input (undecodable image or mask, unsupported
+encoding, a mask of another size than its image, a NaN camera_info, the checks above) is dropped for that view
+with one rate-limited log line.
 """
 from __future__ import annotations
 
 import sys
 import time
-from collections import OrderedDict, deque
+from collections import deque
 
 import numpy as np
 from geometry_msgs.msg import PolygonStamped
@@ -42,12 +49,13 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 import msg_adapters as ma
-from isa_mocap_ros.intake import Setting, ViewGate
+from isa_mocap_ros.intake import Setting
+from isa_mocap_ros.keypoint_intake import KeypointIntake
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, camera_info_callback, declare, run_node
 from isa_mocap_ros.vision.errors import VisionError
 from isa_mocap_ros.vision.landmark_model import ModelUnavailable
-from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, EVERY_K, KeypointSchedule, detect_in_mask
+from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, EVERY_K, detect_in_mask
 from isa_mocap_ros.vision.landmarks import PoseLandmarker
 
 __all__ = ["KeypointNode", "main"]
@@ -74,17 +82,26 @@ class KeypointNode(Node):
         threads = declare(self, "threads", 1, "interpreter threads", lo=1, hi=64)
         gap_s = declare(self, "max_stamp_gap_s", 5.0, "an image or mask farther than this from the view's stream in "
                         "time is dropped unless its own camera_info comes with it (0 = no check)", lo=0.0, hi=1e9)
-        self.gates = [ViewGate(f"cam{v}", max_gap_ns=int(gap_s * 1e9)) for v in range(self.n_views)]
+        # the estimator's frame-set matching (keep equal to /mocap/estimator's): only a completed set moves the
+        # schedules (isa_mocap_ros.keypoint_intake)
+        sync = declare(self, "sync", "exact", "frame-set matching as the estimator's: exact or approximate")
+        queue = declare(self, "queue_size", 10, "stamps kept per view while synchronizing (the estimator's)",
+                        lo=1, hi=1000)
+        slop_s = declare(self, "slop_s", 0.01, "approximate sync window, seconds (the estimator's)", lo=0.0, hi=10.0)
+        view_timeout_s = declare(self, "view_timeout_s", 1.0, "a partial frame set after this wait, as the "
+                                 "estimator's (0 = never)", lo=0.0, hi=60.0)
+        min_views = declare(self, "min_views", 2, "views a partial frame set needs (the estimator's)", lo=1, hi=64)
+        if sync not in ("exact", "approximate"):
+            raise ValueError(f"sync: expected exact or approximate, received {sync!r}")
+        self.intake = KeypointIntake(self.n_views, every_k=self.every_k, dense_frames=self.dense_frames,
+                                     max_gap_ns=int(gap_s * 1e9), keep=_KEEP, queue_size=queue,
+                                     slop_ns=0 if sync == "exact" else int(slop_s * 1e9), max_wait_s=view_timeout_s,
+                                     min_views=min_views)
         try:
             self.detector = PoseLandmarker(model_path or None, num_threads=threads)
         except ModelUnavailable as exc:           # run_node prints a ValueError as one line, exit 2
             raise ValueError(str(exc)) from None
         self.problems = ProblemLog(self)
-        self.images: list[OrderedDict[int, Image]] = [OrderedDict() for _ in range(self.n_views)]
-        self.masks: list[OrderedDict[int, Image]] = [OrderedDict() for _ in range(self.n_views)]
-        self.unpaired = [0] * self.n_views
-        self.schedules = [KeypointSchedule(self.every_k, dense_frames=self.dense_frames)
-                          for _ in range(self.n_views)]
         self.skipped = [0] * self.n_views
         self.published = [0] * self.n_views
         self.latency_s: deque[float] = deque(maxlen=1000)
@@ -94,78 +111,65 @@ class KeypointNode(Node):
         self.pubs_skipped = [self.create_publisher(Header, f"cam{i}/keypoints_skipped", qos.RELIABLE)
                              for i in range(self.n_views)]
         for i in range(self.n_views):
-            self.create_subscription(Image, f"cam{i}/image_raw", self._pair_cb(i, "image"), qos.SENSOR_DATA,
+            self.create_subscription(Image, f"cam{i}/image_raw", self._image_cb(i), qos.SENSOR_DATA,
                                      qos_overriding_options=QOS_OVERRIDES)
-            self.create_subscription(Image, f"cam{i}/mask", self._pair_cb(i, "mask"), qos.SENSOR_DATA,
+            self.create_subscription(Image, f"cam{i}/mask", self._mask_cb(i), qos.SENSOR_DATA,
                                      qos_overriding_options=QOS_OVERRIDES)
             self.create_subscription(CameraInfo, f"cam{i}/camera_info", self._info_cb(i), qos.SENSOR_DATA,
                                      qos_overriding_options=QOS_OVERRIDES)
+        if view_timeout_s > 0:
+            self.create_timer(min(0.1, view_timeout_s / 2), self._poll)
         self.get_logger().info(f"keypoints: {self.n_views} views, every {self.every_k} frame(s) after the first "
                                f"{self.dense_frames} with a person, model "
                                f"{self.detector.model_path}")
 
-    def _pair_cb(self, v: int, kind: str):
-        """Callback of ``cam<v>/image_raw`` (kind "image") or ``cam<v>/mask``: the second of the pair of
-        one stamp to arrive (either order) runs the detection; an unpaired message waits among the last
-        :data:`_KEEP` of its kind, then ages out (counted in :attr:`unpaired`)."""
+    def _image_cb(self, v: int):
+        def cb(msg: Image) -> None:      # through the view's gate: taken when a camera_info agrees (_info_cb)
+            setting = Setting(msg.header.frame_id, msg.width, msg.height, msg.encoding)
+            self._run(*self.intake.add_image(v, ma.stamp_to_ns(msg.header), setting, msg, time.monotonic()))
+        return cb
 
+    def _mask_cb(self, v: int):
         def cb(msg: Image) -> None:
-            stamp = ma.stamp_to_ns(msg.header)
-            gate = self.gates[v]
-            if kind == "image":        # through the view's gate: taken when a camera_info agrees (_info_cb)
-                self._settle(v, *gate.add_image(stamp, Setting(msg.header.frame_id, msg.width, msg.height,
-                                                               msg.encoding), msg))
+            try:
+                mask = ma.image_to_array(msg)
+                if mask.ndim != 2 or mask.dtype != np.uint8:
+                    raise ma.AdapterError(f"cam{v}/mask.encoding", "mono8", msg.encoding)
+            except ma.AdapterError as exc:
+                self.problems.report(f"mask{v}", f"cam{v}/mask dropped: {exc}")
                 return
-            known = gate.setting       # None: waits for an image of its stamp like any mask
-            why = None if known is None else (
-                   gate.window.far(stamp) or (f"frame {msg.header.frame_id!r}, {msg.width}x{msg.height}, is not the "
-                                              f"view's camera's ({known.frame_id!r}, {known.width}x{known.height})"
-                                              if (msg.header.frame_id, msg.width, msg.height)
-                                              != (known.frame_id, known.width, known.height) else None))
-            if why is not None:
-                self.problems.report(f"mask{v}", f"cam{v}/mask dropped: {why}")
-                return
-            self._pair(v, kind, stamp, msg)
+            setting = Setting(msg.header.frame_id, mask.shape[1], mask.shape[0])
+            self._run(*self.intake.add_mask(v, ma.stamp_to_ns(msg.header), setting, mask, bool(np.any(mask)),
+                                            time.monotonic()))
         return cb
 
     def _info_cb(self, v: int):
         return camera_info_callback(v, self.problems, lambda exc: f"info{v}:{exc.field}",
-                                    lambda *info: self._settle(v, *self.gates[v].add_info(*info)))
+                                    lambda *info: self._run(*self.intake.add_info(v, *info, time.monotonic())))
 
-    def _settle(self, v: int, accepted, rejected) -> None:
-        for r in rejected:
-            self.problems.report(f"info{v}:gate" if r.kind == "camera_info" else f"image{v}:{r.kind}", r.text)
-        for a in accepted:
-            self._pair(v, "image", a.stamp_ns, a.payload)
+    def _poll(self) -> None:
+        self._run(*self.intake.poll(time.monotonic()))
 
-    def _pair(self, v: int, kind: str, stamp: int, msg: Image) -> None:
-        """Pair a taken image or mask with the other of its stamp (either order; see :meth:`_pair_cb`)."""
-        mine = (self.images if kind == "image" else self.masks)[v]
-        other = (self.masks if kind == "image" else self.images)[v]
-        partner = other.pop(stamp, None)
-        if partner is None:
-            mine[stamp] = msg
-            while len(mine) > _KEEP:
-                mine.popitem(last=False)
-                self.unpaired[v] += 1
-            return
-        image, mask = (msg, partner) if kind == "image" else (partner, msg)
-        self._detect(v, stamp, image, mask)
+    def _run(self, jobs, problems) -> None:
+        """Report the rejected inputs; detect on (or publish the skip notice of) each view of completed sets."""
+        for key, text in problems:
+            self.problems.report(key, text)
+        for job in jobs:
+            if job.detect:
+                self._detect(job.view, job.stamp_ns, job.image, job.mask)
+            else:
+                self.pubs_skipped[job.view].publish(job.image.header)
+                self.skipped[job.view] += 1
 
-    def _detect(self, v: int, stamp: int, image: Image, mask_msg: Image) -> None:
+    def _detect(self, v: int, stamp: int, image: Image, mask: np.ndarray) -> None:
         t0 = time.perf_counter()
         t0_cpu = time.thread_time()
         try:
             if image.encoding not in ENCODINGS:
                 raise ma.AdapterError("Image.encoding", f"one of {', '.join(ENCODINGS)}", image.encoding)
-            mask = ma.image_to_array(mask_msg)
-            if (mask.shape[0], mask.shape[1]) != (image.height, image.width):
+            if mask.shape != (image.height, image.width):
                 raise ma.AdapterError("mask size", f"the image's {image.width}x{image.height}",
                                       f"{mask.shape[1]}x{mask.shape[0]}")
-            if not self.schedules[v].due(bool(np.any(mask))):
-                self.pubs_skipped[v].publish(image.header)
-                self.skipped[v] += 1
-                return
             lm = detect_in_mask(self.detector, ma.image_to_array(image), mask, box_scale=self.box_scale,
                                 min_score=self.min_score, bgr=image.encoding == "bgr8")
             out = ma.keypoints_to_polygon(None if lm is None else lm.uv, None if lm is None else lm.confidence,
@@ -185,7 +189,7 @@ class KeypointNode(Node):
         cpu = np.array(self.cpu_s) * 1e3
         text = (f"keypoints: {sum(self.published)} keypoint sets published {self.published}, "
                 f"{sum(self.skipped)} frames skipped by the schedule, "
-                f"{self.problems.total} frames dropped, {sum(self.unpaired)} images/masks never paired"
+                f"{self.problems.total} frames dropped, {sum(self.intake.unpaired)} images/masks never paired"
                 + (f", per view {np.median(lat):.1f} ms median / {np.percentile(lat, 95):.1f} ms p95 wall, "
                    f"{np.mean(cpu):.1f} ms mean CPU" if lat.size else ""))
         if self.context.ok():

@@ -1,0 +1,136 @@
+"""What the keypoint node detects on: the views' image + mask pairs, synchronized into the estimator's frame sets.
+
+Pure logic for :mod:`isa_mocap_ros.nodes.keypoints` (no rclpy). The keypoint schedule
+(:class:`~isa_mocap_ros.vision.keypoint_schedule.KeypointSchedule`) counts a view's frames with a person, so a
+lockstep replay gives the offline tracker's estimates only when the node counts exactly the frames the estimator
+tracks. Those are *frame sets*: stamps at which every view (or, after a wait, ``min_views`` of them) has a mask
+(:class:`~isa_mocap_ros.tracking.sync.FrameSynchronizer`, the estimator's matching). So:
+
+* images pass the view's :class:`~isa_mocap_ros.intake.ViewGate` (the camera is what a camera_info and an image
+  of one stamp agree on); masks are taken when they are of the view's camera (frame id and size) and their stamp
+  is near the frame sets' stream;
+* an image and a mask of one stamp make a view's *pair*; pairs go to a synchronizer with the estimator's settings;
+* only a completed frame set moves the views' schedules, each present view once, in stamp order.
+
+A pair that forms no frame set changes nothing. That is what keeps one view's valid-looking pair at a far stamp
+out (an image and a camera_info of one stamp that agree, say at stamp 7 or an hour ahead, and the segmentation
+node's mask of it): counted per view, it shifted the schedule, and the lockstep run with keypoints drifted from
+``isa-mocap track`` (220 mm against 63 mm under ``test/fuzzer.py``).
+"""
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass
+from typing import Any
+
+from isa_mocap_ros.intake import Rejected, Setting, StampWindow, ViewGate
+from isa_mocap_ros.tracking.sync import FrameSynchronizer, SyncError
+from isa_mocap_ros.vision.keypoint_schedule import KeypointSchedule
+
+__all__ = ["KeypointIntake", "Job"]
+
+
+@dataclass(frozen=True)
+class Job:
+    """One view of a completed frame set: detect on it (``detect``) or say it is skipped."""
+
+    view: int
+    stamp_ns: int
+    image: Any
+    mask: Any
+    detect: bool
+
+
+class KeypointIntake:
+    """The keypoint node's input side (see the module docstring).
+
+    Parameters
+    ----------
+    n_views : int
+    every_k, dense_frames : int
+        The schedule (:class:`KeypointSchedule`).
+    max_gap_ns : int
+        Images (through the gate) and masks farther than this from their stream are dropped (0 = no check).
+    keep : int
+        Unpaired images (and masks) kept per view while the other of their stamp is on its way.
+    queue_size, slop_ns, max_wait_s, min_views :
+        The synchronizer's settings: keep them equal to the estimator's (``queue_size``, ``slop_s``,
+        ``view_timeout_s``, ``min_views``), so both form the same frame sets.
+
+    Every ``add_*`` and :meth:`poll` returns ``(jobs, problems)``: the views of completed sets in stamp order,
+    and rejections as ``(key, text)`` (the key counts one kind of problem per view).
+    """
+
+    def __init__(self, n_views: int, *, every_k: int, dense_frames: int, max_gap_ns: int, keep: int = 8,
+                 queue_size: int = 10, slop_ns: int = 0, max_wait_s: float = 0.0, min_views: int = 1) -> None:
+        self.n_views = n_views
+        self.keep = keep
+        self.gates = [ViewGate(f"cam{v}", max_gap_ns=max_gap_ns) for v in range(n_views)]
+        self.schedules = [KeypointSchedule(every_k, dense_frames=dense_frames) for _ in range(n_views)]
+        self.sync = FrameSynchronizer(n_views, queue_size=queue_size, slop_ns=slop_ns, max_wait_s=max_wait_s,
+                                      min_views=min(min_views, n_views))
+        self.sets = StampWindow(max_gap_ns)       # the completed frame sets' stamps
+        self._images: list[OrderedDict[int, Any]] = [OrderedDict() for _ in range(n_views)]
+        self._masks: list[OrderedDict[int, tuple[Any, bool]]] = [OrderedDict() for _ in range(n_views)]
+        self.unpaired = [0] * n_views             # images or masks that aged out without the other
+
+    # -- input -------------------------------------------------------------------------------------
+    def add_info(self, v: int, stamp_ns: int, setting: Setting, info: Any, now_s: float):
+        """A camera_info of view ``v`` (it may let images waiting for it in)."""
+        return self._settle(v, *self.gates[v].add_info(stamp_ns, setting, info), now_s)
+
+    def add_image(self, v: int, stamp_ns: int, setting: Setting, image: Any, now_s: float):
+        """An image of view ``v`` (``setting``: its frame id, size and encoding)."""
+        return self._settle(v, *self.gates[v].add_image(stamp_ns, setting, image), now_s)
+
+    def add_mask(self, v: int, stamp_ns: int, setting: Setting, mask: Any, has_person: bool, now_s: float):
+        """A mask of view ``v`` (``setting``: its frame id and size; ``has_person``: any foreground)."""
+        known = self.gates[v].setting
+        why = self.sets.far(stamp_ns)
+        if why is None and known is not None and (setting.frame_id, setting.width, setting.height) != \
+                (known.frame_id, known.width, known.height):
+            why = (f"frame {setting.frame_id!r}, {setting.width}x{setting.height}, is not the view's camera's "
+                   f"({known.frame_id!r}, {known.width}x{known.height})")
+        if why is not None:
+            return [], [(f"mask{v}", f"cam{v}/mask dropped: {why}")]
+        return self._pair(v, "mask", stamp_ns, (mask, has_person), now_s)
+
+    def poll(self, now_s: float):
+        """Partial frame sets whose views waited longer than ``max_wait_s`` (the estimator's ``view_timeout_s``)."""
+        return self._jobs(self.sync.poll(now_s)), []
+
+    # -- internals ---------------------------------------------------------------------------------
+    def _settle(self, v: int, accepted, rejected: list[Rejected], now_s: float):
+        problems = [(f"info{v}:gate" if r.kind == "camera_info" else f"image{v}:{r.kind}", r.text) for r in rejected]
+        jobs = []
+        for a in accepted:
+            j, p = self._pair(v, "image", a.stamp_ns, a.payload, now_s)
+            jobs += j
+            problems += p
+        return jobs, problems
+
+    def _pair(self, v: int, kind: str, stamp_ns: int, payload: Any, now_s: float):
+        mine, other = (self._images[v], self._masks[v]) if kind == "image" else (self._masks[v], self._images[v])
+        partner = other.pop(stamp_ns, None)
+        if partner is None:
+            mine[stamp_ns] = payload
+            while len(mine) > self.keep:
+                mine.popitem(last=False)
+                self.unpaired[v] += 1
+            return [], []
+        image, (mask, has_person) = (payload, partner) if kind == "image" else (partner, payload)
+        try:
+            sets = self.sync.add(v, stamp_ns, (image, mask, has_person), now_s)
+        except SyncError as exc:
+            return [], [(f"order{v}", f"cam{v} frame at {stamp_ns} ns dropped: {exc}")]
+        return self._jobs(sets), []
+
+    def _jobs(self, sets) -> list[Job]:
+        jobs = []
+        for fs in sets:
+            self.sets.accept(max(s for s in fs.stamps_ns if s is not None))
+            for v, item in enumerate(fs.items):
+                if item is not None:
+                    image, mask, has_person = item
+                    jobs.append(Job(v, fs.stamps_ns[v], image, mask, self.schedules[v].due(has_person)))
+        return jobs
