@@ -37,7 +37,10 @@ def test_a_fuzzer_on_every_input_topic_changes_no_estimate(spawn, rosenv, tmp_pa
     fuzzer = spawn("fuzzer", str(HERE / "fuzzer.py"), "4", "30", "0")
     assert fuzzer.wait_for_output("sent ", 30), fuzzer.output()
     run = subprocess.run(CLI + ["run", str(FIXTURE), "--lockstep", "--out", str(tmp_path / "run"), "--quiet",
-                                "--shape", "default", *SETTINGS], env=rosenv, capture_output=True, text=True, timeout=400)
+                                "--shape", "default", "--no-keypoints", *SETTINGS],
+                         env=rosenv, capture_output=True, text=True, timeout=400)
+    # without the keypoint node (on by default since decision 014): this test is about the estimator's intake; the
+    # keypoint node's outputs under the fuzzer differ from track's (decision 014, "Known defect")
     fuzzer.stop(signal.SIGINT)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
     total = next(ln for ln in fuzzer.output().splitlines() if ln.startswith("total "))
@@ -54,7 +57,7 @@ def test_a_fuzzer_on_every_input_topic_changes_no_estimate(spawn, rosenv, tmp_pa
     assert s["bad_inputs"] > 0                                      # the estimator saw and counted the fuzz
 
     res = subprocess.run(CLI + ["track", str(FIXTURE), "--out", str(tmp_path / "track"), "--shape", "default",
-                                *SETTINGS], capture_output=True, text=True, timeout=400)
+                                "--keypoint-weight", "0", *SETTINGS], capture_output=True, text=True, timeout=400)
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
     offline = json.loads((tmp_path / "track" / "summary.json").read_text())
     print(f"mean joint error: network under the fuzzer {s['mpjpe_mm']:.3f} mm, offline {offline['mpjpe_mm']:.3f} mm")
