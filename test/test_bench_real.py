@@ -14,6 +14,8 @@ def test_real_is_a_bench_and_refuses_unknown_configurations(capsys):
     assert "real" in BENCHES
     assert main(["bench", "real", "--configs", "default,nope", "--lockstep", "none"]) == 2
     assert "expected names of default, keypoints, auto" in capsys.readouterr().err
+    assert main(["bench", "real", "--seeds", "a,b", "--lockstep", "none"]) == 2
+    assert "--seeds: expected integers" in capsys.readouterr().err
 
 
 def test_quick_run_scores_every_frame_against_the_peer(tmp_path):
@@ -29,6 +31,12 @@ def test_quick_run_scores_every_frame_against_the_peer(tmp_path):
     assert len(r["offset_removed_per_marker_mm"]) == 14
     md = bench_real.render_markdown(d)
     assert "| default shape | 8 |" in md and "Quick run" in md and "nan" not in md.lower()
+    assert d["seeds"] == [0] and r["seeds"][0]["seed"] == 0
+    assert r["offset_removed_over_seeds"]["mean"] == r["offset_removed_mpjpe_mm"]
+    # the masks per view against the peer's stick figure (shares in [0, 1])
+    assert [m["view"] for m in d["masks"]] == [0, 1, 2, 3]
+    assert all(0 <= m[k] <= 1 for m in d["masks"] for k in ("beyond", "core_missed", "keypoints_on"))
+    assert "cam0 " in md and "stick figure" in md
     # the bag is cached in the work directory: a second run does not import again
     assert (tmp_path / "w" / "demo_bag_160_8" / "metadata.yaml").is_file()
     assert bench_real.render_markdown({"skipped": "x"}) == "Not run: x.\n"

@@ -17,7 +17,8 @@ def test_bench_energy_quick_json(capsys):
     out = json.loads(capsys.readouterr().out)
     assert list(out) == ["views", "dof", "batch", "fast_evals_per_s", "exact_evals_per_s", "fast_evals_per_cpu_s",
                          "ratio", "search_evals_per_s", "search_evals_per_cpu_s", "search_evals", "search_generation",
-                         "search_restricted_share", "search_ratio", "exact_batch",
+                         "search_restricted_share", "search_coarse_evals_per_s", "search_coarse_evals_per_cpu_s",
+                         "search_ratio", "exact_batch",
                          "n_model_points", "n_template", "n_mask_points", "downsample", "threads"]
     tc = TrackerConfig()                 # measured with the tracker's sample sizes
     obj = tc.objective
@@ -31,3 +32,4 @@ def test_bench_energy_quick_json(capsys):
     assert out["search_evals"] == 360 and out["search_generation"] == 30
     assert 0.5 < out["search_restricted_share"] < 1
     assert out["search_evals_per_s"] > 0 and out["search_evals_per_cpu_s"] > 0 and out["search_ratio"] > 0
+    assert out["search_coarse_evals_per_s"] > 0 and out["search_coarse_evals_per_cpu_s"] > 0

@@ -152,3 +152,58 @@ def test_composed_spec_carries_its_members_as_json():
     with pytest.raises(LaunchError, match="mocap_nodes: a composed spec"):
         both.to_json()
     assert compose_main(["not json"]) == 2 and compose_main([]) == 2
+
+
+def _camera_network(tmp_path: Path, *, camera_fps: str | None, launch_period: str | None = None) -> Path:
+    fps_line = f"    fps: {camera_fps}\n" if camera_fps is not None else ""
+    params = _write(tmp_path / "params.yaml", f"""
+/mocap/camera:
+  ros__parameters:
+    source: synthetic
+    views: 1
+    width: 80
+    height: 60
+{fps_line}/mocap/prediction:
+  ros__parameters:
+    frame_period_s: 0.03333333333333333
+/mocap/estimator:
+  ros__parameters:
+    frame_period_s: 0.03333333333333333
+""")
+    extra = f", param: [{{from: \"{params}\"}}, {{name: frame_period_s, value: {launch_period}}}]" if launch_period \
+        else f", param: [{{from: \"{params}\"}}]"
+    return _write(tmp_path / "cam.launch.yaml", f"""
+launch:
+- node: {{pkg: isa_mocap_ros, exec: camera_node, name: camera, namespace: /mocap, param: [{{from: "{params}"}}]}}
+- node: {{pkg: isa_mocap_ros, exec: prediction_node, name: prediction, namespace: /mocap{extra}}}
+- node: {{pkg: isa_mocap_ros, exec: estimator_node, name: estimator, namespace: /mocap, param: [{{from: "{params}"}}]}}
+""")
+
+
+def test_launch_gives_the_camera_frame_period_to_prediction_and_estimator(tmp_path):
+    from isa_mocap_ros.cli.launch import with_camera_frame_period
+
+    specs, line = with_camera_frame_period(load_launch_file(_camera_network(tmp_path, camera_fps="60.0")))
+    period = {s.name: dict(s.params).get("frame_period_s") for s in specs}
+    assert period == {"camera": None, "prediction": repr(1 / 60), "estimator": repr(1 / 60)}, period
+    assert "camera at 60 fps" in line and "prediction (was 0.033333)" in line
+    # the camera's default rate (30) matches the files: nothing changes
+    specs, line = with_camera_frame_period(load_launch_file(_camera_network(tmp_path, camera_fps=None)))
+    assert line is None and all("frame_period_s" not in dict(s.params) for s in specs)
+    # a period set on the node in the launch file is kept
+    specs, _ = with_camera_frame_period(load_launch_file(_camera_network(tmp_path, camera_fps="60.0",
+                                                                        launch_period="0.05")))
+    assert dict(specs[1].params)["frame_period_s"] == "0.05" and dict(specs[2].params)["frame_period_s"] == repr(1 / 60)
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(120)
+def test_launched_prediction_node_uses_the_camera_frame_period(spawn, tmp_path):
+    """Real processes: the prediction node started by `isa-mocap launch` next to a 60 fps camera stamps its
+    predictions 1/60 s ahead (its start-up line), not the parameter file's 1/30."""
+    lf = _camera_network(tmp_path, camera_fps="60.0")
+    text = lf.read_text().replace("- node: {pkg: isa_mocap_ros, exec: estimator_node", "# estimator left out: ")
+    lf.write_text(text)
+    launch = spawn("launch", *CLI, "launch", str(lf))
+    assert launch.wait_for_output("stamps + 0.016667 s", 90), launch.output()
+    assert launch.stop(signal.SIGINT, timeout=30) == 0, launch.output()

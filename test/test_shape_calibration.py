@@ -82,11 +82,11 @@ def test_calibration_recovers_a_known_capsule_shape():
     before = bone_errors(bone_lengths(make_model(39)), want)
     after = bone_errors(bone_lengths(make_model(39, shape=res.shape)), want)
     assert res.energy < 0.5 * res.energy_default
-    # the bone errors swing between seeds (mean over bones, seeds 0-5: 25.7, 19.2, 30.7, 13.8, 12.7, 19.1 mm; with
-    # the contour stage's numpy reference path 12.3, 13.5, 22.6, 13.6, 30.2, 18.4; the default shape 25.5): the
-    # energy halves and the scale is found in every seed; the bones are bounded loosely
-    assert after["mean_mm"] < 1.25 * before["mean_mm"], (after, before)
-    assert abs(res.params["scale"] - truth["scale"]) < 0.03, res.params
+    # mean bone error over seeds 0-5 (docs/history/issue33_shape_calibration.md, session 25): 15.6, 12.9, 18.5, 11.2,
+    # 10.6, 13.9 mm (limbs 11.0-18.2; the default shape 25.5); before the arm-split prior and the abductions in
+    # the shape fit 25.7, 19.2, 30.7, 13.8, 12.7, 19.1 (this bound failed in 3 of the 6 seeds, seed 0 among them)
+    assert after["mean_mm"] < 20.0 and after["limbs_mean_mm"] < 20.0, (after, before)
+    assert after["mean_mm"] < 0.8 * before["mean_mm"], (after, before)
 
 
 def test_calibration_is_deterministic():
@@ -95,6 +95,31 @@ def test_calibration_is_deterministic():
     cfg = ShapeCalibrationConfig(window_frames=3, n_frames=2, rounds=2, pose_steps=1, shape_evals=40, seed=4)
     a, b = calibrate_shape(39, cams, frames, config=cfg), calibrate_shape(39, cams, frames, config=cfg)
     assert a.params == b.params and np.array_equal(a.poses, b.poses) and a.frame_keys == b.frame_keys == (0, 2)
+
+
+def test_restarts_keep_the_lowest_judged_energy_and_the_prior_holds_the_arm_split():
+    import dataclasses
+
+    from isa_mocap_ros.tracking.shape_calibration import prior
+
+    model = make_model(39, shape=shape_from_params(default_shape(), {"scale": 1.04}))
+    cams, frames = _rendered_frames(model, 3)
+    cfg = ShapeCalibrationConfig(window_frames=3, n_frames=2, rounds=1, pose_steps=1, shape_evals=40, seed=2, restarts=2)
+    res = calibrate_shape(39, cams, frames, config=cfg)
+    kept = int(res.notes[-1].split()[1])                          # "restart K of 2 kept (judged energies a, b)"
+    assert res.notes[-1].startswith(f"restart {kept} of 2 kept")
+    e = [float(v) for v in res.notes[-1].split("energies ")[1].rstrip(")").split(", ")]
+    assert len(e) == 2 and e[kept - 1] == min(e)
+    # restart K is the calibration with seed + 7919 (K - 1), tracker included
+    one = calibrate_shape(39, cams, frames, config=dataclasses.replace(cfg, restarts=1, seed=2 + 7919 * (kept - 1)))
+    assert one.params == res.params
+    # the prior: a weak pull of every log factor, a stronger one on the upper arm / forearm split only
+    z = np.zeros(len(SHAPE_PARAMS))
+    names = [n for n, _, _ in SHAPE_PARAMS]
+    z[names.index("upper_arm")], z[names.index("forearm")] = 0.1, -0.1
+    assert prior(cfg, z) == pytest.approx(cfg.regularization * 0.02 + cfg.arm_split_prior * 0.04)
+    z[names.index("forearm")] = 0.1
+    assert prior(cfg, z) == pytest.approx(cfg.regularization * 0.02)
 
 
 def test_calibration_needs_a_person():

@@ -349,9 +349,22 @@ def test_heading_check_ends_at_a_gap(scene320):
     assert tr.checking_heading          # the estimator node keeps the next sets in sequence meanwhile
     r = tr.step(masks[2], 2, frames_elapsed=2)
     assert 1500 - 4 < r.n_evals <= 1500
-    assert any("heading check ended: no decision (2 frame periods" in n for n in r.notes)
+    assert any("heading check ended: no decision (2 frame periods" in n and "re-checked on the next frame" in n
+               for n in r.notes)
     assert not tr.checking_heading
-    assert not any("heading check" in n for n in tr.step(masks[3], 3).notes)
+    # the check is re-checked once on the next frame that follows its previous one (the estimator node holds
+    # the sets in sequence for it when heading_recheck_pending says so): not after another gap, but then
+    assert tr.heading_recheck_pending(masks[4])
+    r = tr.step(masks[4], 4, frames_elapsed=2)
+    assert not any("heading" in n for n in r.notes) and tr.heading_recheck_pending(masks[5])
+    r = tr.step(masks[5], 5)
+    assert any(n.startswith("heading re-check: the last check ended at a gap") for n in r.notes)
+    if not tr.checking_heading:           # the re-check kept this heading: check against the other one anyway
+        tr.heading_check.rival_start = (walk[5], r.energy, r.energy)
+        heading.start_rival(tr, 5)
+    r = tr.step(masks[5], 7, frames_elapsed=2)           # that check ended by a gap too: not re-checked again
+    assert any(n.startswith("heading check ended: no decision") and "re-checked" not in n for n in r.notes)
+    assert not tr.checking_heading and not tr.heading_recheck_pending(masks[5])
 
 
 def test_a_polished_rival_mends_a_wrong_first_heading(scene320, monkeypatch):

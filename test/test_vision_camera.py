@@ -79,6 +79,46 @@ def test_undistort_agrees_with_cv2():
     np.testing.assert_allclose(np.stack([x, y], -1), ref, atol=1e-5)
 
 
+def test_undistort_of_a_pixel_does_not_depend_on_its_batch():
+    # each point's Newton iteration stops on its own: the same bits alone, in any batch, in any shape (a table
+    # of every pixel built once gives what undistorting a frame's pixels gives)
+    rng = np.random.default_rng(5)
+    cam = random_camera(rng, n_dist=8, strength=0.5)
+    uv = np.stack([rng.uniform(0, cam.width, 400), rng.uniform(0, cam.height, 400)], axis=-1)
+    x, y = cam.undistort_pixels(uv[:, 0], uv[:, 1])
+    for i in (0, 17, 399):
+        xi, yi = cam.undistort_pixels(uv[i, 0], uv[i, 1])
+        assert np.shape(xi) == () and xi == x[i] and yi == y[i]
+    x2, y2 = cam.undistort_pixels(uv[::-1, 0].reshape(20, 20), uv[::-1, 1].reshape(20, 20))
+    assert x2.shape == (20, 20)
+    np.testing.assert_array_equal(x2.ravel()[::-1], x)
+    np.testing.assert_array_equal(y2.ravel()[::-1], y)
+
+
+def test_pixel_areas_are_kept_and_give_the_same_bits():
+    from isa_mocap_ros.vision.camera import PixelAreas
+
+    rng = np.random.default_rng(6)
+    cam = random_camera(rng, n_dist=5, strength=0.5)
+
+    def direct(u, v):                       # each pixel's area computed anew (what every frame did)
+        u, v = u.astype(float), v.astype(float)
+        xu0, yu0 = cam.undistort_pixels(u - 0.5, v)
+        xu1, yu1 = cam.undistort_pixels(u + 0.5, v)
+        xv0, yv0 = cam.undistort_pixels(u, v - 0.5)
+        xv1, yv1 = cam.undistort_pixels(u, v + 0.5)
+        return np.abs((xu1 - xu0) * (yv1 - yv0) - (xv1 - xv0) * (yu1 - yu0))
+
+    areas = PixelAreas(cam)
+    for k in range(3):                      # overlapping pixel sets: the second and third reuse the table
+        v, u = np.nonzero(rng.random((cam.height, cam.width)) < 0.3)
+        a = areas.of(u, v)
+        ref = direct(u, v)
+        np.testing.assert_array_equal(a, ref)
+        assert a.sum() == ref.sum()
+    assert 0 < np.count_nonzero(np.isfinite(areas._table)) < cam.height * cam.width
+
+
 def test_look_at_geometry():
     eye, target = np.array([3.0, -2.0, 2.5]), np.array([0.2, 0.1, 1.0])
     cam = look_at(eye, target, fov_deg=60, width=320, height=240)

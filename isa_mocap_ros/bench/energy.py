@@ -18,7 +18,9 @@ capsules the partition moves are recomputed). So the bench also runs that search
 optimizer, parameters, partitions and search box (``Tracker.search_box``) around the scene's pose, from a
 start 2 cm / 0.1 rad off it, ``--search-evals`` evaluations — and reports its **effective rate**:
 evaluations per second of the whole search (kernels, launches, the optimizer's compiled steps),
-wall clock and per CPU second (``search_*``).
+wall clock and per CPU second (``search_*``), and the same with half of each partition's generations on the
+energy's coarse level (two of the four views, ``search_coarse_*``; ``SearchConfig.coarse_fraction``, off in the
+tracker by default).
 """
 from __future__ import annotations
 
@@ -33,6 +35,10 @@ from isa_mocap_ros.body import capsule_endpoints, make_model
 from isa_mocap_ros.energy import SilhouetteEnergy
 from isa_mocap_ros.tracking.tracker import TrackerConfig
 from isa_mocap_ros.vision import default_rig, render_mask
+
+
+#: The share of the search's generations on the coarse level in the ``search_coarse_*`` figures.
+COARSE_FRACTION = 0.5
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -82,6 +88,8 @@ def run(args: argparse.Namespace) -> int:
     exact(X[:nb])
     t_exact = time.perf_counter() - t0
     search = search_rate(model, rig, fast, x0, args.search_evals, args.repeats, args.seed)
+    search.update(search_rate(model, rig, fast, x0, args.search_evals, args.repeats, args.seed, COARSE_FRACTION,
+                              "search_coarse"))
     fast_rate = args.batch / t_fast
     exact_rate = nb / t_exact
     out = {"views": args.views, "dof": args.dof, "batch": args.batch, "fast_evals_per_s": round(fast_rate, 1),
@@ -106,12 +114,16 @@ def run(args: argparse.Namespace) -> int:
               f"{search['search_evals']} evaluations in generations of {search['search_generation']}, restricted "
               f"kernel in {search['search_restricted_share']:.0%} of them; {search['search_evals_per_cpu_s']:.0f} per "
               f"CPU second; median of {args.repeats}; {search['search_evals_per_s'] / exact_rate:.0f}x the exact)")
+        print(f"  search, {COARSE_FRACTION:.0%} of its generations on two views: {search['search_coarse_evals_per_s']:.0f} "
+              f"evals/s ({search['search_coarse_evals_per_cpu_s']:.0f} per CPU second)")
     return 0
 
 
-def search_rate(model, rig, energy, x_true, evals: int, repeats: int, seed: int) -> dict:
+def search_rate(model, rig, energy, x_true, evals: int, repeats: int, seed: int, coarse_fraction: float = 0.0,
+                key: str = "search") -> dict:
     """The effective rate of the tracker's main search on ``energy`` (module docstring): the median over
-    ``repeats`` runs (the same start and draws each time) after one warm-up run."""
+    ``repeats`` runs (the same start and draws each time) after one warm-up run; ``coarse_fraction`` of each
+    partition's generations on the energy's coarse level (two views, ``SearchConfig.coarse_fraction``)."""
     from isa_mocap_ros.optim import compiled_search, make_optimizer
     from isa_mocap_ros.tracking.tracker import Tracker
 
@@ -128,7 +140,7 @@ def search_rate(model, rig, energy, x_true, evals: int, repeats: int, seed: int)
     def once():
         opt = make_optimizer(tr.config.search.optimizer, start, spread, rng=np.random.default_rng([seed, 2]),
                              bounds=(lo, hi), rotation_blocks=model.rotation_blocks, **params)
-        run = compiled_search.search(opt, energy, evals, paused=True)
+        run = compiled_search.search(opt, energy, evals, paused=True, coarse_fraction=coarse_fraction)
         if run is None:
             raise RuntimeError(f"bench energy: the tracker's optimizer {tr.config.search.optimizer!r} does not run "
                                "compiled on this energy")
@@ -145,7 +157,9 @@ def search_rate(model, rig, energy, x_true, evals: int, repeats: int, seed: int)
     # the partitions without a root coordinate run the restricted kernel (RestrictedSilhouetteEnergy.full)
     restricted = sum(s for q, s in zip(run.parts, run.shares) if not np.any(np.asarray(q) < 6))
     c = float(np.median(cpu))
-    return {"search_evals_per_s": round(n / float(np.median(wall)), 1),
-            "search_evals_per_cpu_s": round(n / c, 1) if c > 0 else None,
-            "search_evals": int(n), "search_generation": int(opt.params.get("n_particles", 0)),
-            "search_restricted_share": round(restricted / n, 3)}
+    out = {f"{key}_evals_per_s": round(n / float(np.median(wall)), 1),
+           f"{key}_evals_per_cpu_s": round(n / c, 1) if c > 0 else None}
+    if coarse_fraction == 0.0:
+        out.update({"search_evals": int(n), "search_generation": int(opt.params.get("n_particles", 0)),
+                    "search_restricted_share": round(restricted / n, 3)})
+    return out

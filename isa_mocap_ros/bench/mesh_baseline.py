@@ -13,7 +13,8 @@ tracking model (``--body capsules``, the control, scored against the ground-trut
   bag from its images (robustness's default);
 * comparison (:mod:`isa_mocap_ros.eval.compare`): the default design's sequences, algorithms
   h-isa, isa, cmaes and pycma at 39 DOF and 1500 evaluations, seed 0, the first
-  ``--compare-frames`` (default 10) frames.
+  ``--compare-frames`` (default 10) frames, the shape calibrated once per sequence from its images (the
+  comparison's default since session 25; the calibration reads the sequence's first 30 frames).
 
 Results go to ``--json`` (default ``docs/results/mesh_baseline.json``), which ``bench all``
 renders into ``docs/RESULTS.md`` ("Mesh bodies vs capsules").

@@ -3,18 +3,21 @@
 ``isa-mocap bench real [--quick] [--configs A,B] [--lockstep CONFIG] [--out DIR] [--json FILE]``:
 
 1. imports ``../shared/data/real/pose2sim_demo`` as ``docs/real_cameras.md`` section 3 does (4 views at
-   320x565, the calibration scene shots as background images, Pose2Sim's raw TRC as the reference), cached in
-   ``DIR/demo_bag``;
-2. tracks every frame offline (``isa-mocap track``, h-isa 1500, seed 0, automatic initialization) per
-   configuration (:data:`CONFIGS`: the default shape, the default shape with the keypoint term, the shape
-   calibrated from the first frames, without and with the keypoint term); scored against Pose2Sim's keypoints mapped to our joints: mean error
-   raw and with each joint's mean offset removed, the worst frame, the knee angle, frames facing backwards,
+   320x565, the calibration scene shots as background images, the person found in each frame by the
+   landmark model for the background, Pose2Sim's raw TRC as the reference), cached in ``DIR/demo_bag``; the
+   masks the default segmentation learns from it are measured against the peer's stick figure per view
+   (:mod:`isa_mocap_ros.eval.mask_quality`);
+2. tracks every frame offline (``isa-mocap track``, h-isa 1500, automatic initialization) per configuration
+   (:data:`CONFIGS`; default: the default shape with the keypoint term, and the shape calibrated from the first
+   frames with it) and per seed (``--seeds``, default 0,1,2: the track is chaotic across seeds, so one seed says
+   little); scored against Pose2Sim's keypoints mapped to our joints: mean error raw and with each joint's mean
+   offset removed (mean, min and max over the seeds), the worst frame, the knee angle, frames facing backwards,
    per joint;
 3. the same through the node network (``isa-mocap run --lockstep``; ``--lockstep CONFIG``, default the calibrated
    shape when it is tracked, else the first configuration) and how many frames differ from the offline run of
    that configuration (the lockstep replay must not depend on machine load).
 
-``--quick``: the first 8 frames at 160 px, 300 evaluations. Without ``../shared`` nothing runs and the
+``--quick``: the first 8 frames at 160 px, 300 evaluations, seed 0. Without ``../shared`` nothing runs and the
 section says so. The recording is third-party data (BSD-3, perfanalytics): neither the bag nor overlays
 are written anywhere but ``DIR``.
 """
@@ -32,7 +35,7 @@ from pathlib import Path
 import numpy as np
 from isa_mocap_ros.bench._common import write_result
 
-__all__ = ["CONFIGS", "collect", "render_markdown", "add_arguments", "run"]
+__all__ = ["CONFIGS", "DEFAULT_CONFIGS", "collect", "mask_figures", "render_markdown", "add_arguments", "run"]
 
 #: configuration name -> (label, extra ``isa-mocap track`` / ``run`` arguments)
 CONFIGS = {
@@ -43,6 +46,8 @@ CONFIGS = {
     "auto_keypoints": ("calibrated shape + keypoint term (weight 1, every 8th frame)",
                        ["--shape", "auto", "--keypoint-weight", "1"]),
 }
+#: configurations tracked when ``--configs`` is not given
+DEFAULT_CONFIGS = ("keypoints", "auto_keypoints")
 _KEEP = ("frames", "frames_tracked", "frames_fell_back", "mpjpe_mm", "offset_removed_mpjpe_mm", "max_frame_error_mm",
          "offset_removed_max_frame_error_mm", "knee_rmse_deg", "offset_removed_knee_rmse_deg", "frames_facing_backwards",
          "max_heading_error_deg", "per_marker_mm", "offset_removed_per_marker_mm", "fps", "frame_errors_mm")
@@ -101,7 +106,36 @@ def _lockstep(bag: Path, out: Path, extra: list[str]) -> dict:
     return r
 
 
-def collect(*, quick: bool, out: Path, configs=tuple(CONFIGS), lockstep: str | None = "default_choice") -> dict:
+def mask_figures(bag: Path) -> list[dict]:
+    """Per view, the default segmentation's masks (learnt from the bag's background frames) against the
+    reference's stick figure, averaged over the frames (:func:`isa_mocap_ros.eval.mask_quality.mask_quality`)."""
+    from isa_mocap_ros.cli.track_io import read_sequence
+    from isa_mocap_ros.eval.mask_quality import mask_quality, mean_quality
+    from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig
+
+    seq = read_sequence(bag, want_images=True, want_masks=False)
+    learn = [f for f in seq.frames if f.truth_markers is None]
+    scored = [f for f in seq.frames if f.truth_markers is not None]
+    out = []
+    for v, cam in enumerate(seq.cameras):
+        seg = BackgroundSegmenter(SegmentationConfig(learn_frames=max(len(learn), 1)))
+        for f in learn:
+            seg.apply(f.images[v])
+        q = mean_quality([mask_quality(cam, f.truth_markers, seq.truth_marker_names, seg.apply(f.images[v]))
+                          for f in scored])
+        out.append({"view": v, "beyond": round(q.beyond, 3), "core_missed": round(q.core_missed, 3),
+                    "keypoints_on": round(q.keypoints_on, 3)})
+    return out
+
+
+def _spread(runs: list[dict], key: str) -> dict:
+    v = np.array([r.get(key) if r.get(key) is not None else np.nan for r in runs], float)
+    return {"mean": float(np.nanmean(v)), "min": float(np.nanmin(v)), "max": float(np.nanmax(v))} if np.isfinite(v).any() \
+        else {"mean": None, "min": None, "max": None}
+
+
+def collect(*, quick: bool, out: Path, configs=DEFAULT_CONFIGS, lockstep: str | None = "default_choice",
+            seeds=(0, 1, 2)) -> dict:
     """The section's measurements (module docstring)."""
     if not (demo_dir() / "calibration" / "Calib_scene_checkerboard.toml").is_file():
         return {"skipped": f"the Pose2Sim demo is not at {demo_dir()} (set ISA_MOCAP_SHARED)"}
@@ -111,23 +145,51 @@ def collect(*, quick: bool, out: Path, configs=tuple(CONFIGS), lockstep: str | N
     bag = out / (f"demo_bag_{width}" + ("" if frames is None else f"_{frames}"))
     if not (bag / "metadata.yaml").is_file():
         import_demo(bag, width=width, frames=frames)
-    common = ["--seed", "0", "--evals", "300" if quick else "1500"]
-    res: dict = {"quick": bool(quick), "width": width, "evals": int(common[-1]), "seed": 0, "runs": {}}
+    seeds = (0,) if quick else tuple(int(x) for x in seeds)
+    evals = ["--evals", "300" if quick else "1500"]
+    t0 = time.perf_counter()
+    res: dict = {"quick": bool(quick), "width": width, "evals": int(evals[-1]), "seeds": list(seeds), "runs": {},
+                 "masks": mask_figures(bag)}
     for name in configs:
         label, extra = CONFIGS[name]
-        print(f"bench real: track {name} ...", file=sys.stderr, flush=True)
-        res["runs"][name] = {"label": label, "command": "isa-mocap track BAG " + " ".join(extra + common),
-                             **_track(bag, out / f"track_{name}", extra + common)}
+        per_seed = []
+        for seed in seeds:
+            print(f"bench real: track {name} seed {seed} ...", file=sys.stderr, flush=True)
+            per_seed.append({"seed": seed, **_track(bag, out / f"track_{name}_s{seed}",
+                                                    extra + ["--seed", str(seed)] + evals)})
+        first = per_seed[0]
+        res["runs"][name] = {"label": label, "command": "isa-mocap track BAG " + " ".join(extra + evals) + " --seed S",
+                             **first, "seeds": [{k: r[k] for k in ("seed", "mpjpe_mm", "offset_removed_mpjpe_mm",
+                                                                    "knee_rmse_deg", "frames_tracked",
+                                                                    "frames_facing_backwards", "wall_seconds")}
+                                                for r in per_seed],
+                             "offset_removed_over_seeds": _spread(per_seed, "offset_removed_mpjpe_mm"),
+                             "raw_over_seeds": _spread(per_seed, "mpjpe_mm"),
+                             "knee_over_seeds": _spread(per_seed, "knee_rmse_deg"),
+                             "backwards_over_seeds": int(sum(r["frames_facing_backwards"] or 0 for r in per_seed)),
+                             "tracked_over_seeds": int(min(r["frames_tracked"] or 0 for r in per_seed))}
+    common = ["--seed", str(seeds[0])] + evals
     if lockstep:
-        name = lockstep if lockstep != "default_choice" else ("auto" if "auto" in configs else configs[0])
+        name = lockstep if lockstep != "default_choice" else next(
+            (c for c in ("auto_keypoints", "auto") if c in configs), configs[0])
         print(f"bench real: run --lockstep {name} ...", file=sys.stderr, flush=True)
-        r = _lockstep(bag, out / f"run_{name}", CONFIGS[name][1] + common)
+        net = CONFIGS[name][1] + (["--keypoints"] if "--keypoint-weight" in CONFIGS[name][1] else [])   # the keypoint node
+        r = _lockstep(bag, out / f"run_{name}", net + common)
         if "frame_errors_mm" in r and name in res["runs"]:
             a, b = np.asarray(r["frame_errors_mm"]), np.asarray(res["runs"][name]["frame_errors_mm"])
             r["frames_differing_from_track"] = int(np.sum(a != b)) if a.shape == b.shape else None
-        res["lockstep"] = {"config": name, "command": "isa-mocap run BAG --lockstep " + " ".join(CONFIGS[name][1] + common),
+        res["lockstep"] = {"config": name, "command": "isa-mocap run BAG --lockstep " + " ".join(net + common),
                            **r}
+    res["wall_seconds"] = round(time.perf_counter() - t0, 1)
     return res
+
+
+def _seeds(d: dict) -> list:
+    return d.get("seeds") or [d.get("seed", 0)]
+
+
+def _one(r: dict, key: str) -> dict:
+    return {"mean": r.get(key), "min": r.get(key), "max": r.get(key)}
 
 
 def _f(v, fmt: str = "{:.1f}") -> str:
@@ -137,24 +199,39 @@ def _f(v, fmt: str = "{:.1f}") -> str:
 def render_markdown(d: dict) -> str:
     if "skipped" in d:
         return f"Not run: {d['skipped']}.\n"
+    seeds = _seeds(d)
     L = ["`isa-mocap bench real` (`isa_mocap_ros/bench/real.py`; the recording, its import and the scoring: "
          "[real_cameras.md](real_cameras.md)). The Pose2Sim demo (4 real cameras, 100 frames at 60 fps) imported at "
-         f"{d['width']} px wide, h-isa {d['evals']} evaluations per frame, seed {d['seed']}, automatic initialization, "
+         f"{d['width']} px wide, h-isa {d['evals']} evaluations per frame, seeds {', '.join(map(str, _seeds(d)))}, "
+         "automatic initialization, "
          "every frame tracked offline (`isa-mocap track`); scored against Pose2Sim's own keypoints (raw TRC) mapped "
          "to our joints — a peer's estimate, not ground truth; its keypoints are not joint centres, so the error with "
          "each joint's mean offset removed is the measure (target ≤ 40 mm)."
          + (" **Quick run (8 frames, 160 px): a smoke test, not the figures.**" if d.get("quick") else ""), "",
-         "| run | frames tracked | mean error raw (mm) | offsets removed (mm) | worst frame, offsets removed (mm) "
-         "| knee RMSE (°) | frames facing backwards |", "|---|---|---|---|---|---|---|"]
+         "| run | frames tracked (fewest of the seeds) | mean error raw (mm), mean [min-max] over the seeds "
+         "| offsets removed (mm), mean [min-max] | per seed, offsets removed (mm) | knee RMSE (°), mean "
+         "| frames facing backwards (all seeds) |", "|---|---|---|---|---|---|---|"]
     for r in d["runs"].values():
-        L.append(f"| {r['label']} | {r['frames_tracked']} | {_f(r['mpjpe_mm'])} | **{_f(r['offset_removed_mpjpe_mm'])}** "
-                 f"| {_f(r['offset_removed_max_frame_error_mm'])} | {_f(r['knee_rmse_deg'])} "
-                 f"| {r['frames_facing_backwards']} (heading within {_f(r['max_heading_error_deg'], '{:.0f}')}°) |")
+        raw, rem, knee = (r.get(k) or _one(r, k2) for k, k2 in (("raw_over_seeds", "mpjpe_mm"),
+                                                                  ("offset_removed_over_seeds", "offset_removed_mpjpe_mm"),
+                                                                  ("knee_over_seeds", "knee_rmse_deg")))
+        per = ", ".join(f"{_f(x['offset_removed_mpjpe_mm'])}" for x in r.get("seeds", [r]))
+        L.append(f"| {r['label']} | {r.get('tracked_over_seeds', r['frames_tracked'])} | {_f(raw['mean'])} "
+                 f"[{_f(raw['min'])}-{_f(raw['max'])}] | **{_f(rem['mean'])}** [{_f(rem['min'])}-{_f(rem['max'])}] "
+                 f"| {per} | {_f(knee['mean'])} | {r.get('backwards_over_seeds', r['frames_facing_backwards'])} |")
     first = next(iter(d["runs"].values()), None)
     if first and first.get("per_marker_mm"):
-        L += ["", f"Per joint ({first['label']}; raw / offsets removed, mm): " + ", ".join(
+        L += ["", f"Per joint ({first['label']}, seed {seeds[0]}; raw / offsets removed, mm): " + ", ".join(
             f"{n.replace('_', ' ')} {first['per_marker_mm'][n]:.0f}/{first['offset_removed_per_marker_mm'][n]:.0f}"
             for n in first["per_marker_mm"]) + "."]
+    if d.get("masks"):
+        L += ["", "Masks of the default segmentation learnt from the import's background frames, against the peer's "
+                  "stick figure (`isa_mocap_ros.eval.mask_quality`; share of the mask farther than 18 px from it / share "
+                  "of its 5-px core missed / keypoints on the mask): " + "; ".join(
+                      f"cam{m['view']} {m['beyond']:.2f} / {m['core_missed']:.2f} / {m['keypoints_on']:.2f}"
+                      for m in d["masks"]) + "."]
+    if d.get("wall_seconds") is not None:
+        L += ["", f"The bench took {d['wall_seconds'] / 60:.1f} min (import, masks, every run)."]
     lk = d.get("lockstep")
     if lk:
         if "error" in lk:
@@ -170,11 +247,13 @@ def render_markdown(d: dict) -> str:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quick", action="store_true", help="8 frames at 160 px, 300 evaluations (a smoke test)")
-    p.add_argument("--configs", default=",".join(CONFIGS), metavar="A,B",
-                   help=f"configurations to track (of {', '.join(CONFIGS)}; default all)")
+    p.add_argument("--configs", default=",".join(DEFAULT_CONFIGS), metavar="A,B",
+                   help=f"configurations to track (of {', '.join(CONFIGS)}; default {','.join(DEFAULT_CONFIGS)})")
+    p.add_argument("--seeds", default="0,1,2", metavar="S,T",
+                   help="seeds tracked per configuration (default 0,1,2; --quick: 0)")
     p.add_argument("--lockstep", default=None, metavar="CONFIG",
-                   help="also run the network in lockstep with this configuration (default: auto, the calibrated shape, "
-                        "when it is among --configs, else the first; 'none' = no network run)")
+                   help="also run the network in lockstep with this configuration, first seed (default: the calibrated "
+                        "shape, auto_keypoints or auto, when among --configs, else the first; 'none' = no network run)")
     p.add_argument("--out", default=None, metavar="DIR", help="work directory: the bag, tracks (default: a temporary one)")
     p.add_argument("--json", default="docs/results/real.json", metavar="FILE", help="where to write the results")
 
@@ -183,11 +262,18 @@ def run(args: argparse.Namespace) -> int:
     configs = tuple(c.strip() for c in args.configs.split(",") if c.strip())
     bad = [c for c in configs if c not in CONFIGS]
     lockstep = None if args.lockstep == "none" else (args.lockstep or "default_choice")
+    try:
+        seeds = tuple(int(x) for x in args.seeds.split(",") if x.strip())
+    except ValueError:
+        seeds = ()
+    if not seeds:
+        print(f"isa-mocap bench real: error: --seeds: expected integers like 0,1,2, received {args.seeds!r}", file=sys.stderr)
+        return 2
     if bad or not configs or (lockstep not in (None, "default_choice") and lockstep not in CONFIGS):
         print(f"isa-mocap bench real: error: --configs / --lockstep: expected names of {', '.join(CONFIGS)}, received "
               f"{args.configs!r} / {args.lockstep!r}", file=sys.stderr)
         return 2
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="isa_mocap_real_"))
-    res = collect(quick=args.quick, out=out, configs=configs, lockstep=lockstep)
+    res = collect(quick=args.quick, out=out, configs=configs, lockstep=lockstep, seeds=seeds)
     res["command"] = "isa-mocap bench real " + " ".join(sys.argv[3:])
     return write_result("real", res, args.json, render_markdown(res))

@@ -419,6 +419,9 @@ def render_markdown(res: dict) -> str:
             f"{e['search_generation']}, {e['search_restricted_share']:.0%} on the restricted kernel) | "
             f"{e['search_evals_per_s']:.0f} |",
             f"| the search, per CPU second | {_f(e.get('search_evals_per_cpu_s'), '{:.0f}')} |",
+            *([f"| the search with half of its generations on two views (`--coarse-fraction 0.5`), per CPU second | "
+               f"{_f(e.get('search_coarse_evals_per_cpu_s'), '{:.0f}')} |"] if e.get("search_coarse_evals_per_cpu_s")
+              else []),
             f"| ratio, the search to the exact | {e['search_ratio']:.0f}× |"] if e.get("search_evals_per_s") else []),
          ""]
     if res.get("segmentation"):

@@ -14,7 +14,10 @@ Topics (the layout of ``isa-mocap synth``; ``i`` = view index):
 * ``--background-frames K`` (default 10): K background-only frames first, made from the recording
   by :func:`isa_mocap_ros.vision.stable_background.estimate_background` (per pixel, the frames where
   the background shows; ``--background DIR`` adds images of the empty scene, one per view), so the
-  segmentation's learn-from-empty-frames start works on a recording where the person never leaves
+  segmentation's learn-from-empty-frames start works on a recording where the person never leaves;
+  ``--find-person auto`` (default; ``on``/``off``): the person found in each frame by the BlazePose
+  model's segmentation (:mod:`isa_mocap_ros.vision.person_masks`) when the model is installed, the
+  background per pixel from the frames where it is not
 * ``--reference FILE.trc``: ``/mocap/ground_truth/markers`` (``geometry_msgs/PoseArray`` in ``world``,
   one pose per TRC marker in file order, identity orientation, NaN for a missing marker) for every
   recording frame (TRC row ``start + j`` for frame ``j``), axes mapped by ``--reference-axes``
@@ -36,6 +39,8 @@ import numpy as np
 import yaml
 
 TOPIC = "/mocap"
+#: frames (spread over the recording) the person-masked background is estimated from
+MAX_PERSON_FRAMES = 100
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 AXES = {"pose2sim": "world = (Z, X, Y) of the TRC point (Pose2Sim's zup2yup undone)", "none": "as in the file"}
 
@@ -62,6 +67,10 @@ def register(sub) -> None:
                    help="images of the empty scene, one per view (sorted by name), same geometry as the inputs")
     p.add_argument("--background-frames", type=int, default=10, metavar="K",
                    help="background-only frames written first (default 10; 0 = none)")
+    p.add_argument("--find-person", choices=("auto", "on", "off"), default="auto",
+                   help="find the person in each frame with the BlazePose model's segmentation (the keypoints extra "
+                        "and `make models`) and learn the background where it is not; auto (default): when the model "
+                        "is installed; off: the temporal mode and the --background images alone")
     p.add_argument("--reference", default=None, metavar="TRC", help="reference 3-D markers (TRC) as ground truth")
     p.add_argument("--reference-axes", choices=tuple(AXES), default="pose2sim",
                    help="axes of the TRC file (default pose2sim: y-up, mapped to the z-up world)")
@@ -152,6 +161,24 @@ def _read_plates(directory, sensors, geoms, sizes):
     return plates
 
 
+def _person_finder(mode: str):
+    """The BlazePose landmarker for ``--find-person`` (None: off, or auto without the model)."""
+    if mode == "off":
+        return None
+    from isa_mocap_ros.vision.errors import VisionError
+    from isa_mocap_ros.vision.landmark_model import ModelUnavailable
+    from isa_mocap_ros.vision.landmarks import PoseLandmarker
+
+    try:
+        return PoseLandmarker()
+    except (ModelUnavailable, VisionError) as exc:
+        if mode == "on":
+            raise ImportInputError(f"--find-person on: {exc}") from exc
+        print(f"import: the person is not found by a model ({exc}); background from the temporal mode and "
+              "--background images", file=sys.stderr)
+        return None
+
+
 def _pose_array_positions(points, stamp_ns):
     from geometry_msgs.msg import Pose, PoseArray
 
@@ -179,6 +206,7 @@ def write_import(args) -> dict:
     from isa_mocap_ros.synth import T0_NS, stamp_ns
     from isa_mocap_ros.vision.calib_formats import read_calibration
     from isa_mocap_ros.vision.sources import AdaptedSource, EndOfSource
+    from isa_mocap_ros.vision.person_masks import PERSON_THRESHOLD, find_person, people_in_plates
     from isa_mocap_ros.vision.stable_background import estimate_background
     from msg_adapters import array_to_image, rt_to_transform, to_cdr, type_name_of
 
@@ -227,7 +255,7 @@ def write_import(args) -> dict:
             k += 1
 
     # pass 1: samples for the background (every frame, thinned to at most 200 by doubling the stride)
-    est = None
+    est = landmarker = None
     if args.background_frames:
         samples: list[list[np.ndarray]] = [[] for _ in range(V)]
         stride, n = 1, 0
@@ -245,10 +273,19 @@ def write_import(args) -> dict:
                                "(or --background-frames 0)")
         plates = (_read_plates(args.background, sensors, src.geometries, src.sizes) if args.background
                   else [[] for _ in range(V)])
+        landmarker = _person_finder(args.find_person)
         est = []
         for v in range(V):
             stack = np.stack(samples[v])
-            e = estimate_background(stack, plates=[plates[v]] if args.background else [])
+            vplates = [plates[v]] if args.background else []
+            if landmarker is None:
+                e = estimate_background(stack, plates=vplates)
+            else:
+                stack = stack[np.unique(np.linspace(0, len(stack) - 1, min(len(stack), MAX_PERSON_FRAMES)).round()
+                                        .astype(int))]
+                person = find_person(stack, landmarker=landmarker) > PERSON_THRESHOLD
+                e = estimate_background(stack, plates=vplates, person=person, plate_people=people_in_plates(
+                    vplates, person.any(axis=0), landmarker=landmarker))
             est.append((e, e.frames(args.background_frames, stack)))
         src = open_adapted()
     elif args.background:
@@ -266,6 +303,7 @@ def write_import(args) -> dict:
         "inputs": [str(s) for s in args.inputs], "calibration": str(args.calibration),
         "cameras": [c.name for c in sensors], "geometry": src.describe(), "fps": float(fps),
         "background_frames": K, "background_images": args.background, "reference": args.reference,
+        "background_person": None if not K else ("found by the landmark model" if landmarker is not None else "not found"),
         "start": args.start}, sort_keys=False, width=200)}
     written = 0
     with BagWriter(out, compression=args.compression, overwrite=args.overwrite, chunk_size=32 * 1024 * 1024,

@@ -4,6 +4,12 @@ Each node runs as its own process (``--single-process``: all in one executor), w
 ``--ros-args --params-file`` from the launch file; SIGINT/SIGTERM are forwarded, nodes marked
 ``respawn`` are restarted after a crash, and shutdown escalates SIGINT -> SIGTERM -> SIGKILL.
 The default launch file is the package's ``launch/mocap.launch.yaml``.
+
+Frame period: the camera node stamps its frame sets ``1 / fps`` apart (its timer), and the prediction and
+estimator nodes match predictions to frames by ``frame_period_s``. When the network has a camera node,
+``launch`` hands both nodes ``frame_period_s = 1 / fps`` of the camera (its parameter as the launch file and
+its parameter files give it, else the node's default 30), as ``isa-mocap run`` hands them a bag's period;
+a ``frame_period_s`` set on a node in the launch file itself is kept.
 """
 from __future__ import annotations
 
@@ -37,6 +43,70 @@ def _parse_arguments(items: list[str]) -> dict[str, str]:
             raise LaunchError(f"launch arguments look like name:=value, got {item!r}")
         out[name] = value
     return out
+
+
+_PERIOD_NODES = ("prediction_node", "estimator_node")
+_CAMERA_DEFAULT_FPS = 30.0       # isa_mocap_ros.nodes.camera's fps default
+
+
+def _file_parameter(files, node_name: str, namespace: str, key: str):
+    """The value of parameter ``key`` for node ``node_name`` in ROS parameter files (later files win; keys
+    ``name``, ``/ns/name``, ``/**``, ``ns/name``), or None."""
+    import yaml
+
+    full = f"{namespace.rstrip('/')}/{node_name}" if namespace else f"/{node_name}"
+    value = None
+    for f in files:
+        try:
+            with open(f) as fh:
+                doc = yaml.safe_load(fh) or {}
+        except (OSError, yaml.YAMLError):
+            continue                    # the node reports an unreadable file itself
+        for k in ("/**", node_name, full, full.lstrip("/")):
+            block = doc.get(k) if isinstance(doc, dict) else None
+            params = block.get("ros__parameters") if isinstance(block, dict) else None
+            if isinstance(params, dict) and key in params:
+                value = params[key]
+    return value
+
+
+def _parameter(spec: NodeSpec, key: str):
+    given = dict(spec.params)
+    return given[key] if key in given else _file_parameter(spec.params_files, spec.name, spec.namespace, key)
+
+
+def with_camera_frame_period(specs: list[NodeSpec]) -> tuple[list[NodeSpec], str | None]:
+    """``specs`` with ``frame_period_s = 1 / fps`` of the camera node given to the prediction and estimator nodes
+    (module docstring), and a line saying so (None when there is no camera node or nothing to change)."""
+    flat = [m for s in specs for m in (s.members or (s,))]
+    cams = [s for s in flat if s.exec == "camera_node"]
+    if not cams:
+        return specs, None
+    fps = _parameter(cams[0], "fps")
+    try:
+        fps = float(_CAMERA_DEFAULT_FPS if fps is None else fps)
+    except (TypeError, ValueError):
+        return specs, None              # the camera node refuses a bad fps itself
+    if not fps > 0:
+        return specs, None
+    period = 1.0 / fps
+    changed = []
+
+    def fix(s: NodeSpec) -> NodeSpec:
+        if s.members:
+            return NodeSpec(**{**s.__dict__, "members": tuple(fix(m) for m in s.members)})
+        if s.exec not in _PERIOD_NODES or "frame_period_s" in dict(s.params):
+            return s
+        old = _file_parameter(s.params_files, s.name, s.namespace, "frame_period_s")
+        if old is not None and abs(float(old) - period) < 1e-9:
+            return s
+        changed.append(f"{s.name} (was {float(old):.6f})" if old is not None else s.name)
+        return NodeSpec(**{**s.__dict__, "params": tuple(s.params) + (("frame_period_s", repr(period)),)})
+
+    out = [fix(s) for s in specs]
+    if not changed:
+        return specs, None
+    return out, (f"[launch] camera at {fps:g} fps: frame_period_s = {period:.6f} s for {', '.join(changed)}")
 
 
 def node_class(spec: NodeSpec):
@@ -81,6 +151,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if args.respawn:
         specs = [NodeSpec(**{**s.__dict__, "respawn": True}) for s in specs]
+    specs, line = with_camera_frame_period(specs)
+    if line:
+        print(line, flush=True)
     if args.list:
         for s in specs:
             print(" ".join(s.command()))

@@ -18,13 +18,16 @@ def add_calibration_arguments(p: argparse.ArgumentParser) -> None:
                    help="shape calibration: pose/shape alternations (default 4)")
     p.add_argument("--calib-evals", type=int, default=None, metavar="N",
                    help="shape calibration: shape-fit evaluations per round (default 1500)")
+    p.add_argument("--calib-restarts", type=int, default=None, metavar="N",
+                   help="shape calibration: whole calibrations from other seeds, the lowest energy kept (default 1)")
 
 
 def calibration_config(args, seed: int):
     from isa_mocap_ros.tracking.shape_calibration import ShapeCalibrationConfig
 
     kw = {"seed": seed}
-    for opt, key in (("calib_frames", "window_frames"), ("calib_rounds", "rounds"), ("calib_evals", "shape_evals")):
+    for opt, key in (("calib_frames", "window_frames"), ("calib_rounds", "rounds"), ("calib_evals", "shape_evals"),
+                     ("calib_restarts", "restarts")):
         v = getattr(args, opt, None)
         if v is not None:
             kw[key] = v

@@ -48,6 +48,9 @@ _TRACKER_OPTIONS = (
     ("--partition-order", str, None, "NAMES",
      "comma-separated order of the hierarchy's partitions (default: the tracker's, root,left_arm,right_arm,torso,"
      "left_leg,right_leg; the paper's: root,torso,left_arm,right_arm,left_leg,right_leg)"),
+    ("--coarse-fraction", float, None, "F",
+     "share of each partition's generations of the main search evaluated on two views only (the energy's coarse "
+     "level, about half the cost; docs/energy.md); 0 = off (default: the tracker's default)"),
     ("--keypoint-weight", float, None, "W",
      "weight of the learned-keypoint term (BlazePose landmarks on the images, cropped around the mask; "
      f"docs/keypoints.md); 0 = off; default {DEFAULT_KEYPOINT_WEIGHT:g} when the landmark model is installed "
@@ -260,6 +263,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         cfg_kw["view_weights"] = False
     if getattr(args, "init_confirm_frames", None) is not None:
         cfg_kw["init_confirm_frames"] = args.init_confirm_frames
+    if getattr(args, "coarse_fraction", None) is not None:
+        cfg_kw["coarse_fraction"] = args.coarse_fraction
     if getattr(args, "partition_order", None) is not None:
         cfg_kw["partition_order"] = tuple(v.strip() for v in args.partition_order.split(",") if v.strip())
     cfg = TrackerConfig.from_flat(**cfg_kw)
@@ -418,6 +423,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                      "view_weights": cfg.objective.view_weights,
                      "init_confirm_frames": cfg.heading.init_confirm_frames,
                      "partition_order": list(cfg.search.partition_order),
+                     "coarse_fraction": cfg.search.coarse_fraction,
                      "keypoint_weight": kp_weight, "keypoint_every": kp_every, "keypoint_dense": kp_dense,
                      "keypoint_frames": len(kp_seconds), "keypoint_detections": kp_views[0],
                      "keypoint_ms_per_frame_set": float(np.mean(kp_seconds) * 1e3) if kp_seconds else None,

@@ -96,13 +96,26 @@ class RestrictedSilhouetteEnergy:
         body, views, tmpl, fg = energy.kernel_args()
         stage = _k.Stage(*_k.restrict_prepare(x, body, views, tmpl, fg, moving))
         # the kernel's arguments between X and (n_chunks, out)
+        self._moving = moving
         self._args = (_k.Restriction(x, self._fixed, self._fk_joints, self._cam_joints, self.moving_capsules,
                                      self._mov_ci, self._moving_ci), body, views, tmpl, fg, stage)
+        self._coarse = [None, None]     # the two pairs of views
 
     def kernel_args(self) -> tuple:
         """The arguments of the restricted kernel between the poses and ``(n_chunks, out)`` (for the
         tracker's compiled search)."""
         return self._args
+
+    def coarse_kernel_args(self, second: bool = False) -> tuple:
+        """:meth:`kernel_args` on the parent's coarse views (:meth:`SilhouetteEnergy.coarse_kernel_args`)."""
+        if self._coarse[second] is None:
+            body, views, tmpl, fg = self.energy.coarse_kernel_args(second)
+            if views is self._args[2]:
+                self._coarse[second] = self._args
+            else:
+                stage = _k.Stage(*_k.restrict_prepare(self.x_base, body, views, tmpl, fg, self._moving))
+                self._coarse[second] = (self._args[0], body, views, tmpl, fg, stage)
+        return self._coarse[second]
 
     def violation(self, X: np.ndarray, rows: np.ndarray) -> EnergyError:
         """The error for rows ``rows`` of ``X`` that move coordinates outside :attr:`coords`."""

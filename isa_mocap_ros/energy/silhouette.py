@@ -32,7 +32,9 @@ import numpy as np
 
 from ..body import BodyModel, capsule_endpoints
 from ..vision import Camera
+from ..vision.camera import PixelAreas
 from . import silhouette_kernel as _k
+from .coarse import coarse_views, view_subset
 from ._checks import EnergyError, _check_cameras, _check_model, _check_poses
 from .restricted import RestrictedSilhouetteEnergy
 from .silhouette_exact import _foreground, _view_terms, core_weights, exact_view_energy, mask_problem
@@ -85,20 +87,15 @@ def _view_weights(weights: Any, n_views: int) -> np.ndarray:
     return w
 
 
-def _normalized_area(camera: Camera, u: np.ndarray, v: np.ndarray) -> float:
+def _normalized_area(camera: Camera, u: np.ndarray, v: np.ndarray, areas: PixelAreas | None = None) -> float:
     """Area of the pixels ``(u, v)`` in the normalized undistorted image plane of ``camera``.
 
     ``1 / (fx fy)`` per pixel for a pinhole camera; with lens distortion the determinant of the
-    Jacobian of the undistortion at each pixel centre (central differences of ±0.5 px)."""
+    Jacobian of the undistortion at each pixel centre (central differences of ±0.5 px), from ``areas``
+    (the camera's :class:`~isa_mocap_ros.vision.camera.PixelAreas`, kept between frames) when given."""
     if not camera.has_distortion:
         return u.size / (camera.fx * camera.fy)
-    u = u.astype(float)
-    v = v.astype(float)
-    xu0, yu0 = camera.undistort_pixels(u - 0.5, v)
-    xu1, yu1 = camera.undistort_pixels(u + 0.5, v)
-    xv0, yv0 = camera.undistort_pixels(u, v - 0.5)
-    xv1, yv1 = camera.undistort_pixels(u, v + 0.5)
-    return float(np.abs((xu1 - xu0) * (yv1 - yv0) - (xv1 - xv0) * (yu1 - yu0)).sum())
+    return float((areas if areas is not None else PixelAreas(camera)).of(u, v).sum())
 
 
 def _template(model: BodyModel, n_points: int,
@@ -260,6 +257,7 @@ class SilhouetteEnergy:
         self._body = _k.Body(*self._kin, self._caps, self._radii)
         self._template_args = _k.Template(self._order, self._tmpl_a, self._tmpl_s, self._tmpl_ptr, self._tmpl_na)
         self._small = tuple(c.scaled(1.0 / self.downsample) for c in self.cameras)
+        self._areas = tuple(PixelAreas(c) for c in self.cameras)   # per pixel, filled as frames need them
         self.skipped_views: list[tuple[int, str]] = []
         self.n_views_used = 0
         self.n_evals = 0
@@ -390,7 +388,7 @@ class SilhouetteEnergy:
                 cov[k, :sc.height, :sc.width] = cv2.resize(F[v].astype(np.float32), (sc.width, sc.height),
                                                            interpolation=cv2.INTER_AREA)
             vv, uu = np.divmod(np.flatnonzero(F[v]), F[v].shape[1])   # np.nonzero(F[v]) (raster order), 10x faster
-            fg_area[k] = _normalized_area(cam, uu, vv)
+            fg_area[k] = _normalized_area(cam, uu, vv, self._areas[v])
             pixels.append((vv, uu))
         return {"cam_R": np.ascontiguousarray([self.cameras[v].R for v in used]),
                 "cam_t": np.ascontiguousarray([self.cameras[v].t for v in used]),
@@ -513,6 +511,23 @@ class SilhouetteEnergy:
         what the tracker's compiled search passes it)."""
         fr = self._frame
         return self._body, fr["views"], self._template_args, fr["fg"]
+
+    def coarse_kernel_args(self, second: bool = False) -> tuple:
+        """:meth:`kernel_args` of the coarse level: the two usable views whose optical axes are closest to
+        perpendicular (:func:`.coarse.coarse_views`; ``second``: the other pair, among the remaining views) with
+        their foreground samples; the kernel then returns their weighted mean of Eq. 4, the same quantity from
+        fewer views at about half the cost (all the views' bundles with fewer than three usable). Built once per
+        frame. For the compiled search's early generations (``SearchConfig.coarse_fraction``, docs/energy.md)."""
+        fr = self._frame
+        key = "coarse2" if second else "coarse"
+        if key not in fr:
+            k = self.coarse_views(second)
+            fr[key] = self._kernel_args() if len(k) == len(self._used) else view_subset(self._kernel_args(), k)
+        return fr[key]
+
+    def coarse_views(self, second: bool = False) -> np.ndarray:
+        """Positions (among the used views) of :meth:`coarse_kernel_args`' views."""
+        return coarse_views([self.cameras[v] for v in self._used], self._frame["view_w"], second)
 
     def _fast(self, X: np.ndarray) -> np.ndarray:
         out = np.empty(X.shape[0])

@@ -38,14 +38,17 @@ from isa_mocap_ros.resources import cmu_walk_bvh
 
 from .stats import StatsError, ranking_table
 
-__all__ = ["ALGORITHMS", "PEER_ALGORITHMS", "HIERARCHICAL_PAIRS", "SequenceSpec", "Design", "make_design",
-           "cell_key", "prepare_sequence", "run_cell", "summarize", "label", "findings", "peer_targets",
+__all__ = ["ALGORITHMS", "PEER_ALGORITHMS", "HIERARCHICAL_PAIRS", "SHAPES", "QUICK_CALIB", "SequenceSpec", "Design",
+           "make_design", "cell_key", "prepare_sequence", "run_cell", "summarize", "label", "findings", "peer_targets",
            "plot_summary"]
 
 ALGORITHMS = ("isa", "h-isa", "apf", "psapf", "cmaes", "h-cmaes", "de", "h-de", "pso", "h-pso")
 PEER_ALGORITHMS = ("pycma", "scipy-de")
 #: (holistic, hierarchical) pairs of the paper's §3.3 (PSAPF is the hierarchical APF)
 HIERARCHICAL_PAIRS = (("isa", "h-isa"), ("apf", "psapf"), ("cmaes", "h-cmaes"), ("de", "h-de"), ("pso", "h-pso"))
+#: the tracking model's shape: calibrated from the images (default, .compare_shape) or the truth (diagnostic)
+SHAPES = ("auto", "truth")
+QUICK_CALIB = (("window_frames", 4), ("n_frames", 2), ("rounds", 2), ("shape_evals", 120))  # the quick design's
 #: the CMU walk in the shared data beside the checkout (or $ISA_MOCAP_SHARED); may be absent
 CMU_WALK = cmu_walk_bvh()
 
@@ -128,8 +131,6 @@ def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK
     ``body``: what every sequence shows (``mesh`` default, ``capsules`` the control). ``shape``: the tracking
     model's (``auto`` default: calibrated from each sequence's images; ``truth``: a diagnostic).
     """
-    from .compare_shape import QUICK_CALIB, SHAPES
-
     if body not in ("mesh", "capsules"):
         raise ValueError(f"body: expected 'mesh' or 'capsules', received {body!r}")
     if shape not in SHAPES:

@@ -16,12 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["SHAPES", "QUICK_CALIB", "calibration_config", "sequence_shape_path", "calibrate_sequence_shape"]
+from .compare import _load_sequence
 
-#: the tracking model's shape in a comparison: calibrated from the images (default) or the truth (diagnostic)
-SHAPES = ("auto", "truth")
-#: the quick design's calibration (a smoke test: 4 frames, 2 rounds, 120 evaluations)
-QUICK_CALIB = (("window_frames", 4), ("n_frames", 2), ("rounds", 2), ("shape_evals", 120))
+__all__ = ["calibration_config", "sequence_shape_path", "calibrate_sequence_shape", "bone_error_summary"]
 
 
 def calibration_config(calib, seed: int):
@@ -49,8 +46,6 @@ def calibrate_sequence_shape(cache_path: Path | str, calib=(), seed: int = 0) ->
     from isa_mocap_ros.body import make_model, save_shape
     from isa_mocap_ros.tracking.shape_calibration import (bone_errors, bone_lengths, calibrate_shape,
                                                           marker_bone_lengths)
-
-    from .compare import _load_sequence
 
     path = sequence_shape_path(cache_path, calib, seed)
     rep_path = path.with_suffix(".json")

@@ -65,9 +65,10 @@ from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, declare_config, one_numba_thread, run_node
 from isa_mocap_ros.nodes.estimator_intake import EstimatorIntake
 from isa_mocap_ros.tracking.predict import periods_between
-from isa_mocap_ros.tracking.sync import FrameSynchronizer, LatestSlot
+from isa_mocap_ros.tracking.sync import FrameSynchronizer
 from isa_mocap_ros.tracking.config import TrackerConfig, field_docs
 from isa_mocap_ros.tracking.load import LoadGovernor, LoadSettings, StartupCatchUp
+from isa_mocap_ros.tracking.realtime import RealTimeSchedule
 from isa_mocap_ros.vision.overlay import draw_overlay
 
 
@@ -165,16 +166,24 @@ class EstimatorNode(EstimatorIntake, Node):
         if sync not in ("exact", "approximate"):
             raise ValueError(f"sync must be 'exact' or 'approximate', got {sync!r}")
         self.tracker_config = TrackerConfig.from_flat(**settings)   # checks every setting (TrackerError names it)
-        # real time: the frame budget under load (None: always the full budget)
-        self.governor = LoadGovernor(LoadSettings(
-            evals=self.tracker_config.search.evals, period_s=self.frame_period_s, headroom=degrade_headroom,
-            min_evals=degrade_min_evals)) if degrade and not self.lockstep else None
-        self._dropped_seen = 0           # slot.dropped at the governor's last observation
+        # real time: which sets the tracker gets and at what budget (isa_mocap_ros.tracking.realtime): the frame
+        # budget under load (governor; None: always the full budget), the start-up's sets caught up after the
+        # initialization, late sets without the contour stage
+        self.schedule = RealTimeSchedule(
+            evals=self.tracker_config.search.evals, heading_sets=self.tracker_config.heading.init_confirm_frames,
+            lockstep=self.lockstep, backlog=self.backlog, catch_up_ms=self.catch_up_ms,
+            startup=StartupCatchUp(sets=self.startup_catch_up, evals=degrade_min_evals,
+                                   limit_ms=self.startup_catch_up_ms),
+            governor=LoadGovernor(LoadSettings(
+                evals=self.tracker_config.search.evals, period_s=self.frame_period_s, headroom=degrade_headroom,
+                min_evals=degrade_min_evals)) if degrade else None)
+        self.governor = self.schedule.governor
+        self.catch_up = self.schedule.startup
         self.budget_reason = ""          # the governor's last change, for /diagnostics
         self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
                                       slop_ns=0 if sync == "exact" else int(slop_s * 1e9),
                                       max_wait_s=self.view_timeout_s, min_views=min(min_views, self.n_views))
-        self.slot = LatestSlot(keep_all=self.lockstep, depth=self.backlog)
+        self.slot = self.schedule.slot
         self.threads_in_use = 0          # numba threads of the tracker's worker (set when it starts)
         self._cv = threading.Condition()
         # input checks (isa_mocap_ros.intake): a view's camera is what a camera_info and a mask of one stamp
@@ -193,10 +202,6 @@ class EstimatorNode(EstimatorIntake, Node):
         self._prev_stamp_ns: int | None = None   # stamp of the last frame set given to the tracker
         self.tracker = None
         self.frames_done = 0
-        self.frames_caught_up = 0       # real-time sets tracked without the contour stage (catch_up_ms)
-        # real time: the sets that waited during the automatic initialization, tracked after it
-        self.catch_up = StartupCatchUp(sets=self.startup_catch_up, evals=degrade_min_evals,
-                                       limit_ms=self.startup_catch_up_ms)
         self.last_result = None
         # the last 300 of each, for the 1 Hz diagnostics' percentiles
         self.latencies_ms: deque[float] = deque(maxlen=300)
@@ -306,18 +311,12 @@ class EstimatorNode(EstimatorIntake, Node):
         self._warm_up()
         while not self._stop.is_set():
             with self._cv:
-                item = self.slot.take()
+                # the oldest waiting set, with the sets after it held in sequence where the tracker's
+                # initialization or a heading re-check needs them (tracking/realtime.py)
+                item = self.schedule.take(self.tracker)
                 if item is None:
                     self._cv.wait(0.1)
                     continue
-                if not self.lockstep and (self.tracker is None or not self.tracker.initialized):
-                    # this set may initialize the tracker: keep the sets that follow it in sequence
-                    # for the heading check (Tracker.checking_heading) and the catch-up after it
-                    self.slot.hold(self.catch_up.hold(self.tracker_config.heading.init_confirm_frames))
-                elif not self.lockstep and self.tracker.heading_recheck_pending(item[0].items):
-                    # the same for a heading re-check (more views see the person): else its check ends at
-                    # the gap after the re-check's own, longer frame
-                    self.slot.hold(self.tracker_config.heading.init_confirm_frames)
                 frame_set, t_ready = item
                 prediction = None
                 if self.use_prediction and self._published_any:
@@ -338,14 +337,6 @@ class EstimatorNode(EstimatorIntake, Node):
                 keypoints = self._keypoints_for(frame_set) if self.use_keypoints else None
             try:
                 self._process(frame_set, prediction, t_ready, keypoints)
-                if self.tracker is not None and self.tracker.initialized and not self.tracker.checking_heading:
-                    with self._cv:
-                        # the start-up's sets still waiting are tracked in order (catch-up) until none waits
-                        # or one waited too long; then (or with no catch-up) on with the newest set
-                        going_on = self.catch_up.after(waiting=len(self.slot),
-                                                       waited_ms=(time.monotonic() - t_ready) * 1e3)
-                        if self.slot.held and not going_on:
-                            self.slot.hold(0)
             except Exception as exc:  # noqa: BLE001 - a node must survive any one bad frame set
                 if self._stop.is_set() or not self.context.ok():
                     return  # shutting down: publishers are gone with the context
@@ -388,26 +379,19 @@ class EstimatorNode(EstimatorIntake, Node):
         # lack of time (or missing views), so the tracker's own prediction looks as far ahead
         gap = periods_between(self._prev_stamp_ns, frame_set.stamp_ns, self.frame_period_s)
         self._prev_stamp_ns = frame_set.stamp_ns
-        # real time: a set that waited for the tracker (the one before took longer than a frame period)
-        # is tracked without the contour stage (catch_up_ms), so the tracker catches up instead of dropping
-        late = not self.lockstep and 0 < self.catch_up_ms < (time.monotonic() - t_ready) * 1e3
-        # under load the governor's lowered budget (isa_mocap_ros.tracking.load)
-        budget = self.governor.decision() if self.governor is not None else None
-        evals = self.tracker_config.search.evals if budget is None or budget.level == 0 else budget.evals
-        # the start-up's waiting sets, after the initialization and its heading check: the catch-up budget
-        evals, contour = (self.catch_up.budget(evals, initialized=self.tracker.initialized,
-                                               checking_heading=self.tracker.checking_heading)
-                          if not self.lockstep else (evals, True))
+        # real time: the governor's budget under load, the start-up catch-up's, no contour stage for a set that
+        # waited longer than catch_up_ms (tracking/realtime.py); lockstep: the full budget
+        budget = self.schedule.budget(self.tracker, (time.monotonic() - t_ready) * 1e3)
         result = self.tracker.step(masks, frame_set.stamp_ns, prediction=prediction, frames_elapsed=gap,
-                                   contour_stage=contour and not late and (budget is None or budget.contour_stage),
-                                   evals=None if evals == self.tracker_config.search.evals else evals,
-                                   keypoints=keypoints)
+                                   contour_stage=budget.contour_stage, evals=budget.evals, keypoints=keypoints)
         self.keypoint_sets += keypoints is not None
-        if self.governor is not None and result.x is not None and not result.initialized:
-            self._govern(frame_set.stamp_ns, result)
+        with self._cv:
+            # the governor's account (a track lost for long re-initializes the tracker), the catch-up's
+            d = self.schedule.after(self.tracker, result, budget=budget, waited_ms=(time.monotonic() - t_ready) * 1e3)
+        if d is not None:
+            self.budget_reason = d.reason
+            self.problems.event("budget", f"frame {frame_set.stamp_ns}: budget level {d.level}: {d.reason}")
         self.frames_done += 1
-        if late and result.x is not None and not result.fell_back and not result.initialized:
-            self.frames_caught_up += 1
         self.last_result = result
         if result.x is not None and not result.fell_back and not result.initialized:
             self.step_ms.append(result.time_s * 1e3)   # tracked sets (not the initialization)
@@ -428,19 +412,6 @@ class EstimatorNode(EstimatorIntake, Node):
         if self.overlay and self.frames_done % self.overlay_every == 0 and result.x is not None:
             with one_numba_thread():
                 self._publish_overlay(frame_set, result.x)
-
-    def _govern(self, stamp_ns: int, result) -> None:
-        """The governor's account of a tracked set (its step time, energy and the sets dropped since the
-        last one); a changed budget is logged and shown in /diagnostics; a track lost for long re-initializes."""
-        dropped = self.slot.dropped - self._dropped_seen
-        self._dropped_seen = self.slot.dropped
-        d = self.governor.observe(step_s=result.time_s, energy=result.energy, fell_back=result.fell_back,
-                                  dropped=dropped)
-        if d.reason:
-            self.budget_reason = d.reason
-            self.problems.event("budget", f"frame {stamp_ns}: budget level {d.level}: {d.reason}")
-        if d.reset:
-            self.tracker.reset()         # the next set initializes automatically
 
     def _done(self, stamp_ns: int) -> None:
         self.pub_done.publish(ma.make_header(stamp_ns, self.world_frame))
@@ -492,7 +463,7 @@ class EstimatorNode(EstimatorIntake, Node):
         t50, t95 = (float(np.percentile(steps, 50)), float(np.percentile(steps, 95))) if steps.size else (0.0, 0.0)
         values = {
             "frames": self.frames_done, "dropped_frame_sets": self.slot.dropped,
-            "frames_without_contour_stage": self.frames_caught_up,
+            "frames_without_contour_stage": self.schedule.frames_caught_up,
             "startup_sets_caught_up": self.catch_up.caught_up,
             "sync_dropped_messages": self.sync.dropped, "bad_inputs": self.problems.total,
             "optimizer": self.tracker_config.search.optimizer, "evals_per_frame": self.tracker_config.search.evals,

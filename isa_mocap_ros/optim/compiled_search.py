@@ -256,11 +256,14 @@ def _kernel_overload(X, kargs, n_chunks, out):
 
 @numba.njit(cache=True)
 def _partition(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c, rho, population, block,
-               best, best_x, stats, g0, n_evals0, threads, kargs, kp):  # pragma: no cover - compiled
+               best, best_x, stats, g0, n_evals0, threads, kargs, kp, kargs_c, kargs_c2, n_coarse):  # pragma: no cover
     """One partition of the hierarchy, evaluated with the full kernel or the restricted one (``kargs``:
     its arguments between the poses and ``n_chunks``, :func:`_kernel`), plus ``kp.scale`` times the keypoint
     term ``kp`` (:class:`~isa_mocap_ros.energy.keypoint_kernel.KeypointTerm`; scale 0: none) as the tracker's
-    objective adds it (``E + w * keypoints(X)``). Returns (estimate, generations,
+    objective adds it (``E + w * keypoints(X)``). The first ``n_coarse`` generations are evaluated with ``kargs_c``
+    and ``kargs_c2`` in turn instead (the coarse level's two pairs of views,
+    :meth:`~isa_mocap_ros.energy.silhouette.SilhouetteEnergy.coarse_kernel_args`; the same kernel kind) and leave the
+    best particle alone. Returns (estimate, generations,
     evaluations, non-finite, last full particles); -1 generations if the kernel flagged a row with a
     negative energy (the restricted kernel's mark of a row off its base pose: never, by construction)."""
     Xs = _start(x0, spread, lo, hi, n, rng)
@@ -276,7 +279,13 @@ def _partition(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c,
         E = np.empty(n)
         out = np.empty(kk)
         Xk = X if kk == n else X[:kk].copy()
-        _kernel(Xk, kargs, max(1, min(kk, threads)), out)   # a chunk per thread (energy._fast)
+        coarse = g - g0 < n_coarse
+        if coarse and (g - g0) % 2 == 1:
+            _kernel(Xk, kargs_c2, max(1, min(kk, threads)), out)
+        elif coarse:
+            _kernel(Xk, kargs_c, max(1, min(kk, threads)), out)
+        else:
+            _kernel(Xk, kargs, max(1, min(kk, threads)), out)   # a chunk per thread (energy._fast)
         for i in range(kk):
             if out[i] < 0.0:
                 return x, -1, used, bad, X
@@ -288,7 +297,10 @@ def _partition(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c,
                 out[i] = out[i] + kp.scale * ek[i]
         E[:kk] = out
         used += kk
-        bad += _record(E, kk, X, best, best_x, stats, g, n_evals0 + used)
+        if coarse:      # a coarse energy is not compared with the full ones
+            bad += _record(E, kk, X, np.full(1, np.inf), X[0].copy(), stats, g, n_evals0 + used)
+        else:
+            bad += _record(E, kk, X, best, best_x, stats, g, n_evals0 + used)
         Xs, x, beta, _, _ = _tell(np.asfortranarray(Xs), E, rng, beta, target, kernel, c, rho, lo, hi, population,
                                   block)
         g += 1
@@ -301,7 +313,7 @@ class HisaRun:
     partition), :meth:`result` is ``opt.result()`` once every partition ran. The same draws from
     ``opt.rng`` as the protocol. Counts the evaluations in ``energy.n_evals`` as the protocol does."""
 
-    def __init__(self, opt, energy, max_evals: int, keypoints=None) -> None:
+    def __init__(self, opt, energy, max_evals: int, keypoints=None, coarse_fraction: float = 0.0) -> None:
         from isa_mocap_ros.optim import split_budget
         from isa_mocap_ros.optim._base import OptimError
 
@@ -317,6 +329,9 @@ class HisaRun:
                              f"c={self.c}, rho={self.rho}")
         self.c = covariance_constant(self.c, p.get("c_scale", C_SCALES[0]))     # Isa.c_cov
         self.opt, self.energy, self.max_evals = opt, energy, int(max_evals)
+        if not 0.0 <= coarse_fraction < 1.0:
+            raise OptimError(f"coarse_fraction: expected a fraction in [0, 1), received {coarse_fraction!r}")
+        self.coarse_fraction = float(coarse_fraction)
         self.keypoint_term = keypoints[0] if keypoints is not None else None
         self.kp = (self.keypoint_term.kernel_term(keypoints[1]) if keypoints is not None
                    else _kp.no_keypoints(energy.kin_tables))
@@ -360,8 +375,11 @@ class HisaRun:
             args = (self.xbase, idx, x0, np.ascontiguousarray(opt.spread[idx]), lo, hi, self.shares[k], self.n,
                     opt.rng, self.target, self.kernel, self.c, self.rho, self.population, self.blocks[k], self.best,
                     self.best_x, self.stats, self.g, self.n_evals, energy.threads)
-            x, gens, used, nb, self.X = _partition(*args, energy.kernel_args() if rest.full else rest.kernel_args(),
-                                                   self.kp)
+            kargs = energy.kernel_args() if rest.full else rest.kernel_args()
+            n_coarse = int(self.coarse_fraction * (-(-self.shares[k] // self.n)))
+            kc = [kargs if n_coarse <= i else (energy.coarse_kernel_args(i == 1) if rest.full
+                                               else rest.coarse_kernel_args(i == 1)) for i in (0, 1)]
+            x, gens, used, nb, self.X = _partition(*args, kargs, self.kp, kc[0], kc[1], n_coarse)
             if gens < 0:
                 raise rest.violation(self.X, np.flatnonzero(np.any(self.X != rest.x_base, axis=1)))
             energy.n_evals += used
@@ -385,7 +403,8 @@ class HisaRun:
                       n_nonfinite=self.bad)
 
 
-def search(opt, energy, max_evals: int, *, extra_terms: bool = False, keypoints=None, paused: bool = False):
+def search(opt, energy, max_evals: int, *, extra_terms: bool = False, keypoints=None, paused: bool = False,
+           coarse_fraction: float = 0.0):
     """The entry point: ``minimize(opt, energy, max_evals=max_evals)`` compiled, or None when this path does
     not cover ``opt`` and ``energy`` (then run it through the optimizer protocol, :func:`~.minimize`).
 
@@ -394,7 +413,9 @@ def search(opt, energy, max_evals: int, *, extra_terms: bool = False, keypoints=
     energy is not the whole objective, a prior is added in Python, so not covered) runs
     compiled per partition, with ``keypoints = (KeypointEnergy, weight)`` adding ``weight`` times that term
     (compiled too, :mod:`~isa_mocap_ros.energy.keypoint_kernel`); with ``paused`` it is returned as a :class:`HisaRun` stopped before its first
-    partition (``advance()``, ``result()``: the first frame's pruned runs). A flat
+    partition (``advance()``, ``result()``: the first frame's pruned runs); ``coarse_fraction`` of each partition's
+    generations (rounded down) are evaluated on the energy's coarse level first (two views, the two pairs in turn,
+    :meth:`~isa_mocap_ros.energy.silhouette.SilhouetteEnergy.coarse_kernel_args`; 0: none, the protocol's numbers). A flat
     :class:`~isa_mocap_ros.optim.Isa` (:func:`supported_flat`) on any batch energy runs with compiled
     generations (:func:`run_isa`). The numbers are the protocol's, bit for bit."""
     from isa_mocap_ros.optim import Hierarchical
@@ -402,7 +423,7 @@ def search(opt, energy, max_evals: int, *, extra_terms: bool = False, keypoints=
     if type(opt) is Hierarchical:
         if not supported(opt, energy, extra_terms):
             return None
-        run = HisaRun(opt, energy, max_evals, keypoints)
+        run = HisaRun(opt, energy, max_evals, keypoints, coarse_fraction)
         return run if paused else run.advance().result()
     if paused or extra_terms or keypoints is not None or not supported_flat(opt):
         return None

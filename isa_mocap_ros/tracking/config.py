@@ -143,6 +143,9 @@ class SearchConfig:
         Joint ``j`` starts with spread ``sqrt(JOINT_SPREAD_RAD² + (k |p_j − x_j|)²)``: wider where the prediction moves (1.5; 0 = off).
     seed : int
         Seed of every per-frame stream ``default_rng([seed, frame, ...])`` (0).
+    coarse_fraction : float
+        Share of each partition's generations of the compiled h-isa main search evaluated on two views only
+        (the energy's coarse level, about half the cost; docs/energy.md); 0 = off (default).
     """
 
     optimizer: str = "h-isa"
@@ -153,6 +156,7 @@ class SearchConfig:
     root_translation_radius_m: float = 0.25
     spread_velocity_gain: float = 1.5
     seed: int = 0
+    coarse_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         from isa_mocap_ros.optim import OPTIMIZERS
@@ -174,6 +178,7 @@ class SearchConfig:
             _number(name, getattr(self, name), lo=0.0, strict=True)
         _number("spread_velocity_gain", self.spread_velocity_gain, lo=0.0)
         _number("seed", self.seed, lo=0, integer=True)
+        _number("coarse_fraction", self.coarse_fraction, lo=0.0, hi=0.99)
 
     def params(self) -> dict:
         """Optimizer keyword arguments: :data:`DEFAULT_PARAMS` of the optimizer, then ``optimizer_params``."""

@@ -25,10 +25,11 @@ def heading_recheck_pending(tr, masks: Sequence) -> bool:
     than the heading was checked with, an undecided check's re-check due, or estimates that travel
     backwards): a caller that drops frames (the estimator node in real time) should hand the tracker
     the frames that follow in sequence, as for :attr:`checking_heading`, or the check ends at the
-    first gap."""
-    if tr.config.heading.init_confirm_frames <= 0 or tr.track.last is None or tr.heading_check.rival is not None:
+    first gap (and a check that a gap ended is re-checked, :func:`recheck_heading`)."""
+    hc = tr.heading_check
+    if tr.config.heading.init_confirm_frames <= 0 or tr.track.last is None or hc.rival is not None:
         return False
-    if tr.heading_check.recheck_at is not None and tr.frames + 1 >= tr.heading_check.recheck_at:
+    if any(at is not None and tr.frames + 1 >= at for at in (hc.recheck_at, hc.gap_recheck_at)):
         return True
     if travel_recheck_due(tr) is not None:
         return True
@@ -102,13 +103,16 @@ def recheck_heading(tr, ctx, res: FrameResult, frames_elapsed: float) -> FrameRe
 
     cfg = tr.config
     due = tr.heading_check.recheck_at is not None and tr.frames >= tr.heading_check.recheck_at
+    after_gap = tr.heading_check.gap_recheck_at is not None and tr.frames >= tr.heading_check.gap_recheck_at
     if cfg.heading.init_confirm_frames <= 0 or res.fell_back or res.initialized or frames_elapsed != 1 \
             or not np.isfinite(res.energy) or not tr.has_heading:
-        return res
+        return res                      # (a due re-check waits for a frame that follows its previous one)
     more_views = res.views_used > tr.heading_check.views
-    travel = None if due or more_views else travel_recheck_due(tr)
-    if not (due or more_views or travel):
+    travel = None if due or after_gap or more_views else travel_recheck_due(tr)
+    if not (due or after_gap or more_views or travel):
         return res
+    if after_gap:
+        tr.heading_check.gap_recheck_at = None
     if due:
         tr.heading_check.recheck_at, tr.heading_check.rechecked_undecided = None, True
     tr.heading_check.travel_recheck_after = tr.frames + TRAVEL_RECHECK_FRAMES
@@ -119,6 +123,8 @@ def recheck_heading(tr, ctx, res: FrameResult, frames_elapsed: float) -> FrameRe
     if travel:
         head = (f"heading re-check: the person moves backwards ({travel[1]:.2f} m in {travel[2]:g} frames, "
                 f"{travel[0]:.0f} deg from the heading)")
+    elif after_gap and not more_views:
+        head = "heading re-check: the last check ended at a gap"
     elif not more_views:
         head = "heading re-check: the last check was undecided"
     else:
@@ -181,6 +187,7 @@ def confirm_heading(tr, ctx, res: FrameResult, masks, frames_elapsed: float) -> 
                  "frames), the other forwards")
     if not by_travel and ((c[2] > margin * c[1] and not contra) or (last and not c[1] > margin * c[2])):
         tr.heading_check.rival = None
+        tr.heading_check.gap_rechecked = False
         if not c[2] > margin * c[1] and not tr.heading_check.rechecked_undecided:
             # kept for want of evidence: the rival may still have been converging; once more later
             tr.heading_check.recheck_at = tr.frames + UNDECIDED_RECHECK_FRAMES
@@ -192,6 +199,7 @@ def confirm_heading(tr, ctx, res: FrameResult, masks, frames_elapsed: float) -> 
     # the rival wins: its track (estimate, predictor, masks, root history) becomes this tracker's; external predictions were made from this tracker's
     # estimates, so they are ignored while the predictor's history still holds any of them
     tr.heading_check.rival = None
+    tr.heading_check.gap_rechecked = False
     # views that joined during the check took part in a switch: no re-check for them (a fresh track
     # checked again at once lost its heading to a fresh rival, generated walk seed 6); a check that
     # kept the heading is re-checked on the next frame that sees them

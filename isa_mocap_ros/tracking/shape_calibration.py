@@ -27,13 +27,14 @@ mesh skeleton's joint centres. See ``docs/shape_calibration.md``.
 from __future__ import annotations
 
 import copy
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
 
 __all__ = ["SHAPE_PARAMS", "BONES", "LIMB_BONES", "ShapeCalibrationConfig", "ShapeCalibrationResult", "ShapeCalibrationError",
-           "shape_from_params", "bone_lengths", "marker_bone_lengths", "bone_errors", "calibrate_shape"]
+           "shape_from_params", "bone_lengths", "marker_bone_lengths", "bone_errors", "prior", "calibrate_shape"]
 
 #: shape parameters: (name, lower, upper) bounds of the factor on the base shape
 SHAPE_PARAMS: tuple[tuple[str, float, float], ...] = (
@@ -83,21 +84,27 @@ class ShapeCalibrationConfig:
     n_mask_points: int = 600        # the fit compares shapes that differ by a few pixels)
     translation_m: float = 0.15     # bound of each frame's root height change in the shape fit
     angle_rad: float = 0.3          # bound of each frame's change of the coupled joint angles in the shape fit
-    coupled_dofs: tuple = ()        # joint angles also free in the shape fit (measured: more dimensions than
-                                    # the shape fit's budget can search; off)
+    coupled_dofs: tuple = ("left_hip_x", "right_hip_x", "left_shoulder_x", "right_shoulder_x")
+                                    # joint angles also free in the shape fit: the abductions, which trade against the
+                                    # hip and shoulder widths (knee, hip and elbow all free: too many dimensions)
     retrack: bool = True            # later rounds re-track the whole window with the new shape first
     regularization: float = 2e-3    # weight of sum(log factor^2): decides only flat directions
+    arm_split_prior: float = 0.05   # weight of (log upper_arm - log forearm)^2: a straight arm shows only the sum
+    restarts: int = 1               # whole calibrations from other seeds, the lowest energy kept (x cost each)
     seed: int = 0                   # all random streams derive from it
 
     def __post_init__(self):
-        for name in ("window_frames", "n_frames", "rounds", "pose_steps", "shape_evals", "n_model_points", "n_mask_points"):
+        for name in ("window_frames", "n_frames", "rounds", "pose_steps", "shape_evals", "n_model_points", "n_mask_points",
+                     "restarts"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ShapeCalibrationError(f"{name}: expected an integer >= 1, received {v!r}")
         if not (np.isfinite(self.translation_m) and self.translation_m > 0):
             raise ShapeCalibrationError(f"translation_m: expected a number > 0, received {self.translation_m!r}")
-        if not (np.isfinite(self.regularization) and self.regularization >= 0):
-            raise ShapeCalibrationError(f"regularization: expected a number >= 0, received {self.regularization!r}")
+        for name in ("regularization", "arm_split_prior"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise ShapeCalibrationError(f"{name}: expected a number >= 0, received {v!r}")
 
 
 @dataclass(frozen=True)
@@ -254,13 +261,22 @@ class _ShapeEnergy:
         for k, masks in enumerate(self.masks):
             f.set_masks(masks)
             e += float(f(X[k][None, :])[0])
-        logf = np.asarray(z[:len(SHAPE_PARAMS)], dtype=float)
-        return e / len(self.masks) + self.cfg.regularization * float(logf @ logf)
+        return e / len(self.masks) + prior(self.cfg, z[:len(SHAPE_PARAMS)])
 
     def __call__(self, Z) -> np.ndarray:
         Z = np.atleast_2d(np.asarray(Z, dtype=float))
         self.n_evals += len(Z)
         return np.array([self.one(z) if np.all(np.isfinite(z)) else np.inf for z in Z])
+
+
+_UA, _FA = (next(i for i, (n, _, _) in enumerate(SHAPE_PARAMS) if n == m) for m in ("upper_arm", "forearm"))
+
+
+def prior(cfg: ShapeCalibrationConfig, logf) -> float:
+    """The shape fit's prior on the log factors ``logf``: a weak pull of all towards 0 (the base shape) and one
+    on the split of the arm between upper arm and forearm (which the silhouette of a straight arm cannot tell)."""
+    logf = np.asarray(logf, dtype=float)
+    return cfg.regularization * float(logf @ logf) + cfg.arm_split_prior * float(logf[_UA] - logf[_FA]) ** 2
 
 
 def _energy(model, cameras, cfg: ShapeCalibrationConfig, seed):
@@ -312,10 +328,9 @@ def calibrate_shape(dof: int, cameras: Sequence, frames: Sequence[tuple[int, Seq
     ShapeCalibrationError
         No frames, or the tracker cannot initialize from the first frame's masks.
     """
-    from isa_mocap_ros.body import default_shape, load_shape, make_model
-    from isa_mocap_ros.optim import CmaEs, minimize
+    from isa_mocap_ros.body import default_shape, load_shape
 
-    from .tracker import TrackerConfig, TrackerError, frame_rng
+    from .tracker import TrackerConfig
 
     if not isinstance(config, ShapeCalibrationConfig):
         raise ShapeCalibrationError(f"config: expected a ShapeCalibrationConfig, received {type(config).__name__}")
@@ -326,6 +341,34 @@ def calibrate_shape(dof: int, cameras: Sequence, frames: Sequence[tuple[int, Seq
         load_shape(base_shape) if not isinstance(base_shape, Mapping) else dict(base_shape))
     tcfg = tracker_config if tracker_config is not None else TrackerConfig.from_flat(seed=config.seed)
     say = progress or (lambda s: None)
+    if config.restarts == 1:
+        return _calibrate_once(dof, cameras, frames, tcfg, config, base, say)
+    # restarts: the whole calibration from other tracker (and shape fit) seeds; each result judged by the same
+    # energy (one sample seed for all) on its calibration frames, the lowest kept
+    out = []
+    for r in range(config.restarts):
+        seed = config.seed + 7919 * r
+        cfg_r = dataclasses.replace(config, seed=seed, restarts=1)
+        say(f"shape calibration restart {r + 1}/{config.restarts} (seed {seed})")
+        res = _calibrate_once(dof, cameras, frames, tcfg.replace(seed=tcfg.search.seed + 7919 * r), cfg_r, base, say)
+        masks_of = {int(k): m for k, m in frames}
+        judge = _ShapeEnergy(dof, base, cameras, _prepared_masks(dof, cameras, [masks_of[k] for k in res.frame_keys],
+                                                                 config), res.poses, config, [config.seed, 33, 2])
+        z = np.concatenate([np.log([res.params[n] for n, _, _ in SHAPE_PARAMS]), np.zeros(len(res.poses))])
+        out.append((float(judge(z[None, :])[0]), r, res))
+    e, r, best = min(out, key=lambda t: t[0])
+    note = (f"restart {r + 1} of {config.restarts} kept (judged energies "
+            + ", ".join(f"{t[0]:.4f}" for t in out) + ")")
+    return dataclasses.replace(best, notes=best.notes + (note,))
+
+
+def _calibrate_once(dof, cameras, frames, tcfg, config, base, say) -> ShapeCalibrationResult:
+    """One calibration (:func:`calibrate_shape` without restarts) from tracker settings ``tcfg``."""
+    from isa_mocap_ros.body import make_model
+    from isa_mocap_ros.optim import CmaEs, minimize
+
+    from .tracker import TrackerError, frame_rng
+
     notes: list[str] = []
 
     # round 0 poses: track the window with the base shape from the automatic initialization

@@ -90,6 +90,11 @@ class HeadingCheckState:
         Whether that re-check ran.
     travel_recheck_after : int
         ``Tracker.frames`` from which the travel cue may start a re-check.
+    gap_recheck_at : int or None
+        ``Tracker.frames`` at which a check that a gap ended is re-checked (real time: the sets after its frame
+        were dropped; the caller holds the next ones in sequence, :func:`.heading.heading_recheck_pending`).
+    gap_rechecked : bool
+        Whether a check that a gap ended was re-checked since the last check that decided (one re-check each).
     own_prediction_frames : int
         Frames left that ignore external predictions (after a switch).
     """
@@ -101,4 +106,6 @@ class HeadingCheckState:
     recheck_at: int | None = None
     rechecked_undecided: bool = False
     travel_recheck_after: int = 0
+    gap_recheck_at: int | None = None
+    gap_rechecked: bool = False
     own_prediction_frames: int = 0

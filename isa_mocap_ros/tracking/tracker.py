@@ -315,7 +315,8 @@ class Tracker:
                                                                              notes, stages)
         share, torso, limbs, contour = stage_shares
         res = compiled_search.search(opt, self.energy, budget, extra_terms=ctx.objective.extra_terms,
-                                     keypoints=ctx.objective.weighted_keypoints) \
+                                     keypoints=ctx.objective.weighted_keypoints,
+                                     coarse_fraction=self.config.search.coarse_fraction) \
             if self.use_compiled_search else None
         if res is None:                   # not covered by the compiled path (the same numbers through the protocol)
             res = minimize(opt, ctx.objective, max_evals=budget)
@@ -442,11 +443,18 @@ class Tracker:
             return res
         if frames_elapsed != 1:
             # after a gap both hypotheses are still catching up and their energies say little (real
-            # time, the sets that arrived during the initialization dropped: wrong switches measured)
-            self.heading_check.rival = None
+            # time, the sets that arrived during the initialization dropped: wrong switches measured);
+            # re-checked once on the next frame that follows its previous one (a real-time caller holds
+            # the sets in sequence for it): a re-check started by a wrong heading must not end unheard
+            hc = self.heading_check
+            hc.rival = None
+            again = not hc.gap_rechecked
+            if again:
+                hc.gap_recheck_at, hc.gap_rechecked = self.frames + 1, True
             return dataclasses.replace(res, notes=res.notes + (
                 f"heading check ended: no decision ({frames_elapsed:g} frame periods since the last frame; "
-                "it compares consecutive frames only); kept this heading",))
+                "it compares consecutive frames only); kept this heading"
+                + ("; re-checked on the next frame that follows its previous one" if again else ""),))
         return heading.confirm_heading(self, ctx, res, masks, frames_elapsed)
 
     def travel(self, min_periods: float = 0.0) -> tuple[float, float, float] | None:

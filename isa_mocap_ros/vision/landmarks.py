@@ -13,8 +13,11 @@ and MediaPipe's ``pose_landmark_by_roi_cpu`` graph, which feeds it):
   are the BlazePose topology (:data:`LANDMARK_NAMES`); 33-38 are auxiliary points MediaPipe uses to
   place the next frame's region (not used here);
 * output ``(1, 1)``: the pose presence score (a probability that a person is in the crop);
-* outputs ``(1, 256, 256, 1)`` segmentation, ``(1, 64, 64, 39)`` heatmaps and ``(1, 117)`` world
-  landmarks are not used (MediaPipe refines x, y with the heatmap; we do not, see ``docs/keypoints.md``).
+* output ``(1, 256, 256, 1)``: the person segmentation of the crop as logits (:meth:`PoseLandmarker.person_probability`
+  turns it into a per-pixel probability in the full image; used to find the person when estimating a background,
+  :mod:`.person_masks`);
+* outputs ``(1, 64, 64, 39)`` heatmaps and ``(1, 117)`` world landmarks are not used (MediaPipe refines x, y
+  with the heatmap; we do not, see ``docs/keypoints.md``).
 
 The region of interest ``(cu, cv, side, angle_rad)`` is a square around the person: the bounding box of
 the foreground mask (:func:`box_from_mask`, upright) or of a predicted pose's projected joints
@@ -193,6 +196,7 @@ class PoseLandmarker:
         except KeyError as exc:
             raise VisionError(f"{path}: expected outputs of shapes (1, 195) and (1, 1), received "
                               f"{sorted(by_shape)}") from exc
+        self._out_segmentation = by_shape.get((1, INPUT_SIZE, INPUT_SIZE, 1))
 
     def crop(self, image: Any, roi: Any, *, bgr: bool = False) -> np.ndarray:
         """The model input ``(256, 256, 3)`` float32 RGB in ``[0, 1]`` for the region ``roi``."""
@@ -226,6 +230,19 @@ class PoseLandmarker:
         uv = (raw[:, :2] - M[:, 2]) @ A_inv.T                # back to image pixels
         return Landmarks2D(uv=uv, visibility=_sigmoid(raw[:, 3]), presence=_sigmoid(raw[:, 4]),
                            score=float(np.clip(flag, 0.0, 1.0)), roi=b)
+
+    def person_probability(self, image: Any, roi: Any, *, bgr: bool = False) -> tuple[np.ndarray, Landmarks2D]:
+        """``(prob, landmarks)``: the model's person segmentation of the region ``roi`` as a per-pixel
+        probability ``(H, W)`` float32 of the full image (0 outside the region), and :meth:`detect`'s landmarks."""
+        if self._out_segmentation is None:
+            raise VisionError(f"{self.model_path}: the model has no (1, {INPUT_SIZE}, {INPUT_SIZE}, 1) segmentation output")
+        img = np.asarray(image)
+        lm = self.detect(img, roi, bgr=bgr)
+        logits = self._it.get_tensor(self._out_segmentation)[0, :, :, 0].astype(np.float32)
+        full = cv2.warpAffine(logits, _crop_transform(lm.roi), (img.shape[1], img.shape[0]),
+                              flags=cv2.WARP_INVERSE_MAP | cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                              borderValue=-60.0)
+        return _sigmoid(full).astype(np.float32), lm
 
     def __repr__(self) -> str:
         return f"PoseLandmarker(model_path='{self.model_path}')"

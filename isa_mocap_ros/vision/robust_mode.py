@@ -11,7 +11,7 @@ import numba
 import numpy as np
 
 __all__ = ["_robust_background_numpy", "_robust_pairs_numpy", "_robust_finish_numpy", "_robust_pairs_numba",
-           "_robust_finish_numba", "_robust_background_numba"]
+           "_robust_finish_numba", "_robust_background_numba", "_masked_mode_numpy", "_masked_mode_numba"]
 
 
 def _robust_background_numpy(stack, radius):
@@ -163,3 +163,70 @@ def _robust_background_numba(stack, radius):
     for k in range(1, stack.shape[0]):
         _robust_pairs_numba(stack, k, n, spread, float(radius))
     return _robust_finish_numba(stack, n, spread, float(radius))
+
+
+def _masked_mode_numpy(stack, valid, radius):
+    """Per-pixel mode of the samples ``valid`` there: ``(mu, count, n_valid)``.
+
+    ``stack`` (K, H, W, C) uint8, ``valid`` (K, H, W) bool. Among the valid samples of a pixel the one agreeing
+    with the most others (ties: the tightest group, then the first) defines the inliers; ``mu`` is their mean
+    (0 where no sample is valid), ``count`` their number, ``n_valid`` the valid samples.
+    """
+    x = stack.astype(np.int16)
+    K = x.shape[0]
+    dist = np.abs(x[:, None] - x[None]).max(axis=-1)                              # (K, K, H, W)
+    both = valid[:, None] & valid[None]
+    agree = both & (dist <= radius)
+    key = agree.sum(axis=1).astype(np.int64) * (256 * K + 1) - np.where(agree, dist, 0).sum(axis=1)
+    key = np.where(valid, key, -1)
+    best = key.argmax(axis=0)
+    inl = np.take_along_axis(agree, best[None, None], axis=1)[:, 0] & valid.any(axis=0)[None]
+    count = inl.sum(axis=0)
+    mu = (inl[..., None] * x).sum(axis=0) / np.maximum(count, 1)[..., None]
+    return mu.astype(np.float32), count.astype(np.int32), valid.sum(axis=0).astype(np.int32)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _masked_mode_numba(stack, valid, radius):  # pragma: no cover
+    # _masked_mode_numpy, pixels of a row in turn, rows in parallel
+    K, H, W, C = stack.shape
+    mu = np.zeros((H, W, C), np.float32)
+    count = np.zeros((H, W), np.int32)
+    n_valid = np.zeros((H, W), np.int32)
+    for y in numba.prange(H):
+        idx = np.empty(K, np.int64)
+        for x in range(W):
+            n = 0
+            for i in range(K):
+                if valid[i, y, x]:
+                    idx[n] = i
+                    n += 1
+            n_valid[y, x] = n
+            if n == 0:
+                continue
+            best, best_spread, b = -1, 0, 0
+            for a in range(n):
+                i = idx[a]
+                c, sp = 0, 0
+                for bb in range(n):
+                    j = idx[bb]
+                    dd = 0
+                    for ch in range(C):
+                        dd = max(dd, abs(np.int32(stack[i, y, x, ch]) - np.int32(stack[j, y, x, ch])))
+                    if dd <= radius:
+                        c += 1
+                        sp += dd
+                if c > best or (c == best and sp < best_spread):
+                    best, best_spread, b = c, sp, i
+            count[y, x] = best
+            for ch in range(C):
+                s = 0.0
+                for bb in range(n):
+                    j = idx[bb]
+                    dd = 0
+                    for c2 in range(C):
+                        dd = max(dd, abs(np.int32(stack[b, y, x, c2]) - np.int32(stack[j, y, x, c2])))
+                    if dd <= radius:
+                        s += np.float64(stack[j, y, x, ch])
+                mu[y, x, ch] = s / best
+    return mu, count, n_valid

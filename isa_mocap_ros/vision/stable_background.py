@@ -26,6 +26,13 @@ per pixel, the frames in which the background is visible:
 Without plates, a pixel the person covers in every frame cannot be learnt and stays in the
 background; :attr:`BackgroundEstimate.source` says which rule decided each pixel.
 
+**With the person found in each frame** (``person``: e.g. :func:`.person_masks.find_person`, a learned
+segmentation) the rules above are replaced by one: per pixel the temporal mode of the frames where the
+person is not (grown by ``person_grow`` of the width); where fewer than ``min_free`` frames show the pixel,
+the first plate that shows no person there (``plate_people``), colour-matched; else the surroundings
+inpainted (OpenCV Telea). Scene shots with other people in them then matter only where the recording's
+person never moves away, and only where those people stand.
+
 :meth:`BackgroundEstimate.frames` turns the estimate into ``K`` background frames for the existing
 learn-from-empty-frames segmentation: per pixel, frames in which the background is visible there,
 spread over the recording, so the learnt variance is the camera's noise at that pixel; the plate value
@@ -40,12 +47,13 @@ import cv2
 import numpy as np
 
 from .errors import VisionError
-from .robust_mode import _robust_background_numba
+from .robust_mode import _masked_mode_numba, _robust_background_numba
 
-__all__ = ["BackgroundEstimate", "estimate_background", "SOURCE_PLATE_FRAMES", "SOURCE_MODE", "SOURCE_PLATE"]
+__all__ = ["BackgroundEstimate", "estimate_background", "SOURCE_PLATE_FRAMES", "SOURCE_MODE", "SOURCE_PLATE",
+           "SOURCE_INPAINTED"]
 
 #: :attr:`BackgroundEstimate.source` codes
-SOURCE_PLATE_FRAMES, SOURCE_MODE, SOURCE_PLATE = 0, 1, 2
+SOURCE_PLATE_FRAMES, SOURCE_MODE, SOURCE_PLATE, SOURCE_INPAINTED = 0, 1, 2, 3
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,11 +68,13 @@ class BackgroundEstimate:
         ``visible[k, y, x]``: frame ``k`` shows the background at ``(x, y)`` (agrees with ``image``).
     source : (H, W) uint8
         Which rule decided the pixel (``SOURCE_PLATE_FRAMES``: frames agreeing with a plate,
-        ``SOURCE_MODE``: temporal mode, ``SOURCE_PLATE``: the plate itself).
+        ``SOURCE_MODE``: temporal mode, ``SOURCE_PLATE``: the plate itself, ``SOURCE_INPAINTED``: the
+        surroundings, with ``person`` only).
     person_region : (H, W) uint8
-        0/255: where the person was found to move (step 2).
+        0/255: where the person was found to move (step 2); with ``person``: every pixel it covered.
     support : (H, W) float
-        Share of the sampled frames agreeing with the temporal mode.
+        Share of the sampled frames agreeing with the temporal mode (with ``person``: of the frames
+        where the person is not).
     """
 
     image: np.ndarray
@@ -139,9 +149,51 @@ def _match_colours(plate: np.ndarray, mode: np.ndarray, where: np.ndarray) -> np
     return np.clip(out, 0, 255)
 
 
+def _check_masks(name: str, masks, shape: tuple) -> np.ndarray:
+    m = np.asarray(masks)
+    if m.shape != shape:
+        raise VisionError(f"{name}: expected shape {shape} (the frames'), received {m.shape}")
+    return m.astype(bool)
+
+
+def _with_person(frames: np.ndarray, person: np.ndarray, plates: Sequence[np.ndarray], plate_people,
+                 radius: float, min_free: int, grow: float) -> BackgroundEstimate:
+    """:func:`estimate_background` with the person given in every frame (module docstring)."""
+    N, H, W, _ = frames.shape
+    g = max(0, int(round(grow * W)))
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * g + 1, 2 * g + 1))   # 1x1 for g = 0: no growth
+    covered = np.stack([cv2.dilate(p.view(np.uint8), kernel) for p in person]).astype(bool)
+    mu, count, n_free = _masked_mode_numba(np.ascontiguousarray(frames), ~covered, float(radius))
+    unknown = n_free < min_free
+    ever = covered.any(axis=0)
+    image = mu
+    source = np.full((H, W), SOURCE_MODE, np.uint8)
+    for i, p in enumerate(plates):
+        fill = unknown & (source == SOURCE_MODE)
+        if not fill.any():
+            break
+        ok = ~cv2.dilate(plate_people[i].view(np.uint8), kernel).astype(bool) if plate_people is not None else \
+            np.ones((H, W), bool)
+        pc = _match_colours(p, mu, ~ever & (np.abs(p.astype(np.float32) - mu).max(axis=-1) <= radius))
+        use = fill & ok
+        image[use] = pc[use]
+        source[use] = SOURCE_PLATE
+    image = np.clip(np.rint(image), 0, 255).astype(np.uint8)
+    rest = unknown & (source == SOURCE_MODE)
+    if rest.any():
+        image = cv2.inpaint(image, rest.view(np.uint8), max(3, g), cv2.INPAINT_TELEA)
+        source[rest] = SOURCE_INPAINTED
+    visible = _agree(frames, image, radius) & ~covered
+    visible[:, source != SOURCE_MODE] = False
+    return BackgroundEstimate(image, visible, source, ever.astype(np.uint8) * 255,
+                              count / np.maximum(n_free, 1))
+
+
 def estimate_background(frames: np.ndarray, *, plates: Sequence[np.ndarray] = (), radius: float = 20.0,
                         min_plate_agree: float = 0.1, active_support: float = 0.9, margin: float = 0.04,
-                        max_samples: int = 25) -> BackgroundEstimate:
+                        max_samples: int = 25, person: np.ndarray | None = None,
+                        plate_people: Sequence[np.ndarray] | None = None, min_free: int = 5,
+                        person_grow: float = 0.015) -> BackgroundEstimate:
     """Background of one view from its frames (and optional background images), see the module docstring.
 
     Parameters
@@ -159,7 +211,16 @@ def estimate_background(frames: np.ndarray, *, plates: Sequence[np.ndarray] = ()
     margin : float
         Dilation of the changing pixels, as a fraction of the image width.
     max_samples : int
-        Frames used for the temporal mode (spread evenly).
+        Frames used for the temporal mode (spread evenly; with ``person`` every frame given is used).
+    person : (N, H, W) bool, optional
+        Where the person is in each frame (e.g. :func:`.person_masks.find_person` ``> 0.5``): the
+        person-masked rule of the module docstring replaces the rules above.
+    plate_people : sequence of (H, W) bool, optional
+        Per plate, where it shows a person (:func:`.person_masks.people_in_plates`); with ``person`` only.
+    min_free : int
+        With ``person``: a pixel shown by fewer frames takes a plate or the inpainted surroundings.
+    person_grow : float
+        With ``person``: the person grown by this fraction of the image width (its edges, shadows).
     """
     frames = np.asarray(frames)
     if frames.dtype != np.uint8 or frames.ndim != 4 or frames.shape[-1] != 3 or frames.shape[0] < 3:
@@ -169,6 +230,13 @@ def estimate_background(frames: np.ndarray, *, plates: Sequence[np.ndarray] = ()
         if not isinstance(p, np.ndarray) or p.shape != (H, W, 3) or p.dtype != np.uint8:
             raise VisionError(f"plates[{i}]: expected ({H}, {W}, 3) uint8 (the frames' size), received "
                               f"{getattr(p, 'dtype', type(p).__name__)} {getattr(p, 'shape', '')}")
+    if person is not None:
+        pm = _check_masks("person", person, (N, H, W))
+        pp = None if plate_people is None else [_check_masks(f"plate_people[{i}]", q, (H, W))
+                                                 for i, q in enumerate(plate_people)]
+        if pp is not None and len(pp) != len(plates):
+            raise VisionError(f"plate_people: expected one mask per plate ({len(plates)}), received {len(pp)}")
+        return _with_person(frames, pm, plates, pp, radius, int(min_free), float(person_grow))
     mode, support = _mode(frames, radius, max_samples)
     moving = _person_region(support, active_support, margin) > 0
     matched = []

@@ -1,0 +1,192 @@
+"""The real-time estimator's schedule: which frame sets the tracker gets, at what budget, and what it does
+after each one (pure: no clock, no threads; the estimator node and :func:`emulate` drive it).
+
+A real-time estimator cannot track every frame set when a step takes longer than the frame period. The
+schedule puts the policies of :mod:`.load` and :mod:`.sync` together in the order the node applies them:
+
+1. **Take** (:meth:`RealTimeSchedule.take`): the oldest waiting set (:class:`~.sync.LatestSlot`: beyond
+   ``backlog`` waiting sets the oldest are dropped). Before the tracker's (re-)initialization it holds the
+   sets that follow in sequence (the heading check compares consecutive frames, the start-up catch-up tracks
+   them, :class:`~.load.StartupCatchUp`); before a heading re-check (:meth:`Tracker.heading_recheck_pending`)
+   the heading check's sets alike.
+2. **Budget** (:meth:`RealTimeSchedule.budget`): the governor's lowered budget under load
+   (:class:`~.load.LoadGovernor`), the catch-up budget for the start-up's waiting sets, and no contour stage
+   for a set that waited longer than ``catch_up_ms``.
+3. **After** (:meth:`RealTimeSchedule.after`): the governor's account of the step (a track lost for
+   ``reset_after`` sets re-initializes the tracker: it finds the person again by itself), then the catch-up's
+   (the rest of the held sets dropped once it stops).
+
+:func:`emulate` runs a tracker through the schedule on a virtual clock (sets arrive every ``period_s``, a
+step lasts what ``step_s(result)`` says): the node's decisions, reproducible on any machine, for tests and
+benchmarks of what load does to a track. Lockstep (``lockstep=True``) tracks every set at the full budget.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Callable, Sequence
+
+from .load import Decision, LoadGovernor, LoadSettings, StartupCatchUp
+from .sync import LatestSlot
+
+__all__ = ["RealTimeSchedule", "Budget", "EmulatedStep", "emulate", "step_cost"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Budget:
+    """The next step's budget: ``evals`` (None = the configured one), the contour stage on or off, and whether
+    the set is ``late`` (it waited longer than ``catch_up_ms``: tracked without the contour stage)."""
+    evals: int | None
+    contour_stage: bool
+    late: bool
+
+
+class RealTimeSchedule:
+    """The estimator's real-time schedule (see the module docstring).
+
+    Parameters
+    ----------
+    evals : int
+        The configured evaluations per frame set.
+    heading_sets : int
+        The heading check's frames (``init_confirm_frames``): sets held in sequence before a heading re-check.
+    lockstep : bool
+        Every set tracked in order at the full budget (no drop, no hold, no governor).
+    backlog : int
+        Sets kept waiting while the tracker is busy (the newest).
+    catch_up_ms : float
+        A set that waited longer than this is tracked without the contour stage (0 = never).
+    startup : StartupCatchUp
+        The start-up's held sets, tracked after the initialization.
+    governor : LoadGovernor or None
+        The budget under load (None: always the full budget).
+    """
+
+    def __init__(self, *, evals: int, heading_sets: int, lockstep: bool = False, backlog: int = 1,
+                 catch_up_ms: float = 15.0, startup: StartupCatchUp | None = None,
+                 governor: LoadGovernor | None = None) -> None:
+        self.evals = int(evals)
+        self.heading_sets = int(heading_sets)
+        self.lockstep = bool(lockstep)
+        self.catch_up_ms = float(catch_up_ms)
+        self.slot = LatestSlot(keep_all=self.lockstep, depth=backlog)
+        self.startup = startup if startup is not None else StartupCatchUp(sets=0, evals=1, limit_ms=0.0)
+        self.governor = None if self.lockstep else governor
+        self.frames_caught_up = 0          # sets tracked without the contour stage because they were late
+        self.last_decision: Decision | None = None   # the governor's last change of budget
+        self._dropped_seen = 0
+
+    def take(self, tracker, masks_of: Callable = lambda item: item[0].items):
+        """The next waiting set (None: none waits), with the holds its step needs (see the module docstring);
+        ``tracker``: the tracker about to step it (None: not made yet); ``masks_of(item)``: its masks."""
+        item = self.slot.take()
+        if item is None or self.lockstep:
+            return item
+        if tracker is None or not tracker.initialized:
+            # this set may initialize the tracker: keep the sets that follow it in sequence for the heading
+            # check (Tracker.checking_heading) and the catch-up after it
+            self.slot.hold(self.startup.hold(self.heading_sets))
+        elif tracker.heading_recheck_pending(masks_of(item)):
+            # the same for a heading re-check (more views see the person, an undecided check or one a gap ended,
+            # the track moving backwards): else its check ends at the gap after the re-check's own, longer frame
+            self.slot.hold(self.heading_sets)
+        return item
+
+    def budget(self, tracker, waited_ms: float) -> Budget:
+        """The budget of the set taken last, which waited ``waited_ms`` before its step."""
+        if self.lockstep:
+            return Budget(None, True, False)
+        late = 0 < self.catch_up_ms < waited_ms
+        d = self.governor.decision() if self.governor is not None else None
+        evals = self.evals if d is None or d.level == 0 else d.evals
+        evals, contour = self.startup.budget(evals, initialized=tracker.initialized,
+                                             checking_heading=tracker.checking_heading)
+        contour = contour and not late and (d is None or d.contour_stage)
+        return Budget(None if evals == self.evals else evals, contour, late)
+
+    def after(self, tracker, result, *, budget: Budget, waited_ms: float, step_s: float | None = None) -> Decision | None:
+        """Account for the step of the set taken last (``result``, its :class:`~.config.FrameResult`; ``budget``:
+        what :meth:`budget` gave; ``waited_ms``: from its arrival to now; ``step_s``: the step's duration, default
+        ``result.time_s``). Re-initializes the tracker when the governor says the track stayed lost; returns the
+        governor's decision when it changed the budget."""
+        if self.lockstep:
+            return None
+        if budget.late and result.x is not None and not result.fell_back and not result.initialized:
+            self.frames_caught_up += 1
+        changed = None
+        if self.governor is not None and result.x is not None and not result.initialized:
+            dropped = self.slot.dropped - self._dropped_seen
+            self._dropped_seen = self.slot.dropped
+            d = self.governor.observe(step_s=result.time_s if step_s is None else step_s, energy=result.energy,
+                                      fell_back=result.fell_back, dropped=dropped)
+            if d.reason:
+                changed = self.last_decision = d
+            if d.reset:
+                tracker.reset()          # the next set initializes automatically
+        if tracker.initialized and not tracker.checking_heading:
+            # the start-up's sets still waiting are tracked in order (catch-up) until none waits or one waited
+            # too long; then (or with no catch-up) on with the newest set
+            going_on = self.startup.after(waiting=len(self.slot), waited_ms=waited_ms)
+            if self.slot.held and not going_on:
+                self.slot.hold(0)
+        return changed
+
+
+def step_cost(*, fixed_s: float = 0.005, per_eval_s: float = 28e-6, load: float = 1.0) -> Callable:
+    """A step's duration from its evaluations: ``load × (fixed_s + per_eval_s × n_evals)`` (defaults: bags/demo
+    idle on this project's 2-core machine, ~47 ms for a 1500-evaluation frame, ~270 ms for the
+    initialization's ~9400; ``load`` 2: another process takes half the core)."""
+    return lambda result: load * (fixed_s + per_eval_s * result.n_evals)
+
+
+@dataclasses.dataclass(frozen=True)
+class EmulatedStep:
+    """One set :func:`emulate` tracked: its index ``k`` in the sequence, the tracker's result, the budget it
+    had, its latency (arrival to estimate, seconds of the virtual clock) and the frame periods since the set
+    tracked before it (``gap``)."""
+    k: int
+    result: object
+    budget: Budget
+    latency_s: float
+    gap: int
+
+
+def emulate(tracker, masks: Sequence, schedule: RealTimeSchedule, *, period_s: float,
+            step_s: Callable, frame_key: Callable[[int], int] = lambda k: k) -> tuple[list[EmulatedStep], int]:
+    """Real time on a virtual clock: set ``k`` (``masks[k]``, one mask per view) arrives at ``k × period_s``; the
+    tracker steps the set :meth:`RealTimeSchedule.take` gives whenever it is free, for ``step_s(result)``
+    seconds. Returns the tracked steps and the number of sets dropped."""
+    n = len(masks)
+    t_free, arrived, prev = 0.0, 0, None
+
+    def arrive(until: float) -> None:
+        nonlocal arrived
+        while arrived < n and arrived * period_s <= until + 1e-12:
+            schedule.slot.put((arrived, arrived * period_s))
+            arrived += 1
+
+    steps: list[EmulatedStep] = []
+    while True:
+        arrive(t_free)
+        item = schedule.take(tracker, masks_of=lambda it: masks[it[0]])
+        if item is None:
+            if arrived >= n:
+                break
+            t_free = arrived * period_s        # idle until the next set
+            continue
+        k, t_ready = item
+        b = schedule.budget(tracker, (t_free - t_ready) * 1e3)
+        gap = 1 if prev is None else k - prev
+        prev = k
+        r = tracker.step(masks[k], frame_key(k), frames_elapsed=gap, contour_stage=b.contour_stage, evals=b.evals)
+        dt = step_s(r)
+        t_free += dt
+        arrive(t_free)
+        schedule.after(tracker, r, budget=b, waited_ms=(t_free - t_ready) * 1e3, step_s=dt)
+        steps.append(EmulatedStep(k, r, b, t_free - t_ready, gap))
+    return steps, schedule.slot.dropped
+
+
+def governor_for(evals: int, period_s: float, **settings) -> LoadGovernor:
+    """A :class:`~.load.LoadGovernor` of ``evals`` per set and frame period ``period_s`` (other settings as
+    :class:`~.load.LoadSettings`)."""
+    return LoadGovernor(LoadSettings(evals=evals, period_s=period_s, **settings))
