@@ -68,7 +68,8 @@ def test_lockstep_run_with_keypoints_equals_offline_track_under_a_fuzzer(landmar
     for stamp in node:
         assert np.array_equal(node[stamp], ref[stamp]), (stamp, np.abs(node[stamp] - ref[stamp]).max())
     # the term was on: without it the same settings give other estimates
-    res = subprocess.run(CLI + ["track", str(FIXTURE), "--out", str(tmp_path / "off"), *SETTINGS],
+    res = subprocess.run(CLI + ["track", str(FIXTURE), "--out", str(tmp_path / "off"), "--keypoint-weight", "0",
+                                *SETTINGS],
                          capture_output=True, text=True, timeout=400)
     assert res.returncode == 0, res.stderr[-3000:]
     off = joint_states_by_stamp(tmp_path / "off" / "estimates")

@@ -8,8 +8,9 @@ What a user meets: a person who is not the tracking model. Each subject (MakeHum
 generated walk, bag seed 0) in the default 4-view rig; the bags are rendered once per condition (clean, 70 %
 pixel noise, 35 occluding rectangles; :mod:`.robustness`'s renderer and cache) and tracked by ``isa-mocap
 track``'s code with **everything automatic**: the shape calibrated from the first frames' silhouettes
-(``--shape auto``), the automatic initialization, h-isa at 1500 evaluations per frame, all other settings the
-tracker's defaults; once per tracker seed (default 0-7). The shape is calibrated once per bag (``isa-mocap
+(``--shape auto``), the automatic initialization, h-isa at 1500 evaluations per frame, the keypoint term as
+``track``'s default (on when the landmark model is installed: decision 014), all other settings the tracker's
+defaults; once per tracker seed (default 0-7). The shape is calibrated once per bag (``isa-mocap
 calibrate``'s code with the first seed, kept beside the bag in the cache under a key of the calibration's
 options and code, :func:`.robustness.calibrate_bag`) and every seed tracks with that file, as a user who
 calibrates once and tracks with ``--shape FILE``. Every frame is
@@ -42,6 +43,7 @@ from isa_mocap_ros.eval.compare import SequenceSpec
 
 from . import robustness as br
 from isa_mocap_ros.bench._common import write_result
+from isa_mocap_ros.cli.keypoint_options import default_keypoint_weight
 
 SUBJECTS = ("slim_woman", "average_man", "heavy_man")
 CONDITIONS = ("clean", "noise70", "occluders35")
@@ -194,9 +196,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--subjects", default=None, metavar="A,B", help=f"mesh subjects (default {','.join(SUBJECTS)})")
     p.add_argument("--conditions", default=None, metavar="A,B", help=f"conditions (default {','.join(CONDITIONS)})")
     p.add_argument("--keypoint-weight", type=float, default=None, metavar="W",
-                   help="track with the learned-keypoint term (docs/keypoints.md; default off)")
+                   help="weight of the learned-keypoint term (docs/keypoints.md; 0 = off; default: track's, 1 when "
+                        "the landmark model is installed)")
     p.add_argument("--keypoint-every", type=int, default=None, metavar="K",
-                   help="with --keypoint-weight: keypoints on the initialized and every K-th frame (default 0)")
+                   help="keypoints on the first frames and every K-th frame after (default: track's, 8)")
     p.add_argument("--silhouette-core-px", type=float, default=None, metavar="PX",
                    help="the tracker's silhouette_core_px (docs/energy.md; default the tracker's)")
     p.add_argument("--jobs", type=int, default=2, metavar="N", help="worker processes (default 2)")
@@ -212,6 +215,10 @@ def _names(v):
 def run(args: argparse.Namespace) -> int:
     try:
         seeds = None if args.seeds is None else tuple(int(x) for x in _names(args.seeds))
+        if getattr(args, "keypoint_weight", None) is None:     # the main job's default (cli.keypoint_options)
+            args.keypoint_weight, note = default_keypoint_weight()
+            if note:
+                print(f"isa-mocap bench mesh: {note}", file=sys.stderr)
         tracker = tuple((k, getattr(args, k)) for k in ("keypoint_weight", "keypoint_every", "silhouette_core_px")
                         if getattr(args, k, None) is not None)
         design = make_design("quick" if args.quick else "default", seeds=seeds, frames=args.frames,

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from isa_mocap_ros.bag import BagReader
+from isa_mocap_ros.cli.keypoint_options import DEFAULT_KEYPOINT_WEIGHT, default_keypoint_weight
 from isa_mocap_ros.launcher import NodeSpec, Supervisor, niceness
 from isa_mocap_ros.resources import default_bag, resource_dir
 from isa_mocap_ros.rosenv import ros_env
@@ -56,26 +57,35 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
                    help="niceness added to every process but the estimator's (player, segmentation, prediction, "
                         "recorder; default 5, 0 = off): on a small machine the tracker's threads then lose "
                         "less time to the helpers (docs/nodes.md)")
-    p.add_argument("--keypoints", action="store_true",
-                   help="also run the keypoint node (BlazePose landmarks on cam<i>/keypoints, recorded) and track "
-                        "with them (the estimator's keypoint_weight; docs/keypoints.md)")
-    p.add_argument("--keypoint-weight", type=float, default=1.0, metavar="W",
-                   help="with --keypoints: weight of the keypoint term (default 1.0; 0 = detect and record only)")
+    p.add_argument("--keypoints", action=argparse.BooleanOptionalAction, default=None,
+                   help="run the keypoint node (BlazePose landmarks on cam<i>/keypoints, recorded) and track with "
+                        "them (the estimator's keypoint_weight; docs/keypoints.md). Default: on when the landmark "
+                        "model is installed (make models), else off with a note; --no-keypoints: off")
+    p.add_argument("--keypoint-weight", type=float, default=DEFAULT_KEYPOINT_WEIGHT, metavar="W",
+                   help=f"with keypoints: weight of the keypoint term (default {DEFAULT_KEYPOINT_WEIGHT:g}; 0 = detect "
+                        "and record only)")
     p.add_argument("--keypoint-every", type=int, default=None, metavar="K",
-                   help="with --keypoints: the keypoint node's every_k_frames (default: the parameter file's, 8)")
+                   help="with keypoints: the keypoint node's every_k_frames (default: the parameter file's, 8)")
     p.add_argument("--shape", default="auto", metavar="auto|default|truth|FILE",
                    help="body shape the estimator tracks with: 'auto' (default) calibrates it from the bag's first "
                         "frames before the replay (as isa-mocap calibrate; written to DIR/body.yaml); 'default' = "
                         "config/body/default.yaml; FILE = a body-shape YAML; 'truth' = the bag's ground-truth "
                         "model's (a diagnostic only)")
     p.add_argument("--single-process", action="store_true",
-                   help="run segmentation, prediction and estimator (and keypoints with --keypoints) in one process "
+                   help="run segmentation, prediction and estimator (and keypoints) in one process "
                         "on one executor (isa_mocap_ros.cli.compose) instead of one process each; the recorder "
                         "stays apart. Lockstep results are the same (docs/nodes.md)")
     p.add_argument("--quiet", action="store_true", help="do not echo node output")
     from isa_mocap_ros.cli.shape_options import add_calibration_arguments
 
     add_calibration_arguments(p)
+
+
+def _keypoints_on(args: argparse.Namespace) -> bool:
+    """Whether the network runs the keypoint node: ``--keypoints`` / ``--no-keypoints``, else (None, the default)
+    on when the landmark model is installed (:mod:`isa_mocap_ros.cli.keypoint_options`)."""
+    on = getattr(args, "keypoints", False)
+    return default_keypoint_weight()[0] > 0 if on is None else bool(on)
 
 
 def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
@@ -108,11 +118,11 @@ def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
     common = dict(namespace=NS, params_files=(params,))
     nice = getattr(args, "helper_nice", 0)
     kp = []
-    if getattr(args, "keypoints", False):
+    if _keypoints_on(args):
         kp_params = [("views", str(n_views))]
         if getattr(args, "keypoint_every", None) is not None:
             kp_params.append(("every_k_frames", str(args.keypoint_every)))
-        est.append(("keypoint_weight", repr(float(getattr(args, "keypoint_weight", 1.0)))))
+        est.append(("keypoint_weight", repr(float(getattr(args, "keypoint_weight", DEFAULT_KEYPOINT_WEIGHT)))))
         if args.lockstep:     # the estimator's frame sets: no partial ones in lockstep (isa_mocap_ros.keypoint_intake)
             kp_params += [("view_timeout_s", "0.0")]
             kp_params += [(f"qos_overrides.{NS}/cam{v}/{t}.subscription.reliability", "reliable")
@@ -225,6 +235,11 @@ def run(args: argparse.Namespace) -> int:
         if not args.quiet and ("[launch]" in line or "WARN" in line or "ERROR" in line or "estimator:" in line):
             print(line, flush=True)
 
+    if getattr(args, "keypoints", None) is None:
+        weight, note = default_keypoint_weight()
+        args.keypoints = weight > 0
+        if note:
+            print(f"run: {note}", file=sys.stderr, flush=True)
     try:
         body_shape = _body_shape(args, bag, out, learn)
     except ValueError as exc:

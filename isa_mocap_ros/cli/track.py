@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from isa_mocap_ros.cli.track_io import TOPIC, read_sequence, reference_coverage, refine_by_model, write_overlay_media
+from isa_mocap_ros.cli.keypoint_options import DEFAULT_KEYPOINT_WEIGHT, default_keypoint_weight
 from isa_mocap_ros.vision.keypoint_schedule import EVERY_K
 
 
@@ -50,9 +51,10 @@ _TRACKER_OPTIONS = (
     ("--coarse-fraction", float, None, "F",
      "share of each partition's generations of the main search evaluated on two views only (the energy's coarse "
      "level, about half the cost; docs/energy.md); 0 = off (default: the tracker's default)"),
-    ("--keypoint-weight", float, 0.0, "W",
+    ("--keypoint-weight", float, None, "W",
      "weight of the learned-keypoint term (BlazePose landmarks on the images, cropped around the mask; "
-     "docs/keypoints.md); 0 = off (default)"),
+     f"docs/keypoints.md); 0 = off; default {DEFAULT_KEYPOINT_WEIGHT:g} when the landmark model is installed "
+     "(make models), else off with a note"),
     ("--keypoint-every", int, EVERY_K, "K",
      "with --keypoint-weight: after the dense start, detect keypoints on every K-th frame with a person of each "
      f"view (0 = the dense start only; default {EVERY_K}, the keypoint node's every_k_frames)"),
@@ -173,7 +175,15 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     with BagReader(bag_path) as probe:
         has_mask_topics = any(t.endswith("/mask") and t.startswith(f"{TOPIC}/cam") for t in probe.topics)
     use_masks = bool(args.use_masks and has_mask_topics)
-    kp_weight = float(getattr(args, "keypoint_weight", 0.0) or 0.0)
+    # a caller's namespace without the option tracks without keypoints; the command line's default (None) is
+    # the main job's: on when the landmark model is installed (cli.keypoint_options)
+    kp_weight = getattr(args, "keypoint_weight", 0.0)
+    kp_note = None
+    if kp_weight is None:
+        kp_weight, kp_note = default_keypoint_weight()
+        if kp_note:
+            print(f"track: {kp_note}", file=sys.stderr)
+    kp_weight = float(kp_weight)
     kp_every = int(getattr(args, "keypoint_every", EVERY_K))
     from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, KeypointSchedule, detect_in_mask
     kp_dense = getattr(args, "keypoint_dense", None)
@@ -207,7 +217,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
             model = make_model(dof, shape=Path(shape_arg))
         except BodyError as exc:
             raise ValueError(f"--shape: expected auto, default, truth or a body-shape YAML file ({exc})") from None
-    notes = list(seq.notes)
+    notes = list(seq.notes) + ([kp_note] if kp_note else [])
     if args.use_masks and not has_mask_topics:
         notes.append("--use-masks: the bag has no mask topics; segmenting the images")
 
@@ -464,6 +474,8 @@ def run(args: argparse.Namespace) -> int:
     rows = [("bag", s["bag"]), ("optimizer", f"{s['optimizer']}, {s['evals_per_frame']} evaluations/frame"),
             ("model", f"{s['model_dof']} DOF"), ("masks", s["masks"]),
             ("frames", f"{s['frames_tracked']} tracked, {s['frames_fell_back']} fell back"),
+            ("keypoints", f"weight {s['keypoint_weight']:g}, every {s['keypoint_every']} frames after the first "
+                          f"{s['keypoint_dense']}" if s["keypoint_weight"] > 0 else "off"),
             ("speed", f"{s['fps']:.2f} frames/s")]
     if "mpjpe_mm" in s:
         rows += [("mean joint error (Eq. 20)", f"{s['mpjpe_mm']:.1f} mm over {s['frames']} frames "
