@@ -59,8 +59,10 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
                         "less time to the helpers (docs/nodes.md)")
     p.add_argument("--keypoints", action=argparse.BooleanOptionalAction, default=None,
                    help="run the keypoint node (BlazePose landmarks on cam<i>/keypoints, recorded) and track with "
-                        "them (the estimator's keypoint_weight; docs/keypoints.md). Default: on when the landmark "
-                        "model is installed (make models), else off with a note; --no-keypoints: off")
+                        "them (the estimator's keypoint_weight; docs/keypoints.md). Default: with --lockstep on when "
+                        "the landmark model is installed (make models), else off with a note; in real time off (on "
+                        "two cores the node made the estimator drop a third of the frame sets: decision 014); "
+                        "--no-keypoints: off")
     p.add_argument("--keypoint-weight", type=float, default=DEFAULT_KEYPOINT_WEIGHT, metavar="W",
                    help=f"with keypoints: weight of the keypoint term (default {DEFAULT_KEYPOINT_WEIGHT:g}; 0 = detect "
                         "and record only)")
@@ -235,6 +237,10 @@ def run(args: argparse.Namespace) -> int:
         if not args.quiet and ("[launch]" in line or "WARN" in line or "ERROR" in line or "estimator:" in line):
             print(line, flush=True)
 
+    if getattr(args, "keypoints", None) is None and not args.lockstep:
+        # real time: off by default (decision 014: bags/demo, idle 2 cores, 51 of 145 sets dropped with the
+        # keypoint node against 5 without); --keypoints turns it on where cores are to spare
+        args.keypoints = False
     if getattr(args, "keypoints", None) is None:
         weight, note = default_keypoint_weight()
         args.keypoints = weight > 0
