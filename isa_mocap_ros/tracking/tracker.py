@@ -296,9 +296,9 @@ class Tracker:
         return opt, budget, (share, torso, limbs, contour), (lo, hi, spread, base)
 
     def optimize(self, ctx: FrameContext, pred: np.ndarray, rng: np.random.Generator, *, spread_scale: float = 1.0,
-                 notes=None, stages: bool = True):
-        """One optimizer run of the frame's budget ``ctx.budget`` on its objective around ``pred`` (raises the
-        optimizer's errors), then
+                 notes=None, stages: bool = True, budget: FrameBudget | None = None):
+        """One optimizer run of the frame's budget ``ctx.budget`` (or ``budget``: the first frame's polish) on its
+        objective around ``pred`` (raises the optimizer's errors), then
         the pelvis stage (``config.stages.pelvis_fraction`` of the budget), the torso stage
         (``config.stages.torso_fraction``), the limb stage (``config.stages.limb_proposals``) and the contour stage
         (``config.stages.contour_iterations``), each also given what the searches before it left unspent
@@ -311,8 +311,8 @@ class Tracker:
         polish (``config.first_frame.init_polish``) then searches the winner with every stage."""
         from isa_mocap_ros.optim import minimize
 
-        opt, budget, stage_shares, (lo, hi, spread, base) = self.plan_search(pred, rng, ctx.budget, spread_scale,
-                                                                             notes, stages)
+        opt, budget, stage_shares, (lo, hi, spread, base) = self.plan_search(
+            pred, rng, ctx.budget if budget is None else budget, spread_scale, notes, stages)
         share, torso, limbs, contour = stage_shares
         res = compiled_search.search(opt, self.energy, budget, extra_terms=ctx.objective.extra_terms,
                                      keypoints=ctx.objective.weighted_keypoints,
