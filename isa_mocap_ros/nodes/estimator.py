@@ -20,12 +20,15 @@ prediction of that frame while a prediction node publishes (none: no wait).
 
 Keypoints (``keypoint_weight`` > 0, docs/keypoints.md): a keypoint message belongs to the frame set of its
 stamp and view; the tracker gets the set's keypoints with its masks. The keypoint node detects on some
-frames only and says so for the others (``keypoints_skipped``): in lockstep the estimator waits up to
-``keypoint_wait_s`` until each view of the set has one or the other (so the player, which waits for
-``estimator/done``, waits for the keypoint node too, and a replay is deterministic); in real time up to
-``keypoint_realtime_wait_s`` (30 ms), then the set is tracked with the keypoints that have arrived. A malformed keypoint message (not 0 or 33 points, a
-non-finite pixel, a confidence outside [0, 1]) or one whose stamp lies far from the frame sets is dropped
-with one line and counted (in lockstep the frame still waits for its view's own message).
+frames only and says so for the others (``keypoints_skipped``): in lockstep the estimator waits until each view
+of the set has one or the other, with no time limit while a keypoint node is in the graph (so the player, which
+waits for ``estimator/done``, waits for the keypoint node too, and a replay is deterministic at any machine
+speed), up to ``keypoint_wait_s`` while none is; a view whose message of a later set came is not waited for (the
+node lost that frame: its message will never come). In real time up to ``keypoint_realtime_wait_s`` (30 ms), then
+the set is tracked with the keypoints that have arrived (:mod:`isa_mocap_ros.keypoint_intake`). A malformed
+keypoint message (not 0 or 33 points, a non-finite pixel, a confidence outside [0, 1]) or one whose stamp lies far
+from the frame sets (before the first set: from the first set) is dropped with one line and counted (in lockstep
+the frame still waits for its view's own message).
 
 Input checks, before anything reaches the synchronizer or the tracker (:mod:`isa_mocap_ros.intake`):
 a view's camera is what a ``camera_info`` and a mask of the same stamp agree on (frame id, size); a
@@ -61,6 +64,7 @@ from isa_mocap_ros.body.hri import hri_joint_names, hri_urdf
 from isa_mocap_ros.eval.peers import register_peers
 from isa_mocap_ros.geometry import exp_so3
 from isa_mocap_ros.intake import StampWindow, ViewGate
+from isa_mocap_ros.keypoint_intake import KeypointInbox, KeypointWait
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.nodes.common import (QOS_OVERRIDES, ProblemLog, declare, declare_config, declare_frame_sync,
                                        one_numba_thread, run_node)
@@ -134,7 +138,8 @@ class EstimatorNode(EstimatorIntake, Node):
                                    "below this share of frame_period_s", lo=0.05, hi=1.0)
         self.use_prediction = declare(self, "use_prediction", True, "use prediction/joint_states when it arrives")
         self.keypoint_wait_s = declare(self, "keypoint_wait_s", 10.0, "lockstep, keypoint_weight > 0: longest wait "
-                                       "for a view's keypoints (or the keypoint node's skip notice) of a frame set",
+                                       "for a view's keypoints (or skip notice) of a frame set while no keypoint node "
+                                       "is in the graph (with one there, the wait has no time limit)",
                                        lo=0.0, hi=600.0)
         self.keypoint_realtime_wait_s = declare(
             self, "keypoint_realtime_wait_s", 0.03, "real time, keypoint_weight > 0: longest wait for a view's "
@@ -188,8 +193,10 @@ class EstimatorNode(EstimatorIntake, Node):
         self._camera_changed: str | None = None   # a view's camera changed after the tracker was made
         self._images: list[dict[int, np.ndarray]] = [{} for _ in range(self.n_views)]
         self._predictions: dict[int, np.ndarray] = {}
-        # per view: stamp -> (uv, confidence) or None (looked, nobody / skipped / dropped as bad)
-        self._keypoints: list[dict[int, tuple | None]] = [{} for _ in range(self.n_views)]
+        # the keypoint node's messages per view and stamp: (uv, confidence) or None (skipped / nobody)
+        self.keypoint_inbox = KeypointInbox(self.n_views, self._stream)
+        self.keypoint_wait = KeypointWait(self.lockstep, self.keypoint_wait_s if self.lockstep
+                                          else self.keypoint_realtime_wait_s)
         self.use_keypoints = self.tracker_config.keypoints.keypoint_weight > 0
         self.keypoint_sets = 0          # frame sets tracked with keypoints
         self._prev_stamp_ns: int | None = None   # stamp of the last frame set given to the tracker
