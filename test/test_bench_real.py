@@ -33,9 +33,16 @@ def test_quick_run_scores_every_frame_against_the_peer(tmp_path):
     assert "| default shape | 8 |" in md and "Quick run" in md and "nan" not in md.lower()
     assert d["seeds"] == [0] and r["seeds"][0]["seed"] == 0
     assert r["offset_removed_over_seeds"]["mean"] == r["offset_removed_mpjpe_mm"]
+    # per joint in each third of the frames (3 + 3 + 2 of 8): weighted by the spans, the score's per-joint mean
+    th = r["joint_thirds_over_seeds"]
+    assert set(th) == set(r["offset_removed_per_marker_mm"])
+    for n, v in th.items():
+        assert np.dot(v, [3, 3, 2]) / 8 == pytest.approx(r["offset_removed_per_marker_mm"][n], abs=1e-9), n
+    assert "| last third |" in md
     # the masks per view against the peer's stick figure (shares in [0, 1])
     assert [m["view"] for m in d["masks"]] == [0, 1, 2, 3]
     assert all(0 <= m[k] <= 1 for m in d["masks"] for k in ("beyond", "core_missed", "keypoints_on"))
+    assert all(len(m["beyond_thirds"]) == 3 and all(0 <= x <= 1 for x in m["beyond_thirds"]) for m in d["masks"])
     assert "cam0 " in md and "stick figure" in md
     # the bag is cached in the work directory: a second run does not import again
     assert (tmp_path / "w" / "demo_bag_160_8" / "metadata.yaml").is_file()
