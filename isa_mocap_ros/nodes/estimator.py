@@ -62,7 +62,8 @@ from isa_mocap_ros.eval.peers import register_peers
 from isa_mocap_ros.geometry import exp_so3
 from isa_mocap_ros.intake import StampWindow, ViewGate
 from isa_mocap_ros.nodes import qos
-from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, declare_config, one_numba_thread, run_node
+from isa_mocap_ros.nodes.common import (QOS_OVERRIDES, ProblemLog, declare, declare_config, declare_frame_sync,
+                                       one_numba_thread, run_node)
 from isa_mocap_ros.nodes.estimator_intake import EstimatorIntake
 from isa_mocap_ros.tracking.predict import periods_between
 from isa_mocap_ros.tracking.sync import FrameSynchronizer
@@ -103,16 +104,12 @@ class EstimatorNode(EstimatorIntake, Node):
         shape = declare(self, "body_shape", "", "body-shape YAML file ('' = default shape)")
         # the tracker's settings: one parameter per TrackerConfig field, with its name, default and one-line doc
         settings = declare_config(self, TrackerConfig, field_docs(TrackerConfig), skip=NOT_PARAMETERS)
-        sync = declare(self, "sync", "exact", "frame-set matching: exact or approximate")
-        queue = declare(self, "queue_size", 10, "stamps kept per view while synchronizing", lo=1, hi=1000)
-        slop_s = declare(self, "slop_s", 0.01, "approximate sync window, seconds", lo=0.0, hi=10.0)
+        sync_kw = declare_frame_sync(self, self.n_views)
+        self.view_timeout_s = sync_kw["max_wait_s"]
         self.tracker_threads = declare(self, "tracker_threads", 1,
                                        "numba threads of the tracker's energy kernels (0 = numba's default, "
                                        "all cores; 1 leaves the other cores to the rest of the network); "
                                        "results do not depend on it", lo=0, hi=256)
-        self.view_timeout_s = declare(self, "view_timeout_s", 1.0,
-                                      "emit a partial frame set after this wait (0 = never)", lo=0.0, hi=60.0)
-        min_views = declare(self, "min_views", 2, "views a partial frame set needs", lo=1, hi=64)
         self.lockstep = declare(self, "lockstep", False, "process every frame set (no dropping) and wait "
                                 "for the prediction of each frame")
         self.catch_up_ms = declare(self, "catch_up_ms", 15.0, "real time: a frame set that waited longer than this "
@@ -163,8 +160,6 @@ class EstimatorNode(EstimatorIntake, Node):
         self.problems = ProblemLog(self)
         self.model = make_model(dof, shape=shape or None)
         self.hri_names = hri_joint_names(self.model, self.body_id)
-        if sync not in ("exact", "approximate"):
-            raise ValueError(f"sync must be 'exact' or 'approximate', got {sync!r}")
         self.tracker_config = TrackerConfig.from_flat(**settings)   # checks every setting (TrackerError names it)
         # real time: which sets the tracker gets and at what budget (isa_mocap_ros.tracking.realtime): the frame
         # budget under load (governor; None: always the full budget), the start-up's sets caught up after the
@@ -180,9 +175,7 @@ class EstimatorNode(EstimatorIntake, Node):
         self.governor = self.schedule.governor
         self.catch_up = self.schedule.startup
         self.budget_reason = ""          # the governor's last change, for /diagnostics
-        self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
-                                      slop_ns=0 if sync == "exact" else int(slop_s * 1e9),
-                                      max_wait_s=self.view_timeout_s, min_views=min(min_views, self.n_views))
+        self.sync = FrameSynchronizer(self.n_views, **sync_kw)
         self.slot = self.schedule.slot
         self.threads_in_use = 0          # numba threads of the tracker's worker (set when it starts)
         self._cv = threading.Condition()
