@@ -95,6 +95,35 @@ def joint_thirds(collect: dict, parts: int = 3) -> dict:
         return {n: [float(np.nanmean(err[i, m])) for i in spans] for m, n in enumerate(shared)}
 
 
+#: Pose2Sim's own filter of its triangulated points (the demo's Config.toml ``[filtering.butterworth]``): order,
+#: cut-off (Hz); zero phase (filtered forward and backward)
+PEER_FILTER = (4, 6.0)
+
+
+def filtered_score(collect: dict, fps: float, reference: Path) -> float | None:
+    """Like for like with the peer's final output: our joint centres filtered as Pose2Sim filters its points
+    (:data:`PEER_FILTER`) against its filtered file ``reference`` (TRC, rows = the scored frames in order), offsets
+    removed as the score removes them; mean mm. An offline figure (a zero-phase filter needs the whole recording)."""
+    from scipy.signal import butter, filtfilt
+
+    from isa_mocap_ros.eval.metrics import body_frames, marker_positions, offset_removed_errors_mm
+    from isa_mocap_ros.eval.trc import TRC_TO_WORLD, read_trc
+
+    model, names = collect["model"], list(collect["truth_marker_names"])
+    frames = sorted(k for k in collect["estimates"] if k in collect["truth_markers"])
+    trc = read_trc(reference)
+    shared = [model.joint_names[j] for j in model.markers if model.joint_names[j] in names]
+    if len(frames) != len(trc.points) or len(frames) < 16 or "left_hip" not in shared:
+        return None
+    order, cut_hz = PEER_FILTER
+    b, a = butter(order, cut_hz / (fps / 2.0))
+    Pe = filtfilt(b, a, marker_positions(model, np.array([collect["estimates"][k] for k in frames]), joints=shared),
+                  axis=0)
+    Pt = trc.in_world(TRC_TO_WORLD)[:, [names.index(n) for n in shared]]
+    err, _ = offset_removed_errors_mm(Pe, Pt, body_frames(Pt, shared.index("left_hip"), shared.index("right_hip")))
+    return float(np.nanmean(np.nanmean(err, axis=1)))
+
+
 def _track(bag: Path, out: Path, extra: list[str]) -> dict:
     from isa_mocap_ros.cli.main import build_parser
     from isa_mocap_ros.cli.track import track_bag
@@ -106,6 +135,10 @@ def _track(bag: Path, out: Path, extra: list[str]) -> dict:
     r = {k: s.get(k) for k in _KEEP}
     r["wall_seconds"] = round(time.perf_counter() - t0, 1)
     r["joint_thirds_mm"] = joint_thirds(collect)
+    ref = demo_dir() / "reference" / "balancing_pose2sim_butterworth.trc"
+    stamps = sorted(collect["stamps"].values())
+    fps = (len(stamps) - 1) / ((stamps[-1] - stamps[0]) / 1e9) if len(stamps) > 1 else 0.0
+    r["filtered_offset_removed_mpjpe_mm"] = filtered_score(collect, round(fps, 3), ref) if ref.is_file() else None
     return r
 
 
@@ -196,6 +229,7 @@ def collect(*, quick: bool, out: Path, configs=DEFAULT_CONFIGS, lockstep: str | 
                              "offset_removed_over_seeds": _spread(per_seed, "offset_removed_mpjpe_mm"),
                              "raw_over_seeds": _spread(per_seed, "mpjpe_mm"),
                              "knee_over_seeds": _spread(per_seed, "knee_rmse_deg"),
+                             "filtered_over_seeds": _spread(per_seed, "filtered_offset_removed_mpjpe_mm"),
                              "backwards_over_seeds": int(sum(r["frames_facing_backwards"] or 0 for r in per_seed)),
                              "tracked_over_seeds": int(min(r["frames_tracked"] or 0 for r in per_seed)),
                              "joint_thirds_over_seeds": _mean_thirds([r["joint_thirds_mm"] for r in per_seed])}
@@ -250,6 +284,14 @@ def render_markdown(d: dict) -> str:
         L.append(f"| {r['label']} | {r.get('tracked_over_seeds', r['frames_tracked'])} | {_f(raw['mean'])} "
                  f"[{_f(raw['min'])}-{_f(raw['max'])}] | **{_f(rem['mean'])}** [{_f(rem['min'])}-{_f(rem['max'])}] "
                  f"| {per} | {_f(knee['mean'])} | {r.get('backwards_over_seeds', r['frames_facing_backwards'])} |")
+    filt = [(r["label"], r["filtered_over_seeds"]) for r in d["runs"].values()
+            if (r.get("filtered_over_seeds") or {}).get("mean") is not None]
+    if filt:
+        L += ["", "Like for like with the peer's final output (Pose2Sim filters its triangulated points with a zero-phase "
+                  f"Butterworth filter, order {PEER_FILTER[0]}, {PEER_FILTER[1]:g} Hz, its Config.toml; here our joint "
+                  "centres filtered the same way against its filtered file, offsets removed; an offline figure, not the "
+                  "score above): " + "; ".join(f"{lab}: **{_f(f['mean'])}** [{_f(f['min'])}-{_f(f['max'])}] mm"
+                                              for lab, f in filt) + "."]
     first = next(iter(d["runs"].values()), None)
     if first and first.get("per_marker_mm"):
         L += ["", f"Per joint ({first['label']}, seed {seeds[0]}; raw / offsets removed, mm): " + ", ".join(
