@@ -123,4 +123,69 @@ def test_raster_refuses_what_it_cannot_count(scene):
     r = SilhouetteEnergy(model, rig, masks, method="raster").restrict(x0, [20, 21])
     Xr = np.repeat(x0[None], 4, axis=0)
     Xr[:, 20:22] += np.linspace(-0.3, 0.3, 8).reshape(4, 2)
-    assert r.full and np.array_equal(r(Xr), SilhouetteEnergy(model, rig, masks, method="raster")(Xr))
+    assert not r.full and np.array_equal(r(Xr), SilhouetteEnergy(model, rig, masks, method="raster")(Xr))
+
+
+PARTS = ("root", "torso", "left_arm", "right_arm", "left_leg", "right_leg")
+
+
+@pytest.mark.parametrize("stride, weights", [(1, None), (2, (1.0, 0.25, 0.0, 0.6))])
+def test_raster_restricted_equals_full_bit_for_bit(scene, stride, weights):
+    """Bases off the rendered pose and 0.4 rad moves, so moving capsules overlap fixed ones: the same bits."""
+    model, rig, x0, masks, X = scene
+    en = SilhouetteEnergy(model, rig, method="raster", downsample=stride)
+    en.set_masks(masks, weights)
+    rng = np.random.default_rng(1)
+    for part in PARTS:
+        cols = model.partitions[part]
+        for _ in range(2):
+            base = np.clip(x0 + rng.normal(0, 0.2, model.dof), model.lower, model.upper)
+            Xp = np.repeat(base[None], 60, axis=0)
+            Xp[:, cols] += rng.normal(0, 0.4, (60, len(cols))) * np.where(cols < 3, 0.25, 1.0)
+            f = en.restrict(base, cols)
+            assert f.full == (part == "root")
+            np.testing.assert_array_equal(f(Xp), en(Xp), err_msg=part)
+    f = en.restrict(x0, model.partitions["left_leg"])
+    bad = np.repeat(x0[None], 3, axis=0)
+    bad[1, 7] += 1e-12                        # outside the coordinates: never a silent value
+    with pytest.raises(EnergyError, match=r"row 1 with coordinate 7"):
+        f(bad)
+    with pytest.raises(EnergyError, match="coarse level"):
+        f.coarse_kernel_args()
+
+
+def test_compiled_search_on_the_raster_energy_equals_the_protocol(scene):
+    """The tracker's compiled h-isa runs on the scanline energy (full kernel in the root partition, restricted in
+    the others) with the protocol's numbers, bit for bit; not with a coarse level."""
+    from isa_mocap_ros.optim import compiled_search, make_optimizer, minimize
+
+    model, rig, x0, masks, X = scene
+    energy = SilhouetteEnergy(model, rig, masks, method="raster")
+
+    class Restrictable:
+        def __call__(self, X):
+            return energy(X)
+
+        def restrict(self, x, coords):
+            return energy.restrict(x, coords)
+
+    def hier():
+        parts = [np.asarray(model.partitions[k]) for k in PARTS]
+        spread = np.full(model.dof, 0.05)
+        spread[:3] = 0.015
+        x = x0 + 0.02
+        lo, hi = np.maximum(x - 0.5, model.lower), np.minimum(x + 0.5, model.upper)
+        return make_optimizer("h-isa", np.clip(x, lo, hi), spread, rng=np.random.default_rng([5, 9]), bounds=(lo, hi),
+                              rotation_blocks=model.rotation_blocks, partitions=parts, n_particles=30, kernel="s2",
+                              schedule="adaptive", target_ess=0.3, c=0.5, variance="selected")
+
+    ref_opt = hier()
+    ref = minimize(ref_opt, Restrictable(), max_evals=900)
+    opt = hier()
+    got = compiled_search.search(opt, energy, 900)
+    assert got is not None
+    for name in ("x", "best_x", "population"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
+    assert (got.energy, got.n_evals, got.n_iter) == (ref.energy, ref.n_evals, ref.n_iter)
+    assert opt.rng.bit_generator.state == ref_opt.rng.bit_generator.state
+    assert compiled_search.search(hier(), energy, 900, coarse_fraction=0.5) is None

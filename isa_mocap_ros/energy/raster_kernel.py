@@ -32,9 +32,11 @@ from numba import types
 from numba.extending import intrinsic
 
 from .silhouette_kernel import (DETERMINISTIC_FASTMATH, G_AX, G_AY, G_CA, G_COLS, G_CONE, G_LEN, G_RA, G_RB, G_SB,
-                                G_UX, G_UY, G_VALID, SERIAL_PIPELINE, _fk_one, _project_caps, _to_camera)
+                                G_UX, G_UY, G_VALID, SERIAL_PIPELINE, _fk_joint, _fk_one, _project_cap, _project_caps,
+                                _to_camera, _to_camera_joint)
 
-__all__ = ["Raster", "raster_batch", "raster_batch_serial", "foreground_bits"]
+__all__ = ["Raster", "RasterStage", "raster_batch", "raster_batch_serial", "raster_restrict_prepare", "raster_restricted",
+           "foreground_bits", "raster_static"]
 
 # the serial kernel has no parallel loop by design (numba warns at compile time), as in silhouette_kernel
 warnings.filterwarnings("ignore", message=r"(?s).*no transformation for parallel execution.*raster_kernel\.py",
@@ -45,11 +47,17 @@ warnings.filterwarnings("ignore", message=r"(?s).*no transformation for parallel
 #: pixels on those rows; ``nw`` words per row (``ceil(Wmax / 64)``); ``stride`` the row stride.
 Raster = namedtuple("Raster", "fbits nfg nw stride")
 
+#: What the poses of a restriction share (:func:`raster_restrict_prepare`): forward kinematics of the base pose
+#: ``R0 (J, 3, 3), P0 (J, 3)``, per view the joints in camera coordinates ``CP0 (V, J, 4)`` and the capsules'
+#: hulls ``G0 (V, C, G_COLS)``, the fixed capsules' union bitmap ``Ufix`` (as ``fbits``) and its counts ``cnt (V,
+#: 2)``: ``|M|``, ``|M and F|``.
+RasterStage = namedtuple("RasterStage", "R0 P0 CP0 G0 Ufix cnt")
+
 
 @intrinsic
 def _popcount(typingctx, x):
     """Set bits of the uint64 ``x`` (LLVM's ``ctpop``: one instruction with POPCNT)."""
-    sig = types.uint64(types.uint64)
+    sig = types.int64(types.uint64)
 
     def codegen(context, builder, signature, args):
         return builder.ctpop(args[0])
@@ -128,6 +136,44 @@ def _spans(G, c, j0, nrow, stride, fx, cx, fy, cy, W, I0, I1):  # pragma: no cov
 
 
 @numba.njit(cache=True, inline="always", fastmath=DETERMINISTIC_FASTMATH)
+def _raster_cap(G, c, U, u_off, stride, Hs, fx, cx, fy, cy, W, H, I0, I1):  # pragma: no cover - compiled
+    """OR capsule ``c``'s pixels (every ``stride``-th row) into the bitmap ``U[u_off:]`` (``Hs`` sampled rows per
+    word column); returns ``(ok, jj0, jj1, w0, w1)``: whether it has rows and columns in the image, its sampled
+    rows and word columns (inclusive)."""
+    if G[c, G_VALID] == 0.0:
+        return False, 0, 0, 0, 0
+    ax, ay, L, ra, rb = G[c, G_AX], G[c, G_AY], G[c, G_LEN], G[c, G_RA], G[c, G_RB]
+    bx = ax + L * G[c, G_UX]
+    by = ay + L * G[c, G_UY]
+    j0 = max(0, int(np.ceil(fy * min(ay - ra, by - rb) + cy)))
+    j1 = min(H - 1, int(np.floor(fy * max(ay + ra, by + rb) + cy)))
+    j0 = (j0 + stride - 1) // stride * stride
+    if j1 < j0:
+        return False, 0, 0, 0, 0
+    u0 = max(0, int(np.floor(fx * min(ax - ra, bx - rb) + cx)))
+    u1 = min(W - 1, int(np.ceil(fx * max(ax + ra, bx + rb) + cx)))
+    if u1 < u0:
+        return False, 0, 0, 0, 0
+    nrow = (j1 - j0) // stride + 1
+    jj0 = j0 // stride
+    _spans(G, c, j0, nrow, stride, fx, cx, fy, cy, float(W), I0, I1)
+    w0 = u0 >> 6
+    w1 = u1 >> 6
+    ones = numba.uint64(0xFFFFFFFFFFFFFFFF)
+    z64 = numba.uint64(0)
+    for w in range(w0, w1 + 1):     # each word column the box meets: OR the rows' bits
+        o = u_off + w * Hs + jj0
+        b64 = np.int64(64 * w)
+        for r in range(nrow):
+            k = numba.uint64(r)
+            a = min(max(np.int64(I0[k]) - b64, np.int64(0)), np.int64(64))
+            b = min(max(np.int64(I1[k]) - b64 + 1, np.int64(0)), np.int64(64))
+            m = (ones << numba.uint64(a)) & (ones if b == 64 else ~(ones << numba.uint64(b)))
+            U[numba.uint64(o + r)] |= m if b > a else z64
+    return True, jj0, jj0 + nrow - 1, w0, w1
+
+
+@numba.njit(cache=True, inline="always", fastmath=DETERMINISTIC_FASTMATH)
 def _raster_rows(X, lo, hi, body, views, raster, out):  # pragma: no cover - compiled
     """:func:`raster_batch` of the rows ``lo:hi`` of ``X`` (one work unit, with its own scratch)."""
     parents, offsets, ptr, dofs, axes, caps, radii = body
@@ -147,7 +193,6 @@ def _raster_rows(X, lo, hi, body, views, raster, out):  # pragma: no cover - com
     U = np.zeros(Hs * nw + 8, np.uint64)    # the union bitmap, cleared while counted
     I0 = np.zeros(Hs + 8, np.int32)
     I1 = np.zeros(Hs + 8, np.int32)
-    ones = numba.uint64(0xFFFFFFFFFFFFFFFF)
     z64 = numba.uint64(0)
     for i in range(lo, hi):
         _fk_one(X[i], parents, offsets, ptr, dofs, axes, R, P)
@@ -160,38 +205,9 @@ def _raster_rows(X, lo, hi, body, views, raster, out):  # pragma: no cover - com
             H = cov_wh[v, 1]
             jlo, jhi, wlo, whi = Hs, -1, nw, -1     # the union's sampled rows and words
             for c in range(C):
-                if G[c, G_VALID] == 0.0:
-                    continue
-                ax, ay, L, ra, rb = G[c, G_AX], G[c, G_AY], G[c, G_LEN], G[c, G_RA], G[c, G_RB]
-                bx = ax + L * G[c, G_UX]
-                by = ay + L * G[c, G_UY]
-                j0 = max(0, int(np.ceil(fy * min(ay - ra, by - rb) + cy)))
-                j1 = min(H - 1, int(np.floor(fy * max(ay + ra, by + rb) + cy)))
-                j0 = (j0 + stride - 1) // stride * stride
-                if j1 < j0:
-                    continue
-                u0 = max(0, int(np.floor(fx * min(ax - ra, bx - rb) + cx)))
-                u1 = min(W - 1, int(np.ceil(fx * max(ax + ra, bx + rb) + cx)))
-                if u1 < u0:
-                    continue
-                nrow = (j1 - j0) // stride + 1
-                jj0 = j0 // stride
-                _spans(G, c, j0, nrow, stride, fx, cx, fy, cy, float(W), I0, I1)
-                jlo = min(jlo, jj0)
-                jhi = max(jhi, jj0 + nrow - 1)
-                w0 = u0 >> 6
-                w1 = u1 >> 6
-                wlo = min(wlo, w0)
-                whi = max(whi, w1)
-                for w in range(w0, w1 + 1):     # each word column the box meets: OR the rows' bits
-                    o = w * Hs + jj0
-                    b64 = np.int64(64 * w)
-                    for r in range(nrow):
-                        k = numba.uint64(r)
-                        a = min(max(np.int64(I0[k]) - b64, np.int64(0)), np.int64(64))
-                        b = min(max(np.int64(I1[k]) - b64 + 1, np.int64(0)), np.int64(64))
-                        m = (ones << numba.uint64(a)) & (ones if b == 64 else ~(ones << numba.uint64(b)))
-                        U[numba.uint64(o + r)] |= m if b > a else z64
+                ok, jj0, jj1, w0, w1 = _raster_cap(G, c, U, 0, stride, Hs, fx, cx, fy, cy, W, H, I0, I1)
+                if ok:
+                    jlo, jhi, wlo, whi = min(jlo, jj0), max(jhi, jj1), min(wlo, w0), max(whi, w1)
             cm = 0      # |M| and |M and F| on the sampled rows
             cmf = 0
             for w in range(wlo, whi + 1):
@@ -221,6 +237,116 @@ def raster_batch(X, body, views, raster, n_chunks, out):  # pragma: no cover - c
 def raster_batch_serial(X, body, views, raster, n_chunks, out):  # pragma: no cover - compiled
     """:func:`raster_batch` on the calling thread (a few poses; the same bits); ``n_chunks`` is ignored."""
     _raster_rows(X, 0, X.shape[0], body, views, raster, out)
+
+
+@numba.njit(parallel=SERIAL_PIPELINE, cache=True, fastmath=DETERMINISTIC_FASTMATH)
+def raster_restrict_prepare(x, body, views, raster, moving):  # pragma: no cover - compiled
+    """:data:`RasterStage` of the base pose ``x``: what the poses of a restriction share, the capsules not in
+    ``moving (C,)`` (bool) rasterized once (the same helpers as :func:`raster_batch`, so the same bits)."""
+    parents, offsets, ptr, dofs, axes, caps, radii = body
+    cam_R, cam_t, cam_K, cam_D, cam_hasd, cov, cov_wh, view_w = views
+    fbits, nfg, nw, stride = raster
+    J = parents.shape[0]
+    C = caps.shape[0]
+    V = cam_R.shape[0]
+    Hs = (fbits.shape[1] - 8) // nw
+    R = np.empty((J, 3, 3))
+    P = np.empty((J, 3))
+    _fk_one(x, parents, offsets, ptr, dofs, axes, R, P)
+    CP = np.zeros((V, J, 4))
+    G = np.zeros((V, C, G_COLS))
+    Ufix = np.zeros(fbits.shape, np.uint64)
+    cnt = np.zeros((V, 2), np.int64)
+    I0 = np.zeros(Hs + 8, np.int32)
+    I1 = np.zeros(Hs + 8, np.int32)
+    for v in range(V):
+        _to_camera(P, cam_R, cam_t, v, CP[v])
+        _project_caps(CP[v], caps, radii, G[v])
+        jlo, jhi, wlo, whi = Hs, -1, nw, -1
+        for c in range(C):
+            if not moving[c]:
+                ok, jj0, jj1, w0, w1 = _raster_cap(G[v], c, Ufix[v], 0, stride, Hs, cam_K[v, 0], cam_K[v, 2],
+                                                   cam_K[v, 1], cam_K[v, 3], cov_wh[v, 0], cov_wh[v, 1], I0, I1)
+                if ok:
+                    jlo, jhi, wlo, whi = min(jlo, jj0), max(jhi, jj1), min(wlo, w0), max(whi, w1)
+        for w in range(wlo, whi + 1):
+            for j in range(jlo, jhi + 1):
+                u = Ufix[v, w * Hs + j]
+                cnt[v, 0] += _popcount(u)
+                cnt[v, 1] += _popcount(u & fbits[v, w * Hs + j])
+    return R, P, CP, G, Ufix, cnt
+
+
+@numba.njit(parallel=True, cache=True, fastmath=DETERMINISTIC_FASTMATH)
+def raster_restricted(X, restriction, body, views, raster, stage, n_chunks, out):  # pragma: no cover - compiled
+    """:func:`raster_batch` for poses ``X (n, D)`` equal to ``x_base`` at ``fixed_dofs`` (the
+    :data:`.silhouette_kernel.Restriction` ``restriction``; ``mov_ci``, ``moving_ci`` unused), from the
+    :data:`RasterStage` ``stage``: per pose forward kinematics of ``fk_joints``, projection of ``cam_joints`` and of
+    the moving capsules, which are OR-ed into a copy of the fixed capsules' bitmap; the counts are the stored ones
+    plus the popcount differences of the words they touched (restored after): the same integers as the full
+    kernel, so the same bits. A row that differs from ``x_base`` at a fixed coordinate gets ``out = -1``."""
+    x_base, fixed_dofs, fk_joints, cam_joints, mov_caps, mov_ci, moving_ci = restriction
+    parents, offsets, ptr, dofs, axes, caps, radii = body
+    cam_R, cam_t, cam_K, cam_D, cam_hasd, cov, cov_wh, view_w = views
+    fbits, nfg, nw, stride = raster
+    R0, P0, CP0, G0, Ufix, cnt = stage
+    n = X.shape[0]
+    V = cam_R.shape[0]
+    Hs = (fbits.shape[1] - 8) // nw
+    Lv = fbits.shape[1]
+    nm = mov_caps.shape[0]
+    wsum = 0.0
+    for v in range(V):
+        wsum += view_w[v]
+    for chunk in numba.prange(n_chunks):
+        lo = chunk * n // n_chunks
+        hi = (chunk + 1) * n // n_chunks
+        R = R0.copy()
+        P = P0.copy()
+        CP = CP0.copy()
+        G = G0.copy()
+        U = Ufix.copy().reshape(-1)         # view v at v * Lv
+        I0 = np.zeros(Hs + 8, np.int32)
+        I1 = np.zeros(Hs + 8, np.int32)
+        for i in range(lo, hi):
+            bad = False
+            for d in fixed_dofs:
+                bad |= X[i, d] != x_base[d]
+            if bad:
+                out[i] = -1.0
+                continue
+            for j in fk_joints:
+                _fk_joint(X[i], j, parents, offsets, ptr, dofs, axes, R, P)
+            total = 0.0
+            for v in range(V):
+                CPv = CP[v]
+                Gv = G[v]
+                for j in cam_joints:
+                    _to_camera_joint(P, cam_R, cam_t, v, CPv, j)
+                fx, fy, cx, cy = cam_K[v, 0], cam_K[v, 1], cam_K[v, 2], cam_K[v, 3]
+                jlo, jhi, wlo, whi = Hs, -1, nw, -1     # the words the moving capsules touched
+                for m in range(nm):
+                    c = mov_caps[m]
+                    _project_cap(CPv, caps, radii, Gv, c)
+                    ok, jj0, jj1, w0, w1 = _raster_cap(Gv, c, U, v * Lv, stride, Hs, fx, cx, fy, cy, cov_wh[v, 0],
+                                                       cov_wh[v, 1], I0, I1)
+                    if ok:
+                        jlo, jhi, wlo, whi = min(jlo, jj0), max(jhi, jj1), min(wlo, w0), max(whi, w1)
+                cm = cnt[v, 0]
+                cmf = cnt[v, 1]
+                for w in range(wlo, whi + 1):
+                    for j in range(jlo, jhi + 1):
+                        k = w * Hs + j
+                        u = U[v * Lv + k]
+                        f = Ufix[v, k]
+                        fb = fbits[v, k]
+                        cm += _popcount(u) - _popcount(f)
+                        cmf += _popcount(u & fb) - _popcount(f & fb)
+                        U[v * Lv + k] = f
+                t1 = (cm - cmf) / cm if cm > 0 else 1.0
+                t2 = (nfg[v] - cmf) / nfg[v] if nfg[v] > 0 else 1.0
+                total += view_w[v] * (0.5 * t1 + 0.5 * t2)
+            out[i] = total / wsum
 
 
 def foreground_bits(F: list, stride: int) -> tuple[np.ndarray, np.ndarray, int]:

@@ -526,6 +526,8 @@ class SilhouetteEnergy:
         ``n_chunks`` for the current masks, its bundles ``(Body, Views, Template, Foreground)`` (also
         what the tracker's compiled search passes it)."""
         fr = self._frame
+        if self.method == "raster":
+            return self._body, fr["views"], fr["raster"]
         return self._body, fr["views"], self._template_args, fr["fg"]
 
     def coarse_kernel_args(self, second: bool = False) -> tuple:
@@ -535,6 +537,8 @@ class SilhouetteEnergy:
         fewer views at about half the cost (all the views' bundles with fewer than three usable). Built once per
         frame. For the compiled search's early generations (``SearchConfig.coarse_fraction``, docs/energy.md)."""
         fr = self._frame
+        if self.method != "fast":
+            raise EnergyError(f"coarse level: expected method 'fast', received {self.method!r}")
         key = "coarse2" if second else "coarse"
         if key not in fr:
             k = self.coarse_views(second)
@@ -554,9 +558,7 @@ class SilhouetteEnergy:
         # costs more than they do (the same bits either way)
         serial = X.shape[0] < _k.SERIAL_BELOW
         if self.method == "raster":
-            fr = self._frame
-            (_rk.raster_batch_serial if serial else _rk.raster_batch)(X, self._body, fr["views"], fr["raster"],
-                                                                      n_chunks, out)
+            (_rk.raster_batch_serial if serial else _rk.raster_batch)(X, *self._kernel_args(), n_chunks, out)
             return out
         kernel = _k.silhouette_batch_serial if serial else _k.silhouette_batch
         kernel(X, *self._kernel_args(), n_chunks, out)
