@@ -7,8 +7,11 @@ tracks. Those are *frame sets*: stamps at which every view (or, after a wait, ``
 (:class:`~isa_mocap_ros.tracking.sync.FrameSynchronizer`, the estimator's matching). So:
 
 * images pass the view's :class:`~isa_mocap_ros.intake.ViewGate` (the camera is what a camera_info and an image
-  of one stamp agree on); masks are taken when they are of the view's camera (frame id and size) and their stamp
-  is near the frame sets' stream;
+  of one stamp agree on); masks are taken when they are of the view's camera (frame id and size), at any stamp:
+  a mask is used only with an image of its stamp that passed the gate. (Judged against the frame sets' stamps, a
+  stream that jumped ahead by more than ``max_gap_ns``, a camera paused, or a far set before the stream, made
+  every later mask far, and the node never detected again.) Unpaired masks beyond ``keep`` go farthest from the
+  view's images first, so far ones cannot push out a real mask that came before its image;
 * an image and a mask of one stamp make a view's *pair*; pairs go to a synchronizer with the estimator's settings;
 * only a completed frame set moves the views' schedules, each present view once, in stamp order.
 
@@ -27,7 +30,7 @@ from isa_mocap_ros.intake import Rejected, Setting, StampWindow, ViewGate
 from isa_mocap_ros.tracking.sync import FrameSynchronizer, SyncError
 from isa_mocap_ros.vision.keypoint_schedule import KeypointSchedule
 
-__all__ = ["KeypointIntake", "Job"]
+__all__ = ["KeypointIntake", "Job", "KeypointInbox", "KeypointWait"]
 
 
 @dataclass(frozen=True)
@@ -50,7 +53,8 @@ class KeypointIntake:
     every_k, dense_frames : int
         The schedule (:class:`KeypointSchedule`).
     max_gap_ns : int
-        Images (through the gate) and masks farther than this from their stream are dropped (0 = no check).
+        Images farther than this from the view's stream wait for a camera_info of their stamp (the gate's rule;
+        0 = no check).
     keep : int
         Unpaired images (and masks) kept per view while the other of their stamp is on its way.
     queue_size, slop_ns, max_wait_s, min_views :
@@ -69,7 +73,6 @@ class KeypointIntake:
         self.schedules = [KeypointSchedule(every_k, dense_frames=dense_frames) for _ in range(n_views)]
         self.sync = FrameSynchronizer(n_views, queue_size=queue_size, slop_ns=slop_ns, max_wait_s=max_wait_s,
                                       min_views=min(min_views, n_views))
-        self.sets = StampWindow(max_gap_ns)       # the completed frame sets' stamps
         self._images: list[OrderedDict[int, Any]] = [OrderedDict() for _ in range(n_views)]
         self._masks: list[OrderedDict[int, tuple[Any, bool]]] = [OrderedDict() for _ in range(n_views)]
         self.unpaired = [0] * n_views             # images or masks that aged out without the other
@@ -86,13 +89,11 @@ class KeypointIntake:
     def add_mask(self, v: int, stamp_ns: int, setting: Setting, mask: Any, has_person: bool, now_s: float):
         """A mask of view ``v`` (``setting``: its frame id and size; ``has_person``: any foreground)."""
         known = self.gates[v].setting
-        why = self.sets.far(stamp_ns)
-        if why is None and known is not None and (setting.frame_id, setting.width, setting.height) != \
+        if known is not None and (setting.frame_id, setting.width, setting.height) != \
                 (known.frame_id, known.width, known.height):
-            why = (f"frame {setting.frame_id!r}, {setting.width}x{setting.height}, is not the view's camera's "
-                   f"({known.frame_id!r}, {known.width}x{known.height})")
-        if why is not None:
-            return [], [(f"mask{v}", f"cam{v}/mask dropped: {why}")]
+            return [], [(f"mask{v}", f"cam{v}/mask dropped: frame {setting.frame_id!r}, {setting.width}x"
+                                     f"{setting.height}, is not the view's camera's ({known.frame_id!r}, "
+                                     f"{known.width}x{known.height})")]
         return self._pair(v, "mask", stamp_ns, (mask, has_person), now_s)
 
     def poll(self, now_s: float):
@@ -114,8 +115,9 @@ class KeypointIntake:
         partner = other.pop(stamp_ns, None)
         if partner is None:
             mine[stamp_ns] = payload
-            while len(mine) > self.keep:
-                mine.popitem(last=False)
+            last = self.gates[v].window.last_ns
+            while len(mine) > self.keep:      # the farthest from the view's images first (the oldest before any)
+                del mine[next(iter(mine)) if last is None else max(mine, key=lambda t: abs(t - last))]
                 self.unpaired[v] += 1
             return [], []
         image, (mask, has_person) = (payload, partner) if kind == "image" else (partner, payload)
@@ -128,9 +130,111 @@ class KeypointIntake:
     def _jobs(self, sets) -> list[Job]:
         jobs = []
         for fs in sets:
-            self.sets.accept(max(s for s in fs.stamps_ns if s is not None))
             for v, item in enumerate(fs.items):
                 if item is not None:
                     image, mask, has_person = item
                     jobs.append(Job(v, fs.stamps_ns[v], image, mask, self.schedules[v].due(has_person)))
         return jobs
+
+
+class KeypointInbox:
+    """The estimator's side: the keypoint node's messages per view and stamp until their frame set takes them.
+
+    A message is a view's keypoints (any payload) or its skip notice (``None``); the keypoint node sends exactly
+    one per view of each frame set it formed (:class:`KeypointIntake`). Messages are judged against the frame
+    sets' stream (``stream``, the estimator's :class:`~isa_mocap_ros.intake.StampWindow`): before the first set
+    they are held, since the keypoint node may answer a set before the estimator has formed it, and those far
+    from the first set are dropped when it comes (:meth:`purge`); after it, far ones are dropped at once.
+
+    Which views a set still waits for (:meth:`due`) depends on messages only, never on clocks: a view is due until
+    its message of the set's stamp came, or a message of a later stamp did (the node formed a later set without
+    this one: it lost a frame, and the set's message will never come). How long to wait is :class:`KeypointWait`.
+
+    Parameters
+    ----------
+    n_views : int
+    stream : StampWindow
+        The frame sets' stamps (shared with the estimator, which moves it).
+    depth : int
+        Messages kept per view (the oldest go first).
+    """
+
+    def __init__(self, n_views: int, stream: StampWindow, *, depth: int = 64) -> None:
+        self.stream = stream
+        self.depth = depth
+        self._store: list[dict[int, Any]] = [{} for _ in range(n_views)]
+        # before the first set, in arrival order (the oldest arrivals go first: a flood of far stamps must not
+        # push out the first set's own messages, which come last)
+        self._held: list[OrderedDict[int, Any]] = [OrderedDict() for _ in range(n_views)]
+
+    def add(self, v: int, stamp_ns: int, payload: Any) -> str | None:
+        """Keep view ``v``'s message (``payload`` None: a skip notice); returns why it was dropped, or None."""
+        started = self.stream.last_ns is not None
+        if started and (far := self.stream.far(stamp_ns)) is not None:
+            return far
+        store = self._store[v] if started else self._held[v]
+        if store.get(stamp_ns) is not None and payload is not None:
+            return f"a second message for stamp {stamp_ns}"
+        if stamp_ns not in store or payload is not None:
+            store[stamp_ns] = payload
+        while len(store) > self.depth:
+            if started:
+                del store[min(store)]
+            else:
+                store.popitem(last=False)
+        return None
+
+    def purge(self) -> list[tuple[int, int, str]]:
+        """Once the stream started: the messages held before it join the store, but for those far from it, which
+        are dropped (returned as ``(view, stamp, why)``)."""
+        out = []
+        if self.stream.last_ns is None:
+            return out
+        for v, held in enumerate(self._held):
+            while held:
+                s, payload = held.popitem(last=False)
+                if (why := self.stream.far(s)) is not None:
+                    out.append((v, s, why))
+                elif self._store[v].get(s) is None:
+                    self._store[v][s] = payload
+        return out
+
+    def due(self, stamps_ns) -> list[int]:
+        """The views of a frame set (``stamps_ns[v]``, None for a view without a mask) still waiting for their
+        message: none of its stamp and none of a later one came."""
+        return [v for v, s in enumerate(stamps_ns)
+                if s is not None and s not in self._store[v] and not any(t > s for t in self._store[v])]
+
+    def take(self, stamps_ns) -> list | None:
+        """The set's payloads per view (None: skipped, or no message), None when no view has keypoints; this
+        set's messages and older ones are dropped."""
+        out = [self._store[v].get(s) if s is not None else None for v, s in enumerate(stamps_ns)]
+        for v, s in enumerate(stamps_ns):
+            if s is not None:
+                for t in [t for t in self._store[v] if t <= s]:
+                    del self._store[v][t]
+        return out if any(o is not None for o in out) else None
+
+
+@dataclass(frozen=True)
+class KeypointWait:
+    """How long a frame set waits for its due views' keypoint messages (:meth:`KeypointInbox.due`).
+
+    Lockstep (a replay equal to ``isa-mocap track``, at any machine speed): as long as a keypoint node is there
+    to answer, with no time limit: a slow detection on a loaded machine must not turn the replay into another
+    result (a 10 s limit did, from the first frame with a person, when the node's detection came late). Only
+    while no keypoint node is in the graph (it crashed, or is being respawned) does ``limit_s`` run out. Real
+    time: at most ``limit_s`` (a late detection is expected under load; the set goes on with what came).
+    """
+
+    lockstep: bool
+    limit_s: float
+
+    def goes_on(self, due: list[int], *, node_present: bool, waited_s: float) -> bool:
+        """Whether the set stops waiting. ``waited_s``: the time waited so far; in lockstep only the time
+        without a keypoint node in the graph counts."""
+        if not due:
+            return True
+        if self.lockstep and node_present:
+            return False
+        return waited_s >= self.limit_s

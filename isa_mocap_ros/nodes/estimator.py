@@ -20,12 +20,15 @@ prediction of that frame while a prediction node publishes (none: no wait).
 
 Keypoints (``keypoint_weight`` > 0, docs/keypoints.md): a keypoint message belongs to the frame set of its
 stamp and view; the tracker gets the set's keypoints with its masks. The keypoint node detects on some
-frames only and says so for the others (``keypoints_skipped``): in lockstep the estimator waits up to
-``keypoint_wait_s`` until each view of the set has one or the other (so the player, which waits for
-``estimator/done``, waits for the keypoint node too, and a replay is deterministic); in real time up to
-``keypoint_realtime_wait_s`` (30 ms), then the set is tracked with the keypoints that have arrived. A malformed keypoint message (not 0 or 33 points, a
-non-finite pixel, a confidence outside [0, 1]) or one whose stamp lies far from the frame sets is dropped
-with one line and counted (in lockstep the frame still waits for its view's own message).
+frames only and says so for the others (``keypoints_skipped``): in lockstep the estimator waits until each view
+of the set has one or the other, with no time limit while a keypoint node is in the graph (so the player, which
+waits for ``estimator/done``, waits for the keypoint node too, and a replay is deterministic at any machine
+speed), up to ``keypoint_wait_s`` while none is; a view whose message of a later set came is not waited for (the
+node lost that frame: its message will never come). In real time up to ``keypoint_realtime_wait_s`` (30 ms), then
+the set is tracked with the keypoints that have arrived (:mod:`isa_mocap_ros.keypoint_intake`). A malformed
+keypoint message (not 0 or 33 points, a non-finite pixel, a confidence outside [0, 1]) or one whose stamp lies far
+from the frame sets (before the first set: from the first set) is dropped with one line and counted (in lockstep
+the frame still waits for its view's own message).
 
 Input checks, before anything reaches the synchronizer or the tracker (:mod:`isa_mocap_ros.intake`):
 a view's camera is what a ``camera_info`` and a mask of the same stamp agree on (frame id, size); a
@@ -61,6 +64,7 @@ from isa_mocap_ros.body.hri import hri_joint_names, hri_urdf
 from isa_mocap_ros.eval.peers import register_peers
 from isa_mocap_ros.geometry import exp_so3
 from isa_mocap_ros.intake import StampWindow, ViewGate
+from isa_mocap_ros.keypoint_intake import KeypointInbox, KeypointWait
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.nodes.common import (QOS_OVERRIDES, ProblemLog, declare, declare_config, declare_frame_sync,
                                        one_numba_thread, run_node)
@@ -134,7 +138,8 @@ class EstimatorNode(EstimatorIntake, Node):
                                    "below this share of frame_period_s", lo=0.05, hi=1.0)
         self.use_prediction = declare(self, "use_prediction", True, "use prediction/joint_states when it arrives")
         self.keypoint_wait_s = declare(self, "keypoint_wait_s", 10.0, "lockstep, keypoint_weight > 0: longest wait "
-                                       "for a view's keypoints (or the keypoint node's skip notice) of a frame set",
+                                       "for a view's keypoints (or skip notice) of a frame set while no keypoint node "
+                                       "is in the graph (with one there, the wait has no time limit)",
                                        lo=0.0, hi=600.0)
         self.keypoint_realtime_wait_s = declare(
             self, "keypoint_realtime_wait_s", 0.03, "real time, keypoint_weight > 0: longest wait for a view's "
@@ -184,12 +189,15 @@ class EstimatorNode(EstimatorIntake, Node):
         self.gates = [ViewGate(f"cam{v}", max_gap_ns=int(gap_s * 1e9), depth=depth) for v in range(self.n_views)]
         self._stream = StampWindow(int(gap_s * 1e9))     # the frame sets' stamps, for the predictions
         self._intrinsics: list = [None] * self.n_views
+        self._set_infos: list[dict[int, object]] = [{} for _ in range(self.n_views)]   # stamp -> its camera_info
         self._extrinsics: list[dict[str, tuple]] = [{} for _ in range(self.n_views)]
         self._camera_changed: str | None = None   # a view's camera changed after the tracker was made
         self._images: list[dict[int, np.ndarray]] = [{} for _ in range(self.n_views)]
         self._predictions: dict[int, np.ndarray] = {}
-        # per view: stamp -> (uv, confidence) or None (looked, nobody / skipped / dropped as bad)
-        self._keypoints: list[dict[int, tuple | None]] = [{} for _ in range(self.n_views)]
+        # the keypoint node's messages per view and stamp: (uv, confidence) or None (skipped / nobody)
+        self.keypoint_inbox = KeypointInbox(self.n_views, self._stream)
+        self.keypoint_wait = KeypointWait(self.lockstep, self.keypoint_wait_s if self.lockstep
+                                          else self.keypoint_realtime_wait_s)
         self.use_keypoints = self.tracker_config.keypoints.keypoint_weight > 0
         self.keypoint_sets = 0          # frame sets tracked with keypoints
         self._prev_stamp_ns: int | None = None   # stamp of the last frame set given to the tracker
@@ -349,7 +357,7 @@ class EstimatorNode(EstimatorIntake, Node):
         self._camera_changed = None
         if self.tracker is None:
             with self._cv:
-                cams = self._cameras()
+                cams = self._cameras(frame_set)
             if cams is None:
                 missing = [v for v in range(self.n_views)
                            if self._intrinsics[v] is None or self._pose_of(v) is None]
@@ -407,6 +415,8 @@ class EstimatorNode(EstimatorIntake, Node):
                 self._publish_overlay(frame_set, result.x)
 
     def _done(self, stamp_ns: int) -> None:
+        if self.lockstep:   # the figures of every set before its done: a run's last ones are then its final ones
+            self._publish_diagnostics()   # (the 1 Hz timer's may come late or not at all on a loaded machine)
         self.pub_done.publish(ma.make_header(stamp_ns, self.world_frame))
 
     def _publish(self, stamp_ns: int, result) -> None:
