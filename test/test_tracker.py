@@ -474,7 +474,7 @@ def test_search_box_respects_radius_and_limits(scene):
     ({"search_radius_rad": -1.0}, "search_radius_rad: expected a finite number > 0"),
     ({"predictor": "kalman"}, "predictor: expected one of ar, constant_pose, constant_velocity"),
     ({"optimizer_params": {"bounds": 1}}, r"optimizer_params: expected algorithm parameters only"),
-    ({"energy": "slow"}, "energy: expected one of fast, exact, received 'slow'"),
+    ({"energy": "slow"}, "energy: expected one of fast, exact, raster, received 'slow'"),
     ({"seed": -1}, "seed: expected an integer >= 0"),
     ({"n_model_points": 0}, "n_model_points: expected an integer >= 1"),
     ({"n_mask_points": -1}, "n_mask_points: expected an integer >= 0"),
