@@ -14,7 +14,7 @@ from isa_mocap_ros.optim import compiled_search
 from . import frame_masks, objective
 from .config import INIT_SPREAD_SCALE, TrackerError
 from .init import InitError, initial_pose
-from .plan import FrameBudget
+from .plan import FrameBudget, flat_algorithm
 
 
 def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int = 0,
@@ -76,7 +76,8 @@ def initial_grid(tr, ctx):
     the masks' rays, heading × standing-pose grid, root refinements (stream 1); raises :class:`.init.InitError`."""
     cfg = tr.config
     return initial_pose(tr.model, tr.cameras, ctx.masks, init_energy_fn(tr, ctx), rng=ctx.rng(1),
-                        n_yaw=cfg.first_frame.init_yaw_steps, refine_evals=cfg.first_frame.init_refine_evals)
+                        n_yaw=cfg.first_frame.init_yaw_steps, refine_evals=cfg.first_frame.init_refine_evals,
+                        refine_optimizer=flat_algorithm(tr))
 
 
 def init_energy_fn(tr, ctx):

@@ -23,7 +23,7 @@ from isa_mocap_ros.geometry import nearest_rotvec
 
 from isa_mocap_ros.optim import compiled_search
 
-from . import first_frame, frame_masks, frame_prediction, heading, objective, plan
+from . import first_frame, frame_masks, frame_prediction, heading, keypoint_screen, objective, plan
 from . import stages as frame_stages
 from .config import (DEFAULT_PARAMS, JOINT_SPREAD_RAD, ROOT_ROTATION_RADIUS_RAD, ROOT_ROTATION_SPREAD_RAD,
                      ROOT_TRANSLATION_SPREAD_M, PREDICTORS, FrameResult, TrackerConfig, TrackerError,
@@ -478,6 +478,11 @@ class Tracker:
         notes.extend(checked)
         # the mask gate and the visual-hull filter around the prediction (made there when they run)
         frame_masks.filter_masks(self, ctx)
+        # the keypoints the views' evidence contradicts go (.keypoint_screen): off the filtered foreground or
+        # outside the other views' consensus
+        ctx.objective.keypoint_term, note = keypoint_screen.screen(ctx.objective.keypoint_term, ctx.masks)
+        if note:
+            notes.append(note)
         if cfg.objective.view_weights and self.track.last is not None and any(m is not None for m in ctx.masks):
             # Eq. 5's view weights (config.objective.view_weights): the share of the predicted body each view sees
             ctx.weights = visible_shares(self.model, self.cameras, frame_prediction.prediction(self, ctx))
