@@ -85,7 +85,7 @@ def test_a_landmark_no_two_views_confirm_is_dropped(scene):
     kp = perfect_keypoints(model, rig, x0)
     kp[0] = kp[1] = None
     li, wi = LANDMARK_NAMES.index("left_knee"), LANDMARK_NAMES.index("right_wrist")
-    kp[2][0][li] += (25.0, 0.0)
+    kp[2][0][li] += (60.0, 0.0)                          # rays 2 x tolerance apart and more
     kp[3][1][wi] = 0.0                                   # right wrist: view 2 only
     term = KeypointEnergy(model, rig, kp)
     out = ks.consensus(term.joints, np.array([rig[v].center for v in term.views]), term.directions, term.moments)
