@@ -88,12 +88,16 @@ class Fuzzer(Node):
         return self.last_real_ns + 3_000_000 + 1_000 * self.unique % 20_000_000 + 7
 
     def far(self) -> int:
-        """A stamp far from the stream (an hour ahead or back, or near 0), never one sent before: with one far stamp
-        per frame (7, or the last frame's +- 1 h), the far images, camera infos and masks of a slow (loaded) run met
-        at one stamp on every view, a frame set of the rig the network must take as data (the estimator's stream
-        then jumped an hour ahead and took no real frame again), which the fuzzer must not send."""
+        """A stamp far from the stream (an hour ahead or back, or near 0), each 10 s from every other far stamp sent.
+        With one far stamp per frame (7, or the last frame's +- 1 h), the far images, camera infos and masks of a
+        slow (loaded) run met at one stamp on every view: a frame set of the rig, which the network must take as
+        data (the estimator's stream jumped an hour ahead and took no real frame again); and far stamps a few us
+        apart continue each other: a stream restarting there (the segmentation node's rule). Neither is the
+        fuzzer's to send."""
         self.unique += 1
-        return int(self.rng.choice([self.last_real_ns + HOUR_NS, self.last_real_ns - HOUR_NS, 7])) + 1_000 * self.unique
+        step = 10 * 10**9 * self.unique
+        base = int(self.rng.choice([self.last_real_ns + HOUR_NS, self.last_real_ns - HOUR_NS, 7]))
+        return base - step if base < self.last_real_ns - HOUR_NS // 2 and base != 7 else base + step
 
     def frame(self, v: int) -> str:
         return f"cam{v}_optical_frame"
