@@ -18,9 +18,11 @@ intersected analytically with both spheres and with the tangent cone restricted 
 valid hit is the entry point into the hull. A camera inside a solid does not see that solid.
 
 Speed: the image is cut into 8x8-pixel tiles, each with a cone bounding its pixel rays; a capsule
-is tested only in tiles whose cone meets one of up to four spheres bounding it, and only in tiles of a
-32x32-pixel super-tile whose cone it meets. A mask alone (:func:`render_mask`) stops at a pixel's first
-hit, trying the capsule that hit the previous pixel first. Kernels are numba,
+is tested only in tiles whose cone meets one of up to four spheres bounding it, only in tiles of a
+32x32-pixel super-tile whose cone it meets, and only at the pixels of a tile's 4x4-pixel sub-tiles whose
+cone it meets (the culling never leaves out a capsule a pixel's ray hits, so every pixel is the same).
+A mask alone (:func:`render_mask`) stops at a pixel's first hit, trying the capsule that hit the
+previous pixel of the tile first. Kernels are numba,
 single-threaded and releasing the GIL (one body view takes ~0.5 ms; render views or frames in parallel
 threads if needed: a multi-threaded kernel per view was slower and erratic on a loaded 2-core
 machine). Per-camera rays are cached (keyed by the camera's geometry).
@@ -39,6 +41,7 @@ import numpy as np
 
 from .background import clothing_colors
 from .camera import Camera
+from .capsule_solid import capsule_contains, capsule_data
 from .errors import VisionError
 
 __all__ = ["render", "render_mask", "render_labels", "render_labels_at", "capsule_data", "capsule_contains",
@@ -48,7 +51,9 @@ __all__ = ["render", "render_mask", "render_labels", "render_labels_at", "capsul
 TILE = 8
 #: super-tile edge in tiles: a capsule is tested against a tile's cone only if it meets its super-tile's
 SUPER = 4
-_MAX_BOUND = 4
+#: sub-tile edge in pixels (a quarter of a tile): a tile's pixels are tested only against the candidates whose
+#: bounding spheres meet their sub-tile's cone
+SUB = TILE // 2
 _CACHE: "OrderedDict[bytes, tuple]" = OrderedDict()
 _CACHE_SIZE = 32
 _AMBIENT, _DIFFUSE, _VIEW = 0.2, 0.45, 0.35
@@ -63,7 +68,8 @@ def clear_ray_cache() -> None:
 
 
 def _camera_data(camera: Camera) -> tuple:
-    """(origin, dirs (H*W, 3), tile axes (T, 3), tile cos, tile sin, optical axis) for ``camera``, cached."""
+    """(origin, dirs (H*W, 3), tile axes (T, 3), tile cos, tile sin, optical axis, then the same three cone
+    arrays of the super-tiles and of the sub-tiles) for ``camera``, cached."""
     key = camera.key()
     hit = _CACHE.get(key)
     if hit is not None:
@@ -73,7 +79,7 @@ def _camera_data(camera: Camera) -> tuple:
     v, u = np.mgrid[0:H, 0:W].astype(np.float64)
     origin, d = camera.ray(u, v)  # (H, W, 3)
     cones = []
-    for size in (TILE, TILE * SUPER):       # tiles, then super-tiles of SUPER x SUPER tiles
+    for size in (TILE, TILE * SUPER, SUB):  # tiles, super-tiles of SUPER x SUPER tiles, sub-tiles
         nty, ntx = -(-H // size), -(-W // size)
         iy = np.minimum(np.arange(nty * size), H - 1)
         ix = np.minimum(np.arange(ntx * size), W - 1)
@@ -84,63 +90,11 @@ def _camera_data(camera: Camera) -> tuple:
         theta = np.arccos(np.clip(cos_min, -1.0, 1.0)) + 1e-6
         cones.append((np.ascontiguousarray(axis.reshape(-1, 3)), np.cos(theta).ravel(), np.sin(theta).ravel()))
     data = (np.ascontiguousarray(origin), np.ascontiguousarray(d.reshape(-1, 3)), *cones[0], camera.R[2].copy(),
-            *cones[1])
+            *cones[1], *cones[2])
     _CACHE[key] = data
     if len(_CACHE) > _CACHE_SIZE:
         _CACHE.popitem(last=False)
     return data
-
-
-# ---------------------------------------------------------------------- capsule data
-def _check_capsules(endpoints: Any, radii: Any) -> tuple[np.ndarray, np.ndarray]:
-    try:
-        E = np.asarray(endpoints, dtype=np.float64)
-        Rr = np.asarray(radii, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise VisionError(f"endpoints/radii: expected numeric arrays, received {endpoints!r}, {radii!r}") from exc
-    if E.ndim != 3 or E.shape[1:] != (2, 3):
-        raise VisionError(f"endpoints: expected shape (C, 2, 3), received shape {E.shape}")
-    if Rr.shape != (E.shape[0], 2):
-        raise VisionError(f"radii: expected shape ({E.shape[0]}, 2) to match endpoints, received shape {Rr.shape}")
-    if not np.all(np.isfinite(E)):
-        raise VisionError("endpoints: expected finite numbers, received NaN or inf")
-    if not np.all(np.isfinite(Rr)) or np.any(Rr <= 0):
-        raise VisionError(f"radii: expected finite positive radii, received min {Rr.min() if Rr.size else None}")
-    return E, Rr
-
-
-def _capsule_params(E: np.ndarray, Rr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per capsule: 16 numbers for the intersection kernel, bounding spheres (C, 4, 4) and their count (C,)."""
-    C = E.shape[0]
-    a, b = E[:, 0], E[:, 1]
-    ra, rb = Rr[:, 0], Rr[:, 1]
-    ba = b - a
-    L = np.linalg.norm(ba, axis=1)
-    cone_ok = L > np.abs(ra - rb) * (1.0 + 1e-9) + 1e-12
-    u = np.where(L[:, None] > 0, ba / np.where(L > 0, L, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
-    s = np.where(cone_ok, (ra - rb) / np.where(cone_ok, L, 1.0), 0.0)
-    ca = np.sqrt(np.maximum(0.0, 1.0 - s * s))
-    caps = np.zeros((C, 16))
-    caps[:, 0:3], caps[:, 3:6], caps[:, 6] = a, u, L
-    caps[:, 7], caps[:, 8], caps[:, 9], caps[:, 10], caps[:, 11] = ra, rb, s, ca, ca * ca
-    caps[:, 12] = cone_ok
-    caps[:, 13:16] = b
-    # bounding spheres: k sub-segments, radius = half sub-length + the larger end radius
-    nb = np.clip(np.ceil(L / (2.0 * np.maximum(ra, rb))), 1, _MAX_BOUND).astype(np.int64)
-    j = np.arange(_MAX_BOUND)[None, :]
-    k = nb[:, None].astype(np.float64)
-    s0, s1 = np.minimum(j, k) / k, np.minimum(j + 1, k) / k  # (C, 4); unused slots (j >= k) are never read
-    bs = np.zeros((C, _MAX_BOUND, 4))
-    bs[:, :, :3] = a[:, None] + ((s0 + s1) / 2.0)[..., None] * ba[:, None]
-    dr = (rb - ra)[:, None]
-    bs[:, :, 3] = (L[:, None] / (2.0 * k)) + np.maximum(ra[:, None] + s0 * dr, ra[:, None] + s1 * dr)
-    # the hull of the two balls is also inside the bigger ball when one contains the other
-    for c in np.nonzero(~cone_ok)[0]:
-        big = 0 if ra[c] >= rb[c] else 1
-        nb[c] = 1
-        bs[c, 0, :3] = E[c, big]
-        bs[c, 0, 3] = Rr[c, big]
-    return caps, bs, nb
 
 
 # ---------------------------------------------------------------------- numba kernels
@@ -321,20 +275,23 @@ def _tile_candidates_of(o, axis, cos_t, sin_t, bs, nb, among, n_among, cand):  #
 
 
 @numba.njit(cache=True, nogil=True)
-def _raycast(o, dirs, H, W, axes, tcos, tsin, saxes, scos, ssin, caps, bs, nb, mode, colors, light, zaxis,
-             out_rgb, out_mask, out_label, out_depth):  # pragma: no cover - compiled
+def _raycast(o, dirs, H, W, axes, tcos, tsin, saxes, scos, ssin, qaxes, qcos, qsin, caps, bs, nb, mode, colors,
+             light, zaxis, out_rgb, out_mask, out_label, out_depth):  # pragma: no cover - compiled
     """mode 0: mask only (any hit); 1: nearest hit -> label + depth; 2: nearest hit -> label, depth, shaded rgb.
 
     A capsule is a tile's candidate when its bounding spheres meet the tile's ray cone, tested only for the
     capsules that meet the cone of the tile's super-tile (which holds every pixel ray of the tile: a capsule
-    left out there hits none of them, so every pixel comes out as without the super-tiles)."""
+    left out there hits none of them, so every pixel comes out as without the super-tiles); the same again
+    from each tile's candidates for its four sub-tiles (``qaxes``, ``qcos``, ``qsin``)."""
     ntx = (W + 7) // 8
     nty = (H + 7) // 8
     sw = 8 * SUPER
     nsx = (W + sw - 1) // sw
+    nqx, nqy = (W + SUB - 1) // SUB, (H + SUB - 1) // SUB
     C = caps.shape[0]
     scand = np.empty(C, np.int64)
     cand = np.empty(C, np.int64)
+    qcand = np.empty(C, np.int64)
     all_caps = np.arange(C)
     for st in range(saxes.shape[0]):
         ns = _tile_candidates_of(o, saxes[st], scos[st], ssin[st], bs, nb, all_caps, C, scand)
@@ -347,30 +304,50 @@ def _raycast(o, dirs, H, W, axes, tcos, tsin, saxes, scos, ssin, caps, bs, nb, m
                 nc = _tile_candidates_of(o, axes[tile], tcos[tile], tsin[tile], bs, nb, scand, ns, cand)
                 if nc == 0:
                     continue
-                _raycast_tile(o, dirs, H, W, tx, ty, caps, cand, nc, mode, colors, light, zaxis,
-                              out_rgb, out_mask, out_label, out_depth)
+                last = -1
+                for qy in range(2 * ty, min(2 * ty + 2, nqy)):
+                    for qx in range(2 * tx, min(2 * tx + 2, nqx)):
+                        q = qy * nqx + qx
+                        nq = _tile_candidates_of(o, qaxes[q], qcos[q], qsin[q], bs, nb, cand, nc, qcand)
+                        if nq == 0:
+                            continue
+                        if mode == 0:
+                            last = _mask_tile(o, dirs, H, W, qx, qy, caps, qcand, nq, last, out_mask)
+                        else:
+                            _raycast_tile(o, dirs, H, W, qx, qy, caps, qcand, nq, mode, colors, light, zaxis,
+                                          out_rgb, out_mask, out_label, out_depth)
+
+
+@numba.njit(cache=True, inline="always")
+def _mask_tile(o, dirs, H, W, tx, ty, caps, cand, nc, last, out_mask):  # pragma: no cover - compiled
+    """Mode 0 of :func:`_raycast` on one sub-tile (``tx``, ``ty`` in sub-tiles): a pixel is set when any of its
+    ``nc`` candidate capsules is hit, capsule ``last`` (the last hit of the tile, -1: none) tried first, as
+    neighbours share one (a hit of any capsule is the answer, candidate or not); returns the last hit."""
+    for py in range(ty * SUB, min(ty * SUB + SUB, H)):
+        for px in range(tx * SUB, min(tx * SUB + SUB, W)):
+            p = py * W + px
+            dx, dy, dz = dirs[p, 0], dirs[p, 1], dirs[p, 2]
+            if last >= 0 and _any_hit(o[0], o[1], o[2], dx, dy, dz, caps[last]):
+                out_mask[py, px] = 255
+                continue
+            for j in range(nc):
+                c = cand[j]
+                if c != last and _any_hit(o[0], o[1], o[2], dx, dy, dz, caps[c]):
+                    out_mask[py, px] = 255
+                    last = c
+                    break
+    return last
 
 
 @numba.njit(cache=True, inline="always")
 def _raycast_tile(o, dirs, H, W, tx, ty, caps, cand, nc, mode, colors, light, zaxis,
                   out_rgb, out_mask, out_label, out_depth):  # pragma: no cover - compiled
-    """The pixels of one tile against its ``nc`` candidate capsules (:func:`_raycast`)."""
-    last = -1
-    for py in range(ty * 8, min(ty * 8 + 8, H)):
-        for px in range(tx * 8, min(tx * 8 + 8, W)):
+    """Modes 1 and 2 of :func:`_raycast` on one sub-tile (``tx``, ``ty`` in sub-tiles) against its ``nc``
+    candidate capsules."""
+    for py in range(ty * SUB, min(ty * SUB + SUB, H)):
+        for px in range(tx * SUB, min(tx * SUB + SUB, W)):
             p = py * W + px
             dx, dy, dz = dirs[p, 0], dirs[p, 1], dirs[p, 2]
-            if mode == 0:   # any hit: the capsule that hit the last pixel first (neighbours share one)
-                if last >= 0 and _any_hit(o[0], o[1], o[2], dx, dy, dz, caps[last]):
-                    out_mask[py, px] = 255
-                    continue
-                for j in range(nc):
-                    c = cand[j]
-                    if c != last and _any_hit(o[0], o[1], o[2], dx, dy, dz, caps[c]):
-                        out_mask[py, px] = 255
-                        last = c
-                        break
-                continue
             best_t, best_c = _nearest_hit(o, dx, dy, dz, caps, cand, nc, False)
             if best_c < 0:
                 continue
@@ -415,13 +392,6 @@ def _raycast_at(o, dirs, W, axes, tcos, tsin, caps, bs, nb, zaxis, px, py, out_l
 
 
 # ---------------------------------------------------------------------- public API
-def capsule_data(endpoints: Any, radii: Any) -> tuple:
-    """The capsules checked and turned into the ray kernel's data, once for several views of one pose:
-    pass it as ``capsules=`` to :func:`render_mask` / :func:`render_labels_at` (``endpoints`` and
-    ``radii`` are then ignored)."""
-    return _capsule_params(*_check_capsules(endpoints, radii))
-
-
 def _prepare(camera: Any, endpoints: Any, radii: Any, capsules: tuple | None = None):
     if not isinstance(camera, Camera):
         raise VisionError(f"camera: expected a Camera, received {type(camera).__name__}")
@@ -430,7 +400,7 @@ def _prepare(camera: Any, endpoints: Any, radii: Any, capsules: tuple | None = N
 
 
 def _run(camera, cd, caps, bs, nb, mode, colors, light, rgb):
-    o, dirs, axes, tcos, tsin, zaxis, saxes, scos, ssin = cd
+    o, dirs, axes, tcos, tsin, zaxis, saxes, scos, ssin, qaxes, qcos, qsin = cd
     H, W = camera.height, camera.width
     mask = np.zeros((H, W), np.uint8)
     if mode == 0:       # the mask only: the kernel never writes labels or depths
@@ -439,8 +409,8 @@ def _run(camera, cd, caps, bs, nb, mode, colors, light, rgb):
         label = np.full((H, W), -1, np.int32)
         depth = np.full((H, W), np.nan, np.float32)
     if caps.shape[0]:
-        _raycast(o, dirs, H, W, axes, tcos, tsin, saxes, scos, ssin, caps, bs, nb, mode, colors, light, zaxis, rgb,
-                 mask, label, depth)
+        _raycast(o, dirs, H, W, axes, tcos, tsin, saxes, scos, ssin, qaxes, qcos, qsin, caps, bs, nb, mode, colors,
+                 light, zaxis, rgb, mask, label, depth)
     return mask, label, depth
 
 
@@ -553,28 +523,3 @@ def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         raise VisionError(f"camera: expected a Camera, received {type(camera).__name__}")
     o, dirs, _, _, _, zaxis = _camera_data(camera)[:6]
     return o, dirs, zaxis
-
-
-def capsule_contains(X: Any, endpoints: Any, radii: Any) -> np.ndarray:
-    """Reference point-in-solid test (pure numpy): ``(..., C)`` bool, X inside the hull of the two balls.
-
-    ``min_s |X - p(s)| - r(s) <= 0`` over ``s in [0, 1]``; the function of ``s`` is convex, so the
-    minimum is found by golden-section search (60 steps). For tests and slow references.
-    """
-    E, Rr = _check_capsules(endpoints, radii)
-    X = np.asarray(X, dtype=np.float64)[..., None, :]
-    a, ba = E[:, 0], E[:, 1] - E[:, 0]
-    ra, dr = Rr[:, 0], Rr[:, 1] - Rr[:, 0]
-
-    def f(s):
-        return np.linalg.norm(X - (a + s[..., None] * ba), axis=-1) - (ra + s * dr)
-
-    lo = np.zeros(X.shape[:-1])
-    hi = np.ones(X.shape[:-1])
-    g = (np.sqrt(5.0) - 1.0) / 2.0
-    for _ in range(60):
-        m1, m2 = hi - g * (hi - lo), lo + g * (hi - lo)
-        left = f(m1) < f(m2)
-        hi = np.where(left, m2, hi)
-        lo = np.where(left, lo, m1)
-    return f((lo + hi) / 2.0) <= 0.0
