@@ -28,15 +28,18 @@ With ``need_info=False`` (a camera without ``camera_info``) the first image fixe
 every later one must agree with it (no pairs: a size change then needs a restart of the node).
 
 :class:`StampWindow` is the stamp check on its own (the estimator applies it to predictions);
-:class:`StreamJumps` follows a stream that may restart (the prediction node's estimates).
+:class:`StreamJumps` follows a stream that may restart (the prediction node's estimates);
+:class:`StreamForks` is the same rule for a stream that builds up a state (the segmentation node's background
+models, after its :class:`ViewGate`: a lone pair that agrees within itself passes the gate at any stamp, and must
+not reach the background model unless the stream continues from it).
 """
 from __future__ import annotations
 
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
-__all__ = ["Setting", "Accepted", "Rejected", "StampWindow", "ViewGate", "StreamJumps"]
+__all__ = ["Setting", "Accepted", "Rejected", "StampWindow", "ViewGate", "StreamJumps", "StreamForks"]
 
 
 @dataclass(frozen=True)
@@ -266,3 +269,34 @@ class StreamJumps:
         self._candidate = stamp_ns
         return "drop", (f"stamp {stamp_ns} is {d_s:+.3f} s from the stream (last {self.last_ns}); taken as a "
                         f"restart only if the next one follows it")
+
+
+class StreamForks:
+    """:class:`StreamJumps` for a stream whose messages build up a state (a view's background model), where
+    no message may wait (a lockstep replay waits for each one's result): a far stamp is processed at once on a
+    *candidate* state of its own (``new_state()``); the next stamp decides. One that continues the stream goes on
+    with the stream's state, which the far message never touched; one that continues the far stamp makes the
+    candidate the stream's state (a restart: a bag replayed or looped, a camera restarted).
+
+    :meth:`state_for` returns ``(kind, state, why)``: ``take`` (the stream's state), ``restart`` (the candidate,
+    now the stream's), ``far`` (a new candidate) or ``drop`` (out of order: ``state`` None).
+    """
+
+    def __init__(self, new_state: Callable[[], Any], *, back_ns: int, ahead_ns: int) -> None:
+        self.new_state = new_state
+        self.jumps = StreamJumps(back_ns=back_ns, ahead_ns=ahead_ns)
+        self.state = new_state()
+        self._candidate: Any = None
+
+    def state_for(self, stamp_ns: int) -> tuple[str, Any, str | None]:
+        kind, why = self.jumps.decide(stamp_ns)
+        if kind == "take":
+            self._candidate = None
+            return kind, self.state, None
+        if kind == "restart":
+            self.state, self._candidate = self._candidate, None
+            return kind, self.state, why
+        if self.jumps._candidate == stamp_ns:       # far: remembered by the rule as a possible restart
+            self._candidate = self.new_state()
+            return "far", self._candidate, why.split("; taken as")[0]
+        return "drop", None, why

@@ -27,7 +27,7 @@ from isa_mocap_ros.intake import Rejected, Setting, StampWindow, ViewGate
 from isa_mocap_ros.tracking.sync import FrameSynchronizer, SyncError
 from isa_mocap_ros.vision.keypoint_schedule import KeypointSchedule
 
-__all__ = ["KeypointIntake", "Job"]
+__all__ = ["KeypointIntake", "Job", "KeypointInbox", "KeypointWait"]
 
 
 @dataclass(frozen=True)
@@ -134,3 +134,106 @@ class KeypointIntake:
                     image, mask, has_person = item
                     jobs.append(Job(v, fs.stamps_ns[v], image, mask, self.schedules[v].due(has_person)))
         return jobs
+
+
+class KeypointInbox:
+    """The estimator's side: the keypoint node's messages per view and stamp until their frame set takes them.
+
+    A message is a view's keypoints (any payload) or its skip notice (``None``); the keypoint node sends exactly
+    one per view of each frame set it formed (:class:`KeypointIntake`). Messages are judged against the frame
+    sets' stream (``stream``, the estimator's :class:`~isa_mocap_ros.intake.StampWindow`): before the first set
+    they are held, since the keypoint node may answer a set before the estimator has formed it, and those far
+    from the first set are dropped when it comes (:meth:`purge`); after it, far ones are dropped at once.
+
+    Which views a set still waits for (:meth:`due`) depends on messages only, never on clocks: a view is due until
+    its message of the set's stamp came, or a message of a later stamp did (the node formed a later set without
+    this one: it lost a frame, and the set's message will never come). How long to wait is :class:`KeypointWait`.
+
+    Parameters
+    ----------
+    n_views : int
+    stream : StampWindow
+        The frame sets' stamps (shared with the estimator, which moves it).
+    depth : int
+        Messages kept per view (the oldest go first).
+    """
+
+    def __init__(self, n_views: int, stream: StampWindow, *, depth: int = 64) -> None:
+        self.stream = stream
+        self.depth = depth
+        self._store: list[dict[int, Any]] = [{} for _ in range(n_views)]
+        # before the first set, in arrival order (the oldest arrivals go first: a flood of far stamps must not
+        # push out the first set's own messages, which come last)
+        self._held: list[OrderedDict[int, Any]] = [OrderedDict() for _ in range(n_views)]
+
+    def add(self, v: int, stamp_ns: int, payload: Any) -> str | None:
+        """Keep view ``v``'s message (``payload`` None: a skip notice); returns why it was dropped, or None."""
+        started = self.stream.last_ns is not None
+        if started and (far := self.stream.far(stamp_ns)) is not None:
+            return far
+        store = self._store[v] if started else self._held[v]
+        if store.get(stamp_ns) is not None and payload is not None:
+            return f"a second message for stamp {stamp_ns}"
+        if stamp_ns not in store or payload is not None:
+            store[stamp_ns] = payload
+        while len(store) > self.depth:
+            if started:
+                del store[min(store)]
+            else:
+                store.popitem(last=False)
+        return None
+
+    def purge(self) -> list[tuple[int, int, str]]:
+        """Once the stream started: the messages held before it join the store, but for those far from it, which
+        are dropped (returned as ``(view, stamp, why)``)."""
+        out = []
+        if self.stream.last_ns is None:
+            return out
+        for v, held in enumerate(self._held):
+            while held:
+                s, payload = held.popitem(last=False)
+                if (why := self.stream.far(s)) is not None:
+                    out.append((v, s, why))
+                elif self._store[v].get(s) is None:
+                    self._store[v][s] = payload
+        return out
+
+    def due(self, stamps_ns) -> list[int]:
+        """The views of a frame set (``stamps_ns[v]``, None for a view without a mask) still waiting for their
+        message: none of its stamp and none of a later one came."""
+        return [v for v, s in enumerate(stamps_ns)
+                if s is not None and s not in self._store[v] and not any(t > s for t in self._store[v])]
+
+    def take(self, stamps_ns) -> list | None:
+        """The set's payloads per view (None: skipped, or no message), None when no view has keypoints; this
+        set's messages and older ones are dropped."""
+        out = [self._store[v].get(s) if s is not None else None for v, s in enumerate(stamps_ns)]
+        for v, s in enumerate(stamps_ns):
+            if s is not None:
+                for t in [t for t in self._store[v] if t <= s]:
+                    del self._store[v][t]
+        return out if any(o is not None for o in out) else None
+
+
+@dataclass(frozen=True)
+class KeypointWait:
+    """How long a frame set waits for its due views' keypoint messages (:meth:`KeypointInbox.due`).
+
+    Lockstep (a replay equal to ``isa-mocap track``, at any machine speed): as long as a keypoint node is there
+    to answer, with no time limit: a slow detection on a loaded machine must not turn the replay into another
+    result (a 10 s limit did, from the first frame with a person, when the node's detection came late). Only
+    while no keypoint node is in the graph (it crashed, or is being respawned) does ``limit_s`` run out. Real
+    time: at most ``limit_s`` (a late detection is expected under load; the set goes on with what came).
+    """
+
+    lockstep: bool
+    limit_s: float
+
+    def goes_on(self, due: list[int], *, node_present: bool, waited_s: float) -> bool:
+        """Whether the set stops waiting. ``waited_s``: the time waited so far; in lockstep only the time
+        without a keypoint node in the graph counts."""
+        if not due:
+            return True
+        if self.lockstep and node_present:
+            return False
+        return waited_s >= self.limit_s

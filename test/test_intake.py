@@ -158,3 +158,24 @@ def test_stream_jumps_one_stray_stamp_changes_nothing_a_real_restart_is_followed
     kind, why = j.decide(start + P)
     assert kind == "restart" and "restarted" in why and j.last_ns == start + P
     assert j.decide(start + 2 * P)[0] == "take"
+
+
+def test_stream_forks_a_far_stamp_gets_a_state_of_its_own_kept_only_when_the_stream_follows_it():
+    from isa_mocap_ros.intake import StreamForks
+
+    made = []
+    f = StreamForks(lambda: made.append(len(made)) or made[-1], back_ns=10**9, ahead_ns=5 * 10**9)
+    first = f.state
+    assert f.state_for(S) == ("take", first, None) and f.state_for(S + P)[:2] == ("take", first)
+    kind, state, why = f.state_for(S)                                 # older, within back_ns
+    assert kind == "drop" and state is None and "out of order" in why
+    for stray in (S + 3600 * 10**9, S - 3600 * 10**9, 7):            # far, alone: its own state, the stream's untouched
+        kind, state, why = f.state_for(stray)
+        assert kind == "far" and state is not first and "from the stream" in why and "taken as" not in why
+        assert f.state_for(f.jumps.last_ns + P)[:2] == ("take", first)
+    start = S - 100 * 10**9                                           # a replayed bag: two stamps in sequence
+    kind, candidate, _ = f.state_for(start)
+    assert kind == "far"
+    kind, state, why = f.state_for(start + P)
+    assert kind == "restart" and state is candidate and f.state is candidate and "restarted" in why
+    assert f.state_for(start + 2 * P)[:2] == ("take", candidate)

@@ -115,3 +115,64 @@ def test_a_partial_set_after_the_wait_counts_only_its_views():
     jobs, _ = ki.poll(1.5)
     assert [(j.view, j.detect) for j in jobs] == [(0, True), (1, True)]
     assert ki.schedules[2].person_frames == 0 and ki.schedules[0].person_frames == 1
+
+
+# -- the estimator's side: KeypointInbox and KeypointWait ----------------------------------------------------------
+def inbox(n=2):
+    from isa_mocap_ros.intake import StampWindow
+    from isa_mocap_ros.keypoint_intake import KeypointInbox
+    return KeypointInbox(n, StampWindow(5 * 10**9), depth=8)
+
+
+def test_messages_before_the_first_set_are_held_and_the_far_ones_dropped_when_it_comes():
+    """The keypoint node may answer a set before the estimator formed it, so messages before the stream are held;
+    a far one of that time (a fuzzer's, an hour ahead) must neither count as the node's answer to a later set nor
+    push the real ones out of the store."""
+    box = inbox()
+    for k in range(10):                                  # more than the store's depth, all far ahead
+        assert box.add(0, S + HOUR + k, "fuzz") is None
+    assert box.add(0, S, "kp0") is None and box.add(1, S, None) is None     # then the node's answers
+    box.stream.accept(S)                                 # the estimator's first frame set
+    dropped = box.purge()
+    assert sorted(s for _, s, _ in dropped) == [S + HOUR + k for k in range(3, 10)]   # the 3 oldest: the depth
+    assert all("from the stream" in why for *_, why in dropped)
+    assert box.due([S, S]) == []                         # the far messages are gone: no "later answer"
+    assert box.take([S, S]) == ["kp0", None]
+    assert box.due([S + P, S + P]) == [0, 1]             # the next set waits for both views
+
+
+def test_a_view_is_due_until_its_message_or_a_later_sets_message_comes():
+    box = inbox()
+    box.stream.accept(S)
+    assert box.due([S, S]) == [0, 1]
+    assert box.add(1, S, None) is None                   # a skip notice answers view 1
+    assert box.due([S, S]) == [0]
+    assert box.add(0, S + P, None) is None               # the node formed the next set without this one
+    assert box.due([S, S]) == []
+    assert box.take([S, S]) is None                      # no keypoints in the set
+    assert box.due([S + P, S + P]) == [1]                # view 0's next-set message is kept
+    assert box.due([None, S + P]) == [1]                 # a view without a mask is never due
+
+
+def test_far_and_second_messages_are_dropped_after_the_stream_started():
+    box = inbox()
+    box.stream.accept(S)
+    assert "from the stream" in box.add(0, S - HOUR, "kp")
+    assert box.add(0, S, "kp") is None
+    assert box.add(0, S, "again").startswith("a second message")
+    assert box.add(0, S, None) is None                   # a skip notice never replaces keypoints
+    assert box.take([S, None]) == ["kp", None]
+
+
+def test_lockstep_waits_with_no_time_limit_while_a_keypoint_node_is_there():
+    """The defect: with a 10 s limit, a keypoint node slower than that on a loaded machine made the lockstep
+    replay go on without the set's keypoints (from the first frame with a person: 2.8 rad against `track`)."""
+    from isa_mocap_ros.keypoint_intake import KeypointWait
+    lock = KeypointWait(lockstep=True, limit_s=10.0)
+    assert not lock.goes_on([0], node_present=True, waited_s=1e6)
+    assert not lock.goes_on([0], node_present=False, waited_s=9.9)
+    assert lock.goes_on([0], node_present=False, waited_s=10.0)
+    assert lock.goes_on([], node_present=True, waited_s=0.0)
+    real = KeypointWait(lockstep=False, limit_s=0.03)
+    assert not real.goes_on([0], node_present=True, waited_s=0.02)
+    assert real.goes_on([0], node_present=True, waited_s=0.03)

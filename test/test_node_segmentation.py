@@ -286,3 +286,47 @@ def test_unquoted_yaml_off_for_a_string_parameter_is_one_clear_line(spawn, tmp_p
     assert 'parameter robust: expected a str, received bool False' in out, out
     assert 'quote the value, e.g. robust: "off"' in out, out
     assert "Traceback" not in out, out
+
+
+def test_a_lone_pair_far_from_the_stream_changes_no_mask_and_a_real_restart_relearns(spawn, rosenv, tmp_path):
+    """View 0 and view 1 get the same images; view 0 also gets lone image + camera_info pairs (the person) that agree with
+    the camera at stamps of their own (a stray camera, the fuzzer's ``image_and_info_before_stream``): one before
+    the stream, one an hour ahead and one an hour back in the middle of it. Every mask of the stream must
+    be bit-equal in both views. Before the stream rule (StreamForks), the pair before the stream was learnt
+    into view 0's background and the stream's masks differed. Then the stream jumps 100 s (a bag looped):
+    both views relearn their background from the jump on."""
+    seg = _start(spawn, tmp_path)
+    src, other = _source(0.6), _source(0.6)
+    for _ in range(LEARN + 8):
+        person = other.read()[0]                   # the person mid-walk: what a stray camera could show
+
+    def stray(stamp):
+        return ma.array_to_image(person, "rgb8", stamp_ns=stamp, frame_id="cam0_optical_frame")
+
+    stream = []
+    with ros_node(rosenv, "seg_test") as (node, ex):
+        h = Harness(node, ex, 2)
+        assert spin_until(ex, h.connected, 20)
+        assert h.send(0, stray(5_000_000_007), wait_for=5_000_000_007), seg.output()    # before the stream
+        s = 1_700_000_000_000_000_000
+        for start, n in ((s, LEARN + 6), (s + 100 * 10**9, LEARN + 3)):               # then a restart 100 s on
+            for k in range(n):
+                stamp = start + k * 33_333_333
+                img = src.read()[0]
+                for v in range(2):
+                    msg = ma.array_to_image(img, "rgb8", stamp_ns=stamp, frame_id=f"cam{v}_optical_frame")
+                    assert h.send(v, msg, wait_for=stamp), (k, v, seg.output())
+                stream.append(stamp)
+                if start == s and k == LEARN + 2:                                        # strays mid-stream
+                    for far in (stamp + 3600 * 10**9, stamp - 3600 * 10**9):
+                        assert h.send(0, stray(far), wait_for=far), seg.output()
+    masks = [[ma.image_to_array(h.masks[v][t]) for t in stream] for v in range(2)]
+    for i, t in enumerate(stream):
+        assert np.array_equal(masks[0][i], masks[1][i]), (i, int((masks[0][i] != masks[1][i]).sum()))
+    first, second = masks[0][:LEARN + 6], masks[0][LEARN + 6:]
+    assert not any(m.any() for m in first[:LEARN]) and all(m.any() for m in first[LEARN:])
+    assert not any(m.any() for m in second[:LEARN]) and second[-1].any()    # learning restarted at the jump
+    assert seg.stop() == 0
+    out = seg.output()
+    assert "segmented on a background model of its own" in out, out
+    assert "the stream restarted" in out and "streams restarted [2, 1]" in out, out

@@ -216,6 +216,22 @@ EXECUTOR_HELP = ("events: rclpy's C++ EventsExecutor (rclpy.experimental; ~0.5 m
                  "single_threaded: rclpy's SingleThreadedExecutor")
 
 
+def declare_frame_sync(node: Node, n_views: int) -> dict[str, Any]:
+    """Declare the frame-set matching parameters (``sync``, ``queue_size``, ``slop_s``, ``view_timeout_s``,
+    ``min_views``) and return :class:`~isa_mocap_ros.tracking.sync.FrameSynchronizer`'s keyword arguments. The
+    estimator and the keypoint node both declare them here, so the two form the same frame sets."""
+    sync = declare(node, "sync", "exact", "frame-set matching: exact or approximate")
+    queue = declare(node, "queue_size", 10, "stamps kept per view while synchronizing", lo=1, hi=1000)
+    slop_s = declare(node, "slop_s", 0.01, "approximate sync window, seconds", lo=0.0, hi=10.0)
+    view_timeout_s = declare(node, "view_timeout_s", 1.0, "emit a partial frame set after this wait (0 = never)",
+                             lo=0.0, hi=60.0)
+    min_views = declare(node, "min_views", 2, "views a partial frame set needs", lo=1, hi=64)
+    if sync not in ("exact", "approximate"):
+        raise ValueError(f"sync must be 'exact' or 'approximate', got {sync!r}")
+    return dict(queue_size=queue, slop_ns=0 if sync == "exact" else int(slop_s * 1e9), max_wait_s=view_timeout_s,
+                min_views=min(min_views, n_views))
+
+
 def declare_executor(node: Node) -> str:
     """Declare the node's ``executor`` parameter (:data:`EXECUTORS`) and return its value."""
     kind = declare(node, "executor", "events", EXECUTOR_HELP, read_only=True)

@@ -20,12 +20,15 @@ prediction of that frame while a prediction node publishes (none: no wait).
 
 Keypoints (``keypoint_weight`` > 0, docs/keypoints.md): a keypoint message belongs to the frame set of its
 stamp and view; the tracker gets the set's keypoints with its masks. The keypoint node detects on some
-frames only and says so for the others (``keypoints_skipped``): in lockstep the estimator waits up to
-``keypoint_wait_s`` until each view of the set has one or the other (so the player, which waits for
-``estimator/done``, waits for the keypoint node too, and a replay is deterministic); in real time up to
-``keypoint_realtime_wait_s`` (30 ms), then the set is tracked with the keypoints that have arrived. A malformed keypoint message (not 0 or 33 points, a
-non-finite pixel, a confidence outside [0, 1]) or one whose stamp lies far from the frame sets is dropped
-with one line and counted (in lockstep the frame still waits for its view's own message).
+frames only and says so for the others (``keypoints_skipped``): in lockstep the estimator waits until each view
+of the set has one or the other, with no time limit while a keypoint node is in the graph (so the player, which
+waits for ``estimator/done``, waits for the keypoint node too, and a replay is deterministic at any machine
+speed), up to ``keypoint_wait_s`` while none is; a view whose message of a later set came is not waited for (the
+node lost that frame: its message will never come). In real time up to ``keypoint_realtime_wait_s`` (30 ms), then
+the set is tracked with the keypoints that have arrived (:mod:`isa_mocap_ros.keypoint_intake`). A malformed
+keypoint message (not 0 or 33 points, a non-finite pixel, a confidence outside [0, 1]) or one whose stamp lies far
+from the frame sets (before the first set: from the first set) is dropped with one line and counted (in lockstep
+the frame still waits for its view's own message).
 
 Input checks, before anything reaches the synchronizer or the tracker (:mod:`isa_mocap_ros.intake`):
 a view's camera is what a ``camera_info`` and a mask of the same stamp agree on (frame id, size); a
@@ -61,8 +64,10 @@ from isa_mocap_ros.body.hri import hri_joint_names, hri_urdf
 from isa_mocap_ros.eval.peers import register_peers
 from isa_mocap_ros.geometry import exp_so3
 from isa_mocap_ros.intake import StampWindow, ViewGate
+from isa_mocap_ros.keypoint_intake import KeypointInbox, KeypointWait
 from isa_mocap_ros.nodes import qos
-from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, declare_config, one_numba_thread, run_node
+from isa_mocap_ros.nodes.common import (QOS_OVERRIDES, ProblemLog, declare, declare_config, declare_frame_sync,
+                                       one_numba_thread, run_node)
 from isa_mocap_ros.nodes.estimator_intake import EstimatorIntake
 from isa_mocap_ros.tracking.predict import periods_between
 from isa_mocap_ros.tracking.sync import FrameSynchronizer
@@ -103,16 +108,12 @@ class EstimatorNode(EstimatorIntake, Node):
         shape = declare(self, "body_shape", "", "body-shape YAML file ('' = default shape)")
         # the tracker's settings: one parameter per TrackerConfig field, with its name, default and one-line doc
         settings = declare_config(self, TrackerConfig, field_docs(TrackerConfig), skip=NOT_PARAMETERS)
-        sync = declare(self, "sync", "exact", "frame-set matching: exact or approximate")
-        queue = declare(self, "queue_size", 10, "stamps kept per view while synchronizing", lo=1, hi=1000)
-        slop_s = declare(self, "slop_s", 0.01, "approximate sync window, seconds", lo=0.0, hi=10.0)
+        sync_kw = declare_frame_sync(self, self.n_views)
+        self.view_timeout_s = sync_kw["max_wait_s"]
         self.tracker_threads = declare(self, "tracker_threads", 1,
                                        "numba threads of the tracker's energy kernels (0 = numba's default, "
                                        "all cores; 1 leaves the other cores to the rest of the network); "
                                        "results do not depend on it", lo=0, hi=256)
-        self.view_timeout_s = declare(self, "view_timeout_s", 1.0,
-                                      "emit a partial frame set after this wait (0 = never)", lo=0.0, hi=60.0)
-        min_views = declare(self, "min_views", 2, "views a partial frame set needs", lo=1, hi=64)
         self.lockstep = declare(self, "lockstep", False, "process every frame set (no dropping) and wait "
                                 "for the prediction of each frame")
         self.catch_up_ms = declare(self, "catch_up_ms", 15.0, "real time: a frame set that waited longer than this "
@@ -137,7 +138,8 @@ class EstimatorNode(EstimatorIntake, Node):
                                    "below this share of frame_period_s", lo=0.05, hi=1.0)
         self.use_prediction = declare(self, "use_prediction", True, "use prediction/joint_states when it arrives")
         self.keypoint_wait_s = declare(self, "keypoint_wait_s", 10.0, "lockstep, keypoint_weight > 0: longest wait "
-                                       "for a view's keypoints (or the keypoint node's skip notice) of a frame set",
+                                       "for a view's keypoints (or skip notice) of a frame set while no keypoint node "
+                                       "is in the graph (with one there, the wait has no time limit)",
                                        lo=0.0, hi=600.0)
         self.keypoint_realtime_wait_s = declare(
             self, "keypoint_realtime_wait_s", 0.03, "real time, keypoint_weight > 0: longest wait for a view's "
@@ -163,8 +165,6 @@ class EstimatorNode(EstimatorIntake, Node):
         self.problems = ProblemLog(self)
         self.model = make_model(dof, shape=shape or None)
         self.hri_names = hri_joint_names(self.model, self.body_id)
-        if sync not in ("exact", "approximate"):
-            raise ValueError(f"sync must be 'exact' or 'approximate', got {sync!r}")
         self.tracker_config = TrackerConfig.from_flat(**settings)   # checks every setting (TrackerError names it)
         # real time: which sets the tracker gets and at what budget (isa_mocap_ros.tracking.realtime): the frame
         # budget under load (governor; None: always the full budget), the start-up's sets caught up after the
@@ -180,9 +180,7 @@ class EstimatorNode(EstimatorIntake, Node):
         self.governor = self.schedule.governor
         self.catch_up = self.schedule.startup
         self.budget_reason = ""          # the governor's last change, for /diagnostics
-        self.sync = FrameSynchronizer(self.n_views, queue_size=queue,
-                                      slop_ns=0 if sync == "exact" else int(slop_s * 1e9),
-                                      max_wait_s=self.view_timeout_s, min_views=min(min_views, self.n_views))
+        self.sync = FrameSynchronizer(self.n_views, **sync_kw)
         self.slot = self.schedule.slot
         self.threads_in_use = 0          # numba threads of the tracker's worker (set when it starts)
         self._cv = threading.Condition()
@@ -195,8 +193,10 @@ class EstimatorNode(EstimatorIntake, Node):
         self._camera_changed: str | None = None   # a view's camera changed after the tracker was made
         self._images: list[dict[int, np.ndarray]] = [{} for _ in range(self.n_views)]
         self._predictions: dict[int, np.ndarray] = {}
-        # per view: stamp -> (uv, confidence) or None (looked, nobody / skipped / dropped as bad)
-        self._keypoints: list[dict[int, tuple | None]] = [{} for _ in range(self.n_views)]
+        # the keypoint node's messages per view and stamp: (uv, confidence) or None (skipped / nobody)
+        self.keypoint_inbox = KeypointInbox(self.n_views, self._stream)
+        self.keypoint_wait = KeypointWait(self.lockstep, self.keypoint_wait_s if self.lockstep
+                                          else self.keypoint_realtime_wait_s)
         self.use_keypoints = self.tracker_config.keypoints.keypoint_weight > 0
         self.keypoint_sets = 0          # frame sets tracked with keypoints
         self._prev_stamp_ns: int | None = None   # stamp of the last frame set given to the tracker

@@ -20,9 +20,6 @@ from isa_mocap_ros.nodes.common import camera_info_callback
 from isa_mocap_ros.tracking.sync import SyncError
 from isa_mocap_ros.vision import Camera
 
-#: keypoint messages (or skip notices) kept per view while their frame set is on its way
-KEYPOINT_DEPTH = 64
-
 #: distinct child frames kept per view from cam<i>/extrinsics (the one the view's masks name is used)
 MAX_CAMERA_FRAMES = 8
 
@@ -168,43 +165,47 @@ class EstimatorIntake:
 
     def _store_keypoints(self, v: int, stamp: int, kp, topic: str) -> None:
         with self._cv:
-            if self._stream.last_ns is not None and (far := self._stream.far(stamp)) is not None:
-                self.problems.report(f"keypoints{v}:stamp", f"{topic} dropped: {far}")
+            why = self.keypoint_inbox.add(v, stamp, kp)
+            if why is not None:
+                self.problems.report(f"keypoints{v}:{'twice' if why.startswith('a second') else 'stamp'}",
+                                     f"{topic} dropped: {why}")
                 return
-            store = self._keypoints[v]
-            if stamp in store and store[stamp] is not None and kp is not None:
-                self.problems.report(f"keypoints{v}:twice", f"{topic} dropped: a second message for stamp {stamp}")
-                return
-            if stamp not in store or kp is not None:
-                store[stamp] = kp
-            while len(store) > KEYPOINT_DEPTH:
-                del store[min(store)]
             self._cv.notify_all()
+
+    def _keypoint_node_present(self) -> bool:
+        """Whether a keypoint node (a publisher of every view's skip notices) is in the graph."""
+        return all(self.count_publishers(self.resolve_topic_name(f"cam{v}/keypoints_skipped")) > 0
+                   for v in range(self.n_views))
 
     def _keypoints_for(self, frame_set) -> list | None:
         """(Under ``_cv``.) The set's keypoints per view ((uv, confidence) or None), None when no view has any;
-        after waiting (lockstep ``keypoint_wait_s``, real time ``keypoint_realtime_wait_s``) until every view
-        with a mask has its message (keypoints or skip notice)."""
-        views = [v for v in range(self.n_views) if frame_set.items[v] is not None]
+        after waiting for every view with a mask to have its message (keypoints or skip notice; the rule:
+        :class:`~isa_mocap_ros.keypoint_intake.KeypointWait`; lockstep: while a keypoint node is in the graph,
+        with no time limit)."""
+        inbox = self.keypoint_inbox
+        for v, s, why in inbox.purge():      # held before the first frame set, far from it
+            self.problems.report(f"keypoints{v}:stamp", f"cam{v}/keypoints (or skip notice) of stamp {s} dropped: "
+                                                        f"{why}")
         stamps = frame_set.stamps_ns
-        wait_s = self.keypoint_wait_s if self.lockstep else self.keypoint_realtime_wait_s
-        deadline = time.monotonic() + wait_s
-        while missing := [v for v in views if stamps[v] not in self._keypoints[v]]:
-            left = deadline - time.monotonic()
-            if left <= 0 or self._stop.is_set():
-                text = (f"frame set {frame_set.stamp_ns}: no keypoints or skip notice from views {missing} within "
-                        f"{wait_s:.3f} s; tracked without them")
+        waited_s, last, present, checked = 0.0, time.monotonic(), True, -1.0
+        while due := inbox.due(stamps):
+            now = time.monotonic()
+            if self.lockstep and now - checked >= 0.5:     # the graph, twice a second
+                present, checked = self._keypoint_node_present(), now
+            waited_s += (now - last) if not (self.lockstep and present) else 0.0
+            last = now
+            if self._stop.is_set() or self.keypoint_wait.goes_on(due, node_present=present, waited_s=waited_s):
+                text = (f"frame set {frame_set.stamp_ns}: no keypoints or skip notice from views {due} within "
+                        f"{self.keypoint_wait.limit_s:.3f} s" + (" without a keypoint node in the graph"
+                                                                  if self.lockstep else "")
+                        + "; tracked without them")
                 if self.lockstep:
                     self.problems.report("nokeypoints", text)
                 else:                       # real time: a late detection is expected under load
                     self.problems.event("nokeypoints", text)
                 break
-            self._cv.wait(min(left, 0.05))
-        out = [self._keypoints[v].get(stamps[v]) if v in views else None for v in range(self.n_views)]
-        for v in views:         # this set's and older ones are done with
-            for s in [s for s in self._keypoints[v] if s <= stamps[v]]:
-                del self._keypoints[v][s]
-        return out if any(o is not None for o in out) else None
+            self._cv.wait(0.05 if self.lockstep else max(0.001, min(0.05, self.keypoint_wait.limit_s - waited_s)))
+        return inbox.take(stamps)
 
     def _poll_partial(self) -> None:
         with self._cv:

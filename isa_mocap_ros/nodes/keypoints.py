@@ -52,7 +52,8 @@ import msg_adapters as ma
 from isa_mocap_ros.intake import Setting
 from isa_mocap_ros.keypoint_intake import KeypointIntake
 from isa_mocap_ros.nodes import qos
-from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, camera_info_callback, declare, run_node
+from isa_mocap_ros.nodes.common import (QOS_OVERRIDES, ProblemLog, camera_info_callback, declare,
+                                       declare_frame_sync, run_node)
 from isa_mocap_ros.vision.errors import VisionError
 from isa_mocap_ros.vision.landmark_model import ModelUnavailable
 from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, EVERY_K, detect_in_mask
@@ -84,19 +85,9 @@ class KeypointNode(Node):
                         "time is dropped unless its own camera_info comes with it (0 = no check)", lo=0.0, hi=1e9)
         # the estimator's frame-set matching (keep equal to /mocap/estimator's): only a completed set moves the
         # schedules (isa_mocap_ros.keypoint_intake)
-        sync = declare(self, "sync", "exact", "frame-set matching as the estimator's: exact or approximate")
-        queue = declare(self, "queue_size", 10, "stamps kept per view while synchronizing (the estimator's)",
-                        lo=1, hi=1000)
-        slop_s = declare(self, "slop_s", 0.01, "approximate sync window, seconds (the estimator's)", lo=0.0, hi=10.0)
-        view_timeout_s = declare(self, "view_timeout_s", 1.0, "a partial frame set after this wait, as the "
-                                 "estimator's (0 = never)", lo=0.0, hi=60.0)
-        min_views = declare(self, "min_views", 2, "views a partial frame set needs (the estimator's)", lo=1, hi=64)
-        if sync not in ("exact", "approximate"):
-            raise ValueError(f"sync: expected exact or approximate, received {sync!r}")
+        sync_kw = declare_frame_sync(self, self.n_views)
         self.intake = KeypointIntake(self.n_views, every_k=self.every_k, dense_frames=self.dense_frames,
-                                     max_gap_ns=int(gap_s * 1e9), keep=_KEEP, queue_size=queue,
-                                     slop_ns=0 if sync == "exact" else int(slop_s * 1e9), max_wait_s=view_timeout_s,
-                                     min_views=min_views)
+                                     max_gap_ns=int(gap_s * 1e9), keep=_KEEP, **sync_kw)
         try:
             self.detector = PoseLandmarker(model_path or None, num_threads=threads)
         except ModelUnavailable as exc:           # run_node prints a ValueError as one line, exit 2
@@ -117,8 +108,8 @@ class KeypointNode(Node):
                                      qos_overriding_options=QOS_OVERRIDES)
             self.create_subscription(CameraInfo, f"cam{i}/camera_info", self._info_cb(i), qos.SENSOR_DATA,
                                      qos_overriding_options=QOS_OVERRIDES)
-        if view_timeout_s > 0:
-            self.create_timer(min(0.1, view_timeout_s / 2), self._poll)
+        if sync_kw["max_wait_s"] > 0:
+            self.create_timer(min(0.1, sync_kw["max_wait_s"] / 2), self._poll)
         self.get_logger().info(f"keypoints: {self.n_views} views, every {self.every_k} frame(s) after the first "
                                f"{self.dense_frames} with a person, model "
                                f"{self.detector.model_path}")

@@ -27,6 +27,15 @@ image of the same stamp agree on (frame id and size; the image's encoding with i
   their stamp and are dropped when none comes;
 * a pair that agrees within itself but not with the camera (a real resolution change) restarts
   that view's background learning, with one log line;
+* a pair passes the gate at any stamp, so the prediction node's stream rule follows the accepted
+  images (:class:`~isa_mocap_ros.intake.StreamForks`): an image more than ``max_stamp_gap_s`` ahead of the
+  view's last one, or behind it, is *far*; it is segmented at once (a lockstep replay waits for its
+  mask) but on a new background model of its own, which the view keeps only if the next image
+  continues the far one's stamp (the stream restarted there: a bag replayed or looped, a camera
+  restarted; one log line), and forgets when the next image continues the stream. So one view's lone
+  pair at a stamp of its own (a stray camera, a fuzzer) changes nothing in the background model of the
+  stream it interrupts, and a stream that starts after such a pair learns nothing from it. An image
+  behind the view's last one by at most ``max_stamp_gap_s`` is out of order and dropped;
 * malformed images (data length disagreeing with ``height * step``, unknown or unsupported
   encoding) and camera infos are dropped at once.
 
@@ -50,7 +59,7 @@ from sensor_msgs.msg import CameraInfo, Image
 
 import msg_adapters as ma
 from isa_mocap_ros.nodes import qos
-from isa_mocap_ros.intake import Setting, ViewGate
+from isa_mocap_ros.intake import Setting, StreamForks, ViewGate
 from isa_mocap_ros.nodes.common import (QOS_OVERRIDES, ProblemLog, camera_info_callback, declare, log_closing,
                                         run_node)
 from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig, SegmentationError
@@ -130,10 +139,14 @@ class SegmentationNode(Node):
             raise ValueError(f"clean_plates: expected one entry per view ({self.n_views}), received {len(plates)}")
         plates = list(plates) or [""] * self.n_views
         self.plates = [_read_plate(p) if p else None for p in plates]
-        self.segmenters = [BackgroundSegmenter(self.config, clean_plate=plate) for plate in self.plates]
         self.gates = [ViewGate(f"cam{v}", max_gap_ns=int(gap_s * 1e9), depth=depth, need_info=self.use_info)
                       for v in range(self.n_views)]
+        # each view's background model is the state of its stream (forks at far stamps; none: max_stamp_gap_s 0)
+        gap_ns = int(gap_s * 1e9) if gap_s > 0 else 2**62
+        self.streams = [StreamForks(lambda v=v: self._new_segmenter(v), back_ns=gap_ns, ahead_ns=gap_ns)
+                        for v in range(self.n_views)]
         self.restarts = [0] * self.n_views
+        self.stream_restarts = [0] * self.n_views
         self._warm_up()
         self.problems = ProblemLog(self)
         self.mask_pubs = [self.create_publisher(Image, f"cam{i}/mask", qos.RELIABLE,
@@ -169,6 +182,22 @@ class SegmentationNode(Node):
             for _ in range(self.config.learn_frames + 2):
                 seg.apply(img)
 
+    @property
+    def segmenters(self) -> list[BackgroundSegmenter]:
+        """Each view's background model (its stream's)."""
+        return [st.state for st in self.streams]
+
+    def _plate_for(self, v: int) -> np.ndarray | None:
+        """View ``v``'s clean plate when it fits the view's size (or the size is not known yet), else None."""
+        plate, setting = self.plates[v], self.gates[v].setting
+        if plate is not None and setting is not None and plate.shape[:2] != (setting.height, setting.width):
+            return None
+        return plate
+
+    def _new_segmenter(self, v: int) -> BackgroundSegmenter:
+        """A new background model for view ``v``, from its clean plate when that fits the view's size."""
+        return BackgroundSegmenter(self.config, clean_plate=self._plate_for(v))
+
     def _info_cb(self, v: int):
         return camera_info_callback(v, self.problems, lambda exc: f"info{v}:{exc.field}",
                                     lambda *info: self._settle(v, *self.gates[v].add_info(*info)))
@@ -195,20 +224,28 @@ class SegmentationNode(Node):
         for a in accepted:
             if a.changed:
                 self.restarts[v] += 1
-                plate = self.plates[v]
-                if plate is not None and plate.shape[:2] != (self.gates[v].setting.height, self.gates[v].setting.width):
-                    plate = None
-                self.segmenters[v] = BackgroundSegmenter(self.config, clean_plate=plate)
+                self.streams[v].state = self._new_segmenter(v)
                 self._reported[v] = False
                 self.get_logger().warn(
                     f"cam{v}: the camera changed ({a.changed}; its camera_info and image of stamp {a.stamp_ns} "
                     f"agree): background learning restarts"
-                    + ("" if plate is not None else f" from the next {self.config.learn_frames} images"))
-            self._segment(v, *a.payload, t0=t0)
+                    + ("" if self._plate_for(v) is not None else f" from the next {self.config.learn_frames} images"))
+            kind, seg, why = self.streams[v].state_for(a.stamp_ns)
+            if kind == "drop":
+                self.problems.report(f"image{v}:order", f"cam{v}/image_raw dropped: {why}")
+                continue
+            if kind == "far":
+                self.problems.report(f"image{v}:stamp", f"cam{v}/image_raw: {why}: segmented on a background model "
+                                     f"of its own, kept only if the next image follows it")
+            elif kind == "restart":
+                self.stream_restarts[v] += 1
+                self._reported[v] = False
+                self.get_logger().warn(f"cam{v}: {why}: the background model begun at its first image is the view's")
+            self._segment(v, seg, *a.payload, t0=t0)
 
-    def _segment(self, v: int, msg: Image, img: np.ndarray, *, t0: float | None) -> None:
+    def _segment(self, v: int, seg: BackgroundSegmenter, msg: Image, img: np.ndarray, *, t0: float | None) -> None:
         t0 = time.perf_counter() if t0 is None else t0
-        seg, pub = self.segmenters[v], self.mask_pubs[v]
+        pub = self.mask_pubs[v]
         if msg.encoding == "bgr8":
             img = img[:, :, ::-1]
         if not img.flags.c_contiguous:
@@ -218,7 +255,8 @@ class SegmentationNode(Node):
         except SegmentationError as exc:
             self.problems.report(f"image{v}:segmenter", f"cam{v}/image_raw dropped: {exc}")
             return
-        if not self._reported[v] and not seg.learning and seg.outlier_fraction is not None:
+        if not self._reported[v] and not seg.learning and seg.outlier_fraction is not None and \
+                seg is self.streams[v].state:
             self._reported[v] = True    # the robust-mode decision is logged once per view (and learning)
             self.get_logger().info(
                 f"cam{v}: background learnt, outlying share {seg.outlier_fraction:.3f} -> robust mode "
@@ -234,6 +272,7 @@ class SegmentationNode(Node):
         st = DiagnosticStatus(name="isa_mocap_ros: segmentation", hardware_id="segmentation")
         values = {"masks_published": self.masks_published, "bad_inputs": self.problems.total,
                   "problems": json.dumps(self.problems.counts), "learning_restarts": self.restarts,
+                  "stream_restarts": self.stream_restarts,
                   "views_learning": [v for v, seg in enumerate(self.segmenters) if seg.learning],
                   "images_waiting_for_camera_info": [g.waiting() for g in self.gates]}
         st.level = DiagnosticStatus.OK if self.problems.total == 0 else DiagnosticStatus.WARN
@@ -250,6 +289,7 @@ class SegmentationNode(Node):
                 + (f", {infos} camera infos dropped" if (infos := sum(n for k, n in self.problems.counts.items()
                                                                       if k.startswith('info'))) else "")
                 + (f", learning restarted {self.restarts} (camera changes)" if any(self.restarts) else "")
+                + (f", streams restarted {self.stream_restarts}" if any(self.stream_restarts) else "")
                 + (f", per image {np.median(lat):.2f} ms median / {np.percentile(lat, 95):.2f} ms p95 / "
                    f"{lat.max():.1f} ms max" if lat.size else ""))
         log_closing(self, text)
