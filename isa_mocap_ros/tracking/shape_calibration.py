@@ -14,6 +14,10 @@ the project's own silhouette energy (EA-vs-PF Eq. 4-5), tracker and CMA-ES (§4.
    mean silhouette energy over the ``n_frames`` calibration frames (plus a weak pull of the log
    factors towards 0, which only decides directions the images leave flat).
 
+The calibration frames' masks are first cut to the largest blob of each frame's visual hull (what the
+tracker does to its first frame, :mod:`.init_hull`): an occluder drawn into one image or pixel noise
+that no other view confirms does not enter the shape fit (``masks="raw"`` keeps them as given).
+
 The shape is a few numbers, not free lengths: an overall scale, length factors of thigh, shin,
 upper arm, forearm, trunk and neck/head, hip and shoulder widths, and radius factors of trunk, arms
 and legs; both sides share them.
@@ -90,12 +94,9 @@ class ShapeCalibrationConfig:
     retrack: bool = True            # later rounds re-track the whole window with the new shape first
     regularization: float = 2e-3    # weight of sum(log factor^2): decides only flat directions
     arm_split_prior: float = 0.05   # weight of (log upper_arm - log forearm)^2: a straight arm shows only the sum
-    frame_choice: str = "even"      # calibration frames: "even" = spread evenly over the window, "diverse" = the
-                                    # round-0 poses farthest apart in joint angles (greedy)
     restarts: int = 1               # whole calibrations from other seeds, the lowest energy kept (x cost each)
     masks: str = "hull"             # the calibration frames' masks: "hull" = cut to the visual hull's person blob
-                                    # (tracking/init_hull.py: occluders and noise no other view confirms go),
-                                    # "tracked" = as the round-0 tracker filtered them, "raw" = as given
+                                    # (tracking/init_hull.py: occluders and noise no other view confirms go), "raw"
     seed: int = 0                   # all random streams derive from it
 
     def __post_init__(self):
@@ -106,10 +107,8 @@ class ShapeCalibrationConfig:
                 raise ShapeCalibrationError(f"{name}: expected an integer >= 1, received {v!r}")
         if not (np.isfinite(self.translation_m) and self.translation_m > 0):
             raise ShapeCalibrationError(f"translation_m: expected a number > 0, received {self.translation_m!r}")
-        if self.frame_choice not in ("even", "diverse"):
-            raise ShapeCalibrationError(f"frame_choice: expected 'even' or 'diverse', received {self.frame_choice!r}")
-        if self.masks not in ("hull", "tracked", "raw"):
-            raise ShapeCalibrationError(f"masks: expected 'hull', 'tracked' or 'raw', received {self.masks!r}")
+        if self.masks not in ("hull", "raw"):
+            raise ShapeCalibrationError(f"masks: expected 'hull' or 'raw', received {self.masks!r}")
         for name in ("regularization", "arm_split_prior"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
@@ -326,18 +325,6 @@ def _hull_masks(masks_per_frame, cameras) -> tuple[list, str | None]:
                  f"({100 * cut / max(total, 1):.1f} %) removed over {len(out)} frames")
 
 
-def _diverse(A: np.ndarray, n: int) -> np.ndarray:
-    """Indices (sorted) of ``n`` rows of ``A (N, J)`` (joint angles) chosen greedily farthest apart: the first
-    the row farthest from the mean, then each the row farthest from those chosen."""
-    chosen = [int(np.argmax(np.linalg.norm(A - A.mean(axis=0), axis=1)))]
-    d = np.linalg.norm(A - A[chosen[0]], axis=1)
-    while len(chosen) < n:
-        i = int(np.argmax(d))
-        chosen.append(i)
-        d = np.minimum(d, np.linalg.norm(A - A[i], axis=1))
-    return np.array(sorted(chosen))
-
-
 def _tracker(model, cameras, tracker_config):
     from .tracker import Tracker
 
@@ -420,30 +407,23 @@ def _calibrate_once(dof, cameras, frames, tcfg, config, base, say) -> ShapeCalib
     tr = _tracker(model, cameras, tcfg)
     poses: dict[int, np.ndarray] = {}
     energies: dict[int, float] = {}
-    tracked_masks: dict[int, list] = {}
     for key, masks, kp in frames:
         r = tr.step(masks, int(key), keypoints=kp)
         if r.x is not None and np.isfinite(r.energy):
             poses[int(key)], energies[int(key)] = np.asarray(r.x, dtype=float), float(r.energy)
-            tracked_masks[int(key)] = tr.track.masks_last
     if not poses:
         raise ShapeCalibrationError("frames: the tracker found no person in the calibration frames (no usable "
                                     "foreground); start the calibration where the person is in view")
     keys = sorted(poses)
-    if config.frame_choice == "diverse":
-        pick = _diverse(np.array([poses[k][6:] for k in keys]), min(config.n_frames, len(keys)))
-    else:
-        pick = np.unique(np.round(np.linspace(0, len(keys) - 1, min(config.n_frames, len(keys)))).astype(int))
+    pick = np.unique(np.round(np.linspace(0, len(keys) - 1, min(config.n_frames, len(keys)))).astype(int))
     cal_keys = [keys[i] for i in pick]
     masks_of = {int(k): m for k, m, _ in frames}
     kps_of = {int(k): kp for k, _, kp in frames}
-    cal_raw = [masks_of[k] for k in cal_keys]                    # the tracker's
-    if config.masks == "hull":
+    cal_raw = [masks_of[k] for k in cal_keys]     # the pose fits' (the tracker filters them further) and the shape fit's
+    if config.masks == "hull":                    # what one view alone reports stays out of both
         cal_raw, note = _hull_masks(cal_raw, cameras)
         if note:
             notes.append(note)
-    elif config.masks == "tracked":
-        cal_raw = [tracked_masks[k] if tracked_masks.get(k) is not None else m for k, m in zip(cal_keys, cal_raw)]
     cal_masks = _prepared_masks(dof, cameras, cal_raw, config)     # the shape fit's energies'
     X = np.array([poses[k] for k in cal_keys])
     P = len(SHAPE_PARAMS)
