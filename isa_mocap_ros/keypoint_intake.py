@@ -7,8 +7,11 @@ tracks. Those are *frame sets*: stamps at which every view (or, after a wait, ``
 (:class:`~isa_mocap_ros.tracking.sync.FrameSynchronizer`, the estimator's matching). So:
 
 * images pass the view's :class:`~isa_mocap_ros.intake.ViewGate` (the camera is what a camera_info and an image
-  of one stamp agree on); masks are taken when they are of the view's camera (frame id and size) and their stamp
-  is near the frame sets' stream;
+  of one stamp agree on); masks are taken when they are of the view's camera (frame id and size), at any stamp:
+  a mask is used only with an image of its stamp that passed the gate. (Judged against the frame sets' stamps, a
+  stream that jumped ahead by more than ``max_gap_ns``, a camera paused, or a far set before the stream, made
+  every later mask far, and the node never detected again.) Unpaired masks beyond ``keep`` go farthest from the
+  view's images first, so far ones cannot push out a real mask that came before its image;
 * an image and a mask of one stamp make a view's *pair*; pairs go to a synchronizer with the estimator's settings;
 * only a completed frame set moves the views' schedules, each present view once, in stamp order.
 
@@ -50,7 +53,8 @@ class KeypointIntake:
     every_k, dense_frames : int
         The schedule (:class:`KeypointSchedule`).
     max_gap_ns : int
-        Images (through the gate) and masks farther than this from their stream are dropped (0 = no check).
+        Images farther than this from the view's stream wait for a camera_info of their stamp (the gate's rule;
+        0 = no check).
     keep : int
         Unpaired images (and masks) kept per view while the other of their stamp is on its way.
     queue_size, slop_ns, max_wait_s, min_views :
@@ -69,7 +73,6 @@ class KeypointIntake:
         self.schedules = [KeypointSchedule(every_k, dense_frames=dense_frames) for _ in range(n_views)]
         self.sync = FrameSynchronizer(n_views, queue_size=queue_size, slop_ns=slop_ns, max_wait_s=max_wait_s,
                                       min_views=min(min_views, n_views))
-        self.sets = StampWindow(max_gap_ns)       # the completed frame sets' stamps
         self._images: list[OrderedDict[int, Any]] = [OrderedDict() for _ in range(n_views)]
         self._masks: list[OrderedDict[int, tuple[Any, bool]]] = [OrderedDict() for _ in range(n_views)]
         self.unpaired = [0] * n_views             # images or masks that aged out without the other
@@ -86,13 +89,11 @@ class KeypointIntake:
     def add_mask(self, v: int, stamp_ns: int, setting: Setting, mask: Any, has_person: bool, now_s: float):
         """A mask of view ``v`` (``setting``: its frame id and size; ``has_person``: any foreground)."""
         known = self.gates[v].setting
-        why = self.sets.far(stamp_ns)
-        if why is None and known is not None and (setting.frame_id, setting.width, setting.height) != \
+        if known is not None and (setting.frame_id, setting.width, setting.height) != \
                 (known.frame_id, known.width, known.height):
-            why = (f"frame {setting.frame_id!r}, {setting.width}x{setting.height}, is not the view's camera's "
-                   f"({known.frame_id!r}, {known.width}x{known.height})")
-        if why is not None:
-            return [], [(f"mask{v}", f"cam{v}/mask dropped: {why}")]
+            return [], [(f"mask{v}", f"cam{v}/mask dropped: frame {setting.frame_id!r}, {setting.width}x"
+                                     f"{setting.height}, is not the view's camera's ({known.frame_id!r}, "
+                                     f"{known.width}x{known.height})")]
         return self._pair(v, "mask", stamp_ns, (mask, has_person), now_s)
 
     def poll(self, now_s: float):
@@ -114,8 +115,9 @@ class KeypointIntake:
         partner = other.pop(stamp_ns, None)
         if partner is None:
             mine[stamp_ns] = payload
-            while len(mine) > self.keep:
-                mine.popitem(last=False)
+            last = self.gates[v].window.last_ns
+            while len(mine) > self.keep:      # the farthest from the view's images first (the oldest before any)
+                del mine[next(iter(mine)) if last is None else max(mine, key=lambda t: abs(t - last))]
                 self.unpaired[v] += 1
             return [], []
         image, (mask, has_person) = (payload, partner) if kind == "image" else (partner, payload)
@@ -128,7 +130,6 @@ class KeypointIntake:
     def _jobs(self, sets) -> list[Job]:
         jobs = []
         for fs in sets:
-            self.sets.accept(max(s for s in fs.stamps_ns if s is not None))
             for v, item in enumerate(fs.items):
                 if item is not None:
                     image, mask, has_person = item

@@ -106,6 +106,41 @@ def niceness(increment: int) -> Callable[[], None] | None:
     return lambda: os.nice(increment)
 
 
+def _prctl():
+    """libc's ``prctl`` (Linux), looked up before any fork (a child runs nothing but the call), or None."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        import ctypes
+        return ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+
+
+_PRCTL = _prctl()
+_PR_SET_PDEATHSIG = 1
+
+
+def child_setup(increment: int) -> Callable[[], None]:
+    """The nodes' ``preexec_fn``: :func:`niceness`, and SIGTERM to the node when the launching thread dies.
+
+    The nodes run in sessions of their own (a Ctrl-C reaches them through :meth:`Supervisor.shutdown`, in order), so
+    a launcher killed outright (SIGKILL: ``subprocess.run(timeout=)`` in a test, the OOM killer) left its nodes
+    running: on a test's ROS domain they answered the next test's network (a second estimator on ``/diagnostics``,
+    masks and frame sets of another run), a cascade of failures under load. Linux only (elsewhere: niceness)."""
+    nice = niceness(increment)
+    parent = os.getpid()
+
+    def setup() -> None:
+        if nice is not None:
+            nice()
+        if _PRCTL is not None:
+            _PRCTL(_PR_SET_PDEATHSIG, int(signal.SIGTERM))
+            if os.getppid() != parent:      # the launcher died before the call
+                os.kill(os.getpid(), signal.SIGTERM)
+    return setup
+
+
 def _substitute(value, variables: Mapping[str, str]):
     if not isinstance(value, str):
         return value
@@ -226,7 +261,7 @@ class Supervisor:
     def _start(self, child: _Child) -> None:
         child.popen = subprocess.Popen(child.spec.command(self.python), env=self.env, stdout=subprocess.PIPE,
                                        stderr=subprocess.STDOUT, start_new_session=True,
-                                       preexec_fn=niceness(child.spec.nice))
+                                       preexec_fn=child_setup(child.spec.nice))
         tag = f"[{child.spec.name}-{child.popen.pid}]"
         self.out(f"[launch] started {child.spec.name} (pid {child.popen.pid}): {' '.join(child.spec.command(self.python)[1:])}")
 

@@ -16,8 +16,8 @@ view's camera, another frame id, a camera_info with no image of its stamp, a sta
 stream, extrinsics from another parent frame or for another child frame, predictions far from the
 frame sets, keypoints of another count than 0 or 33, with NaN or a confidence above 1 (on the next frame's
 own stamp: a lockstep estimator must still wait for that view's real message), keypoints and skip notices
-far from the stream, and, until it hears the stream, images and camera infos that agree, each view at a stamp
-of its own (one view alone is no frame set of the rig: the segmentation node segments them, the estimator and
+far from the stream (each far message at a stamp of its own), and images and camera infos that agree, each view
+at a stamp of its own (one view alone is no frame set of the rig: the segmentation node segments them, the estimator and
 the keypoint node's schedule must not count them). It never sends what a network cannot tell from the cameras
 themselves: every view's image and camera_info of one stamp that agree, or a well-formed mask / prediction right
 in the stream.
@@ -88,7 +88,16 @@ class Fuzzer(Node):
         return self.last_real_ns + 3_000_000 + 1_000 * self.unique % 20_000_000 + 7
 
     def far(self) -> int:
-        return int(self.rng.choice([self.last_real_ns + HOUR_NS, self.last_real_ns - HOUR_NS, 7]))
+        """A stamp far from the stream (an hour ahead or back, or near 0), each 10 s from every other far stamp sent.
+        With one far stamp per frame (7, or the last frame's +- 1 h), the far images, camera infos and masks of a
+        slow (loaded) run met at one stamp on every view: a frame set of the rig, which the network must take as
+        data (the estimator's stream jumped an hour ahead and took no real frame again); and far stamps a few us
+        apart continue each other: a stream restarting there (the segmentation node's rule). Neither is the
+        fuzzer's to send."""
+        self.unique += 1
+        step = 10 * 10**9 * self.unique
+        base = int(self.rng.choice([self.last_real_ns + HOUR_NS, self.last_real_ns - HOUR_NS, 7]))
+        return base - step if base < self.last_real_ns - HOUR_NS // 2 and base != 7 else base + step
 
     def frame(self, v: int) -> str:
         return f"cam{v}_optical_frame"
@@ -112,11 +121,14 @@ class Fuzzer(Node):
 
     def k_image_and_info_before_stream(self, v):
         """Until the stream is heard: on every view an image and a camera_info that agree, each view at a stamp of its
-        own (no frame set of the rig: one view each, like a lone camera starting); after: a lone image far in time."""
+        own (no frame set of the rig: one view each, like a lone camera starting); after: one view's image and
+        camera_info that agree, far in time (a lone camera's pair, no frame set either)."""
         w, h = self.size
         if self.heard:
+            stamp = self.far()
+            self.info[v].publish(self._info(v, w, h, stamp, self.frame(v)))
             return self.img[v], ma.array_to_image(self.rng.integers(0, 255, (h, w, 3), dtype=np.uint8), "rgb8",
-                                                  stamp_ns=self.far(), frame_id=self.frame(v))
+                                                  stamp_ns=stamp, frame_id=self.frame(v))
         mine = None
         for u in range(self.views):
             self.unique += 1

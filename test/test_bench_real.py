@@ -33,10 +33,47 @@ def test_quick_run_scores_every_frame_against_the_peer(tmp_path):
     assert "| default shape | 8 |" in md and "Quick run" in md and "nan" not in md.lower()
     assert d["seeds"] == [0] and r["seeds"][0]["seed"] == 0
     assert r["offset_removed_over_seeds"]["mean"] == r["offset_removed_mpjpe_mm"]
+    # per joint in each third of the frames (3 + 3 + 2 of 8): weighted by the spans, the score's per-joint mean
+    th = r["joint_thirds_over_seeds"]
+    assert set(th) == set(r["offset_removed_per_marker_mm"])
+    for n, v in th.items():
+        assert np.dot(v, [3, 3, 2]) / 8 == pytest.approx(r["offset_removed_per_marker_mm"][n], abs=1e-9), n
+    assert "| last third |" in md
     # the masks per view against the peer's stick figure (shares in [0, 1])
     assert [m["view"] for m in d["masks"]] == [0, 1, 2, 3]
     assert all(0 <= m[k] <= 1 for m in d["masks"] for k in ("beyond", "core_missed", "keypoints_on"))
+    assert all(len(m["beyond_thirds"]) == 3 and all(0 <= x <= 1 for x in m["beyond_thirds"]) for m in d["masks"])
     assert "cam0 " in md and "stick figure" in md
     # the bag is cached in the work directory: a second run does not import again
     assert (tmp_path / "w" / "demo_bag_160_8" / "metadata.yaml").is_file()
     assert bench_real.render_markdown({"skipped": "x"}) == "Not run: x.\n"
+
+
+def test_filtered_score_removes_jitter_not_motion_and_reads_the_peer_in_its_axes(tmp_path):
+    """The like-for-like figure: the estimate's joints filtered as Pose2Sim filters its points. A reference that is a
+    slow motion of the model's own joints, with a constant offset per joint, written in TRC (y-up) axes: the estimate
+    with that motion scores ~0 mm, with 20 mm white jitter per coordinate far less than its unfiltered score."""
+    from isa_mocap_ros.body import make_model
+    from isa_mocap_ros.eval.metrics import marker_positions
+    from isa_mocap_ros.eval.trc import TRC_TO_WORLD, Trc, write_trc
+
+    model = make_model(39)
+    names = [model.joint_names[j] for j in model.markers]
+    F, rng = 100, np.random.default_rng(0)
+    X = np.zeros((F, model.dof))
+    X[:, 0] = 0.3 * np.sin(np.linspace(0, np.pi, F))              # a slow walk forward and back, 1.67 s at 60 fps
+    X[:, 2] = 1.0
+    world = marker_positions(model, X, joints=names) + rng.normal(0, 0.03, (1, len(names), 3))   # per-joint offsets
+    ref = tmp_path / "peer.trc"
+    write_trc(ref, Trc(tuple(f"p{i}" for i in range(len(names))), np.arange(F) / 60.0,
+                       world @ np.linalg.inv(TRC_TO_WORLD).T, 60.0))
+    collect = {"model": model, "truth_marker_names": names, "truth_markers": {k: world[k] for k in range(F)},
+               "estimates": {k: X[k] for k in range(F)}}
+    assert bench_real.filtered_score(collect, 60.0, ref) < 1.0
+    J = X.copy()
+    J[:, :3] += rng.normal(0, 0.02, (F, 3))                          # the estimate's root jitters 20 mm
+    collect["estimates"] = {k: J[k] for k in range(F)}
+    jittered = bench_real.filtered_score(collect, 60.0, ref)
+    raw = float(np.mean(np.linalg.norm(J[:, :3] - X[:, :3], axis=1))) * 1e3
+    assert jittered < 0.5 * raw, (jittered, raw)
+    assert bench_real.filtered_score({**collect, "estimates": {k: J[k] for k in range(10)}}, 60.0, ref) is None

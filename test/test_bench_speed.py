@@ -37,6 +37,7 @@ def test_quick_json(capsys):
     assert len(pr["by_call"]) == 15 and any("silhouette" in r["function"] for r in pr["by_call"])
     md = bench_speed.render_markdown(res)
     assert "| the tracker's h-isa search (360 evaluations in generations of 30" in md
+    assert "| scanline count (`method='raster'`" in md and "| the tracker's search on the scanline energy" in md
     assert "#### Offline tracker" in md and "Skipped (--quick)" in md and "#### Segmentation" in md
     assert "#### Where a tracked frame's CPU time goes" in md and "| contour stage |" in md
 

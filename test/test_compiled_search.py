@@ -203,10 +203,10 @@ def test_cached_code_depends_on_the_kernels_it_calls():
     import hashlib
 
     from isa_mocap_ros.body import kinematics
-    from isa_mocap_ros.energy import keypoint_kernel, silhouette_kernel
+    from isa_mocap_ros.energy import keypoint_kernel, raster_kernel, silhouette_kernel
     from isa_mocap_ros.optim import _fast, _fast_so3
 
-    deps = (silhouette_kernel, keypoint_kernel, kinematics, _fast, _fast_so3)
+    deps = (silhouette_kernel, raster_kernel, keypoint_kernel, kinematics, _fast, _fast_so3)
     assert set(compiled_search.DEPENDENCIES) == set(deps)
     for fn in (compiled_search._partition, compiled_search.rotation_mean):
         locator = fn._cache._impl.locator

@@ -18,7 +18,10 @@ def test_bench_energy_quick_json(capsys):
     assert list(out) == ["views", "dof", "batch", "fast_evals_per_s", "exact_evals_per_s", "fast_evals_per_cpu_s",
                          "ratio", "search_evals_per_s", "search_evals_per_cpu_s", "search_evals", "search_generation",
                          "search_restricted_share", "search_coarse_evals_per_s", "search_coarse_evals_per_cpu_s",
-                         "search_ratio", "exact_batch",
+                         "search_raster_evals_per_s", "search_raster_evals_per_cpu_s",
+                         "search_ratio", "fast_mean_abs_diff", "raster_evals_per_s", "raster_evals_per_cpu_s",
+                         "raster_ratio", "raster_mean_abs_diff", "raster2_evals_per_s", "raster2_evals_per_cpu_s",
+                         "raster2_ratio", "raster2_mean_abs_diff", "exact_batch",
                          "n_model_points", "n_template", "n_mask_points", "downsample", "threads"]
     tc = TrackerConfig()                 # measured with the tracker's sample sizes
     obj = tc.objective
@@ -33,3 +36,7 @@ def test_bench_energy_quick_json(capsys):
     assert 0.5 < out["search_restricted_share"] < 1
     assert out["search_evals_per_s"] > 0 and out["search_evals_per_cpu_s"] > 0 and out["search_ratio"] > 0
     assert out["search_coarse_evals_per_s"] > 0 and out["search_coarse_evals_per_cpu_s"] > 0
+    # the scanline energy: timed as the fast one, and closer to the exact reference than the sampled kernel
+    assert out["raster_evals_per_s"] > 0 and out["raster2_evals_per_s"] > 0 and out["raster_ratio"] > 0
+    assert out["raster_mean_abs_diff"] < out["fast_mean_abs_diff"]
+    assert out["search_raster_evals_per_s"] > 0 and out["search_raster_evals_per_cpu_s"] > 0

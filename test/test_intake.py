@@ -134,7 +134,8 @@ def test_expected_tracker_notes_are_events_not_problems():
                  "heading check started: a run heading the other way ended 0.05",
                  "heading check decided: kept the initial heading (energy sums ...)",
                  "no usable view and no estimate yet: nothing to track",
-                 "pelvis stage skipped: its share (12 evaluations) is below one generation"):
+                 "pelvis stage skipped: its share (12 evaluations) is below one generation",
+                 "keypoints screened: 1 off the foreground, 5 outside the views' consensus, 46 of 52 kept"):
         assert note_is_expected(note), note
     for note in ("view 1: mask shape (7, 3), expected (240, 320); skipped",
                  "no usable view: falling back to the last estimate",

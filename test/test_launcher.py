@@ -207,3 +207,42 @@ def test_launched_prediction_node_uses_the_camera_frame_period(spawn, tmp_path):
     launch = spawn("launch", *CLI, "launch", str(lf))
     assert launch.wait_for_output("stamps + 0.016667 s", 90), launch.output()
     assert launch.stop(signal.SIGINT, timeout=30) == 0, launch.output()
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(90)
+def test_a_launcher_killed_outright_takes_its_nodes_with_it(rosenv):
+    """SIGKILL of the launching process (``subprocess.run(timeout=)`` of ``isa-mocap run`` in a test) left its nodes
+    running on the test's ROS domain, where they answered the next test's network: they now get SIGTERM."""
+    import os
+    import re
+    import subprocess
+
+    script = ("import sys; from isa_mocap_ros.launcher import NodeSpec, Supervisor; "
+              "Supervisor([NodeSpec(exec='prediction_node', name='prediction', namespace='/mocap')]).run()")
+    parent = subprocess.Popen([sys.executable, "-c", script], env=rosenv, stdout=subprocess.PIPE, text=True)
+    try:
+        line = parent.stdout.readline()
+        pid = int(re.search(r"\(pid (\d+)\)", line).group(1))
+        deadline = time.monotonic() + 60            # the node up: its first line after the launch line
+        while "prediction:" not in parent.stdout.readline() and time.monotonic() < deadline:
+            pass
+        parent.kill()
+        parent.wait(10)
+
+        def alive() -> bool:
+            try:
+                with open(f"/proc/{pid}/status") as f:
+                    return "\nState:\tZ" not in f.read()
+            except FileNotFoundError:
+                return False
+        deadline = time.monotonic() + 20
+        while alive() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        gone = not alive()
+        if not gone:
+            os.kill(pid, signal.SIGKILL)
+        assert gone, "the node outlived its killed launcher"
+    finally:
+        if parent.poll() is None:
+            parent.kill()

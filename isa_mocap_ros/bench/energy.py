@@ -21,6 +21,12 @@ evaluations per second of the whole search (kernels, launches, the optimizer's c
 wall clock and per CPU second (``search_*``), and the same with half of each partition's generations on the
 energy's coarse level (two of the four views, ``search_coarse_*``; ``SearchConfig.coarse_fraction``, off in the
 tracker by default).
+
+The scanline energy (``SilhouetteEnergy(method="raster")``: Eq. 4 counted on the pixel grid, no sample) is timed the
+same way on the same batch (``raster_*``; every pixel row, and every second row as ``raster2_*``), and both it and
+the fast kernel are compared with the exact reference on the exact batch (``*_mean_abs_diff``: mean |f - exact|),
+and the tracker's search runs on it too (``search_raster_*``: its restricted kernel and the compiled search; the
+tracker's default energy stays the fast kernel, ``isa-mocap track --energy raster`` selects it).
 """
 from __future__ import annotations
 
@@ -72,24 +78,26 @@ def run(args: argparse.Namespace) -> int:
     fast = SilhouetteEnergy(model, rig, masks, downsample=obj.downsample, n_model_points=obj.n_model_points,
                             n_mask_points=obj.n_mask_points, rng=np.random.default_rng(args.seed))
     exact = SilhouetteEnergy(model, rig, masks, method="exact")
-    fast(X)
+    raster = SilhouetteEnergy(model, rig, masks, method="raster")
+    raster2 = SilhouetteEnergy(model, rig, masks, method="raster", downsample=2)
     exact(X[:1])
-    times = []
-    cpu = []
-    for _ in range(args.repeats):
-        t0 = time.perf_counter()
-        c0 = time.process_time()
-        fast(X)
-        cpu.append(time.process_time() - c0)
-        times.append(time.perf_counter() - t0)
+    times, cpu = _timed(fast, X, args.repeats)
     t_fast = float(np.median(times))
     nb = min(args.exact_batch, args.batch)
     t0 = time.perf_counter()
-    exact(X[:nb])
+    f_exact = exact(X[:nb])
     t_exact = time.perf_counter() - t0
+    ras = {}
+    for key, en in (("raster", raster), ("raster2", raster2)):
+        wall, c = _timed(en, X, args.repeats)
+        ras.update({f"{key}_evals_per_s": round(args.batch / float(np.median(wall)), 1),
+                    f"{key}_evals_per_cpu_s": round(args.batch / float(np.median(c)), 1) if np.median(c) > 0 else None,
+                    f"{key}_ratio": round(args.batch / float(np.median(wall)) / (nb / t_exact), 1),
+                    f"{key}_mean_abs_diff": round(float(np.abs(en(X[:nb]) - f_exact).mean()), 6)})
     search = search_rate(model, rig, fast, x0, args.search_evals, args.repeats, args.seed)
     search.update(search_rate(model, rig, fast, x0, args.search_evals, args.repeats, args.seed, COARSE_FRACTION,
                               "search_coarse"))
+    search.update(search_rate(model, rig, raster, x0, args.search_evals, args.repeats, args.seed, key="search_raster"))
     fast_rate = args.batch / t_fast
     exact_rate = nb / t_exact
     out = {"views": args.views, "dof": args.dof, "batch": args.batch, "fast_evals_per_s": round(fast_rate, 1),
@@ -97,7 +105,8 @@ def run(args: argparse.Namespace) -> int:
            # per CPU second of the process (every thread): what other processes' load does not change
            "fast_evals_per_cpu_s": round(args.batch / float(np.median(cpu)), 1) if np.median(cpu) > 0 else None,
            "ratio": round(fast_rate / exact_rate, 1),
-           **search, "search_ratio": round(search["search_evals_per_s"] / exact_rate, 1), "exact_batch": nb, "n_model_points": tc.objective.n_model_points, "n_template": fast.n_template,
+           **search, "search_ratio": round(search["search_evals_per_s"] / exact_rate, 1),
+           "fast_mean_abs_diff": round(float(np.abs(fast(X[:nb]) - f_exact).mean()), 6), **ras, "exact_batch": nb, "n_model_points": tc.objective.n_model_points, "n_template": fast.n_template,
            "n_mask_points": fast.n_mask_points, "downsample": fast.downsample, "threads": numba.get_num_threads()}
     if args.json:
         print(json.dumps(out))
@@ -116,7 +125,25 @@ def run(args: argparse.Namespace) -> int:
               f"CPU second; median of {args.repeats}; {search['search_evals_per_s'] / exact_rate:.0f}x the exact)")
         print(f"  search, {COARSE_FRACTION:.0%} of its generations on two views: {search['search_coarse_evals_per_s']:.0f} "
               f"evals/s ({search['search_coarse_evals_per_cpu_s']:.0f} per CPU second)")
+        for key, rows in (("raster", "every pixel row"), ("raster2", "every second row")):
+            print(f"  {key:7s}: {out[key + '_evals_per_s']:12.0f} evals/s  (scanline count, {rows}; "
+                  f"{out[key + '_evals_per_cpu_s']:.0f} per CPU second; {out[key + '_ratio']:.0f}x the exact; mean "
+                  f"|f - exact| {out[key + '_mean_abs_diff']:.5f}, fast kernel {out['fast_mean_abs_diff']:.5f})")
+        print(f"  search on the scanline energy: {out['search_raster_evals_per_s']:.0f} evals/s "
+              f"({out['search_raster_evals_per_cpu_s']:.0f} per CPU second)")
     return 0
+
+
+def _timed(energy, X: np.ndarray, repeats: int) -> tuple[list, list]:
+    """Wall and CPU seconds of ``repeats`` calls ``energy(X)`` after a warm-up call (numba cache, scratch)."""
+    energy(X)
+    wall, cpu = [], []
+    for _ in range(repeats):
+        t0, c0 = time.perf_counter(), time.process_time()
+        energy(X)
+        cpu.append(time.process_time() - c0)
+        wall.append(time.perf_counter() - t0)
+    return wall, cpu
 
 
 def search_rate(model, rig, energy, x_true, evals: int, repeats: int, seed: int, coarse_fraction: float = 0.0,
@@ -159,7 +186,7 @@ def search_rate(model, rig, energy, x_true, evals: int, repeats: int, seed: int,
     c = float(np.median(cpu))
     out = {f"{key}_evals_per_s": round(n / float(np.median(wall)), 1),
            f"{key}_evals_per_cpu_s": round(n / c, 1) if c > 0 else None}
-    if coarse_fraction == 0.0:
+    if key == "search":
         out.update({"search_evals": int(n), "search_generation": int(opt.params.get("n_particles", 0)),
                     "search_restricted_share": round(restricted / n, 3)})
     return out

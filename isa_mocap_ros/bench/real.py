@@ -12,7 +12,7 @@
    frames with it) and per seed (``--seeds``, default 0,1,2: the track is chaotic across seeds, so one seed says
    little); scored against Pose2Sim's keypoints mapped to our joints: mean error raw and with each joint's mean
    offset removed (mean, min and max over the seeds), the worst frame, the knee angle, frames facing backwards,
-   per joint;
+   per joint, and per joint in each third of the recording (mean over the seeds: where and when the error is);
 3. the same through the node network (``isa-mocap run --lockstep``; ``--lockstep CONFIG``, default the calibrated
    shape when it is tracked, else the first configuration) and how many frames differ from the offline run of
    that configuration (the lockstep replay must not depend on machine load).
@@ -76,15 +76,69 @@ def import_demo(bag: Path, *, width: int, frames: int | None) -> None:
             raise RuntimeError(f"isa-mocap {' '.join(argv)} failed")
 
 
+def joint_thirds(collect: dict, parts: int = 3) -> dict:
+    """Per marker joint, the error with each joint's mean offset removed (as the score removes it) averaged over
+    each of ``parts`` equal spans of the scored frames, mm: ``{joint: [first, ..., last]}``; ``collect`` is
+    :func:`isa_mocap_ros.cli.track.track_bag`'s."""
+    from isa_mocap_ros.eval.metrics import body_frames, marker_positions, offset_removed_errors_mm
+
+    model, names = collect["model"], list(collect["truth_marker_names"])
+    frames = sorted(k for k in collect["estimates"] if k in collect["truth_markers"])
+    shared = [model.joint_names[j] for j in model.markers if model.joint_names[j] in names]
+    if not frames or "left_hip" not in shared or "right_hip" not in shared:
+        return {}
+    Pe = marker_positions(model, np.array([collect["estimates"][k] for k in frames]), joints=shared)
+    Pt = np.array([collect["truth_markers"][k] for k in frames])[:, [names.index(n) for n in shared]]
+    err, _ = offset_removed_errors_mm(Pe, Pt, body_frames(Pt, shared.index("left_hip"), shared.index("right_hip")))
+    spans = np.array_split(np.arange(len(frames)), parts)
+    with np.errstate(invalid="ignore"):
+        return {n: [float(np.nanmean(err[i, m])) for i in spans] for m, n in enumerate(shared)}
+
+
+#: Pose2Sim's own filter of its triangulated points (the demo's Config.toml ``[filtering.butterworth]``): order,
+#: cut-off (Hz); zero phase (filtered forward and backward)
+PEER_FILTER = (4, 6.0)
+
+
+def filtered_score(collect: dict, fps: float, reference: Path) -> float | None:
+    """Like for like with the peer's final output: our joint centres filtered as Pose2Sim filters its points
+    (:data:`PEER_FILTER`) against its filtered file ``reference`` (TRC, rows = the scored frames in order), offsets
+    removed as the score removes them; mean mm. An offline figure (a zero-phase filter needs the whole recording)."""
+    from scipy.signal import butter, filtfilt
+
+    from isa_mocap_ros.eval.metrics import body_frames, marker_positions, offset_removed_errors_mm
+    from isa_mocap_ros.eval.trc import TRC_TO_WORLD, read_trc
+
+    model, names = collect["model"], list(collect["truth_marker_names"])
+    frames = sorted(k for k in collect["estimates"] if k in collect["truth_markers"])
+    trc = read_trc(reference)
+    shared = [model.joint_names[j] for j in model.markers if model.joint_names[j] in names]
+    if len(frames) != len(trc.points) or len(frames) < 16 or "left_hip" not in shared:
+        return None
+    order, cut_hz = PEER_FILTER
+    b, a = butter(order, cut_hz / (fps / 2.0))
+    Pe = filtfilt(b, a, marker_positions(model, np.array([collect["estimates"][k] for k in frames]), joints=shared),
+                  axis=0)
+    Pt = trc.in_world(TRC_TO_WORLD)[:, [names.index(n) for n in shared]]
+    err, _ = offset_removed_errors_mm(Pe, Pt, body_frames(Pt, shared.index("left_hip"), shared.index("right_hip")))
+    return float(np.nanmean(np.nanmean(err, axis=1)))
+
+
 def _track(bag: Path, out: Path, extra: list[str]) -> dict:
     from isa_mocap_ros.cli.main import build_parser
     from isa_mocap_ros.cli.track import track_bag
 
     args = build_parser().parse_args(["track", str(bag), "--out", str(out), "--overwrite", "--no-progress", *extra])
     t0 = time.perf_counter()
-    s = track_bag(args)
+    collect: dict = {}
+    s = track_bag(args, collect=collect)
     r = {k: s.get(k) for k in _KEEP}
     r["wall_seconds"] = round(time.perf_counter() - t0, 1)
+    r["joint_thirds_mm"] = joint_thirds(collect)
+    ref = demo_dir() / "reference" / "balancing_pose2sim_butterworth.trc"
+    stamps = sorted(collect["stamps"].values())
+    fps = (len(stamps) - 1) / ((stamps[-1] - stamps[0]) / 1e9) if len(stamps) > 1 else 0.0
+    r["filtered_offset_removed_mpjpe_mm"] = filtered_score(collect, round(fps, 3), ref) if ref.is_file() else None
     return r
 
 
@@ -108,7 +162,8 @@ def _lockstep(bag: Path, out: Path, extra: list[str]) -> dict:
 
 def mask_figures(bag: Path) -> list[dict]:
     """Per view, the default segmentation's masks (learnt from the bag's background frames) against the
-    reference's stick figure, averaged over the frames (:func:`isa_mocap_ros.eval.mask_quality.mask_quality`)."""
+    reference's stick figure, averaged over the frames (:func:`isa_mocap_ros.eval.mask_quality.mask_quality`), and the
+    share beyond the person in each third of the recording (``beyond_thirds``)."""
     from isa_mocap_ros.cli.track_io import read_sequence
     from isa_mocap_ros.eval.mask_quality import mask_quality, mean_quality
     from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig
@@ -121,11 +176,19 @@ def mask_figures(bag: Path) -> list[dict]:
         seg = BackgroundSegmenter(SegmentationConfig(learn_frames=max(len(learn), 1)))
         for f in learn:
             seg.apply(f.images[v])
-        q = mean_quality([mask_quality(cam, f.truth_markers, seq.truth_marker_names, seg.apply(f.images[v]))
-                          for f in scored])
+        per = [mask_quality(cam, f.truth_markers, seq.truth_marker_names, seg.apply(f.images[v])) for f in scored]
+        q = mean_quality(per)
+        thirds = [round(mean_quality([per[i] for i in span]).beyond, 3)
+                  for span in np.array_split(np.arange(len(per)), 3)]
         out.append({"view": v, "beyond": round(q.beyond, 3), "core_missed": round(q.core_missed, 3),
-                    "keypoints_on": round(q.keypoints_on, 3)})
+                    "keypoints_on": round(q.keypoints_on, 3), "beyond_thirds": thirds})
     return out
+
+
+def _mean_thirds(runs: list[dict]) -> dict:
+    """:func:`joint_thirds` of several seeds averaged."""
+    names = [n for n in (runs[0] if runs else {}) if all(n in r for r in runs)]
+    return {n: [float(np.mean(v)) for v in zip(*(r[n] for r in runs))] for n in names}
 
 
 def _spread(runs: list[dict], key: str) -> dict:
@@ -166,8 +229,10 @@ def collect(*, quick: bool, out: Path, configs=DEFAULT_CONFIGS, lockstep: str | 
                              "offset_removed_over_seeds": _spread(per_seed, "offset_removed_mpjpe_mm"),
                              "raw_over_seeds": _spread(per_seed, "mpjpe_mm"),
                              "knee_over_seeds": _spread(per_seed, "knee_rmse_deg"),
+                             "filtered_over_seeds": _spread(per_seed, "filtered_offset_removed_mpjpe_mm"),
                              "backwards_over_seeds": int(sum(r["frames_facing_backwards"] or 0 for r in per_seed)),
-                             "tracked_over_seeds": int(min(r["frames_tracked"] or 0 for r in per_seed))}
+                             "tracked_over_seeds": int(min(r["frames_tracked"] or 0 for r in per_seed)),
+                             "joint_thirds_over_seeds": _mean_thirds([r["joint_thirds_mm"] for r in per_seed])}
     common = ["--seed", str(seeds[0])] + evals
     if lockstep:
         name = lockstep if lockstep != "default_choice" else next(
@@ -219,17 +284,36 @@ def render_markdown(d: dict) -> str:
         L.append(f"| {r['label']} | {r.get('tracked_over_seeds', r['frames_tracked'])} | {_f(raw['mean'])} "
                  f"[{_f(raw['min'])}-{_f(raw['max'])}] | **{_f(rem['mean'])}** [{_f(rem['min'])}-{_f(rem['max'])}] "
                  f"| {per} | {_f(knee['mean'])} | {r.get('backwards_over_seeds', r['frames_facing_backwards'])} |")
+    filt = [(r["label"], r["filtered_over_seeds"]) for r in d["runs"].values()
+            if (r.get("filtered_over_seeds") or {}).get("mean") is not None]
+    if filt:
+        L += ["", "Like for like with the peer's final output (Pose2Sim filters its triangulated points with a zero-phase "
+                  f"Butterworth filter, order {PEER_FILTER[0]}, {PEER_FILTER[1]:g} Hz, its Config.toml; here our joint "
+                  "centres filtered the same way against its filtered file, offsets removed; an offline figure, not the "
+                  "score above): " + "; ".join(f"{lab}: **{_f(f['mean'])}** [{_f(f['min'])}-{_f(f['max'])}] mm"
+                                              for lab, f in filt) + "."]
     first = next(iter(d["runs"].values()), None)
     if first and first.get("per_marker_mm"):
         L += ["", f"Per joint ({first['label']}, seed {seeds[0]}; raw / offsets removed, mm): " + ", ".join(
             f"{n.replace('_', ' ')} {first['per_marker_mm'][n]:.0f}/{first['offset_removed_per_marker_mm'][n]:.0f}"
             for n in first["per_marker_mm"]) + "."]
+    th = (first or {}).get("joint_thirds_over_seeds")
+    if th:
+        cols = np.array(list(th.values()))
+        L += ["", f"Per joint in each third of the recording ({first['label']}; offsets removed, mm, mean over the seeds "
+                  f"{', '.join(map(str, seeds))}):", "", "| joint | first third | second third | last third |",
+              "|---|---|---|---|"]
+        L += [f"| {n.replace('_', ' ')} | " + " | ".join(f"{x:.0f}" for x in v) + " |" for n, v in th.items()]
+        L.append("| **mean** | " + " | ".join(f"**{x:.1f}**" for x in np.nanmean(cols, axis=0)) + " |")
     if d.get("masks"):
         L += ["", "Masks of the default segmentation learnt from the import's background frames, against the peer's "
                   "stick figure (`isa_mocap_ros.eval.mask_quality`; share of the mask farther than 18 px from it / share "
                   "of its 5-px core missed / keypoints on the mask): " + "; ".join(
                       f"cam{m['view']} {m['beyond']:.2f} / {m['core_missed']:.2f} / {m['keypoints_on']:.2f}"
                       for m in d["masks"]) + "."]
+        if all("beyond_thirds" in m for m in d["masks"]):
+            L[-1] += " Beyond the person in the first / second / last third of the recording: " + "; ".join(
+                f"cam{m['view']} " + " / ".join(f"{x:.2f}" for x in m["beyond_thirds"]) for m in d["masks"]) + "."
     if d.get("wall_seconds") is not None:
         L += ["", f"The bench took {d['wall_seconds'] / 60:.1f} min (import, masks, every run)."]
     lk = d.get("lockstep")
@@ -276,4 +360,5 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="isa_mocap_real_"))
     res = collect(quick=args.quick, out=out, configs=configs, lockstep=lockstep, seeds=seeds)
     res["command"] = "isa-mocap bench real " + " ".join(sys.argv[3:])
+    res["_seconds"] = res.get("wall_seconds")     # the results page's "Time:" line (bench all sets it the same way)
     return write_result("real", res, args.json, render_markdown(res))

@@ -98,7 +98,8 @@ def register(sub) -> None:
     p.add_argument("--predictor", choices=("ar", "constant_pose", "constant_velocity"), default=None)
     p.add_argument("--prior", default=None, metavar="NPZ", help="Parzen prior file (with --prior-eta)")
     p.add_argument("--prior-eta", type=float, default=0.0, help="prior weight (0 = off)")
-    p.add_argument("--energy", choices=("fast", "exact"), default="fast", help="silhouette energy method")
+    p.add_argument("--energy", choices=("fast", "exact", "raster"), default="fast",
+                   help="silhouette energy method (raster: the scanline count, docs/energy.md; no compiled search)")
     for flag, kind, default, metavar, text in _TRACKER_OPTIONS:
         p.add_argument(flag, type=kind, default=default, metavar=metavar, help=text)
     p.add_argument("--no-hull", action="store_true",

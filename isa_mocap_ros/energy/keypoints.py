@@ -28,6 +28,7 @@ left/right labels of the detector are what separates front from back, which silh
 """
 from __future__ import annotations
 
+import copy
 from typing import Any, Sequence
 
 import numpy as np
@@ -83,6 +84,10 @@ class KeypointEnergy:
         weight ``(K,)`` (summing to 1).
     views : (K,) int ndarray
         Camera of each correspondence.
+    pixels : (K, 2) ndarray
+        The detected pixel of each correspondence (as given, distortion not removed).
+    confidences : (K,) ndarray
+        Each correspondence's detection confidence (the weights before they are normalized).
     n_evals : int
         Poses evaluated.
 
@@ -114,7 +119,7 @@ class KeypointEnergy:
                  if j in names]
         lm_idx = np.array([p[0] for p in pairs], dtype=np.int64)
         jt_idx = np.array([p[1] for p in pairs], dtype=np.int64)
-        joints, dirs, moms, w, views = [], [], [], [], []
+        joints, dirs, moms, w, views, pix = [], [], [], [], [], []
         for v, (entry, cam) in enumerate(zip(keypoints, self.cameras)):
             if entry is None:
                 continue
@@ -136,16 +141,34 @@ class KeypointEnergy:
             dirs.append(n)
             moms.append(m)
             w.append(c[ok])
+            pix.append(u[ok])
             views.append(np.full(int(ok.sum()), v, dtype=np.int64))
         cat = (lambda a, shape: np.concatenate(a) if a else np.zeros(shape))
         self.joints = cat(joints, (0,)).astype(np.int64)
         self.directions = np.ascontiguousarray(cat(dirs, (0, 3)))
         self.moments = np.ascontiguousarray(cat(moms, (0, 3)))
-        weights = cat(w, (0,))
-        self.weights = np.ascontiguousarray(weights / weights.sum() if len(weights) else weights)
+        self.confidences = cat(w, (0,))
+        self.pixels = cat(pix, (0, 2))
         self.views = cat(views, (0,)).astype(np.int64)
+        self._finish()
+
+    def _finish(self) -> None:
+        c = self.confidences
+        self.weights = np.ascontiguousarray(c / c.sum() if len(c) else c)
         self.n_correspondences = len(self.joints)
         self.n_evals = 0
+
+    def subset(self, keep: Any) -> "KeypointEnergy":
+        """A copy with only the correspondences where ``keep (K,)`` is true, weights normalized again (what a
+        screen of the detections against other evidence keeps: :mod:`isa_mocap_ros.tracking.keypoint_screen`)."""
+        keep = np.asarray(keep, dtype=bool)
+        if keep.shape != (self.n_correspondences,):
+            raise EnergyError(f"keep: expected shape ({self.n_correspondences},), received {keep.shape}")
+        out = copy.copy(self)
+        for name in ("joints", "directions", "moments", "confidences", "pixels", "views"):
+            setattr(out, name, np.ascontiguousarray(getattr(self, name)[keep]))
+        out._finish()
+        return out
 
     def distances(self, X: Any) -> np.ndarray:
         """``(n, K)`` point-to-ray distances ``err(x, i)`` (13.31) in metres; rows of non-finite poses are inf."""

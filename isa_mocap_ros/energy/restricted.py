@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from . import raster_kernel as _rk
 from . import silhouette_kernel as _k
 from ._checks import EnergyError, _check_poses
 
@@ -34,7 +35,8 @@ class RestrictedSilhouetteEnergy:
 
     Falls back to the full kernel (still checking the contract) when it would not pay or is not
     implemented: ``method="exact"``, a root coordinate (0-5) in ``coords``, or every capsule moving
-    (:attr:`full` is then True).
+    (:attr:`full` is then True). With ``method="raster"`` the fixed capsules' union bitmap is made once and
+    each pose ORs its moving capsules into a copy (:func:`.raster_kernel.raster_restricted`; the same bits).
 
     Contract: every finite row of ``X`` must equal ``x_base`` (exactly) outside ``coords``; a row that
     does not raises :class:`EnergyError` (checked per row in the kernel, cheaply, never skipped). Rows
@@ -90,8 +92,15 @@ class RestrictedSilhouetteEnergy:
             st = energy.restriction_cache[key] = _restriction_structure(energy, self.coords)
         (self._fixed, self._fixed_mask, self._fk_joints, self._cam_joints, self.moving_capsules, self._mov_ci,
          self._moving_ci, moving, structural_full) = st
-        self.full = energy.method != "fast" or structural_full
+        self.full = energy.method == "exact" or structural_full
+        self._raster = energy.method == "raster"
         if self.full:
+            return
+        if self._raster:        # the scanline kernel: the fixed capsules' bitmap once (raster_kernel)
+            body, views, raster = energy.kernel_args()
+            stage = _rk.RasterStage(*_rk.raster_restrict_prepare(x, body, views, raster, moving))
+            self._args = (_k.Restriction(x, self._fixed, self._fk_joints, self._cam_joints, self.moving_capsules,
+                                         self._mov_ci, self._moving_ci), body, views, raster, stage)
             return
         body, views, tmpl, fg = energy.kernel_args()
         stage = _k.Stage(*_k.restrict_prepare(x, body, views, tmpl, fg, moving))
@@ -108,6 +117,8 @@ class RestrictedSilhouetteEnergy:
 
     def coarse_kernel_args(self, second: bool = False) -> tuple:
         """:meth:`kernel_args` on the parent's coarse views (:meth:`SilhouetteEnergy.coarse_kernel_args`)."""
+        if self._raster:
+            raise EnergyError("coarse level: expected method 'fast', received 'raster' (no coarse level)")
         if self._coarse[second] is None:
             body, views, tmpl, fg = self.energy.coarse_kernel_args(second)
             if views is self._args[2]:
@@ -156,7 +167,8 @@ class RestrictedSilhouetteEnergy:
 
     def _fast(self, X: np.ndarray) -> np.ndarray:
         out = np.empty(X.shape[0])
-        _k.silhouette_restricted(X, *self._args, max(1, min(X.shape[0], self.energy.threads)), out)
+        kernel = _rk.raster_restricted if self._raster else _k.silhouette_restricted
+        kernel(X, *self._args, max(1, min(X.shape[0], self.energy.threads)), out)
         return out
 
     def __repr__(self) -> str:

@@ -33,6 +33,7 @@ import numpy as np
 from ..body import BodyModel, capsule_endpoints
 from ..vision import Camera
 from ..vision.camera import PixelAreas
+from . import raster_kernel as _rk
 from . import silhouette_kernel as _k
 from .coarse import coarse_views, view_subset
 from ._checks import EnergyError, _check_cameras, _check_model, _check_poses
@@ -159,9 +160,12 @@ class SilhouetteEnergy:
     masks : sequence of (H, W) uint8 (or bool) or None, optional
         One foreground mask per camera (nonzero = foreground); see :meth:`set_masks`. May be given
         later; evaluating before any masks are set raises :class:`EnergyError`.
-    method : {"fast", "exact"}
+    method : {"fast", "exact", "raster"}
         ``"fast"``: the compiled sampled estimate (numba, parallel over poses). ``"exact"``: Eq. 4
         per view by rasterizing with ``render_mask`` and counting pixels (slow; the reference).
+        ``"raster"``: Eq. 4 counted on the pixel grid from the projected hulls rasterized by scanlines
+        (compiled, no sample; :mod:`.raster_kernel`), every ``downsample``-th pixel row; pinhole cameras
+        and ``core_px <= 1`` only. Not used by the tracker's compiled search or restrictions (full kernel).
     downsample : int
         Fast method only: term 1 reads the foreground **coverage** of the mask resized by
         ``1 / downsample`` with area averaging (``cv2.INTER_AREA``; the fraction of foreground in
@@ -219,8 +223,8 @@ class SilhouetteEnergy:
                  rng: np.random.Generator | None = None) -> None:
         self.model = _check_model(model)
         self.cameras = _check_cameras(cameras)
-        if method not in ("fast", "exact"):
-            raise EnergyError(f"method: expected 'fast' or 'exact', received {method!r}")
+        if method not in ("fast", "exact", "raster"):
+            raise EnergyError(f"method: expected 'fast', 'exact' or 'raster', received {method!r}")
         self.method = method
         for name, value, least in (("downsample", downsample, 1), ("n_model_points", n_model_points, 1),
                                    ("n_mask_points", n_mask_points, 0)):
@@ -236,6 +240,10 @@ class SilhouetteEnergy:
         if core_px > 1 and method == "fast" and n_mask_points == 0:
             raise EnergyError("core_px: expected n_mask_points > 0 with core_px > 1 (the fast method weighs the "
                               "sampled foreground pixels), received n_mask_points=0")
+        if method == "raster" and (core_px > 1 or any(c.has_distortion for c in self.cameras)):
+            raise EnergyError("method: 'raster' needs pinhole cameras and core_px <= 1, received "
+                              + (f"core_px={core_px!r}" if core_px > 1 else "lens distortion in camera "
+                                 + ", ".join(c.name for c in self.cameras if c.has_distortion)) + "; use 'fast'")
         self.downsample = int(downsample)
         self.n_mask_points = int(n_mask_points)
         self.core_px = float(core_px)
@@ -308,7 +316,11 @@ class SilhouetteEnergy:
                 skipped.append((v, problem))
         F = {v: _foreground(masks[v]) for v in used}
         core = {v: core_weights(F[v], self.core_px) for v in used}
-        static = self._fast_static(used, F) if self.method == "fast" and used else None
+        static = None
+        if self.method == "fast" and used:
+            static = self._fast_static(used, F)
+        elif self.method == "raster" and used:
+            static = _rk.raster_static([self.cameras[v] for v in used], [F[v] for v in used], self.downsample)
         return PreparedMasks(cameras=tuple(self.cameras), method=self.method, downsample=self.downsample,
                              core_px=self.core_px, used=tuple(used), skipped=tuple(skipped), F=F,
                              n_fg={v: int(np.count_nonzero(F[v])) for v in used}, core=core, static=static)
@@ -354,6 +366,10 @@ class SilhouetteEnergy:
             # the kernels' argument bundles of these masks (_k.Views, _k.Foreground)
             frame["views"] = _k.Views(*(frame[k] for k in _k.Views._fields))
             frame["fg"] = _k.Foreground(*(frame[k] for k in _k.Foreground._fields))
+        elif self.method == "raster":
+            frame.update(pre.static)
+            frame["views"] = _k.Views(*(frame[k] for k in _k.Views._fields))
+            frame["raster"] = _rk.Raster(*(frame[k] for k in _rk.Raster._fields))
         self._frame = frame
         self._threads = numba.get_num_threads()      # per set_masks: the call costs ~20 µs
         self.skipped_views, self._used, self.n_views_used = skipped, used, len(used)
@@ -460,11 +476,11 @@ class SilhouetteEnergy:
         n = X.shape[0]
         self.n_evals += n
         if ok.all():
-            return self._fast(X) if self.method == "fast" else self._exact(X)
+            return self._exact(X) if self.method == "exact" else self._fast(X)
         out = np.full(n, np.inf)
         if ok.any():
             Xg = np.ascontiguousarray(X[ok])
-            out[ok] = self._fast(Xg) if self.method == "fast" else self._exact(Xg)
+            out[ok] = self._exact(Xg) if self.method == "exact" else self._fast(Xg)
         return out
 
     def _exact(self, X: np.ndarray) -> np.ndarray:
@@ -510,6 +526,8 @@ class SilhouetteEnergy:
         ``n_chunks`` for the current masks, its bundles ``(Body, Views, Template, Foreground)`` (also
         what the tracker's compiled search passes it)."""
         fr = self._frame
+        if self.method == "raster":
+            return self._body, fr["views"], fr["raster"]
         return self._body, fr["views"], self._template_args, fr["fg"]
 
     def coarse_kernel_args(self, second: bool = False) -> tuple:
@@ -519,6 +537,8 @@ class SilhouetteEnergy:
         fewer views at about half the cost (all the views' bundles with fewer than three usable). Built once per
         frame. For the compiled search's early generations (``SearchConfig.coarse_fraction``, docs/energy.md)."""
         fr = self._frame
+        if self.method != "fast":
+            raise EnergyError(f"coarse level: expected method 'fast', received {self.method!r}")
         key = "coarse2" if second else "coarse"
         if key not in fr:
             k = self.coarse_views(second)
@@ -536,7 +556,11 @@ class SilhouetteEnergy:
         n_chunks = max(1, min(X.shape[0], self._threads))
         # a few poses (a stage's final pose, the contour stage's pair) on this thread: a parallel launch
         # costs more than they do (the same bits either way)
-        kernel = _k.silhouette_batch_serial if X.shape[0] < _k.SERIAL_BELOW else _k.silhouette_batch
+        serial = X.shape[0] < _k.SERIAL_BELOW
+        if self.method == "raster":
+            (_rk.raster_batch_serial if serial else _rk.raster_batch)(X, *self._kernel_args(), n_chunks, out)
+            return out
+        kernel = _k.silhouette_batch_serial if serial else _k.silhouette_batch
         kernel(X, *self._kernel_args(), n_chunks, out)
         return out
 

@@ -69,12 +69,20 @@ class EstimatorIntake:
             return next(reversed(store.values()))
         return store.get(frame)
 
-    def _cameras(self) -> list[Camera] | None:
+    def _cameras(self, frame_set=None) -> list[Camera] | None:
+        """The tracker's cameras: each view's camera_info that vouched for ``frame_set``'s mask (the view's last
+        accepted one for a view without a mask in the set), and its extrinsics. The set's own: the last accepted
+        one could be a lone pair's that came after the set (one view's mask and camera_info at a stamp of their own)."""
         poses = [self._pose_of(v) for v in range(self.n_views)]
-        if any(i is None for i in self._intrinsics) or any(p is None for p in poses):
+        intrinsics = list(self._intrinsics)
+        if frame_set is not None:
+            for v, s in enumerate(frame_set.stamps_ns):
+                if s is not None and s in self._set_infos[v]:
+                    intrinsics[v] = self._set_infos[v][s]
+        if any(i is None for i in intrinsics) or any(p is None for p in poses):
             return None
         cams = []
-        for v, (intr, (R, t)) in enumerate(zip(self._intrinsics, poses)):
+        for v, (intr, (R, t)) in enumerate(zip(intrinsics, poses)):
             # extrinsics carry the camera pose in the world (TF: parent world, child optical frame)
             cams.append(Camera.from_intrinsics_and_pose(f"cam{v}", K=intr.K, D=intr.D, width=intr.width,
                                                         height=intr.height, R_wc=R, t_wc=t))
@@ -102,6 +110,10 @@ class EstimatorIntake:
                                  r.text.replace(": image", ": mask", 1))
         for a in accepted:
             self._intrinsics[v] = a.info
+            infos = self._set_infos[v]         # by stamp: a set's cameras are its own masks' (_cameras)
+            infos[a.stamp_ns] = a.info
+            while len(infos) > 64:
+                del infos[min(infos)]
             if a.changed and self.tracker is not None:
                 self._camera_changed = f"cam{v}: {a.changed}"
                 self.get_logger().warn(f"cam{v}: the camera changed ({a.changed}; its camera_info and mask of stamp "

@@ -29,7 +29,7 @@ image of the same stamp agree on (frame id and size; the image's encoding with i
   that view's background learning, with one log line;
 * a pair passes the gate at any stamp, so the prediction node's stream rule follows the accepted
   images (:class:`~isa_mocap_ros.intake.StreamForks`): an image more than ``max_stamp_gap_s`` ahead of the
-  view's last one, or behind it, is *far*; it is segmented at once (a lockstep replay waits for its
+  view's last one, or behind it by more, is *far*; it is segmented at once (a lockstep replay waits for its
   mask) but on a new background model of its own, which the view keeps only if the next image
   continues the far one's stamp (the stream restarted there: a bag replayed or looped, a camera
   restarted; one log line), and forgets when the next image continues the stream. So one view's lone
@@ -131,7 +131,8 @@ class SegmentationNode(Node):
         self.use_info = declare(self, "use_camera_info", True, "check images against cam<i>/camera_info "
                                 "(false: a camera without one; the first image fixes the view's size)")
         gap_s = declare(self, "max_stamp_gap_s", 5.0, "an image farther than this from the view's last one in "
-                        "time is dropped unless its own camera_info comes with it (0 = no check)", lo=0.0, hi=1e9)
+                        "time is dropped unless its own camera_info comes with it, and then segmented on a background "
+                        "model of its own that the view keeps only if the next image follows it (0 = no check)", lo=0.0, hi=1e9)
         depth = declare(self, "input_queue", 10, "images waiting for the camera_info of their stamp (and camera "
                         "infos for their image), per view", lo=1, hi=1000)
         self.config = SegmentationConfig(**values)

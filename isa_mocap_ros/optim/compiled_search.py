@@ -27,6 +27,7 @@ from numba.extending import overload
 
 from isa_mocap_ros.body import kinematics as _kinematics
 from isa_mocap_ros.energy import keypoint_kernel as _kp
+from isa_mocap_ros.energy import raster_kernel as _rk
 from isa_mocap_ros.energy import silhouette_kernel as _k
 from isa_mocap_ros.optim import _fast, _fast_so3
 from isa_mocap_ros.optim._base import GenerationInfo, Result
@@ -36,7 +37,7 @@ __all__ = ["supported", "run_hisa", "HisaRun", "supported_flat", "run_isa", "rot
 
 
 #: The modules whose compiled functions the functions here call (their hashes key this module's numba cache).
-DEPENDENCIES = (_k, _kp, _kinematics, _fast, _fast_so3)
+DEPENDENCIES = (_k, _rk, _kp, _kinematics, _fast, _fast_so3)
 
 
 def _register_dependent_cache() -> None:
@@ -118,7 +119,7 @@ def supported(opt, energy, prior_active: bool) -> bool:
     from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
     from isa_mocap_ros.optim import Hierarchical
 
-    if prior_active or type(energy) is not SilhouetteEnergy or energy.method != "fast" or not energy.has_masks:
+    if prior_active or type(energy) is not SilhouetteEnergy or energy.method == "exact" or not energy.has_masks:
         return False
     if type(opt) is not Hierarchical or getattr(opt, "inner_name", None) != "isa" or opt.n_iter != 0:
         return False
@@ -229,13 +230,16 @@ def _embed(xbase, idx, Xs):  # pragma: no cover - compiled
 
 def _kernel(X, kargs, n_chunks, out):  # pragma: no cover - compiled only (see the overload below)
     """``silhouette_batch`` or ``silhouette_restricted`` of ``X`` with their arguments ``kargs`` (between
-    the poses and ``n_chunks``), told apart by the number of arguments when numba compiles the caller."""
+    the poses and ``n_chunks``), or the scanline kernels ``raster_batch`` / ``raster_restricted``, told apart by
+    the number of arguments when numba compiles the caller."""
     raise NotImplementedError("compiled_search._kernel is for compiled code only")
 
 
 _N_BATCH = _k.silhouette_batch.py_func.__code__.co_argcount - 3          # without X, n_chunks, out
 _N_RESTRICTED = _k.silhouette_restricted.py_func.__code__.co_argcount - 3
-assert _N_BATCH != _N_RESTRICTED
+_N_RASTER = _rk.raster_batch.py_func.__code__.co_argcount - 3
+_N_RASTER_RESTRICTED = _rk.raster_restricted.py_func.__code__.co_argcount - 3
+assert len({_N_BATCH, _N_RESTRICTED, _N_RASTER, _N_RASTER_RESTRICTED}) == 4
 
 
 @overload(_kernel)
@@ -251,6 +255,14 @@ def _kernel_overload(X, kargs, n_chunks, out):
         def batch(X, kargs, n_chunks, out):
             _k.silhouette_batch(X, *kargs, n_chunks, out)
         return batch
+    if len(kargs) == _N_RASTER_RESTRICTED:
+        def raster_restricted(X, kargs, n_chunks, out):
+            _rk.raster_restricted(X, *kargs, n_chunks, out)
+        return raster_restricted
+    if len(kargs) == _N_RASTER:
+        def raster(X, kargs, n_chunks, out):
+            _rk.raster_batch(X, *kargs, n_chunks, out)
+        return raster
     return None
 
 
@@ -421,7 +433,7 @@ def search(opt, energy, max_evals: int, *, extra_terms: bool = False, keypoints=
     from isa_mocap_ros.optim import Hierarchical
 
     if type(opt) is Hierarchical:
-        if not supported(opt, energy, extra_terms):
+        if not supported(opt, energy, extra_terms) or (coarse_fraction > 0 and energy.method != "fast"):
             return None
         run = HisaRun(opt, energy, max_evals, keypoints, coarse_fraction)
         return run if paused else run.advance().result()

@@ -221,8 +221,8 @@ class ObjectiveConfig:
 
     Attributes
     ----------
-    energy : {"fast", "exact"}
-        Silhouette energy: compiled sampled kernel (default) or the exact raster reference.
+    energy : {"fast", "exact", "raster"}
+        Silhouette energy: compiled sampled kernel (default), the exact raster reference, or the scanline count.
     downsample : int
         Mask downsampling of the fast energy (1 = none).
     n_model_points : int
@@ -249,7 +249,7 @@ class ObjectiveConfig:
     prior_file: str = ""
 
     def __post_init__(self) -> None:
-        check_choice("energy", self.energy, ("fast", "exact"), error=TrackerError)
+        check_choice("energy", self.energy, ("fast", "exact", "raster"), error=TrackerError)
         _number("downsample", self.downsample, lo=1, integer=True)
         _number("n_model_points", self.n_model_points, lo=1, integer=True)
         _number("n_mask_points", self.n_mask_points, lo=0, integer=True)

@@ -14,7 +14,12 @@ from isa_mocap_ros.optim import compiled_search
 from . import frame_masks, objective
 from .config import INIT_SPREAD_SCALE, TrackerError
 from .init import InitError, initial_pose
-from .plan import FrameBudget
+from .plan import FrameBudget, flat_algorithm
+
+#: Share of the frame's evaluations the first frame's polish (of the winner and of the heading check's rival,
+#: ``init_polish``) searches with: at half the budget the initialized frame costs ~45 CPU ms less (bags/demo) and
+#: the tracks of 5 sequences x 3 seeds were as accurate (docs/history/issue35_speed.md, session 26)
+POLISH_SHARE = 0.5
 
 
 def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int = 0,
@@ -76,7 +81,8 @@ def initial_grid(tr, ctx):
     the masks' rays, heading × standing-pose grid, root refinements (stream 1); raises :class:`.init.InitError`."""
     cfg = tr.config
     return initial_pose(tr.model, tr.cameras, ctx.masks, init_energy_fn(tr, ctx), rng=ctx.rng(1),
-                        n_yaw=cfg.first_frame.init_yaw_steps, refine_evals=cfg.first_frame.init_refine_evals)
+                        n_yaw=cfg.first_frame.init_yaw_steps, refine_evals=cfg.first_frame.init_refine_evals,
+                        refine_optimizer=flat_algorithm(tr))
 
 
 def init_energy_fn(tr, ctx):
@@ -147,12 +153,18 @@ def initial_runs(tr, ctx, starts: list, notes: list[str] | None, budget: FrameBu
     return out, n_pruned + sum(res.n_evals for _, res, _ in out)
 
 
+def polish_budget(budget: FrameBudget) -> FrameBudget:
+    """The polish's budget: :data:`POLISH_SHARE` of the frame's evaluations, at least 300 (or the frame's when it
+    has fewer), the frame's contour stage."""
+    return FrameBudget(max(int(budget.evals * POLISH_SHARE), min(budget.evals, 300)), budget.contour)
+
+
 def polish(tr, ctx, x: np.ndarray, energy: float, stream: int, notes):
     """``config.first_frame.init_polish``'s search of the initialized frame's pose ``x`` (energy ``energy``) as a
-    tracked frame, every stage, stream ``[seed, frame, stream]``: ``(result or None if the optimizer refused, the
-    lower-energy pose of the two, its energy)``; a refusal is noted in ``notes`` (when given)."""
+    tracked frame, every stage, on :func:`polish_budget`, stream ``[seed, frame, stream]``: ``(result or None if the
+    optimizer refused, the lower-energy pose of the two, its energy)``; a refusal is noted in ``notes`` (when given)."""
     try:
-        res = tr.optimize(ctx, x, ctx.rng(stream), notes=notes)
+        res = tr.optimize(ctx, x, ctx.rng(stream), notes=notes, budget=polish_budget(ctx.budget))
     except ValueError as exc:
         if notes is not None:
             notes.append(f"initialization polish failed: {exc}")

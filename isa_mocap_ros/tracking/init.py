@@ -20,12 +20,17 @@ Automatic initialization, in three steps:
 2. **Yaw and posture.** A coarse global search: the energy of ``n_yaw`` headings (evenly spaced
    over 2π) × a few standing variants (:data:`STANDING_VARIANTS`: rest, arms out, left stride,
    right stride) at that root, in one batch.
-3. **Refinement** (optional, ``refine_evals > 0``): a short CMA-ES run (library optimizer) over the
-   6 root DOF only (posture kept), from the best grid candidate of each of four heading sectors
-   (the best heading + 0°, 90°, 180°, 270°, each ±45°: a standing silhouette is nearly symmetric
-   front/back, and at low resolution side-on and frontal views are confused too), spreads 0.1 m (x, y), 0.05 m (z), 0.1 rad (tilt), 0.2 rad
-   (yaw); the lower final energy wins. The joint angles are left to the tracker's first frame: a
-   few hundred evaluations in all 39 DOF did not improve on the grid candidate (measured).
+3. **Refinement** (optional, ``refine_evals > 0``): a short run of a flat optimizer over the 6 root DOF
+   only (posture kept), from the best grid candidate of each of four heading sectors (the best heading
+   + 0°, 90°, 180°, 270°, each ±45°: a standing silhouette is nearly symmetric front/back, and at low
+   resolution side-on and frontal views are confused too), spreads 0.1 m (x, y), 0.05 m (z), 0.1 rad
+   (tilt), 0.2 rad (yaw); the lower final energy wins. The optimizer is ``refine_optimizer``: the library
+   CMA-ES by default, the tracker's own flat algorithm from the tracker (for h-isa a compiled ISA,
+   :func:`~isa_mocap_ros.optim.compiled_search.search`, in whole generations: ~half the CPU time of CMA-ES's
+   ~45 Python generations a run, the same accuracy on 5 sequences × 3 seeds, docs/history/issue35_speed.md).
+   Without refinement the four sector candidates are returned as scored. The joint angles are left to the
+   tracker's first frame: a few hundred evaluations in all 39 DOF did not improve on the grid candidate
+   (measured).
 
 The result keeps the energy and the number of evaluations spent, so the tracker can report them.
 """
@@ -259,7 +264,8 @@ def wrap_angle(a):
 
 
 def initial_pose(model, cameras: Sequence, masks: Sequence, energy: Callable, *, rng: np.random.Generator | None = None,
-                 n_yaw: int = 24, variants=None, refine_evals: int = 400) -> InitResult:
+                 n_yaw: int = 24, variants=None, refine_evals: int = 400,
+                 refine_optimizer: tuple = ("cmaes", {})) -> InitResult:
     """Automatic initial pose from foreground masks (see the module docstring).
 
     Parameters
@@ -278,7 +284,11 @@ def initial_pose(model, cameras: Sequence, masks: Sequence, energy: Callable, *,
     variants : mapping, optional
         Standing variants (default :data:`STANDING_VARIANTS`).
     refine_evals : int
-        Evaluations per refinement run (four runs; 0 = no refinement).
+        Evaluations per refinement run (four runs; 0 = no refinement; other than CMA-ES rounded down to
+        whole generations).
+    refine_optimizer : (str, mapping)
+        The refinement's flat optimizer and its parameters (:func:`~isa_mocap_ros.optim.make_optimizer`;
+        default the library CMA-ES).
 
     Returns
     -------
@@ -307,22 +317,21 @@ def initial_pose(model, cameras: Sequence, masks: Sequence, energy: Callable, *,
     best = int(order[0])
     yaw0, variant = labels[best]
     x_best, e_best = X[best].copy(), float(E[best])
+    # one start per heading sector (best yaw + 0, 90, 180, 270 deg, each +-45 deg): the
+    # silhouettes of opposite and of side-on headings are easily confused at low resolution
+    starts = []
+    for sector in range(4):
+        centre = yaw0 + sector * np.pi / 2
+        for i in order:
+            if abs(wrap_angle(labels[i][0] - centre)) <= np.pi / 4 + 1e-9 and np.isfinite(E[i]):
+                starts.append(int(i))
+                break
+    cands = []
     if refine_evals > 0:
-        from isa_mocap_ros.optim import make_optimizer, minimize
+        from isa_mocap_ros.optim import compiled_search, make_optimizer, minimize
 
-        # one start per heading sector (best yaw + 0, 90, 180, 270 deg, each +-45 deg): the
-        # silhouettes of opposite and of side-on headings are easily confused at low resolution
-        starts = []
-        for sector in range(4):
-            centre = yaw0 + sector * np.pi / 2
-            for i in order:
-                if abs(wrap_angle(labels[i][0] - centre)) <= np.pi / 4 + 1e-9 and np.isfinite(E[i]):
-                    starts.append(int(i))
-                    break
         spread = np.array([0.1, 0.1, 0.05, 0.1, 0.1, 0.2])
         bounds = (model.lower[:6], model.upper[:6])
-        e_best = np.inf
-        cands = []
         for i in starts:
             base = X[i]
 
@@ -331,8 +340,17 @@ def initial_pose(model, cameras: Sequence, masks: Sequence, energy: Callable, *,
                 Xf[:, :6] = R6
                 return energy(Xf)
 
-            opt = make_optimizer("cmaes", base[:6], spread, rng=rng, bounds=bounds)
-            res = minimize(opt, root_energy, max_evals=int(refine_evals))
+            name, params = refine_optimizer
+            if name == "cmaes":
+                opt = make_optimizer(name, base[:6], spread, rng=rng, bounds=bounds, **dict(params))
+                res = minimize(opt, root_energy, max_evals=int(refine_evals))
+            else:
+                opt = make_optimizer(name, base[:6], spread, rng=rng, bounds=bounds, rotation_blocks=((3, 4, 5),),
+                                     **dict(params))
+                evals = max(opt.generation_size, int(refine_evals) // opt.generation_size * opt.generation_size)
+                res = compiled_search.search(opt, root_energy, evals)
+                if res is None:           # not covered by the compiled path (the same numbers)
+                    res = minimize(opt, root_energy, max_evals=evals)
             n_evals += res.n_evals
             x_ref = base.copy()
             x_ref[:6] = res.best_x
@@ -340,10 +358,10 @@ def initial_pose(model, cameras: Sequence, masks: Sequence, energy: Callable, *,
             x = np.array(x, dtype=float)
             x[3:6] = log_so3(exp_so3(x[3:6]))
             cands.append((x, e))
-            if e < e_best:
-                e_best, x_best = e, np.array(x, dtype=float)
-        cands.sort(key=lambda t: t[1])
     else:
+        cands = [(np.array(X[i], dtype=float), float(E[i])) for i in starts]
+    cands.sort(key=lambda t: t[1])
+    if not cands:
         cands = [(x_best, e_best)]
     # keep the rotation vector short (|w| <= pi) so the search around it starts well-conditioned
     x_best = cands[0][0].copy()

@@ -23,7 +23,7 @@ from isa_mocap_ros.geometry import nearest_rotvec
 
 from isa_mocap_ros.optim import compiled_search
 
-from . import first_frame, frame_masks, frame_prediction, heading, objective, plan
+from . import first_frame, frame_masks, frame_prediction, heading, keypoint_screen, objective, plan
 from . import stages as frame_stages
 from .config import (DEFAULT_PARAMS, JOINT_SPREAD_RAD, ROOT_ROTATION_RADIUS_RAD, ROOT_ROTATION_SPREAD_RAD,
                      ROOT_TRANSLATION_SPREAD_M, PREDICTORS, FrameResult, TrackerConfig, TrackerError,
@@ -296,9 +296,9 @@ class Tracker:
         return opt, budget, (share, torso, limbs, contour), (lo, hi, spread, base)
 
     def optimize(self, ctx: FrameContext, pred: np.ndarray, rng: np.random.Generator, *, spread_scale: float = 1.0,
-                 notes=None, stages: bool = True):
-        """One optimizer run of the frame's budget ``ctx.budget`` on its objective around ``pred`` (raises the
-        optimizer's errors), then
+                 notes=None, stages: bool = True, budget: FrameBudget | None = None):
+        """One optimizer run of the frame's budget ``ctx.budget`` (or ``budget``: the first frame's polish) on its
+        objective around ``pred`` (raises the optimizer's errors), then
         the pelvis stage (``config.stages.pelvis_fraction`` of the budget), the torso stage
         (``config.stages.torso_fraction``), the limb stage (``config.stages.limb_proposals``) and the contour stage
         (``config.stages.contour_iterations``), each also given what the searches before it left unspent
@@ -311,8 +311,8 @@ class Tracker:
         polish (``config.first_frame.init_polish``) then searches the winner with every stage."""
         from isa_mocap_ros.optim import minimize
 
-        opt, budget, stage_shares, (lo, hi, spread, base) = self.plan_search(pred, rng, ctx.budget, spread_scale,
-                                                                             notes, stages)
+        opt, budget, stage_shares, (lo, hi, spread, base) = self.plan_search(
+            pred, rng, ctx.budget if budget is None else budget, spread_scale, notes, stages)
         share, torso, limbs, contour = stage_shares
         res = compiled_search.search(opt, self.energy, budget, extra_terms=ctx.objective.extra_terms,
                                      keypoints=ctx.objective.weighted_keypoints,
@@ -478,6 +478,11 @@ class Tracker:
         notes.extend(checked)
         # the mask gate and the visual-hull filter around the prediction (made there when they run)
         frame_masks.filter_masks(self, ctx)
+        # the keypoints the views' evidence contradicts go (.keypoint_screen): off the filtered foreground or
+        # outside the other views' consensus
+        ctx.objective.keypoint_term, note = keypoint_screen.screen(ctx.objective.keypoint_term, ctx.masks)
+        if note:
+            notes.append(note)
         if cfg.objective.view_weights and self.track.last is not None and any(m is not None for m in ctx.masks):
             # Eq. 5's view weights (config.objective.view_weights): the share of the predicted body each view sees
             ctx.weights = visible_shares(self.model, self.cameras, frame_prediction.prediction(self, ctx))
