@@ -14,6 +14,10 @@ the project's own silhouette energy (EA-vs-PF Eq. 4-5), tracker and CMA-ES (§4.
    mean silhouette energy over the ``n_frames`` calibration frames (plus a weak pull of the log
    factors towards 0, which only decides directions the images leave flat).
 
+The calibration frames' masks are first cut to the largest blob of each frame's visual hull (what the
+tracker does to its first frame, :mod:`.init_hull`): an occluder drawn into one image or pixel noise
+that no other view confirms does not enter the shape fit (``masks="raw"`` keeps them as given).
+
 The shape is a few numbers, not free lengths: an overall scale, length factors of thigh, shin,
 upper arm, forearm, trunk and neck/head, hip and shoulder widths, and radius factors of trunk, arms
 and legs; both sides share them.
@@ -91,6 +95,8 @@ class ShapeCalibrationConfig:
     regularization: float = 2e-3    # weight of sum(log factor^2): decides only flat directions
     arm_split_prior: float = 0.05   # weight of (log upper_arm - log forearm)^2: a straight arm shows only the sum
     restarts: int = 1               # whole calibrations from other seeds, the lowest energy kept (x cost each)
+    masks: str = "hull"             # the calibration frames' masks: "hull" = cut to the visual hull's person blob
+                                    # (tracking/init_hull.py: occluders and noise no other view confirms go), "raw"
     seed: int = 0                   # all random streams derive from it
 
     def __post_init__(self):
@@ -101,6 +107,8 @@ class ShapeCalibrationConfig:
                 raise ShapeCalibrationError(f"{name}: expected an integer >= 1, received {v!r}")
         if not (np.isfinite(self.translation_m) and self.translation_m > 0):
             raise ShapeCalibrationError(f"translation_m: expected a number > 0, received {self.translation_m!r}")
+        if self.masks not in ("hull", "raw"):
+            raise ShapeCalibrationError(f"masks: expected 'hull' or 'raw', received {self.masks!r}")
         for name in ("regularization", "arm_split_prior"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
@@ -296,6 +304,27 @@ def _prepared_masks(dof, cameras, masks, cfg: ShapeCalibrationConfig) -> list:
     return [f.prepare_masks(m) for m in masks]
 
 
+def _hull_masks(masks_per_frame, cameras) -> tuple[list, str | None]:
+    """Each frame's masks cut to the largest blob of its visual hull (:func:`.init_hull.person_masks`, what the
+    tracker does to its first frame): foreground one view alone reports (an occluder drawn into one image, pixel
+    noise) does not enter the shape fit. A view left empty becomes None. Returns the masks and a note on the share
+    of foreground removed (None when nothing was)."""
+    from .init_hull import person_masks
+
+    out, cut, total = [], 0, 0
+    for masks in masks_per_frame:
+        kept, _ = person_masks(masks, cameras)
+        for m, k in zip(masks, kept):
+            if m is not None:
+                total += int(np.count_nonzero(m))
+                cut += int(np.count_nonzero(m)) - int(np.count_nonzero(k))
+        out.append([None if k is None or not np.any(k) else k for k in kept])
+    if not cut:
+        return out, None
+    return out, (f"calibration masks: the visual hull's person blob kept; {cut} of {total} foreground pixels "
+                 f"({100 * cut / max(total, 1):.1f} %) removed over {len(out)} frames")
+
+
 def _tracker(model, cameras, tracker_config):
     from .tracker import Tracker
 
@@ -312,9 +341,11 @@ def calibrate_shape(dof: int, cameras: Sequence, frames: Sequence[tuple[int, Seq
     dof : {18, 28, 39}
         Tracking model.
     cameras : sequence of Camera
-    frames : sequence of (frame key, masks)
+    frames : sequence of (frame key, masks) or (frame key, masks, keypoints)
         Consecutive frames from the first the person is in view, masks one per camera (None for a
-        missing view); the first ``config.window_frames`` are used.
+        missing view); the first ``config.window_frames`` are used. ``keypoints`` (per camera ``(uv (33, 2),
+        confidence (33,))`` or None, as :meth:`.tracker.Tracker.step` takes them) enter the pose fits when
+        ``tracker_config`` weighs the keypoint term.
     tracker_config : TrackerConfig, optional
         Settings of the pose fits (default ``TrackerConfig.from_flat(seed=config.seed)``).
     config : ShapeCalibrationConfig
@@ -334,7 +365,7 @@ def calibrate_shape(dof: int, cameras: Sequence, frames: Sequence[tuple[int, Seq
 
     if not isinstance(config, ShapeCalibrationConfig):
         raise ShapeCalibrationError(f"config: expected a ShapeCalibrationConfig, received {type(config).__name__}")
-    frames = list(frames)[:config.window_frames]
+    frames = [(f[0], f[1], f[2] if len(f) > 2 else None) for f in list(frames)[:config.window_frames]]
     if not frames:
         raise ShapeCalibrationError("frames: expected at least one frame with masks, received none")
     base = default_shape() if base_shape is None else (
@@ -351,7 +382,7 @@ def calibrate_shape(dof: int, cameras: Sequence, frames: Sequence[tuple[int, Seq
         cfg_r = dataclasses.replace(config, seed=seed, restarts=1)
         say(f"shape calibration restart {r + 1}/{config.restarts} (seed {seed})")
         res = _calibrate_once(dof, cameras, frames, tcfg.replace(seed=tcfg.search.seed + 7919 * r), cfg_r, base, say)
-        masks_of = {int(k): m for k, m in frames}
+        masks_of = {int(k): m for k, m, _ in frames}
         judge = _ShapeEnergy(dof, base, cameras, _prepared_masks(dof, cameras, [masks_of[k] for k in res.frame_keys],
                                                                  config), res.poses, config, [config.seed, 33, 2])
         z = np.concatenate([np.log([res.params[n] for n, _, _ in SHAPE_PARAMS]), np.zeros(len(res.poses))])
@@ -376,8 +407,8 @@ def _calibrate_once(dof, cameras, frames, tcfg, config, base, say) -> ShapeCalib
     tr = _tracker(model, cameras, tcfg)
     poses: dict[int, np.ndarray] = {}
     energies: dict[int, float] = {}
-    for key, masks in frames:
-        r = tr.step(masks, int(key))
+    for key, masks, kp in frames:
+        r = tr.step(masks, int(key), keypoints=kp)
         if r.x is not None and np.isfinite(r.energy):
             poses[int(key)], energies[int(key)] = np.asarray(r.x, dtype=float), float(r.energy)
     if not poses:
@@ -386,8 +417,13 @@ def _calibrate_once(dof, cameras, frames, tcfg, config, base, say) -> ShapeCalib
     keys = sorted(poses)
     pick = np.unique(np.round(np.linspace(0, len(keys) - 1, min(config.n_frames, len(keys)))).astype(int))
     cal_keys = [keys[i] for i in pick]
-    masks_of = {int(k): m for k, m in frames}
-    cal_raw = [masks_of[k] for k in cal_keys]                    # the tracker's
+    masks_of = {int(k): m for k, m, _ in frames}
+    kps_of = {int(k): kp for k, _, kp in frames}
+    cal_raw = [masks_of[k] for k in cal_keys]     # the pose fits' (the tracker filters them further) and the shape fit's
+    if config.masks == "hull":                    # what one view alone reports stays out of both
+        cal_raw, note = _hull_masks(cal_raw, cameras)
+        if note:
+            notes.append(note)
     cal_masks = _prepared_masks(dof, cameras, cal_raw, config)     # the shape fit's energies'
     X = np.array([poses[k] for k in cal_keys])
     P = len(SHAPE_PARAMS)
@@ -412,8 +448,8 @@ def _calibrate_once(dof, cameras, frames, tcfg, config, base, say) -> ShapeCalib
                 # (a calibration frame keeps its last pose when that fits the new shape better)
                 tr = _tracker(model, cameras, tcfg)
                 judge = _ShapeEnergy(dof, base, cameras, cal_masks, X, config, energy_seed).frame_energy
-                for key, masks in frames:
-                    r = tr.step(masks, int(key))
+                for key, masks, kp in frames:
+                    r = tr.step(masks, int(key), keypoints=kp)
                     if int(key) in cal_keys and r.x is not None and np.all(np.isfinite(r.x)):
                         i = cal_keys.index(int(key))
                         if judge(model, i, r.x) < judge(model, i, X[i]):
@@ -427,7 +463,8 @@ def _calibrate_once(dof, cameras, frames, tcfg, config, base, say) -> ShapeCalib
                     raise ShapeCalibrationError(f"pose fit of frame {k}: {exc}") from None
                 for j in range(config.pose_steps):
                     # the frame key picks the random stream: one per (frame, round, step)
-                    r = tr.step(masks, int(k) + 7919 * (rnd * config.pose_steps + j + 1), prediction=X[i])
+                    r = tr.step(masks, int(k) + 7919 * (rnd * config.pose_steps + j + 1), prediction=X[i],
+                                keypoints=kps_of[k])
                     if r.x is not None and np.all(np.isfinite(r.x)):
                         X[i] = r.x
         fe = _ShapeEnergy(dof, base, cameras, cal_masks, X, config, energy_seed, coords)
