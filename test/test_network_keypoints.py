@@ -77,7 +77,13 @@ def test_lockstep_run_with_keypoints_equals_offline_track_under_a_fuzzer(landmar
 
     log = (tmp_path / "run" / "nodes.log").read_text()
     assert "Traceback" not in log and "[ERROR]" not in log, log[-3000:]
-    for text in ("cam0/keypoints dropped: PolygonStamped.polygon.points", "z of point",
-                 "keypoints dropped: stamp", "keypoints_skipped dropped: stamp"):
-        assert text in log.replace("cam1/", "cam0/").replace("cam2/", "cam0/").replace("cam3/", "cam0/"), text
+    log0 = log.replace("cam1/", "cam0/").replace("cam2/", "cam0/").replace("cam3/", "cam0/")
+    for text in ("cam0/keypoints dropped: PolygonStamped.polygon.points", "z of point"):
+        assert text in log0, text
+    # a far keypoint message or skip notice is dropped with one line: at once once the stream has started, or when
+    # the first frame set forms if it came before (which of the two the fuzzer hits first depends on timing; the
+    # problem log says each kind once)
+    held = "cam0/keypoints (or skip notice) of stamp"
+    for text in ("keypoints dropped: stamp", "keypoints_skipped dropped: stamp"):
+        assert text in log0 or held in log0, text
     assert "no keypoints or skip notice" not in log       # every frame set had its views' messages
