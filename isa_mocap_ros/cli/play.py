@@ -24,7 +24,7 @@ def register(sub) -> None:
     p.add_argument("--lockstep-timeout", type=float, default=10.0, metavar="S",
                    help="seconds to wait for each lockstep echo before going on (default 10)")
     p.add_argument("--wait-for-subscribers", type=float, default=0.0, metavar="S",
-                   help="wait up to S seconds until every topic has a subscriber")
+                   help="wait up to S seconds until every topic (and /clock with --clock) has a subscriber")
     p.add_argument("--delay", type=float, default=0.0, metavar="S", help="sleep S seconds before playing")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)

@@ -45,7 +45,7 @@ class BagPlayer(Node):
         self.lockstep_topic = declare(self, "lockstep_topic", "", "wait for this topic to echo each frame's stamp before the next frame ('' = real time)")
         self.lockstep_type = declare(self, "lockstep_type", "sensor_msgs/msg/JointState", "message type on lockstep_topic (its first field must be a std_msgs/Header)")
         self.lockstep_timeout_s = declare(self, "lockstep_timeout_s", 10.0, "give up waiting for a lockstep echo after this long; replay continues", lo=0.0, hi=1e6)
-        self.wait_for_subscribers_s = declare(self, "wait_for_subscribers_s", 0.0, "before playing, wait up to this long until every topic has a subscriber", lo=0.0, hi=1e6)
+        self.wait_for_subscribers_s = declare(self, "wait_for_subscribers_s", 0.0, "before playing, wait up to this long until every topic (and /clock with clock) has a subscriber", lo=0.0, hi=1e6)
         self.delay_s = declare(self, "delay_s", 0.0, "sleep before playing (discovery)", lo=0.0, hi=1e6)
         self.wait_for_acked_s = declare(self, "wait_for_all_acked_s", 10.0, "at the end, wait up to this long until reliable subscribers acknowledged every message "
             "(like ros2 bag play --wait-for-all-acked)", lo=0.0, hi=1e6)
@@ -147,6 +147,8 @@ class BagPlayer(Node):
         deadline = time.monotonic() + self.wait_for_subscribers_s
         while time.monotonic() < deadline and self._running():
             missing = [t for t, pub in self.publishers_by_topic.items() if pub.get_subscription_count() == 0]
+            if self.clock_pub is not None and self.clock_pub.get_subscription_count() == 0:
+                missing.append("/clock")      # published too: a sim-time subscriber would miss the first stamps
             if not missing:
                 return
             time.sleep(0.05)
