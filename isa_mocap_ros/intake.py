@@ -39,7 +39,7 @@ from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any, Callable
 
-__all__ = ["Setting", "Accepted", "Rejected", "StampWindow", "ViewGate", "StreamJumps", "StreamForks"]
+__all__ = ["Setting", "Accepted", "Rejected", "StampWindow", "ViewGate", "StreamJumps", "StreamForks", "FAR_RULE"]
 
 
 @dataclass(frozen=True)
@@ -236,6 +236,10 @@ class ViewGate:
         return [Accepted(stamp_ns, payload, self.info, first=first, changed=changed)]
 
 
+#: what :class:`StreamJumps` does with a ``far`` stamp, for a log line
+FAR_RULE = "taken as a restart only if the next one follows it"
+
+
 class StreamJumps:
     """One stream's stamps when the stream may restart (a replayed bag, a camera paused): a stamp that
     continues the stream (newer than the last, by at most ``ahead_ns``) is taken; one older by at most
@@ -243,7 +247,9 @@ class StreamJumps:
     stamp that continues *it* restarts the stream there. So one stray message far in time neither resets
     nor derails the stream, and a real restart costs its first message.
 
-    :meth:`decide` returns ``("take" | "restart" | "drop", why)``; ``ahead_ns <= 0``: no limit ahead.
+    :meth:`decide` returns ``(kind, why)``: ``take``, ``restart``, ``order`` (out of order: dropped) or ``far``
+    (dropped, remembered as a possible restart: :data:`FAR_RULE` says so in a log line); ``ahead_ns <= 0``: no
+    limit ahead.
     """
 
     def __init__(self, *, back_ns: int, ahead_ns: int) -> None:
@@ -261,14 +267,13 @@ class StreamJumps:
             return "take", None
         d_s = (stamp_ns - self.last_ns) / 1e9
         if -self.back_ns <= stamp_ns - self.last_ns <= 0:
-            return "drop", (f"stamp {stamp_ns} is not newer than the last one's {self.last_ns} "
-                            f"(out of order by {-d_s * 1e3:.1f} ms)")
+            return "order", (f"stamp {stamp_ns} is not newer than the last one's {self.last_ns} "
+                             f"(out of order by {-d_s * 1e3:.1f} ms)")
         if self._candidate is not None and self._continues(self._candidate, stamp_ns):
             self.last_ns, self._candidate = stamp_ns, None
             return "restart", f"the stream restarted {d_s:+.3f} s from its last stamp"
         self._candidate = stamp_ns
-        return "drop", (f"stamp {stamp_ns} is {d_s:+.3f} s from the stream (last {self.last_ns}); taken as a "
-                        f"restart only if the next one follows it")
+        return "far", f"stamp {stamp_ns} is {d_s:+.3f} s from the stream (last {self.last_ns})"
 
 
 class StreamForks:
@@ -296,7 +301,7 @@ class StreamForks:
         if kind == "restart":
             self.state, self._candidate = self._candidate, None
             return kind, self.state, why
-        if self.jumps._candidate == stamp_ns:       # far: remembered by the rule as a possible restart
+        if kind == "far":                          # remembered by the rule as a possible restart
             self._candidate = self.new_state()
-            return "far", self._candidate, why.split("; taken as")[0]
+            return kind, self._candidate, why
         return "drop", None, why

@@ -42,7 +42,7 @@ from sensor_msgs.msg import JointState
 
 import msg_adapters as ma
 from isa_mocap_ros.body import make_model
-from isa_mocap_ros.intake import StreamJumps
+from isa_mocap_ros.intake import FAR_RULE, StreamJumps
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.nodes.common import QOS_OVERRIDES, ProblemLog, declare, run_node
 from isa_mocap_ros.tracking.predict import (ArPredictor, ConstantPosePredictor, ConstantVelocityPredictor,
@@ -138,8 +138,9 @@ class PredictionNode(Node):
                 self.problems.report("names", f"joint_states dropped: {exc}")
                 return
         kind, why = self.jumps.decide(stamp)
-        if kind == "drop":
-            self.problems.report("order" if "out of order" in why else "stamp", f"joint_states dropped: {why}")
+        if kind in ("order", "far"):
+            self.problems.report("order" if kind == "order" else "stamp",
+                                 f"joint_states dropped: {why}" + (f"; {FAR_RULE}" if kind == "far" else ""))
             return
         if kind == "restart":
             self.restarts += 1
