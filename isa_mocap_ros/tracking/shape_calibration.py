@@ -316,13 +316,22 @@ def _hull_masks(masks_per_frame, cameras) -> tuple[list, str | None]:
         kept, _ = person_masks(masks, cameras)
         for m, k in zip(masks, kept):
             if m is not None:
-                total += int(np.count_nonzero(m))
-                cut += int(np.count_nonzero(m)) - int(np.count_nonzero(k))
+                n = int(np.count_nonzero(m))
+                total += n
+                cut += n - int(np.count_nonzero(k))
         out.append([None if k is None or not np.any(k) else k for k in kept])
     if not cut:
         return out, None
     return out, (f"calibration masks: the visual hull's person blob kept; {cut} of {total} foreground pixels "
                  f"({100 * cut / max(total, 1):.1f} %) removed over {len(out)} frames")
+
+
+def _calibration_masks(masks_per_frame, cameras, config: ShapeCalibrationConfig) -> tuple[list, str | None]:
+    """The calibration frames' masks as ``config.masks`` says (``hull``: :func:`_hull_masks`; ``raw``: as given)
+    and the cut's note (or None)."""
+    if config.masks == "hull":
+        return _hull_masks(masks_per_frame, cameras)
+    return list(masks_per_frame), None
 
 
 def _tracker(model, cameras, tracker_config):
@@ -383,8 +392,10 @@ def calibrate_shape(dof: int, cameras: Sequence, frames: Sequence[tuple[int, Seq
         say(f"shape calibration restart {r + 1}/{config.restarts} (seed {seed})")
         res = _calibrate_once(dof, cameras, frames, tcfg.replace(seed=tcfg.search.seed + 7919 * r), cfg_r, base, say)
         masks_of = {int(k): m for k, m, _ in frames}
-        judge = _ShapeEnergy(dof, base, cameras, _prepared_masks(dof, cameras, [masks_of[k] for k in res.frame_keys],
-                                                                 config), res.poses, config, [config.seed, 33, 2])
+        # judged on the masks the fits used (config.masks), not the raw ones
+        cal, _ = _calibration_masks([masks_of[k] for k in res.frame_keys], cameras, config)
+        judge = _ShapeEnergy(dof, base, cameras, _prepared_masks(dof, cameras, cal, config), res.poses, config,
+                             [config.seed, 33, 2])
         z = np.concatenate([np.log([res.params[n] for n, _, _ in SHAPE_PARAMS]), np.zeros(len(res.poses))])
         out.append((float(judge(z[None, :])[0]), r, res))
     e, r, best = min(out, key=lambda t: t[0])
@@ -419,11 +430,10 @@ def _calibrate_once(dof, cameras, frames, tcfg, config, base, say) -> ShapeCalib
     cal_keys = [keys[i] for i in pick]
     masks_of = {int(k): m for k, m, _ in frames}
     kps_of = {int(k): kp for k, _, kp in frames}
-    cal_raw = [masks_of[k] for k in cal_keys]     # the pose fits' (the tracker filters them further) and the shape fit's
-    if config.masks == "hull":                    # what one view alone reports stays out of both
-        cal_raw, note = _hull_masks(cal_raw, cameras)
-        if note:
-            notes.append(note)
+    # the pose fits' (the tracker filters them further) and the shape fit's: what one view alone reports stays out
+    cal_raw, note = _calibration_masks([masks_of[k] for k in cal_keys], cameras, config)
+    if note:
+        notes.append(note)
     cal_masks = _prepared_masks(dof, cameras, cal_raw, config)     # the shape fit's energies'
     X = np.array([poses[k] for k in cal_keys])
     P = len(SHAPE_PARAMS)
