@@ -76,20 +76,39 @@ def import_demo(bag: Path, *, width: int, frames: int | None) -> None:
             raise RuntimeError(f"isa-mocap {' '.join(argv)} failed")
 
 
-def joint_thirds(collect: dict, parts: int = 3) -> dict:
-    """Per marker joint, the error with each joint's mean offset removed (as the score removes it) averaged over
-    each of ``parts`` equal spans of the scored frames, mm: ``{joint: [first, ..., last]}``; ``collect`` is
-    :func:`isa_mocap_ros.cli.track.track_bag`'s."""
-    from isa_mocap_ros.eval.metrics import body_frames, marker_positions, offset_removed_errors_mm
+def _scored_markers(collect: dict):
+    """``(frames, names, shared, Pe)`` of :func:`isa_mocap_ros.cli.track.track_bag`'s ``collect``: the scored frames
+    (estimated, with reference markers), the reference's marker names, the marker joints both define, and our
+    estimates' positions of those ``(F, J, 3)``; None without frames or without both hips (the body frame's axes)."""
+    from isa_mocap_ros.eval.metrics import marker_positions
 
     model, names = collect["model"], list(collect["truth_marker_names"])
     frames = sorted(k for k in collect["estimates"] if k in collect["truth_markers"])
     shared = [model.joint_names[j] for j in model.markers if model.joint_names[j] in names]
     if not frames or "left_hip" not in shared or "right_hip" not in shared:
-        return {}
-    Pe = marker_positions(model, np.array([collect["estimates"][k] for k in frames]), joints=shared)
-    Pt = np.array([collect["truth_markers"][k] for k in frames])[:, [names.index(n) for n in shared]]
+        return None
+    return frames, names, shared, marker_positions(model, np.array([collect["estimates"][k] for k in frames]),
+                                                   joints=shared)
+
+
+def _offset_removed_mm(Pe: np.ndarray, Pt: np.ndarray, shared: list[str]) -> np.ndarray:
+    """``(F, J)`` errors with each joint's mean offset removed in the reference's body frames, as the score does."""
+    from isa_mocap_ros.eval.metrics import body_frames, offset_removed_errors_mm
+
     err, _ = offset_removed_errors_mm(Pe, Pt, body_frames(Pt, shared.index("left_hip"), shared.index("right_hip")))
+    return err
+
+
+def joint_thirds(collect: dict, parts: int = 3) -> dict:
+    """Per marker joint, the error with each joint's mean offset removed (as the score removes it) averaged over
+    each of ``parts`` equal spans of the scored frames, mm: ``{joint: [first, ..., last]}``; ``collect`` is
+    :func:`isa_mocap_ros.cli.track.track_bag`'s."""
+    scored = _scored_markers(collect)
+    if scored is None:
+        return {}
+    frames, names, shared, Pe = scored
+    Pt = np.array([collect["truth_markers"][k] for k in frames])[:, [names.index(n) for n in shared]]
+    err = _offset_removed_mm(Pe, Pt, shared)
     spans = np.array_split(np.arange(len(frames)), parts)
     with np.errstate(invalid="ignore"):
         return {n: [float(np.nanmean(err[i, m])) for i in spans] for m, n in enumerate(shared)}
@@ -106,21 +125,17 @@ def filtered_score(collect: dict, fps: float, reference: Path) -> float | None:
     removed as the score removes them; mean mm. An offline figure (a zero-phase filter needs the whole recording)."""
     from scipy.signal import butter, filtfilt
 
-    from isa_mocap_ros.eval.metrics import body_frames, marker_positions, offset_removed_errors_mm
     from isa_mocap_ros.eval.trc import TRC_TO_WORLD, read_trc
 
-    model, names = collect["model"], list(collect["truth_marker_names"])
-    frames = sorted(k for k in collect["estimates"] if k in collect["truth_markers"])
+    scored = _scored_markers(collect)
     trc = read_trc(reference)
-    shared = [model.joint_names[j] for j in model.markers if model.joint_names[j] in names]
-    if len(frames) != len(trc.points) or len(frames) < 16 or "left_hip" not in shared:
+    if scored is None or len(scored[0]) != len(trc.points) or len(scored[0]) < 16:
         return None
+    frames, names, shared, Pe = scored
     order, cut_hz = PEER_FILTER
     b, a = butter(order, cut_hz / (fps / 2.0))
-    Pe = filtfilt(b, a, marker_positions(model, np.array([collect["estimates"][k] for k in frames]), joints=shared),
-                  axis=0)
     Pt = trc.in_world(TRC_TO_WORLD)[:, [names.index(n) for n in shared]]
-    err, _ = offset_removed_errors_mm(Pe, Pt, body_frames(Pt, shared.index("left_hip"), shared.index("right_hip")))
+    err = _offset_removed_mm(filtfilt(b, a, Pe, axis=0), Pt, shared)
     return float(np.nanmean(np.nanmean(err, axis=1)))
 
 
