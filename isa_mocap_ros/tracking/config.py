@@ -1,5 +1,5 @@
-"""The tracker's settings (:class:`TrackerConfig`), its result record (:class:`FrameResult`), its errors
-and the module constants its stages share. Pure: no ROS import.
+"""The tracker's settings (:class:`TrackerConfig`), its errors and the module constants its stages share; its
+result record (:class:`FrameResult`, tracking/result.py) is re-exported here. Pure: no ROS import.
 """
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ import numpy as np
 from isa_mocap_ros.config_checks import check_bool, check_choice, check_number
 
 from .limbs import LIMBS
+from .result import FrameResult
 
 __all__ = ["TrackerError", "TrackerConfig", "SearchConfig", "PredictionConfig", "ObjectiveConfig", "KeypointConfig",
            "FirstFrameConfig", "HeadingConfig", "StageConfig", "MaskConfig", "LEAVES", "FrameResult", "DEFAULT_PARAMS",
@@ -556,45 +557,3 @@ def field_docs(cls=None) -> dict[str, str]:
     if missing:
         raise TrackerError(f"{cls.__name__}: no one-line description in its docstring for {missing}")
     return {n: docs[n] for n in names}
-
-
-@dataclass(frozen=True, eq=False)
-class FrameResult:
-    """What one :meth:`Tracker.step` produced.
-
-    Attributes
-    ----------
-    x : (D,) ndarray or None
-        The estimate (None only when the tracker has never had an estimate: no usable masks yet).
-    energy : float
-        Energy of the estimate as the optimizer reports it (nan when no optimization ran).
-    n_evals : int
-        Evaluations this frame (initialization included).
-    spread : float
-        Final population spread (mean over coordinates of the standard deviation), nan if none.
-    time_s : float
-        Wall time of the call.
-    views_used : int
-        Views whose mask entered the energy.
-    notes : tuple of str
-        Everything skipped or replaced, and why (``"view 2: empty mask; skipped"``, ...); with the
-        mask gate (``gate_margin_px``) also each view that lost more than :data:`GATE_NOTE_SHARE`
-        of its foreground (``"view 1: the gate removed 812 of 2440 foreground pixels (33 %)"``).
-    fell_back : bool
-        True when no optimization ran and ``x`` is the last estimate.
-    prediction : (D,) ndarray or None
-        The prediction the search was centred on.
-    initialized : bool
-        True on the frame that ran the automatic initialization.
-    """
-
-    x: np.ndarray | None
-    energy: float
-    n_evals: int
-    spread: float
-    time_s: float
-    views_used: int
-    notes: tuple = ()
-    fell_back: bool = False
-    prediction: np.ndarray | None = None
-    initialized: bool = False
