@@ -94,10 +94,11 @@ class ShapeCalibrationConfig:
     retrack: bool = True            # later rounds re-track the whole window with the new shape first
     regularization: float = 2e-3    # weight of sum(log factor^2): decides only flat directions
     arm_split_prior: float = 0.05   # weight of (log upper_arm - log forearm)^2: a straight arm shows only the sum
-    energy: str = "fast"            # the shape fit's silhouette energy: "raster" (Eq. 4 counted on the pixel grid, no
+    energy: str = "raster"          # the shape fit's silhouette energy: "raster" (Eq. 4 counted on the pixel grid, no
                                     # sample; pinhole cameras only, "fast" used with lens distortion) or "fast" (sampled)
-    restarts: int = 1               # whole calibrations from other seeds (x cost each), combined as `combine` says
-    combine: str = "lowest"         # restarts: "lowest" judged energy kept, or "median" of each factor over them
+    restarts: int = 3               # whole calibrations from other seeds (x cost each), combined as `combine` says:
+                                    # one calibration is a lottery of round 0's poses (docs/shape_calibration.md)
+    combine: str = "lowest"         # restarts: "lowest" judged energy kept (measured better), or "median" of each factor
     masks: str = "hull"             # the calibration frames' masks: "hull" = cut to the visual hull's person blob
                                     # (tracking/init_hull.py: occluders and noise no other view confirms go), "raw"
     seed: int = 0                   # all random streams derive from it
