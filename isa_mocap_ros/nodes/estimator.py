@@ -73,7 +73,7 @@ from isa_mocap_ros.tracking.predict import periods_between
 from isa_mocap_ros.tracking.sync import FrameSynchronizer
 from isa_mocap_ros.tracking.config import TrackerConfig, field_docs
 from isa_mocap_ros.tracking.load import LoadGovernor, LoadSettings, StartupCatchUp
-from isa_mocap_ros.tracking.realtime import RealTimeSchedule
+from isa_mocap_ros.tracking.realtime import RealTimeSchedule, warm_up
 from isa_mocap_ros.vision.overlay import draw_overlay
 
 
@@ -255,12 +255,12 @@ class EstimatorNode(EstimatorIntake, Node):
 
     # -- the work -------------------------------------------------------------------------------
     def _warm_up(self) -> None:
-        """Compile (or load from numba's cache) the energy/kinematics kernels on a tiny synthetic frame,
-        then say "ready". The frame is tracked with the configured budget, so every stage a real frame
-        runs (pelvis, limb and refinement stages, skipped below their shares) is loaded here: with a
-        400-evaluation warm-up the first real frame with stages paid ~38 ms of first calls (bags/demo,
-        the frame after the initialization: 63 instead of 25 ms), one or two more sets dropped in real
-        time."""
+        """Compile (or load from numba's cache) the tracker's kernels on a tiny synthetic frame
+        (:func:`isa_mocap_ros.tracking.realtime.warm_up`: the automatic initialization, then a tracked frame), then
+        say "ready". The frames are tracked with the configured budget, so every stage a real frame runs is loaded
+        here: with a 400-evaluation warm-up the first real frame with stages paid ~38 ms of first calls (bags/demo,
+        the frame after the initialization: 63 instead of 25 ms), one or two more sets dropped in real time; with
+        a warm-up from a given pose the initialized frame paid ~50 CPU ms of first calls (session 27)."""
         t0 = time.monotonic()
         # said before the wait, so a first run is not a silent minute: numba compiles the kernels on their
         # first call after an install (`make venv` does it ahead, `isa-mocap warmup`) and loads its cache after
@@ -268,16 +268,7 @@ class EstimatorNode(EstimatorIntake, Node):
                                "1.5-4 min when they were never compiled since the install: run `isa-mocap warmup` "
                                "once to do that ahead)")
         try:
-            from isa_mocap_ros.body import capsule_endpoints as caps
-            from isa_mocap_ros.tracking.tracker import Tracker
-            from isa_mocap_ros.vision import default_rig, render_mask
-            rig = default_rig(n_views=2, width=80, height=60)
-            x = self.model.rest_pose()
-            E = caps(self.model, x[None])[0]
-            masks = [render_mask(c, E, self.model.capsule_radii) for c in rig.cameras]
-            tracker = Tracker(self.model, rig.cameras, self.tracker_config)
-            tracker.initialize(pose=x)
-            tracker.step(masks, 0)
+            warm_up(self.model, self.tracker_config)      # the automatic initialization's kernels too
         except Exception as exc:  # noqa: BLE001 - warm-up is an optimisation, never fatal
             self.get_logger().warn(f"warm-up failed ({type(exc).__name__}: {exc}); the first frame will be slow")
         self._wait_for_inputs()
