@@ -123,9 +123,9 @@ class EstimatorNode(EstimatorIntake, Node):
         self.backlog = declare(self, "backlog", 1, "real time: frame sets kept waiting while the tracker is busy "
                                "(the newest; older ones are dropped)", lo=1, hi=100)
         self.startup_catch_up = declare(
-            self, "startup_catch_up", 12, "real time: frame sets kept waiting, in order, while the tracker initializes "
+            self, "startup_catch_up", 0, "real time: frame sets kept waiting, in order, while the tracker initializes "
             "itself; once initialized it tracks them with degrade_min_evals evaluations and no contour stage until "
-            "none waits, instead of dropping them (0 = keep only the heading check's sets)", lo=0, hi=1000)
+            "none waits, instead of dropping them (0, the default: keep only the heading check's sets; docs/nodes.md)", lo=0, hi=1000)
         self.startup_catch_up_ms = declare(
             self, "startup_catch_up_ms", 1000.0, "startup_catch_up: a caught-up set that waited longer than this, "
             "or no shorter than the one before (the tracker does not gain on the stream), ends the catch-up (the "
