@@ -167,14 +167,15 @@ class KeypointInbox:
         # push out the first set's own messages, which come last)
         self._held: list[OrderedDict[int, Any]] = [OrderedDict() for _ in range(n_views)]
 
-    def add(self, v: int, stamp_ns: int, payload: Any) -> str | None:
-        """Keep view ``v``'s message (``payload`` None: a skip notice); returns why it was dropped, or None."""
+    def add(self, v: int, stamp_ns: int, payload: Any) -> Rejected | None:
+        """Keep view ``v``'s message (``payload`` None: a skip notice); returns why it was dropped (kind ``stamp``:
+        far from the frame sets; ``twice``: a second keypoint message of the stamp), or None."""
         started = self.stream.last_ns is not None
         if started and (far := self.stream.far(stamp_ns)) is not None:
-            return far
+            return Rejected("stamp", far)
         store = self._store[v] if started else self._held[v]
         if store.get(stamp_ns) is not None and payload is not None:
-            return f"a second message for stamp {stamp_ns}"
+            return Rejected("twice", f"a second message for stamp {stamp_ns}")
         if stamp_ns not in store or payload is not None:
             store[stamp_ns] = payload
         while len(store) > self.depth:

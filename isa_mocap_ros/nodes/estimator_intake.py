@@ -177,10 +177,9 @@ class EstimatorIntake:
 
     def _store_keypoints(self, v: int, stamp: int, kp, topic: str) -> None:
         with self._cv:
-            why = self.keypoint_inbox.add(v, stamp, kp)
-            if why is not None:
-                self.problems.report(f"keypoints{v}:{'twice' if why.startswith('a second') else 'stamp'}",
-                                     f"{topic} dropped: {why}")
+            rejected = self.keypoint_inbox.add(v, stamp, kp)
+            if rejected is not None:
+                self.problems.report(f"keypoints{v}:{rejected.kind}", f"{topic} dropped: {rejected.text}")
                 return
             self._cv.notify_all()
 
