@@ -184,6 +184,10 @@ class ViewGate:
         """Images waiting for their camera_info."""
         return len(self._images)
 
+    def waiting_stamps(self) -> list[int]:
+        """The stamps of the images waiting for their camera_info (in arrival order)."""
+        return list(self._images)
+
     # -- internals ---------------------------------------------------------------------------------
     def _disagrees(self, s: Setting) -> str | None:
         c = self.setting

@@ -88,14 +88,39 @@ def test_frames_without_a_person_are_skipped_and_not_counted():
     assert got == [(0, S, False), (0, S + P, True), (0, S + 2 * P, False), (0, S + 3 * P, True)]
 
 
-def test_masks_of_another_camera_are_dropped():
+def test_masks_of_another_camera_than_their_images_are_dropped():
     ki = intake(n=1)
     run(ki, [S], n=1)
-    jobs, problems = ki.add_mask(0, S + P + 3_000_007, Setting("fuzz_optical_frame", 160, 120), "m", True, 0.0)
-    assert jobs == [] and "is not the view's camera's" in problems[0][1]
-    jobs, problems = ki.add_mask(0, S + P + 3_000_008, mask_setting(0, 7, 3), "m", True, 0.0)
-    assert jobs == [] and "7x3" in problems[0][1]
+    for k, setting in enumerate((Setting("fuzz_optical_frame", 160, 120), mask_setting(0, 7, 3))):
+        stamp = S + P + 3_000_007 + k
+        assert ki.add_mask(0, stamp, setting, "m", True, 0.0) == ([], [])     # judged when it meets its image
+        jobs, problems = ki.add_image(0, stamp, cam(0), "i", 0.0)
+        assert jobs == [] and "is not the view's camera's ('cam0_optical_frame', 160x120" in problems[0][1]
+    assert ki.add_mask(0, S + P + 3_000_009, mask_setting(0, 7, 3), "m", True, 0.0) == ([], [])   # no image: unused
     assert run(ki, [S + P], n=1) == [(0, S + P, False)]             # the stream goes on (every 2nd after 1)
+
+
+def test_the_first_mask_of_a_camera_that_changed_meets_its_image():
+    """The flake of test_network_fuzz[keypoints] (10 of 12 frames; 1 run in 3-4): the fuzzer's pairs before the
+    stream (320x240) made each view's camera; the bag's first frame is 160x120, so its image waited in the gate for
+    the camera_info that confirms the change, and the segmentation node's mask of it came first. Judged on arrival
+    against the old camera, the mask was dropped, the frame set never formed here, and the lockstep estimator waited
+    for its keypoints until the player gave up (30 s), time in which the fuzzer's far pairs got between the
+    segmentation node's restart frames. Either order of mask and image must pair."""
+    for mask_first in (False, True):
+        ki = intake()
+        for v in range(2):                                   # a camera before the stream: 320x240
+            frame(ki, v, 5 * 10**9 + v, image="fuzz", w=320, h=240)
+        jobs = []
+        for v in range(2):
+            if mask_first:
+                jobs += ki.add_mask(v, S, mask_setting(v), "mask", True, 0.0)[0]
+            jobs += ki.add_image(v, S, cam(v), ("img", v, S), 0.0)[0]        # waits for its camera_info
+            if not mask_first:
+                jobs += ki.add_mask(v, S, mask_setting(v), "mask", True, 0.0)[0]
+            jobs += ki.add_info(v, S, info(v), "K", 0.0)[0]
+        assert [(j.view, j.stamp_ns, j.mask) for j in jobs] == [(0, S, "mask"), (1, S, "mask")], mask_first
+        assert ki.gates[0].setting == cam(0)
 
 
 def test_a_stream_that_jumps_ahead_is_followed():
