@@ -230,6 +230,18 @@ def test_lockstep_waits_with_no_time_limit_while_a_keypoint_node_is_there():
     assert not lock.goes_on([0], node_present=False, waited_s=9.9)
     assert lock.goes_on([0], node_present=False, waited_s=10.0)
     assert lock.goes_on([], node_present=True, waited_s=0.0)
-    real = KeypointWait(lockstep=False, limit_s=0.03)
-    assert not real.goes_on([0], node_present=True, waited_s=0.02)
-    assert real.goes_on([0], node_present=True, waited_s=0.03)
+
+
+
+def test_real_time_never_waits_for_keypoints():
+    """#35: in real time the estimator waited up to 30 ms a set for the keypoint node's answer (bags/demo, idle:
+    51 of 145 sets dropped with the node against 5 without); the set is tracked with what has arrived."""
+    from isa_mocap_ros.keypoint_intake import KeypointWait
+    real = KeypointWait(lockstep=False, limit_s=10.0)
+    assert real.goes_on([0, 1], node_present=True, waited_s=0.0)
+    assert real.goes_on([0], node_present=False, waited_s=0.0)
+    box = inbox()
+    box.stream.accept(S)
+    box.add(0, S, "kp0")                                   # view 0's came in time; view 1's detection still runs
+    assert box.due([S, S]) == [1] and box.take([S, S]) == ["kp0", None]
+    assert box.add(1, S, "late") is None and box.take([S + P, S + P]) is None   # not used for the next set
