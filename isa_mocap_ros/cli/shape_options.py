@@ -25,7 +25,7 @@ def add_calibration_arguments(p: argparse.ArgumentParser) -> None:
                         "(default lowest)")
     p.add_argument("--calib-energy", choices=("raster", "fast"), default=None,
                    help="shape calibration: the shape fit's silhouette energy, raster (counted on the pixel grid, no "
-                        "sample; fast with lens distortion) or fast (sampled) (default raster)")
+                        "sample) or fast (sampled) (default raster)")
 
 
 def calibration_config(args, seed: int):
