@@ -146,7 +146,8 @@ class SearchConfig:
         Seed of every per-frame stream ``default_rng([seed, frame, ...])`` (0).
     coarse_fraction : float
         Share of each partition's generations of the compiled h-isa main search evaluated on two views only
-        (the energy's coarse level, about half the cost; docs/energy.md); 0 = off (default).
+        (the energy's coarse level, about half the cost; docs/energy.md; energy "fast" only: with another the search
+        runs through the protocol without it); 0 = off (default).
     """
 
     optimizer: str = "h-isa"
