@@ -184,6 +184,10 @@ class ViewGate:
         """Images waiting for their camera_info."""
         return len(self._images)
 
+    def waiting_stamps(self) -> list[int]:
+        """The stamps of the images waiting for their camera_info (in arrival order)."""
+        return list(self._images)
+
     # -- internals ---------------------------------------------------------------------------------
     def _disagrees(self, s: Setting) -> str | None:
         c = self.setting
@@ -247,61 +251,79 @@ class StreamJumps:
     stamp that continues *it* restarts the stream there. So one stray message far in time neither resets
     nor derails the stream, and a real restart costs its first message.
 
-    :meth:`decide` returns ``(kind, why)``: ``take``, ``restart``, ``order`` (out of order: dropped) or ``far``
-    (dropped, remembered as a possible restart: :data:`FAR_RULE` says so in a log line); ``ahead_ns <= 0``: no
-    limit ahead.
+    The last ``candidates`` far stamps are remembered, and a stamp taken by the stream forgets none of them: a
+    restart's first two stamps need not come back to back. (With one candidate, forgotten at the next stamp of the
+    stream, a single message between them -- a far one, or one more of the old stream, say the last image of
+    another source still in flight -- cost the restart its first stamp: the segmentation node then learnt its
+    background from the second frame on, and under test/fuzzer.py the first frames with a person were taken for
+    background.)
+
+    :meth:`decide` returns ``(kind, why)``: ``take``, ``restart`` (from the candidate :attr:`restarted_from`),
+    ``order`` (out of order: dropped) or ``far`` (dropped, remembered as a possible restart: :data:`FAR_RULE` says
+    so in a log line); ``ahead_ns <= 0``: no limit ahead.
     """
 
-    def __init__(self, *, back_ns: int, ahead_ns: int) -> None:
+    def __init__(self, *, back_ns: int, ahead_ns: int, candidates: int = 3) -> None:
+        if candidates < 1:
+            raise ValueError(f"candidates: expected >= 1, received {candidates}")
         self.back_ns = int(back_ns)
         self.ahead_ns = int(ahead_ns)
+        self.max_candidates = candidates
         self.last_ns: int | None = None
-        self._candidate: int | None = None
+        self.restarted_from: int | None = None     # the candidate the last restart continued
+        self._candidates: list[int] = []           # far stamps, oldest first
+
+    @property
+    def candidates(self) -> tuple[int, ...]:
+        """The far stamps remembered as possible restarts, oldest first."""
+        return tuple(self._candidates)
 
     def _continues(self, ref: int, stamp_ns: int) -> bool:
         return stamp_ns > ref and (self.ahead_ns <= 0 or stamp_ns - ref <= self.ahead_ns)
 
     def decide(self, stamp_ns: int) -> tuple[str, str | None]:
         if self.last_ns is None or self._continues(self.last_ns, stamp_ns):
-            self.last_ns, self._candidate = stamp_ns, None
+            self.last_ns = stamp_ns
             return "take", None
         d_s = (stamp_ns - self.last_ns) / 1e9
         if -self.back_ns <= stamp_ns - self.last_ns <= 0:
             return "order", (f"stamp {stamp_ns} is not newer than the last one's {self.last_ns} "
                              f"(out of order by {-d_s * 1e3:.1f} ms)")
-        if self._candidate is not None and self._continues(self._candidate, stamp_ns):
-            self.last_ns, self._candidate = stamp_ns, None
-            return "restart", f"the stream restarted {d_s:+.3f} s from its last stamp"
-        self._candidate = stamp_ns
+        for c in reversed(self._candidates):         # the newest candidate it continues
+            if self._continues(c, stamp_ns):
+                self.last_ns, self.restarted_from, self._candidates = stamp_ns, c, []
+                return "restart", f"the stream restarted {d_s:+.3f} s from its last stamp"
+        self._candidates = [*self._candidates, stamp_ns][-self.max_candidates:]
         return "far", f"stamp {stamp_ns} is {d_s:+.3f} s from the stream (last {self.last_ns})"
 
 
 class StreamForks:
     """:class:`StreamJumps` for a stream whose messages build up a state (a view's background model), where
     no message may wait (a lockstep replay waits for each one's result): a far stamp is processed at once on a
-    *candidate* state of its own (``new_state()``); the next stamp decides. One that continues the stream goes on
-    with the stream's state, which the far message never touched; one that continues the far stamp makes the
-    candidate the stream's state (a restart: a bag replayed or looped, a camera restarted).
+    *candidate* state of its own (``new_state()``), one per candidate the rule remembers. One that continues the
+    stream goes on with the stream's state, which the far messages never touched; one that continues a far stamp
+    makes that candidate the stream's state (a restart: a bag replayed or looped, a camera restarted).
 
     :meth:`state_for` returns ``(kind, state, why)``: ``take`` (the stream's state), ``restart`` (the candidate,
     now the stream's), ``far`` (a new candidate) or ``drop`` (out of order: ``state`` None).
     """
 
-    def __init__(self, new_state: Callable[[], Any], *, back_ns: int, ahead_ns: int) -> None:
+    def __init__(self, new_state: Callable[[], Any], *, back_ns: int, ahead_ns: int, candidates: int = 3) -> None:
         self.new_state = new_state
-        self.jumps = StreamJumps(back_ns=back_ns, ahead_ns=ahead_ns)
+        self.jumps = StreamJumps(back_ns=back_ns, ahead_ns=ahead_ns, candidates=candidates)
         self.state = new_state()
-        self._candidate: Any = None
+        self._candidates: dict[int, Any] = {}     # far stamp -> its state (those the rule remembers)
 
     def state_for(self, stamp_ns: int) -> tuple[str, Any, str | None]:
         kind, why = self.jumps.decide(stamp_ns)
         if kind == "take":
-            self._candidate = None
             return kind, self.state, None
         if kind == "restart":
-            self.state, self._candidate = self._candidate, None
+            self.state, self._candidates = self._candidates[self.jumps.restarted_from], {}
             return kind, self.state, why
         if kind == "far":                          # remembered by the rule as a possible restart
-            self._candidate = self.new_state()
-            return kind, self._candidate, why
+            kept = set(self.jumps.candidates)
+            self._candidates = {s: st for s, st in self._candidates.items() if s in kept}
+            self._candidates[stamp_ns] = self.new_state()
+            return kind, self._candidates[stamp_ns], why
         return "drop", None, why

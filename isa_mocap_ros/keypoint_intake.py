@@ -7,11 +7,16 @@ tracks. Those are *frame sets*: stamps at which every view (or, after a wait, ``
 (:class:`~isa_mocap_ros.tracking.sync.FrameSynchronizer`, the estimator's matching). So:
 
 * images pass the view's :class:`~isa_mocap_ros.intake.ViewGate` (the camera is what a camera_info and an image
-  of one stamp agree on); masks are taken when they are of the view's camera (frame id and size), at any stamp:
-  a mask is used only with an image of its stamp that passed the gate. (Judged against the frame sets' stamps, a
-  stream that jumped ahead by more than ``max_gap_ns``, a camera paused, or a far set before the stream, made
-  every later mask far, and the node never detected again.) Unpaired masks beyond ``keep`` go farthest from the
-  view's images first, so far ones cannot push out a real mask that came before its image;
+  of one stamp agree on); a mask, at any stamp, is used only with an image of its stamp that passed the gate, and
+  only when it is of that image's camera (frame id and size): it is judged when it meets its image, not when it
+  arrives. (Judged on arrival against the view's camera, the first mask of a camera that changed -- its image
+  waiting in the gate for the camera_info that confirms the change, which came after the segmentation node's mask --
+  was dropped, its frame set never formed here, and a lockstep estimator waited for its keypoints until the player
+  gave up 30 s later: test_network_fuzz's 10 of 12 frames. Judged against the frame sets' stamps, a stream that
+  jumped ahead by more than ``max_gap_ns``, a camera paused, or a far set before the stream, made every later mask
+  far, and the node never detected again.) Unpaired masks beyond ``keep`` go oldest first, those far from the
+  view's stream (its last image, and the images waiting in the gate for their camera_info) before any other, so
+  neither far ones nor a stale stream push out a real mask that came before its image;
 * an image and a mask of one stamp make a view's *pair*; pairs go to a synchronizer with the estimator's settings;
 * only a completed frame set moves the views' schedules, each present view once, in stamp order.
 
@@ -73,8 +78,9 @@ class KeypointIntake:
         self.schedules = [KeypointSchedule(every_k, dense_frames=dense_frames) for _ in range(n_views)]
         self.sync = FrameSynchronizer(n_views, queue_size=queue_size, slop_ns=slop_ns, max_wait_s=max_wait_s,
                                       min_views=min(min_views, n_views))
-        self._images: list[OrderedDict[int, Any]] = [OrderedDict() for _ in range(n_views)]
-        self._masks: list[OrderedDict[int, tuple[Any, bool]]] = [OrderedDict() for _ in range(n_views)]
+        # unpaired, by stamp in arrival order: images (payload, the view's camera) and masks (payload, person, setting)
+        self._images: list[OrderedDict[int, tuple[Any, Setting]]] = [OrderedDict() for _ in range(n_views)]
+        self._masks: list[OrderedDict[int, tuple[Any, bool, Setting]]] = [OrderedDict() for _ in range(n_views)]
         self.unpaired = [0] * n_views             # images or masks that aged out without the other
 
     # -- input -------------------------------------------------------------------------------------
@@ -88,13 +94,7 @@ class KeypointIntake:
 
     def add_mask(self, v: int, stamp_ns: int, setting: Setting, mask: Any, has_person: bool, now_s: float):
         """A mask of view ``v`` (``setting``: its frame id and size; ``has_person``: any foreground)."""
-        known = self.gates[v].setting
-        if known is not None and (setting.frame_id, setting.width, setting.height) != \
-                (known.frame_id, known.width, known.height):
-            return [], [(f"mask{v}", f"cam{v}/mask dropped: frame {setting.frame_id!r}, {setting.width}x"
-                                     f"{setting.height}, is not the view's camera's ({known.frame_id!r}, "
-                                     f"{known.width}x{known.height})")]
-        return self._pair(v, "mask", stamp_ns, (mask, has_person), now_s)
+        return self._pair(v, "mask", stamp_ns, (mask, has_person, setting), now_s)
 
     def poll(self, now_s: float):
         """Partial frame sets whose views waited longer than ``max_wait_s`` (the estimator's ``view_timeout_s``)."""
@@ -104,8 +104,8 @@ class KeypointIntake:
     def _settle(self, v: int, accepted, rejected: list[Rejected], now_s: float):
         problems = [(f"info{v}:gate" if r.kind == "camera_info" else f"image{v}:{r.kind}", r.text) for r in rejected]
         jobs = []
-        for a in accepted:
-            j, p = self._pair(v, "image", a.stamp_ns, a.payload, now_s)
+        for a in accepted:       # each agrees with the view's camera once the gate took it
+            j, p = self._pair(v, "image", a.stamp_ns, (a.payload, self.gates[v].setting), now_s)
             jobs += j
             problems += p
         return jobs, problems
@@ -115,17 +115,35 @@ class KeypointIntake:
         partner = other.pop(stamp_ns, None)
         if partner is None:
             mine[stamp_ns] = payload
-            last = self.gates[v].window.last_ns
-            while len(mine) > self.keep:      # the farthest from the view's images first (the oldest before any)
-                del mine[next(iter(mine)) if last is None else max(mine, key=lambda t: abs(t - last))]
+            while len(mine) > self.keep:
+                del mine[self._images_to_drop(v) if kind == "image" else self._mask_to_drop(v)]
                 self.unpaired[v] += 1
             return [], []
-        image, (mask, has_person) = (payload, partner) if kind == "image" else (partner, payload)
+        (image, camera), (mask, has_person, setting) = (payload, partner) if kind == "image" else (partner, payload)
+        if (setting.frame_id, setting.width, setting.height) != (camera.frame_id, camera.width, camera.height):
+            return [], [(f"mask{v}", f"cam{v}/mask dropped: frame {setting.frame_id!r}, {setting.width}x"
+                                     f"{setting.height}, is not the view's camera's ({camera.frame_id!r}, "
+                                     f"{camera.width}x{camera.height}: its image of stamp {stamp_ns})")]
         try:
             sets = self.sync.add(v, stamp_ns, (image, mask, has_person), now_s)
         except SyncError as exc:
             return [], [(f"order{v}", f"cam{v} frame at {stamp_ns} ns dropped: {exc}")]
         return self._jobs(sets), []
+
+    def _images_to_drop(self, v: int) -> int:
+        """The unpaired image to drop: the farthest from the view's last accepted one (the oldest before any)."""
+        images, last = self._images[v], self.gates[v].window.last_ns
+        return next(iter(images)) if last is None else max(images, key=lambda t: abs(t - last))
+
+    def _mask_to_drop(self, v: int) -> int:
+        """The unpaired mask to drop: the oldest of those farther than ``max_gap_ns`` from the view's stream (its
+        last accepted image and the images waiting in the gate for their camera_info), else the oldest."""
+        gate = self.gates[v]
+        anchors = [t for t in (gate.window.last_ns, *gate.waiting_stamps()) if t is not None]
+        gap = gate.window.max_gap_ns
+        masks = self._masks[v]
+        far = (t for t in masks if gap > 0 and all(abs(t - a) > gap for a in anchors))
+        return next(far, next(iter(masks)))
 
     def _jobs(self, sets) -> list[Job]:
         jobs = []
@@ -167,14 +185,15 @@ class KeypointInbox:
         # push out the first set's own messages, which come last)
         self._held: list[OrderedDict[int, Any]] = [OrderedDict() for _ in range(n_views)]
 
-    def add(self, v: int, stamp_ns: int, payload: Any) -> str | None:
-        """Keep view ``v``'s message (``payload`` None: a skip notice); returns why it was dropped, or None."""
+    def add(self, v: int, stamp_ns: int, payload: Any) -> Rejected | None:
+        """Keep view ``v``'s message (``payload`` None: a skip notice); returns why it was dropped (kind ``stamp``:
+        far from the frame sets; ``twice``: a second keypoint message of the stamp), or None."""
         started = self.stream.last_ns is not None
         if started and (far := self.stream.far(stamp_ns)) is not None:
-            return far
+            return Rejected("stamp", far)
         store = self._store[v] if started else self._held[v]
         if store.get(stamp_ns) is not None and payload is not None:
-            return f"a second message for stamp {stamp_ns}"
+            return Rejected("twice", f"a second message for stamp {stamp_ns}")
         if stamp_ns not in store or payload is not None:
             store[stamp_ns] = payload
         while len(store) > self.depth:
@@ -218,23 +237,28 @@ class KeypointInbox:
 
 @dataclass(frozen=True)
 class KeypointWait:
-    """How long a frame set waits for its due views' keypoint messages (:meth:`KeypointInbox.due`).
+    """Whether a frame set waits for its due views' keypoint messages (:meth:`KeypointInbox.due`).
 
     Lockstep (a replay equal to ``isa-mocap track``, at any machine speed): as long as a keypoint node is there
     to answer, with no time limit: a slow detection on a loaded machine must not turn the replay into another
     result (a 10 s limit did, from the first frame with a person, when the node's detection came late). Only
-    while no keypoint node is in the graph (it crashed, or is being respawned) does ``limit_s`` run out. Real
-    time: at most ``limit_s`` (a late detection is expected under load; the set goes on with what came).
+    while no keypoint node is in the graph (it crashed, or is being respawned) does ``limit_s`` run out.
+
+    Real time: never. The set is tracked with the keypoints that have arrived when the tracker takes it; a view's
+    keypoints that come later are dropped with the set's messages (:meth:`KeypointInbox.take` of a later set), not
+    used for the next set: a landmark one frame period old pulls the limb toward where it was. (A wait of up to
+    30 ms per set for the node's answer cost the tracker its frame period: bags/demo, idle, 51 of 145 sets dropped
+    with the keypoint node against 5 without, session 25.)
     """
 
     lockstep: bool
     limit_s: float
 
     def goes_on(self, due: list[int], *, node_present: bool, waited_s: float) -> bool:
-        """Whether the set stops waiting. ``waited_s``: the time waited so far; in lockstep only the time
-        without a keypoint node in the graph counts."""
-        if not due:
+        """Whether the set stops waiting. ``waited_s``: the time waited so far without a keypoint node in the
+        graph (lockstep)."""
+        if not due or not self.lockstep:
             return True
-        if self.lockstep and node_present:
+        if node_present:
             return False
         return waited_s >= self.limit_s

@@ -181,3 +181,41 @@ def test_stream_forks_a_far_stamp_gets_a_state_of_its_own_kept_only_when_the_str
     kind, state, why = f.state_for(start + P)
     assert kind == "restart" and state is candidate and f.state is candidate and "restarted" in why
     assert f.state_for(start + 2 * P)[:2] == ("take", candidate)
+
+
+def test_a_restart_survives_a_message_between_its_first_two_stamps():
+    """test_network_fuzz: the segmentation node's stream of a view had begun at the fuzzer's stamps (its agreeing
+    pairs before the bag); the bag's first frame was far (a candidate), and one message between it and the second
+    frame -- the old stream's next stamp, or a far pair -- made the rule forget it: the background was learnt from
+    the second frame on, and the first frames with a person were taken for background (no estimate, or keypoints
+    on other frames than ``track``'s)."""
+    from isa_mocap_ros.intake import StreamForks, StreamJumps
+
+    start = S + 3600 * 10**9
+    for between in (S + 2 * P, 7, S - 100 * 10**9):       # the old stream goes on; a far stamp; another far one
+        j = StreamJumps(back_ns=10**9, ahead_ns=5 * 10**9)
+        assert j.decide(S)[0] == "take" and j.decide(S + P)[0] == "take"
+        assert j.decide(start)[0] == "far"
+        assert j.decide(between)[0] in ("take", "far")
+        assert j.decide(start + P)[0] == "restart" and j.restarted_from == start and j.last_ns == start + P
+        assert j.decide(between + P)[0] != "restart"         # the restart forgot the others
+    made = []
+    f = StreamForks(lambda: made.append(len(made)) or made[-1], back_ns=10**9, ahead_ns=5 * 10**9)
+    f.state_for(S)
+    _, first_state, _ = f.state_for(start)                  # the restart's first frame, on a state of its own
+    assert f.state_for(7)[0] == "far" and f.state_for(S + P)[:2] == ("take", f.state)
+    kind, state, _ = f.state_for(start + P)
+    assert kind == "restart" and state is first_state and f.state is first_state
+
+
+def test_stream_jumps_remembers_its_last_candidates_only():
+    from isa_mocap_ros.intake import StreamJumps
+
+    j = StreamJumps(back_ns=10**9, ahead_ns=5 * 10**9, candidates=2)
+    j.decide(S)
+    for k in range(3):
+        assert j.decide(S + (k + 1) * 100 * 10**9)[0] == "far"
+    assert j.candidates == (S + 200 * 10**9, S + 300 * 10**9)
+    assert j.decide(S + 100 * 10**9 + P)[0] == "far"        # the oldest was forgotten
+    with pytest.raises(ValueError, match="candidates"):
+        StreamJumps(back_ns=0, ahead_ns=0, candidates=0)

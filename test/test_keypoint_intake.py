@@ -88,14 +88,39 @@ def test_frames_without_a_person_are_skipped_and_not_counted():
     assert got == [(0, S, False), (0, S + P, True), (0, S + 2 * P, False), (0, S + 3 * P, True)]
 
 
-def test_masks_of_another_camera_are_dropped():
+def test_masks_of_another_camera_than_their_images_are_dropped():
     ki = intake(n=1)
     run(ki, [S], n=1)
-    jobs, problems = ki.add_mask(0, S + P + 3_000_007, Setting("fuzz_optical_frame", 160, 120), "m", True, 0.0)
-    assert jobs == [] and "is not the view's camera's" in problems[0][1]
-    jobs, problems = ki.add_mask(0, S + P + 3_000_008, mask_setting(0, 7, 3), "m", True, 0.0)
-    assert jobs == [] and "7x3" in problems[0][1]
+    for k, setting in enumerate((Setting("fuzz_optical_frame", 160, 120), mask_setting(0, 7, 3))):
+        stamp = S + P + 3_000_007 + k
+        assert ki.add_mask(0, stamp, setting, "m", True, 0.0) == ([], [])     # judged when it meets its image
+        jobs, problems = ki.add_image(0, stamp, cam(0), "i", 0.0)
+        assert jobs == [] and "is not the view's camera's ('cam0_optical_frame', 160x120" in problems[0][1]
+    assert ki.add_mask(0, S + P + 3_000_009, mask_setting(0, 7, 3), "m", True, 0.0) == ([], [])   # no image: unused
     assert run(ki, [S + P], n=1) == [(0, S + P, False)]             # the stream goes on (every 2nd after 1)
+
+
+def test_the_first_mask_of_a_camera_that_changed_meets_its_image():
+    """The flake of test_network_fuzz[keypoints] (10 of 12 frames; 1 run in 3-4): the fuzzer's pairs before the
+    stream (320x240) made each view's camera; the bag's first frame is 160x120, so its image waited in the gate for
+    the camera_info that confirms the change, and the segmentation node's mask of it came first. Judged on arrival
+    against the old camera, the mask was dropped, the frame set never formed here, and the lockstep estimator waited
+    for its keypoints until the player gave up (30 s), time in which the fuzzer's far pairs got between the
+    segmentation node's restart frames. Either order of mask and image must pair."""
+    for mask_first in (False, True):
+        ki = intake()
+        for v in range(2):                                   # a camera before the stream: 320x240
+            frame(ki, v, 5 * 10**9 + v, image="fuzz", w=320, h=240)
+        jobs = []
+        for v in range(2):
+            if mask_first:
+                jobs += ki.add_mask(v, S, mask_setting(v), "mask", True, 0.0)[0]
+            jobs += ki.add_image(v, S, cam(v), ("img", v, S), 0.0)[0]        # waits for its camera_info
+            if not mask_first:
+                jobs += ki.add_mask(v, S, mask_setting(v), "mask", True, 0.0)[0]
+            jobs += ki.add_info(v, S, info(v), "K", 0.0)[0]
+        assert [(j.view, j.stamp_ns, j.mask) for j in jobs] == [(0, S, "mask"), (1, S, "mask")], mask_first
+        assert ki.gates[0].setting == cam(0)
 
 
 def test_a_stream_that_jumps_ahead_is_followed():
@@ -187,9 +212,11 @@ def test_a_view_is_due_until_its_message_or_a_later_sets_message_comes():
 def test_far_and_second_messages_are_dropped_after_the_stream_started():
     box = inbox()
     box.stream.accept(S)
-    assert "from the stream" in box.add(0, S - HOUR, "kp")
+    far = box.add(0, S - HOUR, "kp")
+    assert far.kind == "stamp" and "from the stream" in far.text
     assert box.add(0, S, "kp") is None
-    assert box.add(0, S, "again").startswith("a second message")
+    twice = box.add(0, S, "again")         # typed: the estimator's problem key is the kind, not a text prefix
+    assert twice.kind == "twice" and twice.text.startswith("a second message")
     assert box.add(0, S, None) is None                   # a skip notice never replaces keypoints
     assert box.take([S, None]) == ["kp", None]
 
@@ -203,6 +230,18 @@ def test_lockstep_waits_with_no_time_limit_while_a_keypoint_node_is_there():
     assert not lock.goes_on([0], node_present=False, waited_s=9.9)
     assert lock.goes_on([0], node_present=False, waited_s=10.0)
     assert lock.goes_on([], node_present=True, waited_s=0.0)
-    real = KeypointWait(lockstep=False, limit_s=0.03)
-    assert not real.goes_on([0], node_present=True, waited_s=0.02)
-    assert real.goes_on([0], node_present=True, waited_s=0.03)
+
+
+
+def test_real_time_never_waits_for_keypoints():
+    """#35: in real time the estimator waited up to 30 ms a set for the keypoint node's answer (bags/demo, idle:
+    51 of 145 sets dropped with the node against 5 without); the set is tracked with what has arrived."""
+    from isa_mocap_ros.keypoint_intake import KeypointWait
+    real = KeypointWait(lockstep=False, limit_s=10.0)
+    assert real.goes_on([0, 1], node_present=True, waited_s=0.0)
+    assert real.goes_on([0], node_present=False, waited_s=0.0)
+    box = inbox()
+    box.stream.accept(S)
+    box.add(0, S, "kp0")                                   # view 0's came in time; view 1's detection still runs
+    assert box.due([S, S]) == [1] and box.take([S, S]) == ["kp0", None]
+    assert box.add(1, S, "late") is None and box.take([S + P, S + P]) is None   # not used for the next set

@@ -72,3 +72,26 @@ def test_an_error_while_the_context_is_up_propagates(ctx):
             spin_until_shutdown(executor, ctx)
     finally:
         node.destroy_node()
+
+
+def test_the_estimators_worker_asking_the_graph_after_the_shutdown_gets_an_answer(ctx):
+    """The estimator's worker asks the graph from its own thread while it waits in lockstep (is a keypoint node, a
+    prediction node there?); at Ctrl-C the context is shut down under it and rcl raised "rcl node's context is
+    invalid" in that thread (seen once at shutdown). Once the context is down the answer is: none there."""
+    from rclpy.node import Node
+
+    from isa_mocap_ros.nodes.common import publishers_on
+    from isa_mocap_ros.nodes.estimator_intake import EstimatorIntake
+
+    class Probe(EstimatorIntake, Node):
+        n_views = 2
+
+    node = Probe("graph_probe", context=ctx)
+    pub = node.create_publisher(String, "cam0/keypoints_skipped", qos.RELIABLE)
+    try:
+        assert publishers_on(node, "cam0/keypoints_skipped") == 1 and not node._keypoint_node_present()
+        ctx.try_shutdown()
+        assert publishers_on(node, "cam0/keypoints_skipped") == 0 and not node._keypoint_node_present()
+    finally:
+        node.destroy_publisher(pub)
+        node.destroy_node()

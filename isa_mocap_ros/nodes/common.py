@@ -198,6 +198,19 @@ def camera_info_callback(v: int, problems: ProblemLog, problem_key: Callable[[Ex
     return cb
 
 
+def publishers_on(node: Node, topic: str) -> int:
+    """How many publishers ``topic`` (a relative name is resolved in the node's namespace) has in the graph; 0 once
+    the node's context is shut down. A node's worker thread that asks the graph while it waits (the estimator in
+    lockstep: for a prediction node, a keypoint node) would otherwise die at Ctrl-C with rcl's "rcl node's context
+    is invalid" (rclpy's signal handler shuts the context down on a thread of its own)."""
+    try:
+        return node.count_publishers(node.resolve_topic_name(topic))
+    except Exception:
+        if node.context.ok():
+            raise
+        return 0
+
+
 def log_closing(node: Node, text: str) -> None:
     """Log a node's closing line: through its logger while the context is up, else on stderr.
 

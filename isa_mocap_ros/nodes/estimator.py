@@ -24,8 +24,8 @@ frames only and says so for the others (``keypoints_skipped``): in lockstep the 
 of the set has one or the other, with no time limit while a keypoint node is in the graph (so the player, which
 waits for ``estimator/done``, waits for the keypoint node too, and a replay is deterministic at any machine
 speed), up to ``keypoint_wait_s`` while none is; a view whose message of a later set came is not waited for (the
-node lost that frame: its message will never come). In real time up to ``keypoint_realtime_wait_s`` (30 ms), then
-the set is tracked with the keypoints that have arrived (:mod:`isa_mocap_ros.keypoint_intake`). A malformed
+node lost that frame: its message will never come). In real time it never waits: the set is tracked with the
+keypoints that have arrived when the tracker takes it (:mod:`isa_mocap_ros.keypoint_intake`). A malformed
 keypoint message (not 0 or 33 points, a non-finite pixel, a confidence outside [0, 1]) or one whose stamp lies far
 from the frame sets (before the first set: from the first set) is dropped with one line and counted (in lockstep
 the frame still waits for its view's own message).
@@ -67,13 +67,13 @@ from isa_mocap_ros.intake import StampWindow, ViewGate
 from isa_mocap_ros.keypoint_intake import KeypointInbox, KeypointWait
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.nodes.common import (QOS_OVERRIDES, ProblemLog, declare, declare_config, declare_frame_sync,
-                                       one_numba_thread, run_node)
+                                       one_numba_thread, publishers_on, run_node)
 from isa_mocap_ros.nodes.estimator_intake import EstimatorIntake
 from isa_mocap_ros.tracking.predict import periods_between
 from isa_mocap_ros.tracking.sync import FrameSynchronizer
 from isa_mocap_ros.tracking.config import TrackerConfig, field_docs
 from isa_mocap_ros.tracking.load import LoadGovernor, LoadSettings, StartupCatchUp
-from isa_mocap_ros.tracking.realtime import RealTimeSchedule
+from isa_mocap_ros.tracking.realtime import RealTimeSchedule, warm_up
 from isa_mocap_ros.vision.overlay import draw_overlay
 
 
@@ -142,10 +142,6 @@ class EstimatorNode(EstimatorIntake, Node):
                                        "for a view's keypoints (or skip notice) of a frame set while no keypoint node "
                                        "is in the graph (with one there, the wait has no time limit)",
                                        lo=0.0, hi=600.0)
-        self.keypoint_realtime_wait_s = declare(
-            self, "keypoint_realtime_wait_s", 0.03, "real time, keypoint_weight > 0: longest wait for a view's "
-            "keypoints or skip notice (a skip notice comes at once, a detection ~10 ms after the mask on an idle "
-            "core; 0 = take what has arrived)", lo=0.0, hi=10.0)
         self.prediction_wait_s = declare(self, "prediction_wait_s", 10.0,
                                          "lockstep: longest wait for a frame's prediction while a prediction node "
                                          "is there", lo=0.0, hi=60.0)
@@ -197,8 +193,7 @@ class EstimatorNode(EstimatorIntake, Node):
         self._predictions: dict[int, np.ndarray] = {}
         # the keypoint node's messages per view and stamp: (uv, confidence) or None (skipped / nobody)
         self.keypoint_inbox = KeypointInbox(self.n_views, self._stream)
-        self.keypoint_wait = KeypointWait(self.lockstep, self.keypoint_wait_s if self.lockstep
-                                          else self.keypoint_realtime_wait_s)
+        self.keypoint_wait = KeypointWait(self.lockstep, self.keypoint_wait_s)   # real time: never waits
         self.use_keypoints = self.tracker_config.keypoints.keypoint_weight > 0
         self.keypoint_sets = 0          # frame sets tracked with keypoints
         self._prev_stamp_ns: int | None = None   # stamp of the last frame set given to the tracker
@@ -255,12 +250,12 @@ class EstimatorNode(EstimatorIntake, Node):
 
     # -- the work -------------------------------------------------------------------------------
     def _warm_up(self) -> None:
-        """Compile (or load from numba's cache) the energy/kinematics kernels on a tiny synthetic frame,
-        then say "ready". The frame is tracked with the configured budget, so every stage a real frame
-        runs (pelvis, limb and refinement stages, skipped below their shares) is loaded here: with a
-        400-evaluation warm-up the first real frame with stages paid ~38 ms of first calls (bags/demo,
-        the frame after the initialization: 63 instead of 25 ms), one or two more sets dropped in real
-        time."""
+        """Compile (or load from numba's cache) the tracker's kernels on a tiny synthetic frame
+        (:func:`isa_mocap_ros.tracking.realtime.warm_up`: the automatic initialization, then a tracked frame), then
+        say "ready". The frames are tracked with the configured budget, so every stage a real frame runs is loaded
+        here: with a 400-evaluation warm-up the first real frame with stages paid ~38 ms of first calls (bags/demo,
+        the frame after the initialization: 63 instead of 25 ms), one or two more sets dropped in real time; with
+        a warm-up from a given pose the initialized frame paid ~50 CPU ms of first calls (session 27)."""
         t0 = time.monotonic()
         # said before the wait, so a first run is not a silent minute: numba compiles the kernels on their
         # first call after an install (`make venv` does it ahead, `isa-mocap warmup`) and loads its cache after
@@ -268,16 +263,7 @@ class EstimatorNode(EstimatorIntake, Node):
                                "1.5-4 min when they were never compiled since the install: run `isa-mocap warmup` "
                                "once to do that ahead)")
         try:
-            from isa_mocap_ros.body import capsule_endpoints as caps
-            from isa_mocap_ros.tracking.tracker import Tracker
-            from isa_mocap_ros.vision import default_rig, render_mask
-            rig = default_rig(n_views=2, width=80, height=60)
-            x = self.model.rest_pose()
-            E = caps(self.model, x[None])[0]
-            masks = [render_mask(c, E, self.model.capsule_radii) for c in rig.cameras]
-            tracker = Tracker(self.model, rig.cameras, self.tracker_config)
-            tracker.initialize(pose=x)
-            tracker.step(masks, 0)
+            warm_up(self.model, self.tracker_config)      # the automatic initialization's kernels too
         except Exception as exc:  # noqa: BLE001 - warm-up is an optimisation, never fatal
             self.get_logger().warn(f"warm-up failed ({type(exc).__name__}: {exc}); the first frame will be slow")
         self._wait_for_inputs()
@@ -293,7 +279,7 @@ class EstimatorNode(EstimatorIntake, Node):
             topics += [f"cam{v}/keypoints" for v in range(self.n_views)]
         missing = topics
         while self.wait_for_inputs_s > 0 and not self._stop.is_set():
-            missing = [t for t in topics if self.count_publishers(self.resolve_topic_name(t)) == 0]
+            missing = [t for t in topics if publishers_on(self, t) == 0]
             if not missing or time.monotonic() > deadline:
                 break
             time.sleep(0.1)
@@ -324,8 +310,8 @@ class EstimatorNode(EstimatorIntake, Node):
                 if self.use_prediction and self._published_any:
                     # lockstep waits as long as a prediction node is there to answer (a slow one on a loaded
                     # machine must not turn the replay into another result), at most prediction_wait_s
-                    wait_s = self.prediction_wait_s if self.lockstep and self.count_publishers(
-                        self.resolve_topic_name("prediction/joint_states")) > 0 else 0.0
+                    wait_s = self.prediction_wait_s if self.lockstep and publishers_on(
+                        self, "prediction/joint_states") > 0 else 0.0
                     deadline = time.monotonic() + wait_s
                     while (prediction := self._prediction_for(frame_set.stamp_ns)) is None:
                         left = deadline - time.monotonic()

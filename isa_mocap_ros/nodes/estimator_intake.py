@@ -16,7 +16,7 @@ from std_msgs.msg import Header
 
 import msg_adapters as ma
 from isa_mocap_ros.intake import Setting
-from isa_mocap_ros.nodes.common import camera_info_callback
+from isa_mocap_ros.nodes.common import camera_info_callback, publishers_on
 from isa_mocap_ros.tracking.sync import SyncError
 from isa_mocap_ros.vision import Camera
 
@@ -177,23 +177,21 @@ class EstimatorIntake:
 
     def _store_keypoints(self, v: int, stamp: int, kp, topic: str) -> None:
         with self._cv:
-            why = self.keypoint_inbox.add(v, stamp, kp)
-            if why is not None:
-                self.problems.report(f"keypoints{v}:{'twice' if why.startswith('a second') else 'stamp'}",
-                                     f"{topic} dropped: {why}")
+            rejected = self.keypoint_inbox.add(v, stamp, kp)
+            if rejected is not None:
+                self.problems.report(f"keypoints{v}:{rejected.kind}", f"{topic} dropped: {rejected.text}")
                 return
             self._cv.notify_all()
 
     def _keypoint_node_present(self) -> bool:
         """Whether a keypoint node (a publisher of every view's skip notices) is in the graph."""
-        return all(self.count_publishers(self.resolve_topic_name(f"cam{v}/keypoints_skipped")) > 0
-                   for v in range(self.n_views))
+        return all(publishers_on(self, f"cam{v}/keypoints_skipped") > 0 for v in range(self.n_views))
 
     def _keypoints_for(self, frame_set) -> list | None:
-        """(Under ``_cv``.) The set's keypoints per view ((uv, confidence) or None), None when no view has any;
-        after waiting for every view with a mask to have its message (keypoints or skip notice; the rule:
-        :class:`~isa_mocap_ros.keypoint_intake.KeypointWait`; lockstep: while a keypoint node is in the graph,
-        with no time limit)."""
+        """(Under ``_cv``.) The set's keypoints per view ((uv, confidence) or None), None when no view has any.
+        Lockstep: after waiting for every view with a mask to have its message (keypoints or skip notice), with no
+        time limit while a keypoint node is in the graph (the rule: :class:`~isa_mocap_ros.keypoint_intake.KeypointWait`).
+        Real time: what has arrived, at once."""
         inbox = self.keypoint_inbox
         for v, s, why in inbox.purge():      # held before the first frame set, far from it
             self.problems.report(f"keypoints{v}:stamp", f"cam{v}/keypoints (or skip notice) of stamp {s} dropped: "
@@ -204,19 +202,18 @@ class EstimatorIntake:
             now = time.monotonic()
             if self.lockstep and now - checked >= 0.5:     # the graph, twice a second
                 present, checked = self._keypoint_node_present(), now
-            waited_s += (now - last) if not (self.lockstep and present) else 0.0
+            waited_s += (now - last) if not present else 0.0
             last = now
             if self._stop.is_set() or self.keypoint_wait.goes_on(due, node_present=present, waited_s=waited_s):
-                text = (f"frame set {frame_set.stamp_ns}: no keypoints or skip notice from views {due} within "
-                        f"{self.keypoint_wait.limit_s:.3f} s" + (" without a keypoint node in the graph"
-                                                                  if self.lockstep else "")
-                        + "; tracked without them")
                 if self.lockstep:
-                    self.problems.report("nokeypoints", text)
-                else:                       # real time: a late detection is expected under load
-                    self.problems.event("nokeypoints", text)
+                    self.problems.report("nokeypoints", f"frame set {frame_set.stamp_ns}: no keypoints or skip notice "
+                                         f"from views {due} within {self.keypoint_wait.limit_s:.3f} s without a "
+                                         f"keypoint node in the graph; tracked without them")
+                else:                       # real time never waits: a detection still running is expected
+                    self.problems.event("keypoints_late", f"frame set {frame_set.stamp_ns}: keypoints or skip notice "
+                                                          f"of views {due} not in yet; tracked without them")
                 break
-            self._cv.wait(0.05 if self.lockstep else max(0.001, min(0.05, self.keypoint_wait.limit_s - waited_s)))
+            self._cv.wait(0.05)
         return inbox.take(stamps)
 
     def _poll_partial(self) -> None:

@@ -29,9 +29,10 @@ set is complete (the last view's mask), not at each view's own mask.
 
 Input checks as the segmentation node's (:mod:`isa_mocap_ros.intake`): an image is taken only when a
 ``cam<i>/camera_info`` of its stamp agrees with it (or it agrees with the view's camera and its stamp lies
-within ``max_stamp_gap_s`` of the view's stream), and a mask only when it is mono8, its frame id and size are the
-view's camera's (at any stamp: it is used only with a gated image of its stamp, so a stream that jumps ahead
-is followed). A pair that forms no frame set (one view's image
+within ``max_stamp_gap_s`` of the view's stream), and a mask only when it is mono8 and its frame id and size are
+those of the gated image of its stamp, judged when the two meet (at any stamp, so a stream that jumps ahead is
+followed, and in either order: the first mask of a camera that changed may come before the camera_info that lets
+its image through the gate). A pair that forms no frame set (one view's image
 and camera_info that agree at a far stamp, and the segmentation node's mask of it) neither gets published
 keypoints the estimator would use nor moves the schedule. Bad input (undecodable image or mask, unsupported
 encoding, a mask of another size than its image, a NaN camera_info, the checks above) is dropped for that view

@@ -127,7 +127,8 @@ def swapped_sides(model, x: np.ndarray, limbs) -> np.ndarray:
 def better_side(tr, ctx, pred: np.ndarray) -> np.ndarray:
     """After a gap (``ctx.after_gap``) the limbs' phase is unknown: a walker unseen for half a second has swapped
     which leg is in front. Of the prediction and its :data:`SIDE_SWAPS` the lowest energy under the frame's
-    objective starts the search (a few evaluations); a swap taken is noted."""
+    objective starts the search (a few evaluations); a swap taken is noted. The own predictor keeps its history
+    (restarting it there measured worse: docs/history/issue35_speed.md, session 27)."""
     cands = [pred] + [swapped_sides(tr.model, pred, limbs) for limbs in SIDE_SWAPS]
     E = np.asarray(ctx.objective(np.stack(cands)), dtype=float)
     k = int(np.nanargmin(np.where(np.isfinite(E), E, np.inf))) if np.any(np.isfinite(E)) else 0
@@ -135,5 +136,4 @@ def better_side(tr, ctx, pred: np.ndarray) -> np.ndarray:
         what = "legs" if len(SIDE_SWAPS[k - 1]) == 2 else "legs and arms"
         ctx.notes.append(f"prediction: after the gap the search starts with the {what} swapped "
                          f"(energy {E[k]:.4g} vs {E[0]:.4g})")
-        tr.track.predictor.reset()     # the motion before the gap was the other side's
     return cands[k]
