@@ -44,6 +44,17 @@ def test_quick_run_scores_every_frame_against_the_peer(tmp_path):
     assert all(0 <= m[k] <= 1 for m in d["masks"] for k in ("beyond", "core_missed", "keypoints_on"))
     assert all(len(m["beyond_thirds"]) == 3 and all(0 <= x <= 1 for x in m["beyond_thirds"]) for m in d["masks"])
     assert "cam0 " in md and "stick figure" in md
+    # the peer's points defined on the mesh bodies: 'our joints' is the score itself; the other points placed too
+    defs = r["definitions_over_seeds"]
+    assert defs["joints"]["raw"]["mean"] == pytest.approx(r["mpjpe_mm"], abs=1e-9)
+    assert defs["joints"]["offset_removed"]["mean"] == pytest.approx(r["offset_removed_mpjpe_mm"], abs=1e-9)
+    assert defs["head_top"]["per_joint_offset_removed_mm"]["left_knee"] == pytest.approx(
+        r["offset_removed_per_marker_mm"]["left_knee"], abs=1e-9)                  # only the head differs
+    assert defs["head_top"]["raw"]["mean"] != defs["joints"]["raw"]["mean"]
+    assert set(defs["extra"]) == {"Nose", "LHeel", "RHeel", "LBigToe", "RBigToe", "LSmallToe", "RSmallToe"}
+    assert "mesh bodies' head top" in md and "outside the score" in md
+    # the offline smoothing option, scored apart
+    assert np.isfinite(r["smoothed_offset_removed_mpjpe_mm"]) and "`track --smooth-hz 6`" in md
     # the bag is cached in the work directory: a second run does not import again
     assert (tmp_path / "w" / "demo_bag_160_8" / "metadata.yaml").is_file()
     assert bench_real.render_markdown({"skipped": "x"}) == "Not run: x.\n"

@@ -55,11 +55,11 @@ def test_network_rows_change_estimator_parameters_in_a_copy_of_the_parameter_fil
     from isa_mocap_ros.bench.speed import NETWORK_MODES, _params_with
     from isa_mocap_ros.resources import resource_dir
 
-    assert any(m[4] == {"startup_catch_up": 0} and not m[1] for m in NETWORK_MODES)
+    assert any(m[4] == {"startup_catch_up": 12} and not m[1] for m in NETWORK_MODES)
     orig = yaml.safe_load((resource_dir("config") / "pipeline.yaml").read_text())
-    got = yaml.safe_load(_params_with({"startup_catch_up": 0, "degrade": False}, tmp_path / "p.yaml").read_text())
+    got = yaml.safe_load(_params_with({"startup_catch_up": 12, "degrade": False}, tmp_path / "p.yaml").read_text())
     est, ref = got["/mocap/estimator"]["ros__parameters"], orig["/mocap/estimator"]["ros__parameters"]
-    assert est["startup_catch_up"] == 0 and est["degrade"] is False and ref["startup_catch_up"] > 0
+    assert est["startup_catch_up"] == 12 and est["degrade"] is False and ref["startup_catch_up"] == 0
     assert {k: v for k, v in est.items() if k not in ("startup_catch_up", "degrade")} == \
         {k: v for k, v in ref.items() if k not in ("startup_catch_up", "degrade")}
     assert {k: v for k, v in got.items() if k != "/mocap/estimator"} == \

@@ -99,3 +99,39 @@ def test_the_same_inputs_give_the_same_schedule(walk45):
                                     step_s=RT.step_cost(load=3.0))
         return [(s.k, s.gap, s.budget, s.result.x.tobytes()) for s in steps], dropped
     assert run() == run()
+
+
+def test_warm_up_leaves_no_kernel_to_the_first_initialized_frame():
+    """realtime.warm_up (the estimator node's, before "ready"): in a fresh process, the first automatically
+    initialized frame and the frames after it load no numba kernel (a warm-up from a given pose left the first-frame
+    hull's projection kernel, with scipy.ndimage's import, to that frame: ~50 CPU ms, session 27)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = f"""
+import sys
+sys.path.insert(0, {str(Path(__file__).parent)!r})
+from numba.core import dispatcher
+from walk_scene import walk_scene
+from isa_mocap_ros.tracking import realtime
+from isa_mocap_ros.tracking.config import TrackerConfig
+from isa_mocap_ros.tracking.tracker import Tracker
+model, cams, walk, masks = walk_scene(width=160, height=120, frames=3, duration_s=0.2, seed=0)
+cfg = TrackerConfig.from_flat(seed=0)
+warm = realtime.warm_up(model, cfg)
+assert warm[0].initialized and not warm[1].fell_back, warm
+loads = []
+first = dispatcher.Dispatcher._compile_for_args
+def spy(self, *a, **k):
+    loads.append(self.py_func.__qualname__)
+    return first(self, *a, **k)
+dispatcher.Dispatcher._compile_for_args = spy
+tracker = Tracker(model, cams, cfg)
+results = [tracker.step(masks[k], k) for k in range(3)]
+assert results[0].initialized and any(n.startswith("heading check") for n in results[0].notes)
+print("LOADS", loads)
+"""
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "LOADS []" in res.stdout, res.stdout

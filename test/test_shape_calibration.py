@@ -38,6 +38,10 @@ def test_shape_from_params_identity_symmetry_and_bad_input():
         shape_from_params(base, [1.0, 2.0])
     with pytest.raises(ShapeCalibrationError, match="window_frames: expected an integer >= 1"):
         ShapeCalibrationConfig(window_frames=0)
+    with pytest.raises(ShapeCalibrationError, match="energy: expected 'raster' or 'fast', received 'exact'"):
+        ShapeCalibrationConfig(energy="exact")
+    with pytest.raises(ShapeCalibrationError, match="combine: expected 'lowest' or 'median', received 'mean'"):
+        ShapeCalibrationConfig(combine="mean")
 
 
 def test_marker_bone_lengths_are_the_median_distance_and_errors_compare_by_name():
@@ -145,6 +149,39 @@ def test_restarts_keep_the_lowest_judged_energy_and_the_prior_holds_the_arm_spli
     assert prior(cfg, z) == pytest.approx(cfg.regularization * 0.02 + cfg.arm_split_prior * 0.04)
     z[names.index("forearm")] = 0.1
     assert prior(cfg, z) == pytest.approx(cfg.regularization * 0.02)
+
+
+def test_median_of_restarts_is_each_factors_median_over_the_single_calibrations():
+    import dataclasses
+
+    model = make_model(39, shape=shape_from_params(default_shape(), {"scale": 0.96, "thigh": 1.05}))
+    cams, frames = _rendered_frames(model, 3)
+    cfg = ShapeCalibrationConfig(window_frames=3, n_frames=2, rounds=1, pose_steps=1, shape_evals=40, seed=3, restarts=3,
+                                 combine="median")
+    res = calibrate_shape(39, cams, frames, config=cfg)
+    singles = [calibrate_shape(39, cams, frames, config=dataclasses.replace(cfg, restarts=1, seed=3 + 7919 * k))
+               for k in range(3)]
+    for n, _, _ in SHAPE_PARAMS:
+        want = np.exp(np.median([np.log(r.params[n]) for r in singles]))
+        assert res.params[n] == pytest.approx(want, rel=1e-12), n
+    assert res.notes[-1].startswith("median factors of 3 restarts")
+    assert bone_lengths(make_model(39, shape=res.shape)) == pytest.approx(
+        bone_lengths(make_model(39, shape=shape_from_params(default_shape(), res.params))))
+
+
+def test_raster_shape_fit_falls_back_to_the_sampled_energy_with_lens_distortion():
+    import dataclasses
+
+    model = make_model(39, shape=shape_from_params(default_shape(), {"scale": 1.02}))
+    cams, frames = _rendered_frames(model, 2)
+    bent = [dataclasses.replace(c, dist=np.array([-0.04, 0.0, 0.0, 0.0, 0.0])) for c in cams]
+    cfg = ShapeCalibrationConfig(window_frames=2, n_frames=2, rounds=1, pose_steps=1, shape_evals=20, seed=1,
+                                 energy="raster")
+    pinhole = calibrate_shape(39, cams, frames, config=cfg)
+    assert not any("in place of 'raster'" in n for n in pinhole.notes)
+    res = calibrate_shape(39, bent, frames, config=cfg)
+    assert any(n.startswith("shape fit: energy 'fast' (sampled) in place of 'raster'") for n in res.notes)
+    assert res.params == calibrate_shape(39, bent, frames, config=dataclasses.replace(cfg, energy="fast")).params
 
 
 def test_calibration_needs_a_person():

@@ -114,6 +114,56 @@ def joint_thirds(collect: dict, parts: int = 3) -> dict:
         return {n: [float(np.nanmean(err[i, m])) for i in spans] for m, n in enumerate(shared)}
 
 
+#: the score's point definitions compared by :func:`definition_scores`: name -> label
+DEFINITIONS = {
+    "joints": "our joints (the score)",
+    "head_top": "the peer's Head as the mesh bodies' head top (eval/keypoint_map), the rest our joints",
+    "mesh": "Head as the mesh head top, every other joint as the mesh rig's joint (decision 012's map)",
+}
+
+
+def definition_scores(collect: dict) -> dict | None:
+    """The scored frames against the peer with its points defined on the mesh bodies instead of our joints (issue
+    34: nothing fitted on this recording): per :data:`DEFINITIONS` the mean error raw and offsets removed (mm) and
+    per joint offsets removed; ``extra``: the peer's points our joints do not name (nose, heels, toes) placed by
+    :mod:`isa_mocap_ros.eval.keypoint_map`, raw and offsets removed per point."""
+    from isa_mocap_ros.eval.joint_map import mapped_markers, mesh_rig_map
+    from isa_mocap_ros.eval.keypoint_map import keypoint_positions, mesh_keypoint_points
+    from isa_mocap_ros.eval.metrics import body_frames, offset_removed_errors_mm
+
+    scored = _scored_markers(collect)
+    if scored is None or "head" not in scored[2]:
+        return None
+    frames, names, shared, Pe = scored
+    model = collect["model"]
+    X = np.array([collect["estimates"][k] for k in frames])
+    T = np.array([collect["truth_markers"][k] for k in frames])
+    Pt = T[:, [names.index(n) for n in shared]]
+    pts, rig = mesh_keypoint_points(), mesh_rig_map()
+    head = shared.index("head")
+    Ph = Pe.copy()
+    Ph[:, head] = keypoint_positions(pts, model, X, ["Head"], rig_map=rig)[:, 0]
+    Pm = mapped_markers(rig, model, X, shared)
+    Pm[:, head] = Ph[:, head]
+    out: dict = {}
+    with np.errstate(invalid="ignore"):
+        for key, P in (("joints", Pe), ("head_top", Ph), ("mesh", Pm)):
+            rem = _offset_removed_mm(P, Pt, shared)
+            out[key] = {"raw_mm": float(np.nanmean(np.nanmean(1e3 * np.linalg.norm(P - Pt, axis=-1), axis=1))),
+                        "offset_removed_mm": float(np.nanmean(np.nanmean(rem, axis=1))),
+                        "per_joint_offset_removed_mm": {n: float(np.nanmean(rem[:, m])) for m, n in enumerate(shared)}}
+        extra = [n for n in names if n in pts.points and n != "Head"]
+        if extra:
+            Pk = keypoint_positions(pts, model, X, extra, rig_map=rig)
+            Tk = T[:, [names.index(n) for n in extra]]
+            rem, _ = offset_removed_errors_mm(Pk, Tk, body_frames(Pt, shared.index("left_hip"),
+                                                                  shared.index("right_hip")))
+            raw = 1e3 * np.linalg.norm(Pk - Tk, axis=-1)
+            out["extra"] = {n: [float(np.nanmean(raw[:, m])), float(np.nanmean(rem[:, m]))]
+                            for m, n in enumerate(extra)}
+    return out
+
+
 #: Pose2Sim's own filter of its triangulated points (the demo's Config.toml ``[filtering.butterworth]``): order,
 #: cut-off (Hz); zero phase (filtered forward and backward)
 PEER_FILTER = (4, 6.0)
@@ -143,13 +193,17 @@ def _track(bag: Path, out: Path, extra: list[str]) -> dict:
     from isa_mocap_ros.cli.main import build_parser
     from isa_mocap_ros.cli.track import track_bag
 
-    args = build_parser().parse_args(["track", str(bag), "--out", str(out), "--overwrite", "--no-progress", *extra])
+    args = build_parser().parse_args(["track", str(bag), "--out", str(out), "--overwrite", "--no-progress",
+                                      "--smooth-hz", f"{PEER_FILTER[1]:g}", *extra])
     t0 = time.perf_counter()
     collect: dict = {}
     s = track_bag(args, collect=collect)
     r = {k: s.get(k) for k in _KEEP}
     r["wall_seconds"] = round(time.perf_counter() - t0, 1)
     r["joint_thirds_mm"] = joint_thirds(collect)
+    r["definitions"] = definition_scores(collect)
+    sm = s.get("smoothed") or {}
+    r["smoothed_mpjpe_mm"], r["smoothed_offset_removed_mpjpe_mm"] = sm.get("mpjpe_mm"), sm.get("offset_removed_mpjpe_mm")
     ref = demo_dir() / "reference" / "balancing_pose2sim_butterworth.trc"
     stamps = sorted(collect["stamps"].values())
     fps = (len(stamps) - 1) / ((stamps[-1] - stamps[0]) / 1e9) if len(stamps) > 1 else 0.0
@@ -212,6 +266,25 @@ def _spread(runs: list[dict], key: str) -> dict:
         else {"mean": None, "min": None, "max": None}
 
 
+def _definitions_over_seeds(per_seed: list[dict]) -> dict | None:
+    """:func:`definition_scores` of several seeds: per definition the spread of raw and offset-removed means and the
+    per-joint means; per extra point the mean raw / offset-removed error over the seeds."""
+    runs = [r["definitions"] for r in per_seed if r.get("definitions")]
+    if not runs:
+        return None
+    out = {}
+    for key in DEFINITIONS:
+        out[key] = {"raw": _spread([r[key] for r in runs], "raw_mm"),
+                    "offset_removed": _spread([r[key] for r in runs], "offset_removed_mm"),
+                    "per_seed_offset_removed": [r[key]["offset_removed_mm"] for r in runs],
+                    "per_joint_offset_removed_mm": {n: float(np.mean([r[key]["per_joint_offset_removed_mm"][n]
+                                                                      for r in runs]))
+                                                    for n in runs[0][key]["per_joint_offset_removed_mm"]}}
+    if all("extra" in r for r in runs):
+        out["extra"] = {n: [float(np.mean([r["extra"][n][i] for r in runs])) for i in (0, 1)] for n in runs[0]["extra"]}
+    return out
+
+
 def collect(*, quick: bool, out: Path, configs=DEFAULT_CONFIGS, lockstep: str | None = "default_choice",
             seeds=(0, 1, 2)) -> dict:
     """The section's measurements (module docstring)."""
@@ -245,9 +318,12 @@ def collect(*, quick: bool, out: Path, configs=DEFAULT_CONFIGS, lockstep: str | 
                              "raw_over_seeds": _spread(per_seed, "mpjpe_mm"),
                              "knee_over_seeds": _spread(per_seed, "knee_rmse_deg"),
                              "filtered_over_seeds": _spread(per_seed, "filtered_offset_removed_mpjpe_mm"),
+                             "smoothed_over_seeds": _spread(per_seed, "smoothed_offset_removed_mpjpe_mm"),
+                             "smoothed_raw_over_seeds": _spread(per_seed, "smoothed_mpjpe_mm"),
                              "backwards_over_seeds": int(sum(r["frames_facing_backwards"] or 0 for r in per_seed)),
                              "tracked_over_seeds": int(min(r["frames_tracked"] or 0 for r in per_seed)),
-                             "joint_thirds_over_seeds": _mean_thirds([r["joint_thirds_mm"] for r in per_seed])}
+                             "joint_thirds_over_seeds": _mean_thirds([r["joint_thirds_mm"] for r in per_seed]),
+                             "definitions_over_seeds": _definitions_over_seeds(per_seed)}
     common = ["--seed", str(seeds[0])] + evals
     if lockstep:
         name = lockstep if lockstep != "default_choice" else next(
@@ -307,7 +383,32 @@ def render_markdown(d: dict) -> str:
                   "centres filtered the same way against its filtered file, offsets removed; an offline figure, not the "
                   "score above): " + "; ".join(f"{lab}: **{_f(f['mean'])}** [{_f(f['min'])}-{_f(f['max'])}] mm"
                                               for lab, f in filt) + "."]
+    smo = [(r["label"], r["smoothed_over_seeds"], r.get("smoothed_raw_over_seeds") or {}) for r in d["runs"].values()
+           if (r.get("smoothed_over_seeds") or {}).get("mean") is not None]
+    if smo:
+        L += ["", f"`track --smooth-hz {PEER_FILTER[1]:g}` (an offline option: the finished track's poses low-passed "
+                  "by the peer's kind of filter, zero phase; against the raw file, as the score): " + "; ".join(
+                      f"{lab}: **{_f(f['mean'])}** [{_f(f['min'])}-{_f(f['max'])}] mm offsets removed, raw "
+                      f"{_f(raw.get('mean'))}" for lab, f, raw in smo) + "."]
     first = next(iter(d["runs"].values()), None)
+    defs = (first or {}).get("definitions_over_seeds")
+    if defs:
+        L += ["", f"The peer's points defined on the mesh bodies ({first['label']}; the same runs re-scored; "
+                  "`isa_mocap_ros/eval/keypoint_map.py`: the MakeHuman meshes' head top, nose, heels and toes anchored "
+                  "on our head and ankle joints, `config/joint_maps/halpe26_mesh_points.yaml`; nothing fitted on this "
+                  "recording):", "",
+              "| points scored as | raw (mm), mean [min-max] | offsets removed (mm), mean [min-max] | per seed "
+              "| head | right ankle |", "|---|---|---|---|---|---|"]
+        for key, label in DEFINITIONS.items():
+            v = defs[key]
+            pj = v["per_joint_offset_removed_mm"]
+            L.append(f"| {label} | {_f(v['raw']['mean'])} [{_f(v['raw']['min'])}-{_f(v['raw']['max'])}] "
+                     f"| **{_f(v['offset_removed']['mean'])}** [{_f(v['offset_removed']['min'])}-"
+                     f"{_f(v['offset_removed']['max'])}] | {', '.join(_f(x) for x in v['per_seed_offset_removed'])} "
+                     f"| {_f(pj.get('head'), '{:.0f}')} | {_f(pj.get('right_ankle'), '{:.0f}')} |")
+        if defs.get("extra"):
+            L += ["", "The peer's points outside the score, placed the same way (raw / offsets removed, mm, mean over "
+                      "the seeds): " + ", ".join(f"{n} {a:.0f}/{b:.0f}" for n, (a, b) in defs["extra"].items()) + "."]
     if first and first.get("per_marker_mm"):
         L += ["", f"Per joint ({first['label']}, seed {seeds[0]}; raw / offsets removed, mm): " + ", ".join(
             f"{n.replace('_', ' ')} {first['per_marker_mm'][n]:.0f}/{first['offset_removed_per_marker_mm'][n]:.0f}"

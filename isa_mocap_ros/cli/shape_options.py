@@ -19,7 +19,13 @@ def add_calibration_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calib-evals", type=int, default=None, metavar="N",
                    help="shape calibration: shape-fit evaluations per round (default 1500)")
     p.add_argument("--calib-restarts", type=int, default=None, metavar="N",
-                   help="shape calibration: whole calibrations from other seeds, the lowest energy kept (default 1)")
+                   help="shape calibration: whole calibrations from other seeds, combined by --calib-combine (default 1)")
+    p.add_argument("--calib-combine", choices=("lowest", "median"), default=None,
+                   help="shape calibration with restarts: keep the lowest judged energy, or the median of each factor "
+                        "(default lowest)")
+    p.add_argument("--calib-energy", choices=("raster", "fast"), default=None,
+                   help="shape calibration: the shape fit's silhouette energy, raster (counted on the pixel grid, no "
+                        "sample; fast with lens distortion) or fast (sampled) (default fast)")
 
 
 def calibration_config(args, seed: int):
@@ -27,7 +33,7 @@ def calibration_config(args, seed: int):
 
     kw = {"seed": seed}
     for opt, key in (("calib_frames", "window_frames"), ("calib_rounds", "rounds"), ("calib_evals", "shape_evals"),
-                     ("calib_restarts", "restarts")):
+                     ("calib_restarts", "restarts"), ("calib_combine", "combine"), ("calib_energy", "energy")):
         v = getattr(args, opt, None)
         if v is not None:
             kw[key] = v

@@ -115,6 +115,11 @@ def register(sub) -> None:
     p.add_argument("--overlays", default=None, metavar="DIR",
                    help="also draw the estimate on every view: DIR/strip.png (a few frames, all views) and "
                         "DIR/overlay.mp4 (every tracked frame, all views side by side)")
+    p.add_argument("--smooth-hz", type=float, default=0.0, metavar="HZ",
+                   help="also smooth the finished track offline: a zero-phase Butterworth low-pass (order 4, forward "
+                        "and backward, the filter Pose2Sim applies to its points; 6 Hz its demo's) on the poses, "
+                        "written to DIR/estimates_smoothed and scored apart ('smoothed' in summary.json); the "
+                        "per-frame estimates and their score are unchanged (0 = off, the default)")
     p.add_argument("--overwrite", action="store_true", help="replace DIR/estimates if it exists")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     from isa_mocap_ros.cli.shape_options import add_calibration_arguments
@@ -153,6 +158,9 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig
     from msg_adapters import arrays_to_joint_state, to_cdr
 
+    smooth_hz = float(getattr(args, "smooth_hz", 0.0) or 0.0)
+    if not np.isfinite(smooth_hz) or smooth_hz < 0:
+        raise ValueError(f"--smooth-hz: expected a cut-off in Hz >= 0 (0 = off), received {smooth_hz}")
     if args.evals < 1:
         raise ValueError(f"--evals: expected an integer >= 1, received {args.evals}")
     if args.frames is not None and args.frames < 1:
@@ -463,6 +471,18 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         summary.update(acc)
     else:
         summary["frames"] = len(estimates)
+    if smooth_hz > 0 and estimates:
+        from isa_mocap_ros.cli.track_io import smooth_track, write_joint_states
+
+        smoothed = smooth_track(model, stamp_of, estimates, smooth_hz)
+        if collect is not None:
+            collect["estimates_smoothed"] = smoothed
+        write_joint_states(out / "estimates_smoothed", model, {stamp_of[k]: x for k, x in smoothed.items()},
+                           overwrite=args.overwrite)
+        sm = score(model, seq, {int(seq.frames[k].stamp_ns): smoothed[k] for k in smoothed})
+        summary["smoothed"] = {"cutoff_hz": smooth_hz, "order": 4, **({k: sm[k] for k in (
+            "mpjpe_mm", "offset_removed_mpjpe_mm", "knee_rmse_deg", "max_frame_error_mm", "per_marker_mm",
+            "offset_removed_per_marker_mm") if k in sm} if sm is not None else {})}
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
 
@@ -493,6 +513,12 @@ def run(args: argparse.Namespace) -> int:
         rows.append(("max frame error", f"{s['max_frame_error_mm']:.1f} mm"
                      + (f" (frame {s['worst_frame_index']} of the scored)" if "worst_frame_index" in s else "")))
         rows.append(("knee-angle RMSE", f"{s['knee_rmse_deg']:.2f} deg"))
+        sm = s.get("smoothed") or {}
+        if "mpjpe_mm" in sm:
+            rows.append((f"smoothed offline ({sm['cutoff_hz']:g} Hz, zero phase)",
+                         f"{sm['mpjpe_mm']:.1f} mm" + (f", offsets removed {sm['offset_removed_mpjpe_mm']:.1f} mm"
+                                                       if "offset_removed_mpjpe_mm" in sm else "")
+                         + f", knee {sm['knee_rmse_deg']:.2f} deg"))
         if s.get("frames_facing_backwards") is not None:
             rows.append(("frames facing backwards", f"{s['frames_facing_backwards']} (heading error max "
                                                     f"{s['max_heading_error_deg']:.0f} deg)"))

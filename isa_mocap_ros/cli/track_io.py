@@ -144,3 +144,54 @@ def reference_coverage(cameras, points, masks) -> float:
         n += int(ok.sum())
         hit += int(np.count_nonzero(m[uv[ok, 1], uv[ok, 0]]))
     return hit / n if n else float("nan")
+
+
+def smooth_track(model, stamps_ns: dict, estimates: dict, cutoff_hz: float, *, order: int = 4) -> dict:
+    """``track --smooth-hz``: the estimates (frame index -> pose) low-passed without delay
+    (:func:`isa_mocap_ros.tracking.smooth.smooth_poses`), each run of consecutive tracked frames on its own (the
+    frame rate from the run's stamps); frame index -> smoothed pose."""
+    from isa_mocap_ros.tracking.smooth import smooth_poses
+
+    keys = sorted(estimates)
+    if len(keys) < 2:
+        return dict(estimates)
+    step = min(b - a for a, b in zip(keys, keys[1:]))
+    runs, cur = [], [keys[0]]
+    for k in keys[1:]:
+        if k - cur[-1] == step:
+            cur.append(k)
+        else:
+            runs.append(cur)
+            cur = [k]
+    runs.append(cur)
+    out = {}
+    for run in runs:
+        X = np.array([estimates[k] for k in run])
+        if len(run) >= 4:
+            fps = 1e9 * (len(run) - 1) / (stamps_ns[run[-1]] - stamps_ns[run[0]])
+            X = smooth_poses(model, X, fps, cutoff_hz, order=order)
+        out.update(zip(run, X))
+    return out
+
+
+def write_joint_states(path: Path, model, poses_by_stamp: dict, *, overwrite: bool) -> None:
+    """A rosbag2 with ``/mocap/joint_states`` of ``poses_by_stamp`` (stamp ns -> pose), as ``track`` writes its
+    estimates (``/mocap/model`` latched beside them)."""
+    from std_msgs.msg import String
+
+    from isa_mocap_ros.bag import QOS_DEFAULT, QOS_LATCHED, BagWriter
+    from isa_mocap_ros.body import pose_to_joint_state
+    from isa_mocap_ros.sequence import model_to_yaml
+    from msg_adapters import arrays_to_joint_state, to_cdr
+
+    with BagWriter(path, overwrite=overwrite) as bag:
+        bag.add_topic(f"{TOPIC}/joint_states", "sensor_msgs/msg/JointState", qos=[QOS_DEFAULT])
+        bag.add_topic(f"{TOPIC}/model", "std_msgs/msg/String", qos=[QOS_LATCHED])
+        stamps = sorted(poses_by_stamp)
+        if stamps:
+            bag.write(f"{TOPIC}/model", to_cdr(String(data=model_to_yaml(model, role="isa-mocap track --smooth-hz"))),
+                      stamps[0])
+        for s in stamps:
+            q = pose_to_joint_state(model, poses_by_stamp[s])
+            bag.write(f"{TOPIC}/joint_states",
+                      to_cdr(arrays_to_joint_state(model.dof_names, q, stamp_ns=s, frame_id="world")), s)

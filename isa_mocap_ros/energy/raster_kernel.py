@@ -15,7 +15,8 @@ pixel grid: ``|M| = popcount(U)``, ``|M ∩ F| = popcount(U & F)``, ``|F|`` fixe
 No random sample. What remains of the exact reference's difference is the disc approximation of the
 projected balls (docs/energy.md, IoU 0.998) and, with a row stride ``s > 1``, counting every ``s``-th
 pixel row only (``F`` then counted on the same rows). Pinhole views only (a pixel row is a line of the
-undistorted plane only without lens distortion).
+undistorted plane only without lens distortion): a distorted camera's masks are resampled onto its pinhole twin
+first (:mod:`.undistort`), and the kernel counts there.
 
 Layout: a view's bitmap is word-plane major, ``U[w * Hs + j]`` = pixels ``64 w .. 64 w + 63`` of sampled row
 ``j`` (bit ``i`` = pixel ``64 w + i``), so one capsule's rows in one word column are contiguous and the OR

@@ -39,6 +39,7 @@ from .coarse import coarse_views, view_subset
 from ._checks import EnergyError, _check_cameras, _check_model, _check_poses
 from .restricted import RestrictedSilhouetteEnergy
 from .silhouette_exact import _foreground, _view_terms, core_weights, exact_view_energy, mask_problem
+from .undistort import pinhole, undistort_mask
 
 __all__ = ["EnergyError", "PreparedMasks", "SilhouetteEnergy", "RestrictedSilhouetteEnergy", "exact_view_energy",
            "kinematic_tables"]
@@ -164,8 +165,8 @@ class SilhouetteEnergy:
         ``"fast"``: the compiled sampled estimate (numba, parallel over poses). ``"exact"``: Eq. 4
         per view by rasterizing with ``render_mask`` and counting pixels (slow; the reference).
         ``"raster"``: Eq. 4 counted on the pixel grid from the projected hulls rasterized by scanlines
-        (compiled, no sample; :mod:`.raster_kernel`), every ``downsample``-th pixel row; pinhole cameras
-        and ``core_px <= 1`` only. Not used by the tracker's compiled search or restrictions (full kernel).
+        (compiled, no sample; :mod:`.raster_kernel`), every ``downsample``-th pixel row; ``core_px <= 1`` only.
+        A distorted camera's masks are resampled once per frame onto its pinhole image (:mod:`.undistort`).
     downsample : int
         Fast method only: term 1 reads the foreground **coverage** of the mask resized by
         ``1 / downsample`` with area averaging (``cv2.INTER_AREA``; the fraction of foreground in
@@ -240,10 +241,8 @@ class SilhouetteEnergy:
         if core_px > 1 and method == "fast" and n_mask_points == 0:
             raise EnergyError("core_px: expected n_mask_points > 0 with core_px > 1 (the fast method weighs the "
                               "sampled foreground pixels), received n_mask_points=0")
-        if method == "raster" and (core_px > 1 or any(c.has_distortion for c in self.cameras)):
-            raise EnergyError("method: 'raster' needs pinhole cameras and core_px <= 1, received "
-                              + (f"core_px={core_px!r}" if core_px > 1 else "lens distortion in camera "
-                                 + ", ".join(c.name for c in self.cameras if c.has_distortion)) + "; use 'fast'")
+        if method == "raster" and core_px > 1:
+            raise EnergyError(f"method: 'raster' needs core_px <= 1, received core_px={core_px!r}; use 'fast'")
         self.downsample = int(downsample)
         self.n_mask_points = int(n_mask_points)
         self.core_px = float(core_px)
@@ -266,6 +265,7 @@ class SilhouetteEnergy:
         self._template_args = _k.Template(self._order, self._tmpl_a, self._tmpl_s, self._tmpl_ptr, self._tmpl_na)
         self._small = tuple(c.scaled(1.0 / self.downsample) for c in self.cameras)
         self._areas = tuple(PixelAreas(c) for c in self.cameras)   # per pixel, filled as frames need them
+        self._pinhole = tuple(pinhole(c) for c in self.cameras)     # raster: distorted masks resampled onto these
         self.skipped_views: list[tuple[int, str]] = []
         self.n_views_used = 0
         self.n_evals = 0
@@ -320,7 +320,8 @@ class SilhouetteEnergy:
         if self.method == "fast" and used:
             static = self._fast_static(used, F)
         elif self.method == "raster" and used:
-            static = _rk.raster_static([self.cameras[v] for v in used], [F[v] for v in used], self.downsample)
+            static = _rk.raster_static([self._pinhole[v] for v in used],
+                                       [undistort_mask(self.cameras[v], F[v]) for v in used], self.downsample)
         return PreparedMasks(cameras=tuple(self.cameras), method=self.method, downsample=self.downsample,
                              core_px=self.core_px, used=tuple(used), skipped=tuple(skipped), F=F,
                              n_fg={v: int(np.count_nonzero(F[v])) for v in used}, core=core, static=static)

@@ -73,7 +73,7 @@ from isa_mocap_ros.tracking.predict import periods_between
 from isa_mocap_ros.tracking.sync import FrameSynchronizer
 from isa_mocap_ros.tracking.config import TrackerConfig, field_docs
 from isa_mocap_ros.tracking.load import LoadGovernor, LoadSettings, StartupCatchUp
-from isa_mocap_ros.tracking.realtime import RealTimeSchedule
+from isa_mocap_ros.tracking.realtime import RealTimeSchedule, warm_up
 from isa_mocap_ros.vision.overlay import draw_overlay
 
 
@@ -123,9 +123,9 @@ class EstimatorNode(EstimatorIntake, Node):
         self.backlog = declare(self, "backlog", 1, "real time: frame sets kept waiting while the tracker is busy "
                                "(the newest; older ones are dropped)", lo=1, hi=100)
         self.startup_catch_up = declare(
-            self, "startup_catch_up", 12, "real time: frame sets kept waiting, in order, while the tracker initializes "
+            self, "startup_catch_up", 0, "real time: frame sets kept waiting, in order, while the tracker initializes "
             "itself; once initialized it tracks them with degrade_min_evals evaluations and no contour stage until "
-            "none waits, instead of dropping them (0 = keep only the heading check's sets)", lo=0, hi=1000)
+            "none waits, instead of dropping them (0, the default: keep only the heading check's sets; docs/nodes.md)", lo=0, hi=1000)
         self.startup_catch_up_ms = declare(
             self, "startup_catch_up_ms", 1000.0, "startup_catch_up: a caught-up set that waited longer than this, "
             "or no shorter than the one before (the tracker does not gain on the stream), ends the catch-up (the "
@@ -250,12 +250,12 @@ class EstimatorNode(EstimatorIntake, Node):
 
     # -- the work -------------------------------------------------------------------------------
     def _warm_up(self) -> None:
-        """Compile (or load from numba's cache) the energy/kinematics kernels on a tiny synthetic frame,
-        then say "ready". The frame is tracked with the configured budget, so every stage a real frame
-        runs (pelvis, limb and refinement stages, skipped below their shares) is loaded here: with a
-        400-evaluation warm-up the first real frame with stages paid ~38 ms of first calls (bags/demo,
-        the frame after the initialization: 63 instead of 25 ms), one or two more sets dropped in real
-        time."""
+        """Compile (or load from numba's cache) the tracker's kernels on a tiny synthetic frame
+        (:func:`isa_mocap_ros.tracking.realtime.warm_up`: the automatic initialization, then a tracked frame), then
+        say "ready". The frames are tracked with the configured budget, so every stage a real frame runs is loaded
+        here: with a 400-evaluation warm-up the first real frame with stages paid ~38 ms of first calls (bags/demo,
+        the frame after the initialization: 63 instead of 25 ms), one or two more sets dropped in real time; with
+        a warm-up from a given pose the initialized frame paid ~50 CPU ms of first calls (session 27)."""
         t0 = time.monotonic()
         # said before the wait, so a first run is not a silent minute: numba compiles the kernels on their
         # first call after an install (`make venv` does it ahead, `isa-mocap warmup`) and loads its cache after
@@ -263,16 +263,7 @@ class EstimatorNode(EstimatorIntake, Node):
                                "1.5-4 min when they were never compiled since the install: run `isa-mocap warmup` "
                                "once to do that ahead)")
         try:
-            from isa_mocap_ros.body import capsule_endpoints as caps
-            from isa_mocap_ros.tracking.tracker import Tracker
-            from isa_mocap_ros.vision import default_rig, render_mask
-            rig = default_rig(n_views=2, width=80, height=60)
-            x = self.model.rest_pose()
-            E = caps(self.model, x[None])[0]
-            masks = [render_mask(c, E, self.model.capsule_radii) for c in rig.cameras]
-            tracker = Tracker(self.model, rig.cameras, self.tracker_config)
-            tracker.initialize(pose=x)
-            tracker.step(masks, 0)
+            warm_up(self.model, self.tracker_config)      # the automatic initialization's kernels too
         except Exception as exc:  # noqa: BLE001 - warm-up is an optimisation, never fatal
             self.get_logger().warn(f"warm-up failed ({type(exc).__name__}: {exc}); the first frame will be slow")
         self._wait_for_inputs()

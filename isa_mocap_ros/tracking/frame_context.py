@@ -43,6 +43,9 @@ class FrameContext:
         The frame's damped prediction, once made (:func:`.frame_prediction.prediction`).
     weights : (V,) ndarray or None
         Eq. 5's view weights (``TrackerConfig.objective.view_weights``), None = views counted alike.
+    after_gap : bool
+        The prediction was made across a gap (:func:`.frame_prediction.recentre` moved its root): the limbs'
+        phase is unknown, the search starts from the better side (:func:`.frame_prediction.better_side`).
     t0 : float
         ``time.perf_counter()`` when the step started.
     """
@@ -57,6 +60,7 @@ class FrameContext:
     masks: list | None = None
     prediction: np.ndarray | None = None
     weights: np.ndarray | None = None
+    after_gap: bool = False
     t0: float = 0.0
 
     def rng(self, *stream: int) -> np.random.Generator:

@@ -1,6 +1,7 @@
 """The frame's prediction: the external one (the prediction node's) when usable, else the tracker's
 own predictor looking as many periods ahead as passed, damped towards the last estimate; after a long
-gap the predicted root follows the foreground's triangulated centroid (:func:`recentre`).
+gap the predicted root follows the foreground's triangulated centroid (:func:`recentre`) and the search starts
+from the better of the prediction and its limbs' other side (:func:`better_side`).
 """
 from __future__ import annotations
 
@@ -67,7 +68,7 @@ def predict(tr, ctx) -> np.ndarray:
     gain[:6] = ROOT_VELOCITY_GAIN
     out = tr.track.last + gain * (p - tr.track.last)        # damped extrapolation
     if tr.track.elapsed > cfg.prediction.max_frames_ahead or (tr.track.elapsed > 1 and motion_unknown(tr)):
-        recentre(tr, out, ctx.raw_masks, notes)
+        ctx.after_gap = recentre(tr, out, ctx.raw_masks, notes)
     return out
 
 
@@ -78,7 +79,7 @@ def motion_unknown(tr) -> bool:
     return n is not None and int(n) < 2
 
 
-def recentre(tr, pred: np.ndarray, masks_now: list, notes: list[str]) -> None:
+def recentre(tr, pred: np.ndarray, masks_now: list, notes: list[str]) -> bool:
     """After more frames than ``max_frames_ahead`` unseen — or after any gap when the predictor holds
     a single estimate (the first estimate's frame: no motion to extrapolate) — move the predicted
     root position (x, y) by how far the foreground moved: the triangulated mask centroid
@@ -97,3 +98,42 @@ def recentre(tr, pred: np.ndarray, masks_now: list, notes: list[str]) -> None:
     pred[:2] = tr.track.last[:2] + (c_now[:2] - c_last[:2])
     notes.append(f"prediction: {tr.track.elapsed:g} frame periods since the last estimate; root moved with the "
                  f"foreground by {1e3 * float(np.hypot(*(c_now[:2] - c_last[:2]))):.0f} mm")
+    return True
+
+
+#: The side swaps :func:`better_side` tries: the legs' angles exchanged, and legs and arms together (a walk
+#: swings each arm with the other side's leg).
+SIDE_SWAPS = (("left_leg", "right_leg"), ("left_leg", "right_leg", "left_arm", "right_arm"))
+
+
+def swapped_sides(model, x: np.ndarray, limbs) -> np.ndarray:
+    """``x`` with the angles of each limb in ``limbs`` and its other side's exchanged, mirrored through the
+    sagittal plane (a joint's x and z rotations change sign, its y rotation keeps it: ``body/model.py``)."""
+    out = np.array(x, dtype=float)
+    names = model.dof_names
+    index = {n: i for i, n in enumerate(names)}
+    for limb in limbs:
+        if not limb.startswith("left_") or limb not in model.partitions:
+            continue
+        for i in model.partitions[limb]:
+            j = index.get("right_" + names[i][5:])
+            if j is None:
+                continue
+            sign = -1.0 if names[i][-1] in "xz" else 1.0
+            out[i], out[j] = sign * x[j], sign * x[i]
+    return out
+
+
+def better_side(tr, ctx, pred: np.ndarray) -> np.ndarray:
+    """After a gap (``ctx.after_gap``) the limbs' phase is unknown: a walker unseen for half a second has swapped
+    which leg is in front. Of the prediction and its :data:`SIDE_SWAPS` the lowest energy under the frame's
+    objective starts the search (a few evaluations); a swap taken is noted. The own predictor keeps its history
+    (restarting it there measured worse: docs/history/issue35_speed.md, session 27)."""
+    cands = [pred] + [swapped_sides(tr.model, pred, limbs) for limbs in SIDE_SWAPS]
+    E = np.asarray(ctx.objective(np.stack(cands)), dtype=float)
+    k = int(np.nanargmin(np.where(np.isfinite(E), E, np.inf))) if np.any(np.isfinite(E)) else 0
+    if k:
+        what = "legs" if len(SIDE_SWAPS[k - 1]) == 2 else "legs and arms"
+        ctx.notes.append(f"prediction: after the gap the search starts with the {what} swapped "
+                         f"(energy {E[k]:.4g} vs {E[0]:.4g})")
+    return cands[k]

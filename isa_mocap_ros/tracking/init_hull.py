@@ -13,7 +13,8 @@ a cube is kept when every usable view that sees its centre sees foreground there
 person, seen by all, is one connected blob. :func:`person_masks` takes the largest 26-connected blob, grows it
 by the cubes within ``pad_m`` that two views confirm and none denies (a limb a third view does not see) connected to
 it, and keeps per view the foreground within its projection (each cube drawn as a disc of its projected
-half-diagonal plus ``margin_px``). Cost: one pass over the volume's cubes per view (the frame is the first one, once).
+half-diagonal plus ``margin_px``). Cost: one compiled pass over the volume's cubes per view (:func:`_carve`; the frame is
+the first one, once).
 """
 from __future__ import annotations
 
@@ -21,6 +22,8 @@ from typing import Sequence
 
 import cv2
 import numpy as np
+
+import numba
 
 from isa_mocap_ros.vision.camera import project_batch
 
@@ -139,17 +142,40 @@ def _blobs(F: dict, cameras: Sequence, lo: np.ndarray, hi: np.ndarray, voxel_m: 
     views = list(F)
     UV = project_batch([cameras[v] for v in views], G[None])[:, 0]       # compiled: no BLAS call per view
     for j, v in enumerate(views):
-        cam, Fv = cameras[v], F[v]
-        front = np.flatnonzero(_depth(cam, G) > 1e-6)
-        uv = UV[j, front]
-        with np.errstate(invalid="ignore"):     # far outside a distorted camera's field: not finite, not seen
-            on = (uv[:, 0] > -0.5) & (uv[:, 0] < cam.width - 0.5) & (uv[:, 1] > -0.5) & (uv[:, 1] < cam.height - 0.5)
-        inside, uv = front[on], np.rint(uv[on]).astype(int)
-        ok = Fv[uv[:, 1], uv[:, 0]]
-        seen[inside] += 1
-        denied[inside[~ok]] += 1
+        cam = cameras[v]
+        _carve(G, UV[j], np.ascontiguousarray(cam.R[2], dtype=np.float64), float(cam.t[2]), cam.width, cam.height,
+               np.ascontiguousarray(F[v]), seen, denied)
     allowed = np.where(seen >= 3, misses, 0)
     keep = (seen >= min_views) & (denied <= allowed)
     labels, _ = ndimage.label(keep.reshape(n), structure=np.ones((3, 3, 3), bool))
     labels = labels.ravel()
     return G, n, np.bincount(labels)[1:], labels
+
+
+@numba.njit(cache=True)
+def _carve(G, uv, r2, t2, width, height, F, seen, denied):  # pragma: no cover - compiled
+    """One view's vote on the cubes ``G (N, 3)`` projected to ``uv (N, 2)`` (:func:`_carve_reference`, the same
+    counts: one pass instead of a dozen numpy temporaries of N): a cube in front of the camera (depth, as
+    :func:`_depth`, > 1e-6) whose pixel (rounded half to even) lies in the image adds 1 to ``seen``, and 1 to
+    ``denied`` when the dilated mask ``F (H, W)`` shows no foreground there."""
+    for i in range(G.shape[0]):
+        z = G[i, 0] * r2[0] + G[i, 1] * r2[1] + G[i, 2] * r2[2] + t2
+        if not z > 1e-6:
+            continue
+        u, v = uv[i, 0], uv[i, 1]
+        if u > -0.5 and u < width - 0.5 and v > -0.5 and v < height - 0.5:     # NaN (far off a distorted view): out
+            seen[i] += 1
+            if not F[int(np.rint(v)), int(np.rint(u))]:
+                denied[i] += 1
+
+
+def _carve_reference(G: np.ndarray, uv: np.ndarray, cam, F: np.ndarray, seen: np.ndarray, denied: np.ndarray) -> None:
+    """:func:`_carve` in numpy (its reference; tests compare them)."""
+    front = np.flatnonzero(_depth(cam, G) > 1e-6)
+    uv = uv[front]
+    with np.errstate(invalid="ignore"):     # far outside a distorted camera's field: not finite, not seen
+        on = (uv[:, 0] > -0.5) & (uv[:, 0] < cam.width - 0.5) & (uv[:, 1] > -0.5) & (uv[:, 1] < cam.height - 0.5)
+    inside, uv = front[on], np.rint(uv[on]).astype(int)
+    ok = F[uv[:, 1], uv[:, 0]]
+    seen[inside] += 1
+    denied[inside[~ok]] += 1

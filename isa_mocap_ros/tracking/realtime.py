@@ -28,7 +28,7 @@ from typing import Callable, Sequence
 from .load import Decision, LoadGovernor, LoadSettings, StartupCatchUp
 from .sync import LatestSlot
 
-__all__ = ["RealTimeSchedule", "Budget", "EmulatedStep", "emulate", "step_cost"]
+__all__ = ["RealTimeSchedule", "Budget", "EmulatedStep", "emulate", "step_cost", "warm_up"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -190,3 +190,24 @@ def governor_for(evals: int, period_s: float, **settings) -> LoadGovernor:
     """A :class:`~.load.LoadGovernor` of ``evals`` per set and frame period ``period_s`` (other settings as
     :class:`~.load.LoadSettings`)."""
     return LoadGovernor(LoadSettings(evals=evals, period_s=period_s, **settings))
+
+
+def warm_up(model, config) -> list:
+    """Load (or compile) the kernels of the estimator's first frames ahead, on a tiny synthetic frame: the rest pose
+    of ``model`` rendered into 4 views of 80×60, stepped twice by a :class:`~.tracker.Tracker` with ``config`` (its
+    budget and stages): the automatic initialization (first-frame hull, grid, root refinements, candidate runs,
+    polish, the heading check's rival) and a tracked frame with every stage. numba loads a kernel's machine code
+    from its cache on the first call in a process (~5-30 ms each): a warm-up from a given pose left the automatic
+    initialization's kernels to the first real frame, ~50 CPU ms more there (docs/history/issue35_speed.md,
+    session 27). Returns the two steps' :class:`~.result.FrameResult`."""
+    from isa_mocap_ros.body import capsule_endpoints
+    from isa_mocap_ros.vision import default_rig, render_mask
+
+    from .tracker import Tracker
+
+    rig = default_rig(n_views=4, width=80, height=60)
+    x = model.rest_pose()
+    ends = capsule_endpoints(model, x[None])[0]
+    masks = [render_mask(c, ends, model.capsule_radii) for c in rig.cameras]
+    tracker = Tracker(model, rig.cameras, config)
+    return [tracker.step(masks, 0), tracker.step(masks, 1)]

@@ -94,7 +94,10 @@ class ShapeCalibrationConfig:
     retrack: bool = True            # later rounds re-track the whole window with the new shape first
     regularization: float = 2e-3    # weight of sum(log factor^2): decides only flat directions
     arm_split_prior: float = 0.05   # weight of (log upper_arm - log forearm)^2: a straight arm shows only the sum
-    restarts: int = 1               # whole calibrations from other seeds, the lowest energy kept (x cost each)
+    energy: str = "fast"            # the shape fit's silhouette energy: "raster" (Eq. 4 counted on the pixel grid, no
+                                    # sample; pinhole cameras only, "fast" used with lens distortion) or "fast" (sampled)
+    restarts: int = 1               # whole calibrations from other seeds (x cost each), combined as `combine` says
+    combine: str = "lowest"         # restarts: "lowest" judged energy kept, or "median" of each factor over them
     masks: str = "hull"             # the calibration frames' masks: "hull" = cut to the visual hull's person blob
                                     # (tracking/init_hull.py: occluders and noise no other view confirms go), "raw"
     seed: int = 0                   # all random streams derive from it
@@ -109,6 +112,10 @@ class ShapeCalibrationConfig:
             raise ShapeCalibrationError(f"translation_m: expected a number > 0, received {self.translation_m!r}")
         if self.masks not in ("hull", "raw"):
             raise ShapeCalibrationError(f"masks: expected 'hull' or 'raw', received {self.masks!r}")
+        if self.energy not in ("raster", "fast"):
+            raise ShapeCalibrationError(f"energy: expected 'raster' or 'fast', received {self.energy!r}")
+        if self.combine not in ("lowest", "median"):
+            raise ShapeCalibrationError(f"combine: expected 'lowest' or 'median', received {self.combine!r}")
         for name in ("regularization", "arm_split_prior"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
@@ -240,6 +247,7 @@ class _ShapeEnergy:
         self.cfg = cfg
         self.seed = rng_seed
         self.n_evals = 0
+        self._route = _RasterRoute(dof, base, cameras, masks, cfg) if _method(cameras, cfg) == "raster" else None
 
     def params(self, z) -> np.ndarray:
         return np.exp(np.asarray(z[:len(SHAPE_PARAMS)], dtype=float))
@@ -262,9 +270,11 @@ class _ShapeEnergy:
         return float(f(np.asarray(x, dtype=float)[None, :])[0])
 
     def one(self, z) -> float:
+        X = self.poses(z)
+        if self._route is not None:
+            return self._route(self.params(z), X) + prior(self.cfg, z[:len(SHAPE_PARAMS)])
         # the same generator seed for every shape
         f = _energy(self.model(z), self.cameras, self.cfg, self.seed)
-        X = self.poses(z)
         e = 0.0
         for k, masks in enumerate(self.masks):
             f.set_masks(masks)
@@ -277,6 +287,47 @@ class _ShapeEnergy:
         return np.array([self.one(z) if np.all(np.isfinite(z)) else np.inf for z in Z])
 
 
+class _RasterRoute:
+    """The raster shape fit's energy without a model or an energy object per candidate shape: the calibration
+    frames' kernel inputs are set once (an energy of the base model per frame), and a candidate's offsets and radii
+    are the base model's times the factors each entry scales (``offsets(f) = offsets0 * prod_p f_p^E_p``, ``E`` read
+    off :func:`shape_from_params` once, factor by factor); the same kernel as ``SilhouetteEnergy(method='raster')``."""
+
+    def __init__(self, dof, base, cameras, masks, cfg):
+        from isa_mocap_ros.body import make_model
+        from isa_mocap_ros.energy.silhouette import kinematic_tables
+        from isa_mocap_ros.energy.silhouette_kernel import Body
+
+        m0 = make_model(dof, shape=shape_from_params(base, {}))
+        o0, r0 = np.asarray(m0.offsets, dtype=float), np.asarray(m0.capsule_radii, dtype=float)
+        eo, er = [], []
+        for n, _, _ in SHAPE_PARAMS:
+            m = make_model(dof, shape=shape_from_params(base, {n: 2.0}))
+            eo.append(np.round(np.log2(np.divide(m.offsets, o0, out=np.ones_like(o0), where=o0 != 0))))
+            er.append(np.round(np.log2(np.divide(m.capsule_radii, r0, out=np.ones_like(r0), where=r0 != 0))))
+        self.o0, self.r0, self.eo, self.er = o0, r0, np.array(eo), np.array(er)
+        parents, _, ptr, dofs, axes = kinematic_tables(m0)
+        self.body = lambda o, r: Body(parents, np.ascontiguousarray(o), ptr, dofs, axes,
+                                      np.ascontiguousarray(m0.capsules, dtype=np.int64), np.ascontiguousarray(r))
+        self.frames = []
+        for pre in masks:
+            f = _energy(m0, cameras, cfg, 0)
+            f.set_masks(pre)
+            self.frames.append(f.kernel_args()[1:])
+
+    def __call__(self, factors, X) -> float:
+        from isa_mocap_ros.energy.raster_kernel import raster_batch_serial
+
+        lf = np.log(np.asarray(factors, dtype=float))
+        body = self.body(self.o0 * np.exp(np.tensordot(lf, self.eo, 1)), self.r0 * np.exp(np.tensordot(lf, self.er, 1)))
+        out = np.empty(1)
+        e = 0.0
+        for k, (views, raster) in enumerate(self.frames):
+            raster_batch_serial(np.ascontiguousarray(X[k:k + 1], dtype=np.float64), body, views, raster, 1, out)
+            e += float(out[0])
+        return e / len(self.frames)
+
+
 _UA, _FA = (next(i for i, (n, _, _) in enumerate(SHAPE_PARAMS) if n == m) for m in ("upper_arm", "forearm"))
 
 
@@ -287,11 +338,21 @@ def prior(cfg: ShapeCalibrationConfig, logf) -> float:
     return cfg.regularization * float(logf @ logf) + cfg.arm_split_prior * float(logf[_UA] - logf[_FA]) ** 2
 
 
+def _method(cameras, cfg: ShapeCalibrationConfig) -> str:
+    """The shape fit's energy method: ``cfg.energy``, but "fast" where a camera has lens distortion (the scanline
+    count needs pinhole views)."""
+    if cfg.energy == "raster" and any(c.has_distortion for c in cameras):
+        return "fast"
+    return cfg.energy
+
+
 def _energy(model, cameras, cfg: ShapeCalibrationConfig, seed):
     """The shape fit's silhouette energy of ``model`` (no masks set)."""
     from isa_mocap_ros.energy import SilhouetteEnergy
 
-    return SilhouetteEnergy(model, cameras, None, n_model_points=cfg.n_model_points,
+    method = _method(cameras, cfg)
+    return SilhouetteEnergy(model, cameras, None, method=method,
+                            n_model_points=cfg.n_model_points if method == "fast" else 8,
                             n_mask_points=cfg.n_mask_points, rng=np.random.default_rng(seed))
 
 
@@ -384,24 +445,39 @@ def calibrate_shape(dof: int, cameras: Sequence, frames: Sequence[tuple[int, Seq
     if config.restarts == 1:
         return _calibrate_once(dof, cameras, frames, tcfg, config, base, say)
     # restarts: the whole calibration from other tracker (and shape fit) seeds; each result judged by the same
-    # energy (one sample seed for all) on its calibration frames, the lowest kept
+    # energy (one sample seed for all) on its calibration frames' masks as its fits used them (config.masks)
     out = []
     for r in range(config.restarts):
         seed = config.seed + 7919 * r
         cfg_r = dataclasses.replace(config, seed=seed, restarts=1)
         say(f"shape calibration restart {r + 1}/{config.restarts} (seed {seed})")
         res = _calibrate_once(dof, cameras, frames, tcfg.replace(seed=tcfg.search.seed + 7919 * r), cfg_r, base, say)
-        masks_of = {int(k): m for k, m, _ in frames}
-        # judged on the masks the fits used (config.masks), not the raw ones
-        cal, _ = _calibration_masks([masks_of[k] for k in res.frame_keys], cameras, config)
-        judge = _ShapeEnergy(dof, base, cameras, _prepared_masks(dof, cameras, cal, config), res.poses, config,
-                             [config.seed, 33, 2])
-        z = np.concatenate([np.log([res.params[n] for n, _, _ in SHAPE_PARAMS]), np.zeros(len(res.poses))])
-        out.append((float(judge(z[None, :])[0]), r, res))
+        out.append((_judged(dof, cameras, frames, base, config, res, res.params), r, res))
+    listed = ", ".join(f"{t[0]:.4f}" for t in out)
     e, r, best = min(out, key=lambda t: t[0])
-    note = (f"restart {r + 1} of {config.restarts} kept (judged energies "
-            + ", ".join(f"{t[0]:.4f}" for t in out) + ")")
-    return dataclasses.replace(best, notes=best.notes + (note,))
+    if config.combine == "lowest":
+        return dataclasses.replace(best, notes=best.notes + (f"restart {r + 1} of {config.restarts} kept (judged "
+                                                             f"energies {listed})",))
+    # the median of each factor over the restarts (their poses: those of the restart that fits it best)
+    logs = np.array([[np.log(t[2].params[n]) for n, _, _ in SHAPE_PARAMS] for t in out])
+    factors = {n: float(v) for (n, _, _), v in zip(SHAPE_PARAMS, np.exp(np.median(logs, axis=0)))}
+    e, r, best = min(((_judged(dof, cameras, frames, base, config, t[2], factors), t[1], t[2]) for t in out),
+                     key=lambda t: t[0])
+    note = (f"median factors of {config.restarts} restarts (judged energies {listed}; the median {e:.4f} on "
+            f"restart {r + 1}'s poses)")
+    return dataclasses.replace(best, shape=shape_from_params(base, factors), params=factors, energy=e,
+                               notes=best.notes + (note,))
+
+
+def _judged(dof, cameras, frames, base, config, res, params) -> float:
+    """The energy (one sample seed for every restart) of the shape ``params`` with restart ``res``'s calibration
+    frames and poses, on those frames' masks as its fits used them (``config.masks``)."""
+    masks_of = {int(k): m for k, m, _ in frames}
+    cal, _ = _calibration_masks([masks_of[k] for k in res.frame_keys], cameras, config)
+    judge = _ShapeEnergy(dof, base, cameras, _prepared_masks(dof, cameras, cal, config), res.poses, config,
+                         [config.seed, 33, 2])
+    z = np.concatenate([np.log([params[n] for n, _, _ in SHAPE_PARAMS]), np.zeros(len(res.poses))])
+    return float(judge(z[None, :])[0])
 
 
 def _calibrate_once(dof, cameras, frames, tcfg, config, base, say) -> ShapeCalibrationResult:
@@ -412,6 +488,9 @@ def _calibrate_once(dof, cameras, frames, tcfg, config, base, say) -> ShapeCalib
     from .tracker import TrackerError, frame_rng
 
     notes: list[str] = []
+    if _method(cameras, config) != config.energy:
+        notes.append(f"shape fit: energy 'fast' (sampled) in place of {config.energy!r}: lens distortion in camera "
+                     + ", ".join(c.name for c in cameras if c.has_distortion))
 
     # round 0 poses: track the window with the base shape from the automatic initialization
     model = make_model(dof, shape=shape_from_params(base, {}))

@@ -507,6 +507,10 @@ class Tracker:
             starts = [c[0] for c in res0.candidates] or [res0.x]
         else:
             starts = [frame_prediction.prediction(self, ctx)]
+            if ctx.after_gap:          # the limbs' phase unknown: the prediction or its other side
+                starts = [frame_prediction.better_side(self, ctx, starts[0])]
+                n_evals += len(frame_prediction.SIDE_SWAPS) + 1          # out of the frame's budget
+                ctx.budget = dataclasses.replace(ctx.budget, evals=ctx.budget.evals - n_evals)
         # the first frame optimizes from every initialization candidate (pruned to config.first_frame.init_keep
         # runs part-way) and keeps the lowest energy
         try:

@@ -500,10 +500,10 @@ def project_batch(cams: Any, P: Any) -> np.ndarray:
     P = np.ascontiguousarray(as_points(P), dtype=np.float64)
     if P.ndim != 3:
         raise VisionError(f"P: expected shape (n, K, 3), received shape {P.shape}")
-    Rs = np.stack([c.R for c in cams])
-    ts = np.stack([c.t for c in cams])
-    Ks = np.stack([c.K for c in cams])
-    Ds = np.stack([_dist8(c.dist) for c in cams])
+    # C order throughout: one compiled signature whatever the cameras' own layout (a calibration file's R may be
+    # Fortran-ordered: a second version loaded on the first real frame, after the estimator's warm-up)
+    Rs, ts, Ks, Ds = (np.ascontiguousarray(np.stack(a), dtype=np.float64) for a in (
+        [c.R for c in cams], [c.t for c in cams], [c.K for c in cams], [_dist8(c.dist) for c in cams]))
     out = np.empty((len(cams), P.shape[0], P.shape[1], 2))
     if P.size:
         _project_batch_kernel(Rs, ts, Ks, Ds, P, out)
