@@ -114,8 +114,8 @@ class RobustDesign:
 
 
 DEFAULT_SEEDS = (0, 1, 2, 3, 4, 5, 6, 7)
-#: the quick designs' shape calibration (a smoke test: 4 frames, 2 rounds, 120 evaluations)
-QUICK_CALIB = (("calib_frames", 4), ("calib_rounds", 2), ("calib_evals", 120))
+#: the quick designs' shape calibration (a smoke test: 4 frames, 2 rounds, 120 evaluations, one calibration)
+QUICK_CALIB = (("calib_frames", 4), ("calib_rounds", 2), ("calib_evals", 120), ("calib_restarts", 1))
 
 
 def make_design(kind: str = "default", *, cmu_path: Path | str | None = CMU_WALK, init: str = "truth",
