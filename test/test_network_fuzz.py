@@ -31,14 +31,7 @@ CLI = [sys.executable, "-m", "isa_mocap_ros.cli.main"]
 SETTINGS = ["--optimizer", "isa", "--evals", "300", "--seed", "3"]
 
 
-# The keypoint case is a known open defect (session 26): on an idle clean-clone run 1 of 3 times the lockstep run
-# estimated 10 of the 12 person frames (every set processed, none dropped); cause not found yet. It still runs and
-# reports XPASS / XFAIL; the next session's first job is to make it strict again.
-KNOWN_FLAKY = pytest.mark.xfail(strict=False, reason="keypoint node under the fuzzer: sometimes 10 of 12 person "
-                                                     "frames estimated (open, session 26)")
-
-
-@pytest.mark.parametrize("keypoints", [False, pytest.param(True, marks=KNOWN_FLAKY)], ids=["masks", "keypoints"])
+@pytest.mark.parametrize("keypoints", [False, True], ids=["masks", "keypoints"])
 def test_a_fuzzer_on_every_input_topic_changes_no_estimate(keypoints, request, spawn, rosenv, tmp_path):
     """``keypoints``: the network with the keypoint node (``run --keypoints``) against ``track --keypoint-weight 1``.
     One view's image and camera_info that agree at a far stamp (the fuzzer's) once moved the node's schedule, and
