@@ -1,5 +1,5 @@
 """tracking/camera_data.py: the per-camera data (the renderer's rays and tile cones, the hull filter's rays) are built
-when the tracker gets its cameras, so the start-up's frames (the automatic initialization, the heading check's, the
+when the tracker gets its cameras, so the start-up's frames (the automatic initialization, the
 first hull-filtered frame) build none; the track is bit-identical to one that builds them at first use."""
 import importlib
 
@@ -39,7 +39,7 @@ def test_the_start_up_frames_build_no_camera_data_and_track_the_same(monkeypatch
         built_late, poses_late, notes = _run(model, cams, masks, cfg, 3)
     # the frames of this start-up do need them (else the check below could not fail): the initialized frame
     # (its polish's contour stage) the renderer's, the frames after it the hull filter's
-    assert any(n.startswith("heading check") for n in notes[0])
+    assert any(n.startswith("initialized automatically") for n in notes[0])
     assert {kind for kind, _ in built_late} == {"render", "hull"}, built_late
     assert len(built_late) == 2 * len(cams)
     built, poses, _ = _run(model, cams, masks, cfg, 3)
