@@ -118,7 +118,7 @@ from isa_mocap_ros.tracking import realtime
 from isa_mocap_ros.tracking.config import TrackerConfig
 from isa_mocap_ros.tracking.tracker import Tracker
 model, cams, walk, masks = walk_scene(width=160, height=120, frames=3, duration_s=0.2, seed=0)
-cfg = TrackerConfig.from_flat(seed=0)
+cfg = TrackerConfig.from_flat(seed=0, init_confirm_ratio=10.0)      # a heading check on the first frame, whatever the energy
 warm = realtime.warm_up(model, cfg)
 assert warm[0].initialized and not warm[1].fell_back, warm
 loads = []

@@ -26,7 +26,7 @@ The scanline energy (``SilhouetteEnergy(method="raster")``: Eq. 4 counted on the
 same way on the same batch (``raster_*``; every pixel row, and every second row as ``raster2_*``), and both it and
 the fast kernel are compared with the exact reference on the exact batch (``*_mean_abs_diff``: mean |f - exact|),
 and the tracker's search runs on it too (``search_raster_*``: its restricted kernel and the compiled search; the
-tracker's default energy stays the fast kernel, ``isa-mocap track --energy raster`` selects it).
+tracker's default energy since decision 017; ``isa-mocap track --energy fast`` selects the sampled kernel).
 """
 from __future__ import annotations
 

@@ -99,7 +99,7 @@ def bench_peer(args) -> dict:
             track_bag(argparse.Namespace(
                 bag=str(bag), out=str(run_dir), optimizer="h-isa", evals=1500, params=None, model=None, seed=0,
                 frames=None, start=0, use_masks=False, learn_frames=None, shape="auto", init="auto", predictor=None,
-                prior=None, prior_eta=0.0, energy="fast", overwrite=True, no_progress=True, keypoint_weight=w,
+                prior=None, prior_eta=0.0, energy=None, overwrite=True, no_progress=True, keypoint_weight=w,
                 keypoint_every=args.every, calib_frames=None, calib_rounds=None, calib_evals=None))
         out[name] = peer_scores(bag, run_dir)
         print(f"  peer {bag.name} {name}: {out[name]}", file=sys.stderr, flush=True)
@@ -123,7 +123,7 @@ def _track_one(bag: Path, out: Path, *, weight: float, every: int, shape: str = 
     ns = argparse.Namespace(
         bag=str(bag), out=str(out), optimizer="h-isa", evals=1500, params=None, model=None, seed=seed, frames=None,
         start=0, use_masks=True, learn_frames=None, shape=shape, init="auto", predictor=None, prior=None,
-        prior_eta=0.0, energy="fast", overwrite=True, no_progress=True, keypoint_weight=weight, keypoint_every=every,
+        prior_eta=0.0, energy=None, overwrite=True, no_progress=True, keypoint_weight=weight, keypoint_every=every,
         calib_frames=None, calib_rounds=None, calib_evals=None)
     got: dict = {}
     s = track_bag(ns, collect=got)

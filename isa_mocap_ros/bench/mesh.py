@@ -178,15 +178,31 @@ def render_markdown(res: dict) -> str:
         L.append(f"| {t['target']} | {m} | {'not tested' if t['met'] is None else ('met' if t['met'] else 'not met')} |")
     cal = res.get("calibrations") or []
     if cal:
+        secs = [c["seconds"] for c in cal if c.get("seconds") is not None]
         L += ["", "Body shape calibrated once per bag (`isa-mocap calibrate`, calibration seed "
-              f"{seeds[0]}; every tracker seed tracks with it); mean bone-length error against the mesh "
-              "skeleton's joint centres (12 bones; the 8 limb bones, whose joints both skeletons define alike):", "",
+              f"{seeds[0]}, {_calibration_settings(d)}; every tracker seed tracks with it"
+              + (f"; {np.mean(secs):.0f} s wall per bag, {max(secs):.0f} s at most" if secs else "")
+              + "); mean bone-length error against the mesh skeleton's joint centres (12 bones; the 8 limb bones, "
+              "whose joints both skeletons define alike):", "",
               "| bag | calibrated | default shape | limbs calibrated | limbs default shape |", "|---|---|---|---|---|"]
         L += [f"| {c['bag']} | {_fmt(c['bone_error_mm'])} mm | {_fmt(c['bone_error_default_shape_mm'])} mm | "
               f"{_fmt(c.get('limb_bone_error_mm'))} mm | {_fmt(c.get('limb_bone_error_default_shape_mm'))} mm |"
               for c in cal]
+        v = [c["bone_error_mm"] for c in cal if c.get("bone_error_mm") is not None]
+        if v:
+            L += ["", f"Bone-length error over the {len(v)} bags: mean {np.mean(v):.1f} mm, worst {max(v):.1f} mm."]
     L += ["", f"Wall time {res['seconds'] / 60:.1f} min with {res['jobs']} worker(s) (no speed claims)."]
     return "\n".join(L)
+
+
+def _calibration_settings(design: dict) -> str:
+    """The calibration's settings as the bench ran it: ``isa-mocap calibrate``'s defaults and the design's options."""
+    from isa_mocap_ros.cli.shape_options import calibration_config
+
+    cfg = calibration_config(argparse.Namespace(**dict(design.get("calib") or ())), 0)
+    return (f"shape-fit energy {cfg.energy}, {cfg.restarts} restart{'s' if cfg.restarts > 1 else ''}"
+            + (f" combined by the {cfg.combine}" if cfg.restarts > 1 else "")
+            + f", {cfg.rounds} rounds x {cfg.shape_evals} evaluations on {cfg.n_frames} of {cfg.window_frames} frames")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -13,6 +13,9 @@
    little); scored against Pose2Sim's keypoints mapped to our joints: mean error raw and with each joint's mean
    offset removed (mean, min and max over the seeds), the worst frame, the knee angle, frames facing backwards,
    per joint, and per joint in each third of the recording (mean over the seeds: where and when the error is);
+   the same runs re-scored with the peer's surface points (head top, nose, heels, toes) defined on the mesh bodies
+   (:func:`definition_scores`, :mod:`isa_mocap_ros.eval.keypoint_map`: a diagnostic) and smoothed offline as the peer
+   smooths its points (``track --smooth-hz 6``, scored apart);
 3. the same through the node network (``isa-mocap run --lockstep``; ``--lockstep CONFIG``, default the calibrated
    shape when it is tracked, else the first configuration) and how many frames differ from the offline run of
    that configuration (the lockstep replay must not depend on machine load).
@@ -396,7 +399,8 @@ def render_markdown(d: dict) -> str:
         L += ["", f"The peer's points defined on the mesh bodies ({first['label']}; the same runs re-scored; "
                   "`isa_mocap_ros/eval/keypoint_map.py`: the MakeHuman meshes' head top, nose, heels and toes anchored "
                   "on our head and ankle joints, `config/joint_maps/halpe26_mesh_points.yaml`; nothing fitted on this "
-                  "recording):", "",
+                  "recording; a diagnostic, not the score: on mesh bags the mapped head top is farther from the mesh's "
+                  "than our head joint, real_cameras.md section 5):", "",
               "| points scored as | raw (mm), mean [min-max] | offsets removed (mm), mean [min-max] | per seed "
               "| head | right ankle |", "|---|---|---|---|---|---|"]
         for key, label in DEFINITIONS.items():

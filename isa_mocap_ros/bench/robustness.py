@@ -244,7 +244,7 @@ def track_condition(bag: Path, out: Path, design: RobustDesign, seed: int | None
         bag=str(bag), out=str(out), optimizer=design.optimizer, evals=design.evals, params=None, model=None,
         seed=design.seed if seed is None else int(seed), frames=None, start=0, use_masks=False, learn_frames=None,
         shape=shape or getattr(design, "shape", "truth"), init=design.init, predictor=None, prior=None, prior_eta=0.0,
-        energy="fast", overwrite=True, no_progress=True, gate_margin_px=design.gate_margin_px,
+        energy=None, overwrite=True, no_progress=True, gate_margin_px=design.gate_margin_px,
         **dict(getattr(design, "calib", ())), **dict(getattr(design, "tracker", ())))
     got: dict = {}
     t0 = time.perf_counter()

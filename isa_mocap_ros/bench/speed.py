@@ -134,7 +134,7 @@ def tracker_speed(bag: Path, *, frames: int, budgets=BUDGETS, optimizer: str = "
         return argparse.Namespace(
             bag=str(bag), out=str(work / name), optimizer=optimizer, evals=int(b), params=None, model=None,
             seed=0, frames=n, start=0, use_masks=use_masks, learn_frames=None, shape="truth", init="truth",
-            predictor=None, prior=None, prior_eta=0.0, energy="fast", overwrite=True, no_progress=True)
+            predictor=None, prior=None, prior_eta=0.0, energy=None, overwrite=True, no_progress=True)
 
     # warm-up (not reported): loads or compiles every numba function the tracker calls
     track_bag(ns(min(budgets), 3, "track_warmup"))
@@ -225,7 +225,7 @@ def frame_profile(bag: Path, *, frames: int, evals: int = 1500, optimizer: str =
         return argparse.Namespace(
             bag=str(bag), out=str(work / name), optimizer=optimizer, evals=int(evals), params=None, model=None,
             seed=0, frames=n, start=0, use_masks=use_masks, learn_frames=None, shape="truth", init="truth",
-            predictor=None, prior=None, prior_eta=0.0, energy="fast", overwrite=True, no_progress=True)
+            predictor=None, prior=None, prior_eta=0.0, energy=None, overwrite=True, no_progress=True)
 
     track_bag(ns("profile_warmup", 3))          # loads or compiles every numba function the steps call
     plain: dict = {}

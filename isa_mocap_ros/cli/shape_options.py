@@ -19,13 +19,13 @@ def add_calibration_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calib-evals", type=int, default=None, metavar="N",
                    help="shape calibration: shape-fit evaluations per round (default 1500)")
     p.add_argument("--calib-restarts", type=int, default=None, metavar="N",
-                   help="shape calibration: whole calibrations from other seeds, combined by --calib-combine (default 1)")
+                   help="shape calibration: whole calibrations from other seeds, combined by --calib-combine (default 3)")
     p.add_argument("--calib-combine", choices=("lowest", "median"), default=None,
                    help="shape calibration with restarts: keep the lowest judged energy, or the median of each factor "
                         "(default lowest)")
     p.add_argument("--calib-energy", choices=("raster", "fast"), default=None,
                    help="shape calibration: the shape fit's silhouette energy, raster (counted on the pixel grid, no "
-                        "sample; fast with lens distortion) or fast (sampled) (default fast)")
+                        "sample) or fast (sampled) (default raster)")
 
 
 def calibration_config(args, seed: int):

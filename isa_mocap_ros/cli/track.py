@@ -50,7 +50,7 @@ _TRACKER_OPTIONS = (
      "left_leg,right_leg; the paper's: root,torso,left_arm,right_arm,left_leg,right_leg)"),
     ("--coarse-fraction", float, None, "F",
      "share of each partition's generations of the main search evaluated on two views only (the energy's coarse "
-     "level, about half the cost; docs/energy.md); 0 = off (default: the tracker's default)"),
+     "level, about half the cost; docs/energy.md; with --energy fast only); 0 = off (default: the tracker's default)"),
     ("--keypoint-weight", float, None, "W",
      "weight of the learned-keypoint term (BlazePose landmarks on the images, cropped around the mask; "
      f"docs/keypoints.md); 0 = off; default {DEFAULT_KEYPOINT_WEIGHT:g} when the landmark model is installed "
@@ -98,8 +98,9 @@ def register(sub) -> None:
     p.add_argument("--predictor", choices=("ar", "constant_pose", "constant_velocity"), default=None)
     p.add_argument("--prior", default=None, metavar="NPZ", help="Parzen prior file (with --prior-eta)")
     p.add_argument("--prior-eta", type=float, default=0.0, help="prior weight (0 = off)")
-    p.add_argument("--energy", choices=("fast", "exact", "raster"), default="fast",
-                   help="silhouette energy method (raster: the scanline count, docs/energy.md; no compiled search)")
+    p.add_argument("--energy", choices=("raster", "fast", "exact"), default=None,
+                   help="silhouette energy method (default: the tracker's, raster: Eq. 4 counted on the pixel grid; "
+                        "fast: the sampled kernel; exact: the rendered reference; docs/energy.md)")
     for flag, kind, default, metavar, text in _TRACKER_OPTIONS:
         p.add_argument(flag, type=kind, default=default, metavar=metavar, help=text)
     p.add_argument("--no-hull", action="store_true",
@@ -259,7 +260,9 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         from isa_mocap_ros.energy.prior import ParzenPrior
         prior = ParzenPrior.load(args.prior)
     cfg_kw = dict(optimizer=args.optimizer, evals=args.evals, optimizer_params=params, seed=args.seed,
-                  energy=args.energy, prior_eta=args.prior_eta, keypoint_weight=kp_weight)
+                  prior_eta=args.prior_eta, keypoint_weight=kp_weight)
+    if getattr(args, "energy", None) is not None:
+        cfg_kw["energy"] = args.energy
     if args.predictor:
         cfg_kw["predictor"] = args.predictor
     if getattr(args, "silhouette_core_px", None) is not None:

@@ -146,7 +146,8 @@ class SearchConfig:
         Seed of every per-frame stream ``default_rng([seed, frame, ...])`` (0).
     coarse_fraction : float
         Share of each partition's generations of the compiled h-isa main search evaluated on two views only
-        (the energy's coarse level, about half the cost; docs/energy.md); 0 = off (default).
+        (the energy's coarse level, about half the cost; docs/energy.md; energy "fast" only: with another the search
+        runs through the protocol without it); 0 = off (default).
     """
 
     optimizer: str = "h-isa"
@@ -222,10 +223,11 @@ class ObjectiveConfig:
 
     Attributes
     ----------
-    energy : {"fast", "exact", "raster"}
-        Silhouette energy: compiled sampled kernel (default), the exact raster reference, or the scanline count.
+    energy : {"raster", "fast", "exact"}
+        Silhouette energy: the scanline count on the pixel grid (default; decision 017), the compiled sampled kernel, or
+        the exact rendering reference.
     downsample : int
-        Mask downsampling of the fast energy (1 = none).
+        Mask downsampling of the fast energy, row stride of the scanline count (1 = none).
     n_model_points : int
         Fast energy's sample size: model-template points per view (640).
     n_mask_points : int
@@ -240,7 +242,7 @@ class ObjectiveConfig:
         ``.npz`` of :meth:`ParzenPrior.save`, used when no ``prior=`` object is given ("" = none).
     """
 
-    energy: str = "fast"
+    energy: str = "raster"
     downsample: int = 1
     n_model_points: int = 640
     n_mask_points: int = 384

@@ -94,10 +94,11 @@ class ShapeCalibrationConfig:
     retrack: bool = True            # later rounds re-track the whole window with the new shape first
     regularization: float = 2e-3    # weight of sum(log factor^2): decides only flat directions
     arm_split_prior: float = 0.05   # weight of (log upper_arm - log forearm)^2: a straight arm shows only the sum
-    energy: str = "fast"            # the shape fit's silhouette energy: "raster" (Eq. 4 counted on the pixel grid, no
-                                    # sample; pinhole cameras only, "fast" used with lens distortion) or "fast" (sampled)
-    restarts: int = 1               # whole calibrations from other seeds (x cost each), combined as `combine` says
-    combine: str = "lowest"         # restarts: "lowest" judged energy kept, or "median" of each factor over them
+    energy: str = "raster"          # the shape fit's silhouette energy: "raster" (Eq. 4 counted on the pixel grid, no
+                                    # sample) or "fast" (sampled: session 26's fit)
+    restarts: int = 3               # whole calibrations from other seeds (x cost each), combined as `combine` says:
+                                    # one calibration is a lottery of round 0's poses (docs/shape_calibration.md)
+    combine: str = "lowest"         # restarts: "lowest" judged energy kept (measured better), or "median" of each factor
     masks: str = "hull"             # the calibration frames' masks: "hull" = cut to the visual hull's person blob
                                     # (tracking/init_hull.py: occluders and noise no other view confirms go), "raw"
     seed: int = 0                   # all random streams derive from it
@@ -247,7 +248,7 @@ class _ShapeEnergy:
         self.cfg = cfg
         self.seed = rng_seed
         self.n_evals = 0
-        self._route = _RasterRoute(dof, base, cameras, masks, cfg) if _method(cameras, cfg) == "raster" else None
+        self._route = _RasterRoute(dof, base, cameras, masks, cfg) if cfg.energy == "raster" else None
 
     def params(self, z) -> np.ndarray:
         return np.exp(np.asarray(z[:len(SHAPE_PARAMS)], dtype=float))
@@ -338,19 +339,11 @@ def prior(cfg: ShapeCalibrationConfig, logf) -> float:
     return cfg.regularization * float(logf @ logf) + cfg.arm_split_prior * float(logf[_UA] - logf[_FA]) ** 2
 
 
-def _method(cameras, cfg: ShapeCalibrationConfig) -> str:
-    """The shape fit's energy method: ``cfg.energy``, but "fast" where a camera has lens distortion (the scanline
-    count needs pinhole views)."""
-    if cfg.energy == "raster" and any(c.has_distortion for c in cameras):
-        return "fast"
-    return cfg.energy
-
-
 def _energy(model, cameras, cfg: ShapeCalibrationConfig, seed):
     """The shape fit's silhouette energy of ``model`` (no masks set)."""
     from isa_mocap_ros.energy import SilhouetteEnergy
 
-    method = _method(cameras, cfg)
+    method = cfg.energy
     return SilhouetteEnergy(model, cameras, None, method=method,
                             n_model_points=cfg.n_model_points if method == "fast" else 8,
                             n_mask_points=cfg.n_mask_points, rng=np.random.default_rng(seed))
@@ -488,9 +481,6 @@ def _calibrate_once(dof, cameras, frames, tcfg, config, base, say) -> ShapeCalib
     from .tracker import TrackerError, frame_rng
 
     notes: list[str] = []
-    if _method(cameras, config) != config.energy:
-        notes.append(f"shape fit: energy 'fast' (sampled) in place of {config.energy!r}: lens distortion in camera "
-                     + ", ".join(c.name for c in cameras if c.has_distortion))
 
     # round 0 poses: track the window with the base shape from the automatic initialization
     model = make_model(dof, shape=shape_from_params(base, {}))
