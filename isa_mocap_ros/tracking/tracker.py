@@ -25,6 +25,7 @@ from isa_mocap_ros.optim import compiled_search
 
 from . import first_frame, frame_masks, frame_prediction, heading, keypoint_screen, objective, plan
 from . import stages as frame_stages
+from .camera_data import prepare_cameras
 from .config import (DEFAULT_PARAMS, JOINT_SPREAD_RAD, ROOT_ROTATION_RADIUS_RAD, ROOT_ROTATION_SPREAD_RAD,
                      ROOT_TRANSLATION_SPREAD_M, PREDICTORS, FrameResult, TrackerConfig, TrackerError,
                      frame_rng, partition_coords, whole_generations)
@@ -137,6 +138,7 @@ class Tracker:
         self.contour_fit = ContourFit(model, self.cameras, n_points=config.stages.contour_points,
                                       max_px=config.stages.contour_max_px)
         self.contour_extra_coords = partition_coords(model, config.stages.contour_extra_partitions)
+        prepare_cameras(self.cameras, config)          # calibration-only data now, not on the start-up's frames
         self.generation_sizes: dict[int, int] = {}     # plan.flat_generation's cache, by coordinate count
         missing = [k for k in model.partitions if k not in config.search.partition_order]
         if missing:
