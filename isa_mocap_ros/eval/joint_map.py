@@ -28,7 +28,7 @@ import numpy as np
 import yaml
 
 __all__ = ["JointMap", "JointMapError", "fit_joint_map", "save_joint_map", "load_joint_map", "mapped_markers",
-           "segment_of", "mesh_rig_map", "MESH_RIG_MAP_FILE"]
+           "segment_of", "mesh_rig_map", "MESH_RIG_MAP_FILE", "read_map_file"]
 
 #: the shipped map of the mesh bodies' rig (``isa-mocap synth --body mesh``: MakeHuman/MPFB2 ``cmu_mb``), under config/
 MESH_RIG_MAP_FILE = "joint_maps/makehuman_cmu_mb.yaml"
@@ -155,17 +155,23 @@ def save_joint_map(jmap: JointMap, path) -> None:
     Path(path).write_text(yaml.safe_dump(data, sort_keys=False, allow_unicode=True))
 
 
+def read_map_file(path, what: str, key: str, form: str) -> tuple[dict, dict]:
+    """``(data, data[key])`` of the YAML file ``path`` whose ``key`` must be a mapping; :class:`JointMapError`
+    names ``what`` (e.g. "joint map"), the file, and the expected ``form`` of an entry."""
+    try:
+        data = yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise JointMapError(f"{what} {path}: cannot read it ({exc})") from exc
+    if not isinstance(data, dict) or not isinstance(data.get(key), dict):
+        raise JointMapError(f"{what} {path}: expected a mapping with '{key}' ({form})")
+    return data, data[key]
+
+
 def load_joint_map(path) -> JointMap:
     """Read a map written by :func:`save_joint_map`; :class:`JointMapError` names the file and the field."""
-    path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise JointMapError(f"joint map {path}: cannot read it ({exc})") from exc
-    if not isinstance(data, dict) or not isinstance(data.get("offsets"), dict):
-        raise JointMapError(f"joint map {path}: expected a mapping with 'offsets' (joint -> [x, y, z])")
+    data, entries = read_map_file(path, "joint map", "offsets", "joint -> [x, y, z]")
     offsets = {}
-    for n, o in data["offsets"].items():
+    for n, o in entries.items():
         a = np.asarray(o, dtype=float) if isinstance(o, (list, tuple)) else np.full(0, np.nan)
         if a.shape != (3,) or not np.all(np.isfinite(a)):
             raise JointMapError(f"joint map {path}: offsets.{n}: expected three finite numbers, received {o!r}")

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .joint_map import JointMap, JointMapError, mapped_markers
+from .joint_map import JointMap, JointMapError, mapped_markers, read_map_file
 
 __all__ = ["POINT_RULES", "KEYPOINT_POINTS_FILE", "KeypointPoints", "fit_keypoint_points", "keypoint_positions",
            "save_keypoint_points", "load_keypoint_points", "mesh_keypoint_points"]
@@ -156,15 +156,9 @@ def save_keypoint_points(points: KeypointPoints, path) -> None:
 
 def load_keypoint_points(path) -> KeypointPoints:
     """Read a file written by :func:`save_keypoint_points`; :class:`JointMapError` names the file and the field."""
-    path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise JointMapError(f"keypoint points {path}: cannot read it ({exc})") from exc
-    if not isinstance(data, dict) or not isinstance(data.get("points"), dict):
-        raise JointMapError(f"keypoint points {path}: expected a mapping with 'points' (name -> [joint, [x, y, z]])")
+    data, entries = read_map_file(path, "keypoint points", "points", "name -> [joint, [x, y, z]]")
     points = {}
-    for n, v in data["points"].items():
+    for n, v in entries.items():
         ok = isinstance(v, (list, tuple)) and len(v) == 2 and isinstance(v[0], str) and isinstance(v[1], (list, tuple))
         o = np.asarray(v[1], dtype=float) if ok else np.full(0, np.nan)
         if o.shape != (3,) or not np.all(np.isfinite(o)):
