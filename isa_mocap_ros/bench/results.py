@@ -396,7 +396,9 @@ def headlines(data: dict) -> list[str]:
     sp = data.get("speed")
     if sp:
         e = sp["energy"]
-        line = f"speed: fast energy {e['fast_evals_per_s']:.0f} evaluations/s ({e['ratio']:.0f}× the exact one); tracker " \
+        line = (f"speed: scanline energy (the default) {e['raster_evals_per_s']:.0f} evaluations/s ({e['raster_ratio']:.0f}× "
+                f"the exact one); " if e.get("raster_evals_per_s") else "speed: ")
+        line += f"fast energy {e['fast_evals_per_s']:.0f} evaluations/s ({e['ratio']:.0f}× the exact one); tracker " \
             + ", ".join(f"{x['frames_per_s']:.2f} frames/s at {x['evals_per_frame']}" for x in sp["tracker"]["rows"])
         for x in sp["network"]["rows"]:
             if "error" not in x and x.get("fps") is not None:

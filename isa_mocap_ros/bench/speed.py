@@ -424,7 +424,7 @@ def render_markdown(res: dict) -> str:
                f"{_f(e.get('search_coarse_evals_per_cpu_s'), '{:.0f}')} |"] if e.get("search_coarse_evals_per_cpu_s")
               else []),
             f"| ratio, the search to the exact | {e['search_ratio']:.0f}× |"] if e.get("search_evals_per_s") else []),
-         *([f"| scanline count (`method='raster'`, not the tracker's default), every pixel row / every second row | "
+         *([f"| scanline count (`method='raster'`, the tracker's default: decision 017), every pixel row / every second row | "
             f"{e['raster_evals_per_s']:.0f} / {e['raster2_evals_per_s']:.0f} |",
             f"| its ratio to the exact; mean \\|f − exact\\| (fast kernel: {e['fast_mean_abs_diff']:.4f}) | "
             f"{e['raster_ratio']:.0f}× / {e['raster2_ratio']:.0f}×; {e['raster_mean_abs_diff']:.4f} / "
