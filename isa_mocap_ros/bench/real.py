@@ -176,9 +176,8 @@ def filtered_score(collect: dict, fps: float, reference: Path) -> float | None:
     """Like for like with the peer's final output: our joint centres filtered as Pose2Sim filters its points
     (:data:`PEER_FILTER`) against its filtered file ``reference`` (TRC, rows = the scored frames in order), offsets
     removed as the score removes them; mean mm. An offline figure (a zero-phase filter needs the whole recording)."""
-    from scipy.signal import butter, filtfilt
-
     from isa_mocap_ros.eval.trc import TRC_TO_WORLD, read_trc
+    from isa_mocap_ros.tracking.smooth import zero_phase_lowpass
 
     scored = _scored_markers(collect)
     trc = read_trc(reference)
@@ -186,9 +185,8 @@ def filtered_score(collect: dict, fps: float, reference: Path) -> float | None:
         return None
     frames, names, shared, Pe = scored
     order, cut_hz = PEER_FILTER
-    b, a = butter(order, cut_hz / (fps / 2.0))
     Pt = trc.in_world(TRC_TO_WORLD)[:, [names.index(n) for n in shared]]
-    err = _offset_removed_mm(filtfilt(b, a, Pe, axis=0), Pt, shared)
+    err = _offset_removed_mm(zero_phase_lowpass(Pe, fps, cut_hz, order=order), Pt, shared)
     return float(np.nanmean(np.nanmean(err, axis=1)))
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SmoothError", "continuous_rotation_vectors", "smooth_poses"]
+__all__ = ["SmoothError", "continuous_rotation_vectors", "smooth_poses", "zero_phase_lowpass"]
 
 
 class SmoothError(ValueError):
@@ -35,8 +35,6 @@ def continuous_rotation_vectors(r: np.ndarray) -> np.ndarray:
 def smooth_poses(model, X, fps: float, cutoff_hz: float, *, order: int = 4) -> np.ndarray:
     """Poses ``X`` ((F, D), consecutive frames at ``fps``) low-passed at ``cutoff_hz`` with a zero-phase
     Butterworth filter of ``order`` (module docstring). Fewer than 4 frames come back unchanged."""
-    from scipy.signal import butter, filtfilt
-
     X = np.asarray(X, dtype=float)
     if X.ndim != 2 or X.shape[1] != model.dof:
         raise SmoothError(f"poses: expected shape (F, {model.dof}), received {X.shape}")
@@ -48,7 +46,16 @@ def smooth_poses(model, X, fps: float, cutoff_hz: float, *, order: int = 4) -> n
         return X.copy()
     Y = X.copy()
     Y[:, 3:6] = continuous_rotation_vectors(X[:, 3:6])
-    b, a = butter(int(order), cutoff_hz / (fps / 2.0))
-    Y = filtfilt(b, a, Y, axis=0, padlen=min(3 * max(len(a), len(b)), len(X) - 1))
+    Y = zero_phase_lowpass(Y, fps, cutoff_hz, order=order)
     Y[:, 6:] = np.clip(Y[:, 6:], model.lower[6:], model.upper[6:])
     return Y
+
+
+def zero_phase_lowpass(Y, fps: float, cutoff_hz: float, *, order: int = 4) -> np.ndarray:
+    """``Y`` (frames along axis 0, at ``fps``) through a Butterworth low-pass of ``order`` at ``cutoff_hz``, run
+    forward and backward (``scipy.signal.filtfilt``; its padding shortened to the sequence when that is shorter):
+    Pose2Sim's filter of its points, used by :func:`smooth_poses` and by ``bench real``'s like-for-like figure."""
+    from scipy.signal import butter, filtfilt
+
+    b, a = butter(int(order), cutoff_hz / (fps / 2.0))
+    return filtfilt(b, a, Y, axis=0, padlen=min(3 * max(len(a), len(b)), len(Y) - 1))
