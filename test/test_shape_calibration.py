@@ -73,12 +73,16 @@ def _rendered_frames(model, n, seed=0):
     return list(rig), frames
 
 
+#: the known shape of the calibration tests' renders: a subject unlike the default shape (taller, long shins,
+#: short upper arms, heavier legs)
+KNOWN_SHAPE = {"scale": 1.07, "thigh": 0.95, "shin": 1.08, "upper_arm": 0.92, "forearm": 1.0,
+               "hip_width": 1.15, "r_legs": 1.25, "r_trunk": 1.1}
+
+
 @pytest.mark.timeout(300)
 def test_calibration_recovers_a_known_capsule_shape():
-    # exact renders of a subject unlike the default shape: taller, long shins, short upper arms, heavier legs
-    truth = {"scale": 1.07, "thigh": 0.95, "shin": 1.08, "upper_arm": 0.92, "forearm": 1.0,
-             "hip_width": 1.15, "r_legs": 1.25, "r_trunk": 1.1}
-    model = make_model(39, shape=shape_from_params(default_shape(), truth))
+    # exact renders of a subject unlike the default shape (KNOWN_SHAPE)
+    model = make_model(39, shape=shape_from_params(default_shape(), KNOWN_SHAPE))
     cams, frames = _rendered_frames(model, 8)
     cfg = ShapeCalibrationConfig(window_frames=8, n_frames=4, rounds=3, pose_steps=2, shape_evals=1500, seed=0)
     res = calibrate_shape(39, cams, frames, config=cfg)
@@ -102,9 +106,7 @@ def test_occluders_one_view_reports_stay_out_of_the_shape_fit():
     # without occluders: 20.1 mm (seed 0)
     from isa_mocap_ros.vision.distort import occluders
 
-    truth = {"scale": 1.07, "thigh": 0.95, "shin": 1.08, "upper_arm": 0.92, "forearm": 1.0,
-             "hip_width": 1.15, "r_legs": 1.25, "r_trunk": 1.1}
-    model = make_model(39, shape=shape_from_params(default_shape(), truth))
+    model = make_model(39, shape=shape_from_params(default_shape(), KNOWN_SHAPE))
     cams, frames = _rendered_frames(model, 8)
     rng = np.random.default_rng(7)
     occluded = [(k, [occluders(m, 35, rng=rng) for m in ms]) for k, ms in frames]
