@@ -196,6 +196,9 @@ class EstimatorNode(EstimatorIntake, Node):
         self._hinted = [0] * self.n_views   # cameras built ahead per view (at most MAX_HINTED_CAMERAS)
         self.prepare_ms = 0.0           # CPU the worker spent building camera data ahead of the frame sets
         self.cameras_ready_ahead = 0    # of the tracker's cameras when it was made, those built ahead
+        self._last_arrival: float | None = None     # when the last complete frame set reached the slot
+        self.sets_bunched = 0           # sets that arrived < half a period after the one before (EstimatorIntake._put)
+        self.dropped_bunched = 0        # sets the slot dropped at those arrivals
         self._predictions: dict[int, np.ndarray] = {}
         # the keypoint node's messages per view and stamp: (uv, confidence) or None (skipped / nobody)
         self.keypoint_inbox = KeypointInbox(self.n_views, self._stream)
@@ -499,6 +502,8 @@ class EstimatorNode(EstimatorIntake, Node):
             # cameras found theirs ready when it was made
             "camera_data_ahead_ms": round(self.prepare_ms, 1), "cameras_built_ahead": len(self._prepared_keys),
             "cameras_ready_ahead": self.cameras_ready_ahead,
+            # real time: sets arriving < half a frame period after the one before, and the drops at those arrivals
+            "sets_bunched": self.sets_bunched, "dropped_at_bunched_arrivals": self.dropped_bunched,
             # the budget under load (isa_mocap_ros.tracking.load): level 0 = full, its evaluations and contour stage
             **({"budget_level": g.level, "budget_evals": g.decision().evals,
                 "budget_contour_stage": g.decision().contour_stage, "budget_lowered": g.lowered,

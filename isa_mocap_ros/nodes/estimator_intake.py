@@ -162,9 +162,21 @@ class EstimatorIntake:
                 continue
             for fs in sets:   # the frame sets' stream: one view's mask far in time (its own pair) makes no set
                 self._stream.accept(fs.stamp_ns)
-                self.slot.put((fs, time.monotonic()))
+                self._put(fs)
         if accepted:
             self._cv.notify_all()
+
+    def _put(self, frame_set) -> None:
+        """(Under ``_cv``.) Hand a complete frame set to the worker's slot, counting the sets that arrive less than half a
+        frame period after the one before (bunched: the masks came late, then together) and the sets dropped then: a
+        drop there is the inputs' timing (segmentation, executor, transport), not the tracker's pace."""
+        now = time.monotonic()
+        dropped = self.slot.dropped
+        self.slot.put((frame_set, now))
+        if self._last_arrival is not None and now - self._last_arrival < 0.5 * self.frame_period_s:
+            self.sets_bunched += 1
+            self.dropped_bunched += self.slot.dropped - dropped
+        self._last_arrival = now
 
     def _image_cb(self, v: int):
         def cb(msg: Image) -> None:
