@@ -154,6 +154,29 @@ def test_restarts_keep_the_lowest_judged_energy_and_the_prior_holds_the_arm_spli
     assert prior(cfg, z) == pytest.approx(cfg.regularization * 0.02)
 
 
+def test_radius_prior_is_off_by_default_and_pulls_only_the_radius_factors_towards_their_centre():
+    import argparse
+    import dataclasses
+
+    from isa_mocap_ros.cli.shape_options import calibration_config
+    from isa_mocap_ros.tracking.shape_calibration import prior
+
+    cfg = ShapeCalibrationConfig()
+    names = [n for n, _, _ in SHAPE_PARAMS]
+    z = np.zeros(len(SHAPE_PARAMS))
+    z[names.index("r_arms")], z[names.index("thigh")] = np.log(1.3), 0.1
+    assert cfg.radius_prior == 0 and prior(cfg, z) == pytest.approx(cfg.regularization * float(z @ z))
+    on = dataclasses.replace(cfg, radius_prior=0.1)
+    c = np.log(on.radius_centre)
+    want = cfg.regularization * float(z @ z) + 0.1 * ((np.log(1.3) - c) ** 2 + 2 * c ** 2)   # r_arms, r_trunk, r_legs
+    assert prior(on, z) == pytest.approx(want)
+    assert calibration_config(argparse.Namespace(calib_radius_prior=0.1), 0).radius_prior == 0.1
+    with pytest.raises(ShapeCalibrationError, match="radius_prior"):
+        ShapeCalibrationConfig(radius_prior=-1.0)
+    with pytest.raises(ShapeCalibrationError, match="radius_centre"):
+        ShapeCalibrationConfig(radius_centre=0.0)
+
+
 def test_median_of_restarts_is_each_factors_median_over_the_single_calibrations():
     import dataclasses
 

@@ -23,6 +23,9 @@ def add_calibration_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calib-combine", choices=("lowest", "median"), default=None,
                    help="shape calibration with restarts: keep the lowest judged energy, or the median of each factor "
                         "(default lowest)")
+    p.add_argument("--calib-radius-prior", type=float, default=None, metavar="W",
+                   help="shape calibration: weight of a prior pulling the radius factors towards 1.15 (their level on "
+                        "clean mesh bags; 0 = off, the default: docs/shape_calibration.md)")
     p.add_argument("--calib-energy", choices=("raster", "fast"), default=None,
                    help="shape calibration: the shape fit's silhouette energy, raster (counted on the pixel grid, no "
                         "sample) or fast (sampled) (default raster)")
@@ -33,7 +36,8 @@ def calibration_config(args, seed: int):
 
     kw = {"seed": seed}
     for opt, key in (("calib_frames", "window_frames"), ("calib_rounds", "rounds"), ("calib_evals", "shape_evals"),
-                     ("calib_restarts", "restarts"), ("calib_combine", "combine"), ("calib_energy", "energy")):
+                     ("calib_restarts", "restarts"), ("calib_combine", "combine"), ("calib_energy", "energy"),
+                     ("calib_radius_prior", "radius_prior")):
         v = getattr(args, opt, None)
         if v is not None:
             kw[key] = v

@@ -94,6 +94,9 @@ class ShapeCalibrationConfig:
     retrack: bool = True            # later rounds re-track the whole window with the new shape first
     regularization: float = 2e-3    # weight of sum(log factor^2): decides only flat directions
     arm_split_prior: float = 0.05   # weight of (log upper_arm - log forearm)^2: a straight arm shows only the sum
+    radius_prior: float = 0.0       # weight of sum((log r - log radius_centre)^2) over r_trunk/r_arms/r_legs: degraded
+                                    # masks fatten the calibrated limbs (session 28: a lead on noisy bags, off)
+    radius_centre: float = 1.15     # the radius factors' level on clean mesh bags (bench mesh's calibrations 1.08-1.25)
     energy: str = "raster"          # the shape fit's silhouette energy: "raster" (Eq. 4 counted on the pixel grid, no
                                     # sample) or "fast" (sampled: session 26's fit)
     restarts: int = 3               # whole calibrations from other seeds (x cost each), combined as `combine` says:
@@ -117,7 +120,9 @@ class ShapeCalibrationConfig:
             raise ShapeCalibrationError(f"energy: expected 'raster' or 'fast', received {self.energy!r}")
         if self.combine not in ("lowest", "median"):
             raise ShapeCalibrationError(f"combine: expected 'lowest' or 'median', received {self.combine!r}")
-        for name in ("regularization", "arm_split_prior"):
+        if not (np.isfinite(self.radius_centre) and self.radius_centre > 0):
+            raise ShapeCalibrationError(f"radius_centre: expected a number > 0, received {self.radius_centre!r}")
+        for name in ("regularization", "arm_split_prior", "radius_prior"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise ShapeCalibrationError(f"{name}: expected a number >= 0, received {v!r}")
@@ -330,13 +335,18 @@ class _RasterRoute:
 
 
 _UA, _FA = (next(i for i, (n, _, _) in enumerate(SHAPE_PARAMS) if n == m) for m in ("upper_arm", "forearm"))
+_RADII = [i for i, (n, _, _) in enumerate(SHAPE_PARAMS) if n.startswith("r_")]
 
 
 def prior(cfg: ShapeCalibrationConfig, logf) -> float:
     """The shape fit's prior on the log factors ``logf``: a weak pull of all towards 0 (the base shape) and one
-    on the split of the arm between upper arm and forearm (which the silhouette of a straight arm cannot tell)."""
+    on the split of the arm between upper arm and forearm (which the silhouette of a straight arm cannot tell); with
+    ``radius_prior`` > 0 one pulling the radius factors towards ``radius_centre``."""
     logf = np.asarray(logf, dtype=float)
-    return cfg.regularization * float(logf @ logf) + cfg.arm_split_prior * float(logf[_UA] - logf[_FA]) ** 2
+    e = cfg.regularization * float(logf @ logf) + cfg.arm_split_prior * float(logf[_UA] - logf[_FA]) ** 2
+    if cfg.radius_prior > 0:
+        e += cfg.radius_prior * float(np.sum((logf[_RADII] - np.log(cfg.radius_centre)) ** 2))
+    return e
 
 
 def _energy(model, cameras, cfg: ShapeCalibrationConfig, seed):
