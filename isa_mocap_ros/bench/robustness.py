@@ -19,7 +19,7 @@ Protocol (ISA §13.4.2, Figs. 13.15-13.17, with our tracker's best settings):
 * each bag is tracked offline by ``isa-mocap track``'s code (:func:`isa_mocap_ros.cli.track.track_bag`):
   the images are segmented by the segmentation node's background model (learned from the 10
   distorted background frames), default tracker settings (h-isa, 1500 evaluations per frame, 39
-  DOF, fast energy, no prior; the body shape calibrated once per bag from its images
+  DOF, the scanline energy (decision 017), no prior; the body shape calibrated once per bag from its images
   (:func:`calibrate_bag`, ``isa-mocap calibrate``'s code; ``--shape truth``: the bag's, a diagnostic); ``--gate-margin-px`` sets the mask gate,
   default the tracker's), once per tracker seed (default 0-7: one run is chaotic); the bags do not depend on the seed (rendered with seed 0);
 * initialization: ``--init truth`` (default) starts from the ground truth of the first frame, as a

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from isa_mocap_ros.cli.track_io import TOPIC, read_sequence, reference_coverage, refine_by_model, write_overlay_media
+from isa_mocap_ros.cli.track_io import TOPIC, JointStateBag, read_sequence, reference_coverage, refine_by_model, write_overlay_media
 from isa_mocap_ros.cli.keypoint_options import DEFAULT_KEYPOINT_WEIGHT, default_keypoint_weight
 from isa_mocap_ros.vision.keypoint_schedule import EVERY_K
 
@@ -152,12 +152,11 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     """
     from tqdm import tqdm
 
-    from isa_mocap_ros.bag import QOS_DEFAULT, BagReader, BagWriter
-    from isa_mocap_ros.body import make_model, pose_to_joint_state
+    from isa_mocap_ros.bag import BagReader
+    from isa_mocap_ros.body import make_model
     from isa_mocap_ros.tracking import Tracker, TrackerConfig
     from isa_mocap_ros.tracking.published import PublishedPredictor
     from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig
-    from msg_adapters import arrays_to_joint_state, to_cdr
 
     smooth_hz = float(getattr(args, "smooth_hz", 0.0) or 0.0)
     if not np.isfinite(smooth_hz) or smooth_hz < 0:
@@ -349,17 +348,9 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         if looked:
             kp_seconds.append(time.perf_counter() - t0)
         return out if any(o is not None for o in out) else None
-    with BagWriter(est_path, overwrite=args.overwrite) as bag:
-        bag.add_topic(f"{TOPIC}/joint_states", "sensor_msgs/msg/JointState", qos=[QOS_DEFAULT])
-        # the model the joint states belong to (with the shape tracked with): a self-describing result
-        from std_msgs.msg import String
-
-        from isa_mocap_ros.bag import QOS_LATCHED
-        from isa_mocap_ros.sequence import model_to_yaml
-
-        bag.add_topic(f"{TOPIC}/model", "std_msgs/msg/String", qos=[QOS_LATCHED])
-        t_model = int(seq.frames[0].stamp_ns) if seq.frames else 0
-        bag.write(f"{TOPIC}/model", to_cdr(String(data=model_to_yaml(model, role="isa-mocap track"))), t_model)
+    t_model = int(seq.frames[0].stamp_ns) if seq.frames else 0
+    with JointStateBag(est_path, model, role="isa-mocap track", overwrite=args.overwrite,
+                       model_stamp_ns=t_model) as bag:
         bar = tqdm(total=stop - first, unit="frame", desc="track", file=sys.stderr, disable=not show)
         for fr in seq.frames[:stop]:
             if use_masks:
@@ -408,10 +399,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                 estimates[fr.index] = x
                 if r is not None:
                     energies[fr.index] = float(r.energy)
-                q = pose_to_joint_state(model, x)
-                bag.write(f"{TOPIC}/joint_states",
-                          to_cdr(arrays_to_joint_state(model.dof_names, q, stamp_ns=fr.stamp_ns, frame_id="world")),
-                          fr.stamp_ns)
+                bag.write(fr.stamp_ns, x)
             if r is not None and show:
                 bar.set_postfix(E=f"{r.energy:.3f}", views=r.views_used)
             bar.update(1)

@@ -174,24 +174,57 @@ def smooth_track(model, stamps_ns: dict, estimates: dict, cutoff_hz: float, *, o
     return out
 
 
+class JointStateBag:
+    """A rosbag2 of ``/mocap/joint_states`` with ``/mocap/model`` latched beside it (the model the joint states
+    belong to, with the shape tracked with: a self-describing result), written as the poses come: ``track``'s
+    estimates and :func:`write_joint_states`. The model is written once, at ``model_stamp_ns`` or, when that
+    is None, at the first pose's stamp."""
+
+    def __init__(self, path: Path, model, *, role: str, overwrite: bool, model_stamp_ns: int | None = None) -> None:
+        from isa_mocap_ros.bag import QOS_DEFAULT, QOS_LATCHED, BagWriter
+
+        self.model, self._role = model, role
+        self._bag = BagWriter(path, overwrite=overwrite)
+        self._bag.add_topic(f"{TOPIC}/joint_states", "sensor_msgs/msg/JointState", qos=[QOS_DEFAULT])
+        self._bag.add_topic(f"{TOPIC}/model", "std_msgs/msg/String", qos=[QOS_LATCHED])
+        self._model_written = False
+        if model_stamp_ns is not None:
+            self._write_model(int(model_stamp_ns))
+
+    def _write_model(self, stamp_ns: int) -> None:
+        from std_msgs.msg import String
+
+        from isa_mocap_ros.sequence import model_to_yaml
+        from msg_adapters import to_cdr
+
+        self._bag.write(f"{TOPIC}/model", to_cdr(String(data=model_to_yaml(self.model, role=self._role))), stamp_ns)
+        self._model_written = True
+
+    def write(self, stamp_ns: int, pose) -> None:
+        """One pose (the model's state vector) as a ``sensor_msgs/JointState`` stamped ``stamp_ns``."""
+        from isa_mocap_ros.body import pose_to_joint_state
+        from msg_adapters import arrays_to_joint_state, to_cdr
+
+        if not self._model_written:
+            self._write_model(int(stamp_ns))
+        q = pose_to_joint_state(self.model, pose)
+        self._bag.write(f"{TOPIC}/joint_states",
+                        to_cdr(arrays_to_joint_state(self.model.dof_names, q, stamp_ns=int(stamp_ns), frame_id="world")),
+                        int(stamp_ns))
+
+    def close(self) -> None:
+        self._bag.close()
+
+    def __enter__(self) -> "JointStateBag":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()    # also on an exception: what was written is kept as a complete bag
+
+
 def write_joint_states(path: Path, model, poses_by_stamp: dict, *, overwrite: bool) -> None:
     """A rosbag2 with ``/mocap/joint_states`` of ``poses_by_stamp`` (stamp ns -> pose), as ``track`` writes its
     estimates (``/mocap/model`` latched beside them)."""
-    from std_msgs.msg import String
-
-    from isa_mocap_ros.bag import QOS_DEFAULT, QOS_LATCHED, BagWriter
-    from isa_mocap_ros.body import pose_to_joint_state
-    from isa_mocap_ros.sequence import model_to_yaml
-    from msg_adapters import arrays_to_joint_state, to_cdr
-
-    with BagWriter(path, overwrite=overwrite) as bag:
-        bag.add_topic(f"{TOPIC}/joint_states", "sensor_msgs/msg/JointState", qos=[QOS_DEFAULT])
-        bag.add_topic(f"{TOPIC}/model", "std_msgs/msg/String", qos=[QOS_LATCHED])
-        stamps = sorted(poses_by_stamp)
-        if stamps:
-            bag.write(f"{TOPIC}/model", to_cdr(String(data=model_to_yaml(model, role="isa-mocap track --smooth-hz"))),
-                      stamps[0])
-        for s in stamps:
-            q = pose_to_joint_state(model, poses_by_stamp[s])
-            bag.write(f"{TOPIC}/joint_states",
-                      to_cdr(arrays_to_joint_state(model.dof_names, q, stamp_ns=s, frame_id="world")), s)
+    with JointStateBag(path, model, role="isa-mocap track --smooth-hz", overwrite=overwrite) as bag:
+        for s in sorted(poses_by_stamp):
+            bag.write(s, poses_by_stamp[s])

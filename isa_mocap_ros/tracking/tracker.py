@@ -150,7 +150,7 @@ class Tracker:
         self.frames = 0
         # the heading check after an automatic initialization (config.heading.init_confirm_frames)
         self.heading_check = HeadingCheckState()
-        # h-isa on the fast energy runs compiled per partition (optim/compiled_search.py, the same
+        # h-isa runs compiled per partition, either energy (optim/compiled_search.py, the same
         # numbers as the optimizer protocol); False: always through the protocol (tests compare both)
         self.use_compiled_search = True
 
