@@ -9,8 +9,9 @@ solves it by linearizing the kinematic chain, which is what this stage does afte
 global search: a few **iterated closest point** steps, each
 
 1. drawing the current pose's silhouette per usable view, taking its outer contour and back-projecting its
-   pixels onto the visible capsules (the nearest hit of each pixel's ray:
-   :func:`~isa_mocap_ros.vision.render_labels_at`; at most ``n_points`` per view). The silhouette is the
+   pixels onto the visible capsules (the nearest hit of each pixel's ray, as
+   :func:`~isa_mocap_ros.vision.render_labels_at`; at most ``n_points`` per view; subsampling, labels and
+   back-projection in one compiled call per view: :func:`.contour_kernel.contour_points`). The silhouette is the
    scanline energy's: each capsule's two projected end discs and their hull, filled by scanlines
    (:func:`~isa_mocap_ros.vision.outline.fill_capsules`, one compiled call per view); in a view with lens
    distortion the exact one, ray-cast (:func:`~isa_mocap_ros.vision.render_mask`). The discs lie inside the
@@ -52,9 +53,9 @@ from ..body.kinematics import descendant_mask, frames_and_axes, joint_frames
 from ..energy.correspondence import mask_contour_pixels, capsule_contour_points, capsule_frames, plucker_lines
 from ..geometry import exp_so3, log_so3
 from ..geometry.so3 import nearest_rotvec
-from ..vision import capsule_data, render_labels_at, render_mask
+from ..vision import capsule_data, render_mask
 from ..vision.outline import camera_arrays, fill_capsules
-from ..vision.render import pixel_rays
+from ..vision.render import ray_tiles
 from . import contour_kernel
 
 __all__ = ["ContourFit", "ContourFitError", "ContourFitInfo"]
@@ -188,6 +189,8 @@ class ContourFit:
         # the scanline silhouette's image and camera numbers per view (.vision.outline)
         self._sil = [np.zeros((c.height, c.width), np.uint8) for c in self.cameras]
         self._outline_cams = [camera_arrays(c) for c in self.cameras]
+        self._scratch = (np.empty(self.n_points, np.int64), np.empty(self.n_points, np.int64),
+                         np.empty(self.n_points, np.int32), np.empty(self.n_points, np.float32))
         self._proj = [(np.array(c.R, dtype=np.float64, order="C"), np.array(c.t, dtype=np.float64, order="C"),
                        np.array([c.fx, c.fy, c.cx, c.cy]), _padded_distortion(c.dist), c.has_distortion) for c in self.cameras]
 
@@ -255,36 +258,33 @@ class ContourFit:
         for v, (img, cam) in enumerate(zip(self._images, self.cameras)):
             if img is None:
                 continue
-            pix = self._silhouette_contour(v, E, radii, capsules)
-            if len(pix) > self.n_points:
-                pix = pix[np.floor(np.arange(self.n_points) * (len(pix) / self.n_points)).astype(np.int64)]
-            if not len(pix):
+            contour = self._silhouette_contour(v, E, radii, capsules)
+            if not len(contour):
                 continue
-            label, depth = render_labels_at(cam, E, radii, pix, capsules=capsules)
-            o, dirs, zaxis = pixel_rays(cam)
-            fr = np.empty(len(pix), np.int64)
-            loc = np.empty((len(pix), 3))
-            k = contour_kernel.back_project(np.ascontiguousarray(pix[:, 0]), np.ascontiguousarray(pix[:, 1]), label,
-                                            depth, o, dirs, cam.width, zaxis, self._cap_frames, R, P, fr, loc)
+            n = min(len(contour), self.n_points)
+            fr, loc = np.empty(n, np.int64), np.empty((n, 3))
+            k = contour_kernel.contour_points(contour, self.n_points, *ray_tiles(cam), cam.width, *capsules,
+                                              self._cap_frames, R, P, *self._scratch, fr, loc)
             if k:
                 out.append((v, fr[:k], loc[:k]))
         return out
 
     def _silhouette_contour(self, v: int, E: np.ndarray, radii: np.ndarray, capsules: tuple) -> np.ndarray:
-        """``(k, 2)`` outer contour pixels ``(u, v)`` of the model's silhouette in view ``v`` (capsule end points
+        """``(k, 2)`` int32 outer contour pixels ``(u, v)`` of the model's silhouette in view ``v`` (capsule end points
         ``E``): in a view without lens distortion the capsules' outlines drawn by scanlines
         (:func:`~isa_mocap_ros.vision.outline.fill_capsules`: the scanline energy's silhouette), else the exact
         silhouette ray-cast (:func:`~isa_mocap_ros.vision.render_mask`)."""
         cam = self.cameras[v]
         if cam.has_distortion:
-            return mask_contour_pixels(render_mask(cam, E, radii, capsules=capsules))
-        sil = self._sil[v]
-        sil.fill(0)
-        fill_capsules(E, radii, *self._outline_cams[v], 0.0, sil, np.uint8(255))
+            sil = render_mask(cam, E, radii, capsules=capsules)
+        else:
+            sil = self._sil[v]
+            sil.fill(0)
+            fill_capsules(E, radii, *self._outline_cams[v], 0.0, sil, np.uint8(255))
         contours, _ = cv2.findContours(sil, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
         if not contours:
-            return np.zeros((0, 2), dtype=np.int64)
-        return np.concatenate([c.reshape(-1, 2) for c in contours]).astype(np.int64)
+            return np.zeros((0, 2), dtype=np.int32)
+        return np.concatenate(contours).reshape(-1, 2)
 
     def _pairs(self, points: list, R: np.ndarray, P: np.ndarray):
         """:meth:`correspondences` of the pose with joint rotations ``R`` and positions ``P``, the matching
