@@ -184,13 +184,14 @@ class ContourFit:
         # per camera, built once: the index image of the contour pixels (-1 elsewhere; cleared pixel by
         # pixel each frame) and the projection's numbers for the compiled matching
         self._index = [np.full((c.height, c.width), -1, np.int32) for c in self.cameras]
-        # own writable C-order copies: one kernel signature for every camera (a read-only or Fortran-order R from a
-        # calibration file would load a second compiled version on the first real frame, after the warm-up)
-        # the scanline silhouette's image and camera numbers per view (.vision.outline)
+        # the scanline silhouette's image and camera numbers per view (.vision.outline), and the per-view scratch of
+        # contour_kernel.contour_points (pixels, labels, depths)
         self._sil = [np.zeros((c.height, c.width), np.uint8) for c in self.cameras]
         self._outline_cams = [camera_arrays(c) for c in self.cameras]
         self._scratch = (np.empty(self.n_points, np.int64), np.empty(self.n_points, np.int64),
                          np.empty(self.n_points, np.int32), np.empty(self.n_points, np.float32))
+        # own writable C-order copies: one kernel signature for every camera (a read-only or Fortran-order R from a
+        # calibration file would load a second compiled version on the first real frame, after the warm-up)
         self._proj = [(np.array(c.R, dtype=np.float64, order="C"), np.array(c.t, dtype=np.float64, order="C"),
                        np.array([c.fx, c.fy, c.cx, c.cy]), _padded_distortion(c.dist), c.has_distortion) for c in self.cameras]
 
