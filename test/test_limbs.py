@@ -291,3 +291,27 @@ def test_extrapolated_proposals_carry_a_limb_along_its_motion(scene):
     tr = Tracker(model, cams, TrackerConfig.from_flat(seed=1, limb_extrapolations=()))
     assert _limb_stage_of(tr, [], truth) == (list(LIMBS), ["left_leg", "right_leg"], 16)
     assert plan.limb_share(tr, 4, 16) == 66
+
+
+@pytest.mark.parametrize("energy", ["raster", "fast"])
+def test_batch_energies_limb_by_limb_equal_one_call(scene, energy):
+    """The limb stage's batch is scored limb by limb on the energy restricted to each limb
+    (stages._limb_batch_energies): the same bits as one call of the frame's objective, keypoint-free and with
+    twist, hinge-only and extrapolated proposals."""
+    from isa_mocap_ros.tracking import stages
+
+    model, cams, walk, truth, masks = scene
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=1, energy=energy))
+    tr.initialize(pose=walk[2])
+    tr.step(masks, 3)
+    ctx = tr.frame_context()
+    x = np.clip(walk[3], model.lower, model.upper)
+    rng = np.random.default_rng(5)
+    chosen = tr.limb_move.limbs
+    batches = [np.vstack([tr.limb_move.draw(x, limb, 7, rng, twist=limb.name.endswith("arm")),
+                          tr.limb_move.extrapolate(x, walk[1], limb, (0.5, 1.0))]) for limb in chosen]
+    n0 = tr.energy.n_evals
+    got = stages._limb_batch_energies(ctx, x, chosen, batches)
+    assert tr.energy.n_evals - n0 == 1 + sum(len(P) for P in batches)
+    want = ctx.objective(np.vstack([x[None, :]] + batches))
+    assert got.shape == want.shape and np.array_equal(got, want)

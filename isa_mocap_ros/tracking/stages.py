@@ -143,7 +143,9 @@ def propose_limbs(tr, ctx, x, *, n: int, rng: np.random.Generator, limbs: Sequen
 
     Returns ``(pose, its energy, evaluations, limbs replaced)``; evaluations are always
     ``(n + extrapolations) × limbs + 2``: the batch, then the returned pose once more (its energy is
-    not among the batch's when two limbs changed), so the stage spends exactly its share.
+    not among the batch's when two limbs changed), so the stage spends exactly its share. The batch's data
+    term is evaluated limb by limb on the energy restricted to that limb (:func:`_limb_batch_energies`: the
+    same values as one call of ``ctx.objective``).
     """
     m = tr.model
     names = [limb.name for limb in tr.limb_move.limbs] if limbs is None else list(limbs)
@@ -160,7 +162,7 @@ def propose_limbs(tr, ctx, x, *, n: int, rng: np.random.Generator, limbs: Sequen
     if factors:
         batches = [np.vstack([P, tr.limb_move.extrapolate(x, last, limb, factors)])
                    for limb, P in zip(chosen, batches)]
-    E = ctx.objective(np.vstack([x[None, :]] + batches))
+    E = _limb_batch_energies(ctx, x, chosen, batches)
     out, changed = x.copy(), []
     size = n + len(factors)
     for k, (limb, P) in enumerate(zip(chosen, batches)):
@@ -170,3 +172,19 @@ def propose_limbs(tr, ctx, x, *, n: int, rng: np.random.Generator, limbs: Sequen
             out[limb.dofs] = P[i, limb.dofs]
             changed.append(limb.name)
     return out, float(ctx.objective(out[None, :])[0]), size * len(chosen) + 2, changed
+
+
+def _limb_batch_energies(ctx, x, chosen, batches) -> np.ndarray:
+    """``ctx.objective`` of the limb stage's batch ``[x, *batches]`` (``batches[k]``: poses equal to ``x`` outside
+    limb ``chosen[k]``'s DOFs), the same values: the data term of each limb's rows from the data energy restricted
+    to that limb's DOFs (:meth:`~isa_mocap_ros.energy.SilhouetteEnergy.restrict`: the same bits as the full energy,
+    a few capsules rasterized per pose instead of all), the prior and keypoint terms on the whole batch as
+    ``ctx.objective`` adds them. A data energy without ``restrict`` is called on the whole batch."""
+    X = np.vstack([x[None, :]] + batches)
+    obj = ctx.objective
+    restrict = getattr(obj.tracker.energy, "restrict", None)
+    if not callable(restrict):
+        return obj(X)
+    data = [restrict(x, limb.dofs)(np.vstack([x[None, :], P]) if k == 0 else P)
+            for k, (limb, P) in enumerate(zip(chosen, batches))]
+    return obj.add_terms(X, np.concatenate(data))
