@@ -66,3 +66,24 @@ def test_network_rows_change_estimator_parameters_in_a_copy_of_the_parameter_fil
         {k: v for k, v in orig.items() if k != "/mocap/estimator"}
     with pytest.raises(ValueError, match="no_such_parameter"):
         _params_with({"no_such_parameter": 1}, tmp_path / "q.yaml")
+
+
+def test_the_network_table_says_where_the_drops_came_from():
+    """A network row's drops are split: the estimator's queue (of them at bunched arrivals) and the rest lost before
+    it; the governor's lowerings beside them (the figures the one-core-busy question needs)."""
+    row = {"mode": "real time, one core busy", "frame_sets_played": 145, "frames_processed": 129, "fps": 26.4,
+           "real_time_factor": 0.88, "latency_ms_p50": 50.0, "latency_ms_p95": 120.0, "dropped_frames": 16,
+           "dropped_share": 16 / 145, "dropped_while_initializing": 6, "dropped_by_estimator": 14,
+           "dropped_at_bunched_arrivals": 5, "startup_sets_caught_up": 0, "frames_without_contour_stage": 14,
+           "budget_lowered": 3, "init_ms": 168.0, "tracker_ms_p50": 21.0, "tracker_ms_p95": 44.0, "mpjpe_mm": 38.2,
+           "mpjpe_vs_lockstep_mm": 2.9}
+    lines = bench_speed.network_table([row, {"mode": "lockstep", "error": "x"}])
+    head = next(ln for ln in lines if ln.startswith("| mode |"))
+    cells = next(ln for ln in lines if ln.startswith("| real time, one core busy |")).split(" | ")
+    names = head.split(" | ")
+    assert len(cells) == len(names)
+    at = dict(zip(names, cells))
+    assert at["of them by the estimator (its queue) / at bunched arrivals"] == "14 / 5"
+    assert at["budget lowered (times)"] == "3" and at["dropped"] == "16 (11 %)"
+    failed = next(ln for ln in lines if ln.startswith("| lockstep |"))
+    assert failed.count("|") == head.count("|")

@@ -135,3 +135,56 @@ print("LOADS", loads)
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr[-2000:]
     assert "LOADS []" in res.stdout, res.stdout
+
+
+def test_the_start_up_is_not_load_for_the_governor():
+    """The initialization and the heading check's frames take several periods by design (the check's rival is stepped
+    beside the track), and the sets dropped meanwhile or when the check ends are theirs: the governor counts none of
+    them, so an idle machine keeps the full budget after the start-up (it lowered it after every start-up before);
+    two tracked sets over the period after it still lower it."""
+    from types import SimpleNamespace
+
+    class Tracker_:                      # the schedule reads these four members of the tracker only
+        initialized = checking_heading = False
+
+        def heading_recheck_pending(self, masks):
+            return False
+
+        def reset(self):
+            raise AssertionError("no reset expected")
+
+    def result(time_s, *, initialized=False):
+        return SimpleNamespace(x=np.zeros(3), fell_back=False, initialized=initialized, energy=0.1, time_s=time_s)
+
+    tr, k = Tracker_(), 0
+
+    def arrive(n):
+        nonlocal k
+        for _ in range(n):
+            sch.slot.put((SimpleNamespace(items=None), 0.0))
+            k += 1
+
+    def step(time_s, **kw):
+        sch.take(tr)
+        b = sch.budget(tr, 0.0)
+        arrive(round(time_s / PERIOD))
+        return b, sch.after(tr, result(time_s, **kw), budget=b, waited_ms=1e3 * time_s)
+
+    sch = RT.RealTimeSchedule(evals=1500, heading_sets=3, governor=RT.governor_for(1500, PERIOD))
+    arrive(1)
+    step(0.15, initialized=True)                   # the initialization: 4-5 periods, sets held for the check
+    tr.initialized = tr.checking_heading = True
+    step(0.07)                                     # the check's frames: twice a tracked one
+    sch.take(tr)
+    b = sch.budget(tr, 0.0)
+    arrive(2)
+    tr.checking_heading = False                    # decided on this frame: the held sets still waiting are dropped
+    sch.after(tr, result(0.07), budget=b, waited_ms=70.0)
+    assert sch.slot.dropped > 0
+    for _ in range(20):
+        b, d = step(0.025)                         # then tracked sets within the period
+        assert d is None and b.evals is None and b.contour_stage
+    assert sch.governor.lowered == 0 and sch.governor.level == 0
+    step(0.05)
+    step(0.05)                                     # real overload: two sets over the period
+    assert sch.governor.level == 1 and sch.governor.lowered == 1

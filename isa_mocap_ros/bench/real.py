@@ -8,8 +8,8 @@
    masks the default segmentation learns from it are measured against the peer's stick figure per view
    (:mod:`isa_mocap_ros.eval.mask_quality`);
 2. tracks every frame offline (``isa-mocap track``, h-isa 1500, automatic initialization) per configuration
-   (:data:`CONFIGS`; default: the default shape with the keypoint term, and the shape calibrated from the first
-   frames with it) and per seed (``--seeds``, default 0,1,2: the track is chaotic across seeds, so one seed says
+   (:data:`CONFIGS`; default: the shape calibrated from the first frames with the keypoint term, ``track``'s own
+   defaults and so the headline row, and the default shape with it) and per seed (``--seeds``, default 0,1,2: the track is chaotic across seeds, so one seed says
    little); scored against Pose2Sim's keypoints mapped to our joints: mean error raw and with each joint's mean
    offset removed (mean, min and max over the seeds), the worst frame, the knee angle, frames facing backwards,
    per joint, and per joint in each third of the recording (mean over the seeds: where and when the error is);
@@ -46,11 +46,11 @@ CONFIGS = {
     "keypoints": ("default shape + keypoint term (weight 1, the default rate: every 8th frame)",
                   ["--shape", "default", "--keypoint-weight", "1"]),
     "auto": ("shape calibrated from the first 30 frames", ["--shape", "auto"]),
-    "auto_keypoints": ("calibrated shape + keypoint term (weight 1, every 8th frame)",
+    "auto_keypoints": ("calibrated shape + keypoint term (weight 1, every 8th frame): track's defaults",
                        ["--shape", "auto", "--keypoint-weight", "1"]),
 }
-#: configurations tracked when ``--configs`` is not given
-DEFAULT_CONFIGS = ("keypoints", "auto_keypoints")
+#: configurations tracked when ``--configs`` is not given; the first is the headline row (the per-joint tables)
+DEFAULT_CONFIGS = ("auto_keypoints", "keypoints")
 _KEEP = ("frames", "frames_tracked", "frames_fell_back", "mpjpe_mm", "offset_removed_mpjpe_mm", "max_frame_error_mm",
          "offset_removed_max_frame_error_mm", "knee_rmse_deg", "offset_removed_knee_rmse_deg", "frames_facing_backwards",
          "max_heading_error_deg", "per_marker_mm", "offset_removed_per_marker_mm", "fps", "frame_errors_mm")

@@ -183,6 +183,10 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
         "dropped_frames": max(int(play_summary.get("frames") or 0) - len(rec["done"]),
                               int(diag.get("dropped_frame_sets", 0) or 0)),
         "dropped_by_estimator": int(diag.get("dropped_frame_sets", 0) or 0),
+        # of the sets reaching the estimator, those less than half a period after the one before (their masks came
+        # late, then together), and its drops at those arrivals: the inputs' timing, not the tracker's pace
+        "sets_bunched": int(diag.get("sets_bunched", 0) or 0),
+        "dropped_at_bunched_arrivals": int(diag.get("dropped_at_bunched_arrivals", 0) or 0),
         # real time: sets that waited longer than the estimator's catch_up_ms, tracked without the contour
         # stage (from its last 1 Hz diagnostics)
         "frames_without_contour_stage": int(diag.get("frames_without_contour_stage", 0) or 0),

@@ -190,6 +190,15 @@ class EstimatorNode(EstimatorIntake, Node):
         self._extrinsics: list[dict[str, tuple]] = [{} for _ in range(self.n_views)]
         self._camera_changed: str | None = None   # a view's camera changed after the tracker was made
         self._images: list[dict[int, np.ndarray]] = [{} for _ in range(self.n_views)]
+        # the last camera_info of each view (frame id, intrinsics), and the cameras whose data the worker built
+        self._camera_hints: list = [None] * self.n_views
+        self._prepared_keys: set[bytes] = set()
+        self._hinted = [0] * self.n_views   # cameras built ahead per view (at most MAX_HINTED_CAMERAS)
+        self.prepare_ms = 0.0           # CPU the worker spent building camera data ahead of the frame sets
+        self.cameras_ready_ahead = 0    # of the tracker's cameras when it was made, those built ahead
+        self._last_arrival: float | None = None     # when the last complete frame set reached the slot
+        self.sets_bunched = 0           # sets that arrived < half a period after the one before (EstimatorIntake._put)
+        self.dropped_bunched = 0        # sets the slot dropped at those arrivals
         self._predictions: dict[int, np.ndarray] = {}
         # the keypoint node's messages per view and stamp: (uv, confidence) or None (skipped / nobody)
         self.keypoint_inbox = KeypointInbox(self.n_views, self._stream)
@@ -303,26 +312,18 @@ class EstimatorNode(EstimatorIntake, Node):
                 # initialization or a heading re-check needs them (tracking/realtime.py)
                 item = self.schedule.take(self.tracker)
                 if item is None:
-                    self._cv.wait(0.1)
-                    continue
-                frame_set, t_ready = item
-                prediction = None
-                if self.use_prediction and self._published_any:
-                    # lockstep waits as long as a prediction node is there to answer (a slow one on a loaded
-                    # machine must not turn the replay into another result), at most prediction_wait_s
-                    wait_s = self.prediction_wait_s if self.lockstep and publishers_on(
-                        self, "prediction/joint_states") > 0 else 0.0
-                    deadline = time.monotonic() + wait_s
-                    while (prediction := self._prediction_for(frame_set.stamp_ns)) is None:
-                        left = deadline - time.monotonic()
-                        if left <= 0 or self._stop.is_set():
-                            break
-                        self._cv.wait(min(left, 0.05))
-                    if prediction is None and self.lockstep:
-                        self.problems.report("noprediction", f"no prediction for frame {frame_set.stamp_ns} "
-                                             + (f"within {wait_s:.2f} s" if wait_s else "(no prediction node)")
-                                             + "; using the estimator's own")
-                keypoints = self._keypoints_for(frame_set) if self.use_keypoints else None
+                    # idle: the per-camera data of the cameras the camera_infos announce, built before their
+                    # first frame set needs them (tracking/camera_data.py)
+                    cams = self._hinted_cameras()
+                    if not cams:
+                        self._cv.wait(0.1)
+                        continue
+                else:
+                    frame_set, t_ready = item
+                    prediction, keypoints = self._inputs_of(frame_set)
+            if item is None:
+                self._prepare(cams)
+                continue
             try:
                 self._process(frame_set, prediction, t_ready, keypoints)
             except Exception as exc:  # noqa: BLE001 - a node must survive any one bad frame set
@@ -334,6 +335,39 @@ class EstimatorNode(EstimatorIntake, Node):
                     self._done(frame_set.stamp_ns)
                 except Exception:  # noqa: BLE001 - the context may have gone meanwhile
                     return
+
+    def _inputs_of(self, frame_set):
+        """(Under ``_cv``.) The frame set's prediction message (or None) and keypoints (or None)."""
+        prediction = None
+        if self.use_prediction and self._published_any:
+            # lockstep waits as long as a prediction node is there to answer (a slow one on a loaded
+            # machine must not turn the replay into another result), at most prediction_wait_s
+            wait_s = self.prediction_wait_s if self.lockstep and publishers_on(
+                self, "prediction/joint_states") > 0 else 0.0
+            deadline = time.monotonic() + wait_s
+            while (prediction := self._prediction_for(frame_set.stamp_ns)) is None:
+                left = deadline - time.monotonic()
+                if left <= 0 or self._stop.is_set():
+                    break
+                self._cv.wait(min(left, 0.05))
+            if prediction is None and self.lockstep:
+                self.problems.report("noprediction", f"no prediction for frame {frame_set.stamp_ns} "
+                                     + (f"within {wait_s:.2f} s" if wait_s else "(no prediction node)")
+                                     + "; using the estimator's own")
+        keypoints = self._keypoints_for(frame_set) if self.use_keypoints else None
+        return prediction, keypoints
+
+    def _prepare(self, cams: list) -> None:
+        """Build the per-camera data of ``cams`` (:func:`~isa_mocap_ros.tracking.camera_data.prepare_cameras`; a
+        camera it cannot build is left to the tracker, which reports it with the frame set that needs it)."""
+        from isa_mocap_ros.tracking.camera_data import prepare_cameras
+
+        t0 = time.thread_time()
+        try:
+            prepare_cameras(cams, self.tracker_config)
+        except Exception:  # noqa: BLE001 - a cache fill only; the tracker's own build reports the camera
+            return
+        self.prepare_ms += (time.thread_time() - t0) * 1e3
 
     def _process(self, frame_set, prediction_msg, t_ready: float, keypoints=None) -> None:
         if self._camera_changed is not None and self.tracker is not None:
@@ -354,6 +388,8 @@ class EstimatorNode(EstimatorIntake, Node):
                 return
             from isa_mocap_ros.tracking.published import PublishedPredictor
             from isa_mocap_ros.tracking.tracker import Tracker
+            # of its cameras, those whose data the worker built ahead from the camera_infos (Tracker() finds them)
+            self.cameras_ready_ahead = sum(c.key() in self._prepared_keys for c in cams)
             self.tracker = Tracker(self.model, cams, self.tracker_config)
             # The estimator's own prediction (used when the prediction node's is missing) goes
             # through the same JointState conversions as the prediction node's.
@@ -462,6 +498,12 @@ class EstimatorNode(EstimatorIntake, Node):
             "views_used": getattr(r, "views_used", 0), "keypoint_sets": self.keypoint_sets,
             "latency_ms_p50": p50, "latency_ms_p95": p95,
             "tracker_ms_p50": t50, "tracker_ms_p95": t95, "init_ms": self.init_ms,
+            # the per-camera data built ahead from the camera_infos (CPU ms; cameras), and how many of the tracker's
+            # cameras found theirs ready when it was made
+            "camera_data_ahead_ms": round(self.prepare_ms, 1), "cameras_built_ahead": len(self._prepared_keys),
+            "cameras_ready_ahead": self.cameras_ready_ahead,
+            # real time: sets arriving < half a frame period after the one before, and the drops at those arrivals
+            "sets_bunched": self.sets_bunched, "dropped_at_bunched_arrivals": self.dropped_bunched,
             # the budget under load (isa_mocap_ros.tracking.load): level 0 = full, its evaluations and contour stage
             **({"budget_level": g.level, "budget_evals": g.decision().evals,
                 "budget_contour_stage": g.decision().contour_stage, "budget_lowered": g.lowered,

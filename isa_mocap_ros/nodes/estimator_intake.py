@@ -23,6 +23,9 @@ from isa_mocap_ros.vision import Camera
 #: distinct child frames kept per view from cam<i>/extrinsics (the one the view's masks name is used)
 MAX_CAMERA_FRAMES = 8
 
+#: cameras per view whose data the worker builds ahead from camera_infos alone (:meth:`EstimatorIntake._hinted_cameras`)
+MAX_HINTED_CAMERAS = 2
+
 
 class EstimatorIntake:
     """The input side of the estimator node: subscription callbacks, the cameras they make, and the lookup of a
@@ -31,10 +34,43 @@ class EstimatorIntake:
 
     # -- calibration and masks: checked before they reach the synchronizer (isa_mocap_ros.intake) ----------
     def _info_cb(self, v: int):
-        def take(*info) -> None:
+        def take(stamp_ns, setting, intr) -> None:
             with self._cv:
-                self._settle(v, *self.gates[v].add_info(*info))
+                self._settle(v, *self.gates[v].add_info(stamp_ns, setting, intr))
+                hint = self._camera_hints[v]
+                if hint is None or hint[0] != setting.frame_id or hint[1] is not intr:   # (intr: cached per camera)
+                    self._camera_hints[v] = (setting.frame_id, intr)    # the worker builds its data when idle
+                    self._cv.notify_all()
         return camera_info_callback(v, self.problems, lambda exc: f"info{v}", take)
+
+    def _hinted_cameras(self) -> list[Camera]:
+        """(Under ``_cv``.) Before the tracker is made: the cameras the last camera_info of each view and its
+        extrinsics describe, whose per-camera data (:func:`isa_mocap_ros.tracking.camera_data.prepare_cameras`) were
+        not built yet. Not vouched for by a mask (the gate's rule, :mod:`isa_mocap_ros.intake`): they only fill the
+        caches a tracker made of the same cameras finds (keyed by the geometry, ``Camera.key``), so a wrong one
+        changes no result. A camera_info of another size than the view's camera (once known) is not taken, and
+        at most :data:`MAX_HINTED_CAMERAS` per view are built, so stray camera_infos cost little."""
+        if self.tracker is not None:
+            return []
+        cams = []
+        for v, hint in enumerate(self._camera_hints):
+            known = self.gates[v].setting
+            if hint is None or self._hinted[v] >= MAX_HINTED_CAMERAS:
+                continue
+            frame, intr = hint
+            if known is not None and (known.frame_id, known.width, known.height) != (frame, intr.width, intr.height):
+                continue
+            store = self._extrinsics[v]
+            pose = store.get(frame) if frame else (next(reversed(store.values())) if store else None)
+            if pose is None:
+                continue
+            cam = Camera.from_intrinsics_and_pose(f"cam{v}", K=intr.K, D=intr.D, width=intr.width,
+                                                  height=intr.height, R_wc=pose[0], t_wc=pose[1])
+            if cam.key() not in self._prepared_keys:
+                self._prepared_keys.add(cam.key())
+                self._hinted[v] += 1
+                cams.append(cam)
+        return cams
 
     def _extr_cb(self, v: int):
         def cb(msg: TransformStamped) -> None:
@@ -57,6 +93,7 @@ class EstimatorIntake:
                 return
             with self._cv:
                 store[msg.child_frame_id] = rt   # used when it is the frame of the view's masks (_cameras)
+                self._cv.notify_all()            # the worker may build the view's camera data now
         return cb
 
     def _pose_of(self, v: int):
@@ -125,9 +162,21 @@ class EstimatorIntake:
                 continue
             for fs in sets:   # the frame sets' stream: one view's mask far in time (its own pair) makes no set
                 self._stream.accept(fs.stamp_ns)
-                self.slot.put((fs, time.monotonic()))
+                self._put(fs)
         if accepted:
             self._cv.notify_all()
+
+    def _put(self, frame_set) -> None:
+        """(Under ``_cv``.) Hand a complete frame set to the worker's slot, counting the sets that arrive less than half a
+        frame period after the one before (bunched: the masks came late, then together) and the sets dropped then: a
+        drop there is the inputs' timing (segmentation, executor, transport), not the tracker's pace."""
+        now = time.monotonic()
+        dropped = self.slot.dropped
+        self.slot.put((frame_set, now))
+        if self._last_arrival is not None and now - self._last_arrival < 0.5 * self.frame_period_s:
+            self.sets_bunched += 1
+            self.dropped_bunched += self.slot.dropped - dropped
+        self._last_arrival = now
 
     def _image_cb(self, v: int):
         def cb(msg: Image) -> None:

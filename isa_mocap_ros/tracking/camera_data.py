@@ -6,8 +6,9 @@ calibration only and are cached per camera geometry (:meth:`Camera.key`). Built 
 start-up's frames: ~20-24 ms per 320x240 camera for the renderer's on the initialized frame (its polish runs the
 tracker's first contour stage) and ~20 ms for the hull filter's on the next frame, measured under load
 (docs/history/issue35_speed.md, session 27). :class:`~.tracker.Tracker` calls :func:`prepare_cameras` when it is
-made (the estimator node makes its tracker on the first frame set, so that set's latency still includes them). The
-data are the same arrays either way (the tracks are bit-identical).
+made; the estimator node calls it earlier, while its worker waits, on the cameras the camera_infos announce, so the
+tracker it makes on the first frame set finds them built (docs/nodes.md, "Start-up"). The data are the same arrays
+either way (the tracks are bit-identical).
 """
 from __future__ import annotations
 

@@ -13,8 +13,9 @@ schedule puts the policies of :mod:`.load` and :mod:`.sync` together in the orde
    (:class:`~.load.LoadGovernor`), the catch-up budget for the start-up's waiting sets, and no contour stage
    for a set that waited longer than ``catch_up_ms``.
 3. **After** (:meth:`RealTimeSchedule.after`): the governor's account of the step (a track lost for
-   ``reset_after`` sets re-initializes the tracker: it finds the person again by itself), then the catch-up's
-   (the rest of the held sets dropped once it stops).
+   ``reset_after`` sets re-initializes the tracker: it finds the person again by itself; the start-up's frames —
+   the initialization, the heading check's — and the sets dropped meanwhile are not load and not counted), then the
+   catch-up's (the rest of the held sets dropped once it stops).
 
 :func:`emulate` runs a tracker through the schedule on a virtual clock (sets arrive every ``period_s``, a
 step lasts what ``step_s(result)`` says): the node's decisions, reproducible on any machine, for tests and
@@ -74,6 +75,7 @@ class RealTimeSchedule:
         self.frames_caught_up = 0          # sets tracked without the contour stage because they were late
         self.last_decision: Decision | None = None   # the governor's last change of budget
         self._dropped_seen = 0
+        self._checking = False             # the set taken last is a heading check's frame
 
     def take(self, tracker, masks_of: Callable = lambda item: item[0].items):
         """The next waiting set (None: none waits), with the holds its step needs (see the module docstring);
@@ -96,6 +98,7 @@ class RealTimeSchedule:
         if self.lockstep:
             return Budget(None, True, False)
         late = 0 < self.catch_up_ms < waited_ms
+        self._checking = tracker.checking_heading      # a heading check's frame: its rival doubles the step
         d = self.governor.decision() if self.governor is not None else None
         evals = self.evals if d is None or d.level == 0 else d.evals
         evals, contour = self.startup.budget(evals, initialized=tracker.initialized,
@@ -113,7 +116,10 @@ class RealTimeSchedule:
         if budget.late and result.x is not None and not result.fell_back and not result.initialized:
             self.frames_caught_up += 1
         changed = None
-        if self.governor is not None and result.x is not None and not result.initialized:
+        if self.governor is not None and result.x is not None and not result.initialized and not self._checking:
+            # the start-up's frames are not load: the initialization and the heading check's frames (the rival's
+            # step beside the track's) take several periods by design, and the sets dropped meanwhile or when the
+            # check ends are theirs; counted as overload they lowered the budget right after every start-up
             dropped = self.slot.dropped - self._dropped_seen
             self._dropped_seen = self.slot.dropped
             d = self.governor.observe(step_s=result.time_s if step_s is None else step_s, energy=result.energy,
@@ -128,6 +134,8 @@ class RealTimeSchedule:
             going_on = self.startup.after(waiting=len(self.slot), waited_ms=waited_ms)
             if self.slot.held and not going_on:
                 self.slot.hold(0)
+        if result.initialized or self._checking:
+            self._dropped_seen = self.slot.dropped       # (the start-up's drops: not the governor's to count)
         return changed
 
 

@@ -1,0 +1,78 @@
+"""The estimator node's start-up, with a real process: the per-camera data (tracking/camera_data.py) are built from
+the camera_infos and extrinsics while the worker waits, before the first frame set, and the tracker made on that set
+finds them (the same camera geometry, ``Camera.key``)."""
+from __future__ import annotations
+
+import json
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+from isa_mocap_ros.bag import BagReader
+from rosnode import ros_node, spin_until
+
+pytestmark = [pytest.mark.ros, pytest.mark.timeout(300)]
+HERE = Path(__file__).parent
+FIXTURE = HERE.parent / "bags" / "fixture"
+CONFIG = HERE.parent / "config" / "pipeline.yaml"
+
+
+def _diag(msg) -> dict:
+    return {kv.key: kv.value for st in msg.status if st.name.endswith("estimator") for kv in st.values}
+
+
+def test_the_camera_data_are_built_from_the_camera_infos_before_the_first_frame_set(spawn, rosenv):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import TransformStamped
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from sensor_msgs.msg import CameraInfo, Image
+    from std_msgs.msg import Header
+
+    import msg_adapters as ma
+
+    frames: dict[int, dict] = {}
+    latched = {}
+    with BagReader(FIXTURE) as r:
+        for m in r.messages():
+            msg = ma.from_cdr(m.data, m.type)
+            if m.topic.endswith("/extrinsics"):
+                latched[m.topic] = msg
+            elif m.topic.endswith(("/mask", "/camera_info")):
+                frames.setdefault(ma.stamp_to_ns(msg.header), {})[m.topic] = msg
+    stamps = sorted(frames)
+    est = spawn("estimator", "-m", "isa_mocap_ros.nodes.estimator", "--ros-args", "-r", "__ns:=/mocap",
+                "--params-file", str(CONFIG), "-p", "evals:=200", "-p", "optimizer:=isa", "-p", "use_prediction:=false")
+    assert est.wait_for_output("estimator: ready", 120), est.output()
+    with ros_node(rosenv, "startup_test") as (node, ex):
+        pubs = {t: node.create_publisher(Image if t.endswith("mask") else CameraInfo, t, 10)
+                for t in sorted({t for f in frames.values() for t in f})}
+        qos_latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        ext = [node.create_publisher(TransformStamped, t, qos_latched) for t in latched]
+        for p, msg in zip(ext, latched.values()):
+            p.publish(msg)
+        diag, done = [{}], set()
+        node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: diag.__setitem__(0, _diag(m) or diag[0]), 10)
+        node.create_subscription(Header, "/mocap/estimator/done", lambda h: done.add(ma.stamp_to_ns(h)), 10)
+        assert spin_until(ex, lambda: all(p.get_subscription_count() > 0 for p in pubs.values()), 30)
+        time.sleep(1.0)
+        assert spin_until(ex, lambda: diag[0].get("cameras_built_ahead") == "0", 10), diag[0]
+        # the first set's camera_infos alone: the worker builds the four cameras' data while it waits
+        for topic, msg in sorted(frames[stamps[0]].items()):
+            if topic.endswith("camera_info"):
+                pubs[topic].publish(msg)
+        assert spin_until(ex, lambda: diag[0].get("cameras_built_ahead") == "4", 20), (diag[0], est.output()[-2000:])
+        assert float(diag[0]["camera_data_ahead_ms"]) > 0
+        assert diag[0]["frames"] == "0"                 # no frame set yet: built ahead of it
+        for s in stamps[:3]:                             # then the sets, masks and camera_infos
+            for topic, msg in sorted(frames[s].items()):
+                pubs[topic].publish(msg)
+            assert spin_until(ex, lambda: s in done, 30), est.output()[-3000:]
+        assert spin_until(ex, lambda: diag[0].get("frames") == "3", 5), diag[0]
+        # the tracker made on the first set found all four (the same geometry as its cameras'), none built twice
+        assert diag[0]["cameras_ready_ahead"] == "4", diag[0]
+        assert diag[0]["cameras_built_ahead"] == "4", diag[0]
+        assert json.loads(diag[0]["problems"]) == {}, diag[0]
+    est.stop(signal.SIGINT)
+    assert est.popen.returncode == 0, est.output()[-2000:]
