@@ -8,7 +8,8 @@ from isa_mocap_ros.body import capsule_endpoints, forward_kinematics, make_model
 from isa_mocap_ros.geometry import exp_so3, log_so3
 from isa_mocap_ros.tracking.contour import ContourFit, ContourFitError, _normal_equations
 from isa_mocap_ros.body.kinematics import joint_frames
-from isa_mocap_ros.vision import default_rig, render_mask
+from isa_mocap_ros.energy.correspondence import mask_contour_pixels
+from isa_mocap_ros.vision import capsule_data, default_rig, render_mask
 
 
 @pytest.fixture(scope="module")
@@ -155,6 +156,10 @@ def test_compiled_steps_match_the_numpy_reference(scene):
     T = forward_kinematics(model, x)[0]
     assert np.array_equal(R, T[:, :3, :3]) and np.array_equal(P, T[:, :3, 3])
     np.testing.assert_allclose(A[6:], joint_frames(model, x[None], want_axes=True)[2][0][6:], atol=1e-12)
+    # the reference renders the exact silhouette; the fit takes the scanline outline in a pinhole view (the next
+    # test): here both from the exact one
+    fit._silhouette_contour = lambda v, E, radii, capsules: mask_contour_pixels(
+        render_mask(rig[v], E, radii, capsules=capsules))
     ref, new = fit.model_points(x), fit._points(R, P)
     assert [v for v, _, _ in ref] == [v for v, _, _ in new] == list(range(len(rig)))
     for (_, f1, l1), (_, f2, l2) in zip(ref, new):
@@ -172,3 +177,27 @@ def test_compiled_steps_match_the_numpy_reference(scene):
     assert fit._pairs(ref, Ry, Py)[0].size == 0
     fit.set_masks(masks)
     assert np.array_equal(fit._pairs(ref, Ry, Py)[0], b[0])
+
+
+def test_model_contour_from_the_scanline_outline(scene):
+    """In a view without lens distortion the model's contour is that of the capsules' scanline outlines (the
+    scanline energy's silhouette, vision/outline.py) instead of the ray-cast one: every pixel of it within a
+    pixel of the exact silhouette's contour and the other way round, and every one back-projected onto a
+    capsule (the outline's discs lie inside the exact projection of the balls)."""
+    from scipy.spatial import cKDTree
+
+    from isa_mocap_ros.body.kinematics import frames_and_axes
+
+    model, rig, x0, masks = scene
+    fit = ContourFit(model, rig, n_points=100000)
+    fit.set_masks(masks)
+    R, P, _ = frames_and_axes(model, x0)
+    E = np.ascontiguousarray(P[np.asarray(model.capsules)])
+    total = 0
+    for v, cam in enumerate(rig):
+        assert not cam.has_distortion
+        pix = fit._silhouette_contour(v, E, fit._radii, capsule_data(E, model.capsule_radii))
+        exact = mask_contour_pixels(render_mask(cam, E, model.capsule_radii))
+        assert cKDTree(exact).query(pix)[0].max() <= 1.0 and cKDTree(pix).query(exact)[0].max() <= 1.0
+        total += len(pix)
+    assert sum(len(f) for _, f, _ in fit._points(R, P)) == total

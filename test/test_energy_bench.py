@@ -19,7 +19,7 @@ def test_bench_energy_quick_json(capsys):
                          "ratio", "search_evals_per_s", "search_evals_per_cpu_s", "search_evals", "search_generation",
                          "search_restricted_share", "search_coarse_evals_per_s", "search_coarse_evals_per_cpu_s",
                          "search_raster_evals_per_s", "search_raster_evals_per_cpu_s",
-                         "search_ratio", "fast_mean_abs_diff", "raster_evals_per_s", "raster_evals_per_cpu_s",
+                         "search_raster_coarse_evals_per_s", "search_raster_coarse_evals_per_cpu_s", "search_ratio", "fast_mean_abs_diff", "raster_evals_per_s", "raster_evals_per_cpu_s",
                          "raster_ratio", "raster_mean_abs_diff", "raster2_evals_per_s", "raster2_evals_per_cpu_s",
                          "raster2_ratio", "raster2_mean_abs_diff", "exact_batch",
                          "n_model_points", "n_template", "n_mask_points", "downsample", "threads"]
@@ -40,3 +40,4 @@ def test_bench_energy_quick_json(capsys):
     assert out["raster_evals_per_s"] > 0 and out["raster2_evals_per_s"] > 0 and out["raster_ratio"] > 0
     assert out["raster_mean_abs_diff"] < out["fast_mean_abs_diff"]
     assert out["search_raster_evals_per_s"] > 0 and out["search_raster_evals_per_cpu_s"] > 0
+    assert out["search_raster_coarse_evals_per_s"] > 0 and out["search_raster_coarse_evals_per_cpu_s"] > 0

@@ -96,3 +96,42 @@ def test_the_search_evaluates_its_early_generations_coarse(scene):
         run(1.0)
     with pytest.raises(TrackerError, match="coarse_fraction"):
         TrackerConfig.from_flat(coarse_fraction=1.5)
+
+
+def test_the_scanline_coarse_level_counts_every_second_row(scene):
+    """method="raster": the coarse level is every view on every second pixel row, the same bits as the energy made
+    with downsample 2 (full and restricted kernel), its foreground packed from the full-resolution words; the compiled
+    search runs its early generations on it."""
+    from isa_mocap_ros.energy import raster_kernel as RK
+    from isa_mocap_ros.energy.coarse import raster_rows_subset
+
+    model, rig, x0, masks = scene
+    en = SilhouetteEnergy(model, rig, masks, method="raster")
+    ref = SilhouetteEnergy(model, rig, masks, method="raster", downsample=2)
+    got, want = raster_rows_subset(en.kernel_args()[2]), ref.kernel_args()[2]
+    for a, b in zip(got, want):
+        np.testing.assert_array_equal(a, b)
+    rng = np.random.default_rng(0)
+    X = x0 + np.concatenate([rng.normal(0, 0.03, (24, 6)), rng.normal(0, 0.15, (24, model.dof - 6))], axis=1)
+    out = np.empty(24)
+    RK.raster_batch(X, *en.coarse_kernel_args(), 2, out)
+    np.testing.assert_array_equal(out, ref(X))
+    assert en.coarse_kernel_args() is en.coarse_kernel_args(second=True)     # one level, built once per frame
+    coords = np.asarray(model.partitions["left_leg"])
+    Xr = np.repeat(x0[None], 24, axis=0)
+    Xr[:, coords] = X[:, coords]
+    rest = en.restrict(x0, coords)
+    RK.raster_restricted(Xr, *rest.coarse_kernel_args(), 2, out)
+    np.testing.assert_array_equal(out, ref(Xr))
+    parts = [np.asarray(model.partitions[k]) for k in ("root", "left_arm", "torso")]
+    spread = np.full(model.dof, 0.05)
+
+    def run(frac):
+        opt = make_optimizer("h-isa", x0, spread, rng=np.random.default_rng(5), bounds=(model.lower, model.upper),
+                             rotation_blocks=model.rotation_blocks, partitions=parts, n_particles=30, kernel="s2",
+                             schedule="adaptive", target_ess=0.3, c=0.5, variance="selected", whole_generations=True)
+        return compiled_search.search(opt, en, 450, coarse_fraction=frac)
+
+    full, coarse = run(0.0), run(0.5)
+    assert full is not None and coarse is not None and full.n_evals == coarse.n_evals == 450
+    assert not np.array_equal(full.x, coarse.x) and en(coarse.best_x[None])[0] == coarse.best_energy

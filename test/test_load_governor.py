@@ -60,16 +60,32 @@ def test_one_slow_set_is_noise():
     d = g.observe(step_s=0.060, energy=0.1)
     assert d.level == 0
     d = g.observe(step_s=0.060, energy=0.1)
-    assert d.level == 1 and not d.contour_stage and d.evals == 1500 and "over the frame period" in d.reason
+    # 60 ms: without the contour stage ~42 ms (over 0.85 × 33), at 67 % of the evaluations ~28 ms (fits)
+    assert d.level == 2 and not d.contour_stage and d.evals == 1005 and "over the frame period" in d.reason
 
 
 def test_steps_down_the_ladder_and_not_below():
     g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD, down_after=1, min_evals=600))
-    levels = [g.observe(step_s=0.1, energy=0.1).level for _ in range(10)]
+    levels = [g.observe(step_s=0.035, energy=0.1).level for _ in range(10)]     # just over: one level at a time
     assert levels == [1, 2, 3, 4, 4, 4, 4, 4, 4, 4]
     assert [g.budget(k) for k in range(len(LEVELS))] == [(1500, True), (1500, False), (1005, False), (750, False),
                                                          (600, False)]       # 0.33 × 1500 = 495 < min_evals
     assert g.lowered == 4
+
+
+def test_far_over_the_period_steps_down_to_the_level_that_fits_at_once():
+    """A step at three times the period goes to the level projected to fit (the whole step scaled with the
+    evaluations, less the contour stage's share), not one level per down_after sets: each of those sets dropped
+    one or two sets on the way down."""
+    g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD, down_after=2, min_evals=300))
+    g.observe(step_s=0.1, energy=0.1)
+    d = g.observe(step_s=0.1, energy=0.1)
+    assert d.level == len(LEVELS) - 1 and d.evals == 495 and g.lowered == 1     # 100 × 0.7 × 0.33 = 23 ms
+    g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD, down_after=2, contour_share=0.0))
+    g.observe(step_s=0.05, energy=0.1)
+    assert g.observe(step_s=0.05, energy=0.1).level == 3                          # 50 × 0.5 = 25 ms
+    with pytest.raises(LoadError, match="contour_share"):
+        LoadSettings(evals=1500, period_s=PERIOD, contour_share=1.0)
 
 
 def test_drops_count_as_overload_even_after_a_quick_step():
@@ -119,7 +135,7 @@ def test_lost_track_returns_to_full_budget_then_resets():
     g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD, down_after=1, reset_after=4))
     for _ in range(10):
         g.observe(step_s=0.02, energy=0.1)
-    g.observe(step_s=0.1, energy=0.1)
+    g.observe(step_s=0.04, energy=0.1)          # 40 ms: without the contour stage 28 ms fits
     assert g.level == 1
     d = g.observe(step_s=0.1, energy=0.5)                      # 5 × the median energy: lost
     assert d.level == 0 and d.contour_stage and "track lost" in d.reason and not d.reset

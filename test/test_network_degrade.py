@@ -6,6 +6,7 @@ default), so the tracker cannot keep up: the estimator lowers its budget and say
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -28,5 +29,6 @@ def test_an_overloaded_real_time_estimator_lowers_its_budget(tmp_path, rosenv):
     assert s["budget_lowered"] >= 1, s
     assert s["budget_level"] not in (None, "off", "0"), s
     log = (out / "nodes.log").read_text()
-    assert "budget level 1: over the frame period" in log and "no contour stage" in log, log[-3000:]
+    # straight to the level projected to fit (at 4x the default budget, the last one), not one level at a time
+    assert re.search(r"budget level [1-4]: over the frame period .*no contour stage", log), log[-3000:]
     assert s["frames_estimated"] >= 1 and s["track_resets"] == 0, s

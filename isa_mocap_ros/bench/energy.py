@@ -26,7 +26,8 @@ The scanline energy (``SilhouetteEnergy(method="raster")``: Eq. 4 counted on the
 same way on the same batch (``raster_*``; every pixel row, and every second row as ``raster2_*``), and both it and
 the fast kernel are compared with the exact reference on the exact batch (``*_mean_abs_diff``: mean |f - exact|),
 and the tracker's search runs on it too (``search_raster_*``: its restricted kernel and the compiled search; the
-tracker's default energy since decision 017; ``isa-mocap track --energy fast`` selects the sampled kernel).
+tracker's default energy since decision 017; ``isa-mocap track --energy fast`` selects the sampled kernel), also with
+half of each partition's generations on its coarse level, every second pixel row (``search_raster_coarse_*``).
 """
 from __future__ import annotations
 
@@ -98,6 +99,8 @@ def run(args: argparse.Namespace) -> int:
     search.update(search_rate(model, rig, fast, x0, args.search_evals, args.repeats, args.seed, COARSE_FRACTION,
                               "search_coarse"))
     search.update(search_rate(model, rig, raster, x0, args.search_evals, args.repeats, args.seed, key="search_raster"))
+    search.update(search_rate(model, rig, raster, x0, args.search_evals, args.repeats, args.seed, COARSE_FRACTION,
+                              "search_raster_coarse"))
     fast_rate = args.batch / t_fast
     exact_rate = nb / t_exact
     out = {"views": args.views, "dof": args.dof, "batch": args.batch, "fast_evals_per_s": round(fast_rate, 1),
@@ -130,7 +133,9 @@ def run(args: argparse.Namespace) -> int:
                   f"{out[key + '_evals_per_cpu_s']:.0f} per CPU second; {out[key + '_ratio']:.0f}x the exact; mean "
                   f"|f - exact| {out[key + '_mean_abs_diff']:.5f}, fast kernel {out['fast_mean_abs_diff']:.5f})")
         print(f"  search on the scanline energy: {out['search_raster_evals_per_s']:.0f} evals/s "
-              f"({out['search_raster_evals_per_cpu_s']:.0f} per CPU second)")
+              f"({out['search_raster_evals_per_cpu_s']:.0f} per CPU second); {COARSE_FRACTION:.0%} of its generations "
+              f"on every second row: {out['search_raster_coarse_evals_per_s']:.0f} evals/s "
+              f"({out['search_raster_coarse_evals_per_cpu_s']:.0f} per CPU second)")
     return 0
 
 

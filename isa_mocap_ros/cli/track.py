@@ -49,8 +49,8 @@ _TRACKER_OPTIONS = (
      "comma-separated order of the hierarchy's partitions (default: the tracker's, root,left_arm,right_arm,torso,"
      "left_leg,right_leg; the paper's: root,torso,left_arm,right_arm,left_leg,right_leg)"),
     ("--coarse-fraction", float, None, "F",
-     "share of each partition's generations of the main search evaluated on two views only (the energy's coarse "
-     "level, about half the cost; docs/energy.md; with --energy fast only); 0 = off (default: the tracker's default)"),
+     "share of each partition's generations of the main search evaluated on the energy's coarse level (--energy "
+     "fast: two views; raster: every second pixel row; docs/energy.md); 0 = off (default: the tracker's default)"),
     ("--keypoint-weight", float, None, "W",
      "weight of the learned-keypoint term (BlazePose landmarks on the images, cropped around the mask; "
      f"docs/keypoints.md); 0 = off; default {DEFAULT_KEYPOINT_WEIGHT:g} when the landmark model is installed "

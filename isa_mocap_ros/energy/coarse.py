@@ -1,12 +1,13 @@
-"""The silhouette energy's coarse level: the kernel's argument bundles restricted to two of the views
-(:meth:`.silhouette.SilhouetteEnergy.coarse_kernel_args`, docs/energy.md "What the resolution buys")."""
+"""The silhouette energy's coarse level: the sampled kernel's argument bundles restricted to two of the views, the
+scanline kernel's to every second pixel row (:meth:`.silhouette.SilhouetteEnergy.coarse_kernel_args`, docs/energy.md
+"What the resolution buys")."""
 from __future__ import annotations
 
 import numpy as np
 
 from . import silhouette_kernel as _k
 
-__all__ = ["coarse_views", "view_subset"]
+__all__ = ["coarse_views", "view_subset", "raster_rows_subset"]
 
 
 def coarse_views(cameras, view_w: np.ndarray, second: bool = False) -> np.ndarray:
@@ -48,3 +49,20 @@ def view_subset(kernel_args: tuple, k: np.ndarray) -> tuple:
                        np.ascontiguousarray(f.fg_y.reshape(V, -1)[k].ravel()), np.ascontiguousarray(f.fg_n[k]),
                        rows(f.fg_tab), rows(f.fg_bins), rows(f.fg_xr), np.ascontiguousarray(f.fg_area[k]))
     return body, sub, tmpl, fg
+
+
+def raster_rows_subset(raster):
+    """The scanline kernel's :data:`.raster_kernel.Raster` on every second of its sampled rows (row stride ``2 s``):
+    the same bits as :func:`.raster_kernel.foreground_bits` of the masks at that stride (the rows ``0, 2 s, 4 s, ...``
+    taken from the packed words, the foreground recounted on them). The scanline energy's coarse level
+    (:meth:`.silhouette.SilhouetteEnergy.coarse_kernel_args`)."""
+    from .raster_kernel import Raster
+
+    fbits, nfg, nw, stride = raster
+    V = fbits.shape[0]
+    Hs = (fbits.shape[1] - 8) // nw
+    rows = fbits[:, :nw * Hs].reshape(V, nw, Hs)[:, :, ::2]        # word-plane major: (view, word column, row)
+    Hs2 = rows.shape[2]
+    fb = np.zeros((V, nw * Hs2 + 8), np.uint64)
+    fb[:, :nw * Hs2] = rows.reshape(V, nw * Hs2)
+    return Raster(fb, np.bitwise_count(fb).sum(axis=1).astype(np.int64), nw, 2 * stride)

@@ -101,6 +101,8 @@ class RestrictedSilhouetteEnergy:
             stage = _rk.RasterStage(*_rk.raster_restrict_prepare(x, body, views, raster, moving))
             self._args = (_k.Restriction(x, self._fixed, self._fk_joints, self._cam_joints, self.moving_capsules,
                                          self._mov_ci, self._moving_ci), body, views, raster, stage)
+            self._moving = moving
+            self._coarse = [None, None]
             return
         body, views, tmpl, fg = energy.kernel_args()
         stage = _k.Stage(*_k.restrict_prepare(x, body, views, tmpl, fg, moving))
@@ -116,9 +118,14 @@ class RestrictedSilhouetteEnergy:
         return self._args
 
     def coarse_kernel_args(self, second: bool = False) -> tuple:
-        """:meth:`kernel_args` on the parent's coarse views (:meth:`SilhouetteEnergy.coarse_kernel_args`)."""
-        if self._raster:
-            raise EnergyError("coarse level: expected method 'fast', received 'raster' (no coarse level)")
+        """:meth:`kernel_args` on the parent's coarse level (:meth:`SilhouetteEnergy.coarse_kernel_args`: two views;
+        with ``method="raster"`` every second pixel row, ``second`` alike)."""
+        if self._raster:            # every second pixel row: the fixed capsules' bitmap on those rows once
+            if self._coarse[0] is None:
+                body, views, raster = self.energy.coarse_kernel_args()
+                stage = _rk.RasterStage(*_rk.raster_restrict_prepare(self.x_base, body, views, raster, self._moving))
+                self._coarse[0] = (self._args[0], body, views, raster, stage)
+            return self._coarse[0]
         if self._coarse[second] is None:
             body, views, tmpl, fg = self.energy.coarse_kernel_args(second)
             if views is self._args[2]:

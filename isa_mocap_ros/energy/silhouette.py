@@ -35,7 +35,7 @@ from ..vision import Camera
 from ..vision.camera import PixelAreas
 from . import raster_kernel as _rk
 from . import silhouette_kernel as _k
-from .coarse import coarse_views, view_subset
+from .coarse import coarse_views, raster_rows_subset, view_subset
 from ._checks import EnergyError, _check_cameras, _check_model, _check_poses
 from .restricted import RestrictedSilhouetteEnergy
 from .silhouette_exact import _foreground, _view_terms, core_weights, exact_view_energy, mask_problem
@@ -535,11 +535,15 @@ class SilhouetteEnergy:
         """:meth:`kernel_args` of the coarse level: the two usable views whose optical axes are closest to
         perpendicular (:func:`.coarse.coarse_views`; ``second``: the other pair, among the remaining views) with
         their foreground samples; the kernel then returns their weighted mean of Eq. 4, the same quantity from
-        fewer views at about half the cost (all the views' bundles with fewer than three usable). Built once per
+        fewer views at about half the cost (all the views' bundles with fewer than three usable); ``"raster"``: every
+        view on every second counted pixel row (:func:`.coarse.raster_rows_subset`, ``second`` alike). Built once per
         frame. For the compiled search's early generations (``SearchConfig.coarse_fraction``, docs/energy.md)."""
         fr = self._frame
+        if self.method == "raster":
+            return fr["coarse"] if "coarse" in fr else fr.setdefault("coarse", (self._body, fr["views"],
+                                                                                raster_rows_subset(fr["raster"])))
         if self.method != "fast":
-            raise EnergyError(f"coarse level: expected method 'fast', received {self.method!r}")
+            raise EnergyError(f"coarse level: expected method 'fast' or 'raster', received {self.method!r}")
         key = "coarse2" if second else "coarse"
         if key not in fr:
             k = self.coarse_views(second)

@@ -273,8 +273,9 @@ def _partition(xbase, idx, x0, spread, lo, hi, share, n, rng, target, kernel, c,
     its arguments between the poses and ``n_chunks``, :func:`_kernel`), plus ``kp.scale`` times the keypoint
     term ``kp`` (:class:`~isa_mocap_ros.energy.keypoint_kernel.KeypointTerm`; scale 0: none) as the tracker's
     objective adds it (``E + w * keypoints(X)``). The first ``n_coarse`` generations are evaluated with ``kargs_c``
-    and ``kargs_c2`` in turn instead (the coarse level's two pairs of views,
-    :meth:`~isa_mocap_ros.energy.silhouette.SilhouetteEnergy.coarse_kernel_args`; the same kernel kind) and leave the
+    and ``kargs_c2`` in turn instead (the coarse level: the sampled kernel's two pairs of views, the scanline kernel's
+    every second row, :meth:`~isa_mocap_ros.energy.silhouette.SilhouetteEnergy.coarse_kernel_args`; the same kernel
+    kind) and leave the
     best particle alone. Returns (estimate, generations,
     evaluations, non-finite, last full particles); -1 generations if the kernel flagged a row with a
     negative energy (the restricted kernel's mark of a row off its base pose: never, by construction)."""
@@ -426,14 +427,15 @@ def search(opt, energy, max_evals: int, *, extra_terms: bool = False, keypoints=
     compiled per partition, with ``keypoints = (KeypointEnergy, weight)`` adding ``weight`` times that term
     (compiled too, :mod:`~isa_mocap_ros.energy.keypoint_kernel`); with ``paused`` it is returned as a :class:`HisaRun` stopped before its first
     partition (``advance()``, ``result()``: the first frame's pruned runs); ``coarse_fraction`` of each partition's
-    generations (rounded down) are evaluated on the energy's coarse level first (two views, the two pairs in turn,
+    generations (rounded down) are evaluated on the energy's coarse level first (sampled: two views, the two pairs in
+    turn; scanline: every second pixel row,
     :meth:`~isa_mocap_ros.energy.silhouette.SilhouetteEnergy.coarse_kernel_args`; 0: none, the protocol's numbers). A flat
     :class:`~isa_mocap_ros.optim.Isa` (:func:`supported_flat`) on any batch energy runs with compiled
     generations (:func:`run_isa`). The numbers are the protocol's, bit for bit."""
     from isa_mocap_ros.optim import Hierarchical
 
     if type(opt) is Hierarchical:
-        if not supported(opt, energy, extra_terms) or (coarse_fraction > 0 and energy.method != "fast"):
+        if not supported(opt, energy, extra_terms):
             return None
         run = HisaRun(opt, energy, max_evals, keypoints, coarse_fraction)
         return run if paused else run.advance().result()

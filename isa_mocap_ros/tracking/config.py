@@ -145,9 +145,9 @@ class SearchConfig:
     seed : int
         Seed of every per-frame stream ``default_rng([seed, frame, ...])`` (0).
     coarse_fraction : float
-        Share of each partition's generations of the compiled h-isa main search evaluated on two views only
-        (the energy's coarse level, about half the cost; docs/energy.md; energy "fast" only: with another the search
-        runs through the protocol without it); 0 = off (default).
+        Share of each partition's generations of the compiled h-isa main search evaluated on the energy's coarse
+        level (energy "fast": two views, about half the cost; "raster": every second pixel row; docs/energy.md);
+        0 = off (default).
     """
 
     optimizer: str = "h-isa"

@@ -8,9 +8,15 @@ minimise that energy with ISA; the authors' own earlier pose estimation (Rosenha
 solves it by linearizing the kinematic chain, which is what this stage does after the tracker's
 global search: a few **iterated closest point** steps, each
 
-1. rendering the current pose per usable view (:func:`~isa_mocap_ros.vision.render_labels`), taking the
-   outer contour of that silhouette and back-projecting its pixels onto the visible capsules
-   (:func:`~isa_mocap_ros.energy.correspondence.model_contour_points`, at most ``n_points`` per view);
+1. drawing the current pose's silhouette per usable view, taking its outer contour and back-projecting its
+   pixels onto the visible capsules (the nearest hit of each pixel's ray, as
+   :func:`~isa_mocap_ros.vision.render_labels_at`; at most ``n_points`` per view; subsampling, labels and
+   back-projection in one compiled call per view: :func:`.contour_kernel.contour_points`). The silhouette is the
+   scanline energy's: each capsule's two projected end discs and their hull, filled by scanlines
+   (:func:`~isa_mocap_ros.vision.outline.fill_capsules`, one compiled call per view); in a view with lens
+   distortion the exact one, ray-cast (:func:`~isa_mocap_ros.vision.render_mask`). The discs lie inside the
+   balls' exact projections, so every outline contour pixel's ray hits a capsule; the outline is within a
+   pixel of the exact silhouette's contour at the tracker's image sizes (``test_contour_fit``);
 2. pairing each model contour pixel with the closest pixel of the mask's outer contour (kept when
    within ``max_px`` pixels: a farther match is more often another limb's edge than this one's);
 3. one Levenberg-Marquardt step on the stacked residuals ``e_i = x_i × n_i − m_i``:
@@ -36,6 +42,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Sequence
 
+import cv2
 import numba
 import numpy as np
 from scipy.spatial import cKDTree
@@ -46,8 +53,9 @@ from ..body.kinematics import descendant_mask, frames_and_axes, joint_frames
 from ..energy.correspondence import mask_contour_pixels, capsule_contour_points, capsule_frames, plucker_lines
 from ..geometry import exp_so3, log_so3
 from ..geometry.so3 import nearest_rotvec
-from ..vision import capsule_data, render_labels_at, render_mask
-from ..vision.render import pixel_rays
+from ..vision import capsule_data, render_mask
+from ..vision.outline import camera_arrays, fill_capsules
+from ..vision.render import ray_tiles
 from . import contour_kernel
 
 __all__ = ["ContourFit", "ContourFitError", "ContourFitInfo"]
@@ -171,10 +179,17 @@ class ContourFit:
         self._below = descendant_mask(model)                 # (J, J): [j, f] frame f at or below joint j
         self._dof_joint = np.asarray(model.dof_joint)
         self._cap_frames = capsule_frames(model)
+        self._radii = np.ascontiguousarray(model.capsule_radii, dtype=np.float64)
         self._images: list = [None] * len(self.cameras)
         # per camera, built once: the index image of the contour pixels (-1 elsewhere; cleared pixel by
         # pixel each frame) and the projection's numbers for the compiled matching
         self._index = [np.full((c.height, c.width), -1, np.int32) for c in self.cameras]
+        # the scanline silhouette's image and camera numbers per view (.vision.outline), and the per-view scratch of
+        # contour_kernel.contour_points (pixels, labels, depths)
+        self._sil = [np.zeros((c.height, c.width), np.uint8) for c in self.cameras]
+        self._outline_cams = [camera_arrays(c) for c in self.cameras]
+        self._scratch = (np.empty(self.n_points, np.int64), np.empty(self.n_points, np.int64),
+                         np.empty(self.n_points, np.int32), np.empty(self.n_points, np.float32))
         # own writable C-order copies: one kernel signature for every camera (a read-only or Fortran-order R from a
         # calibration file would load a second compiled version on the first real frame, after the warm-up)
         self._proj = [(np.array(c.R, dtype=np.float64, order="C"), np.array(c.t, dtype=np.float64, order="C"),
@@ -238,26 +253,39 @@ class ContourFit:
         out = []
         if not any(img is not None for img in self._images):
             return out
-        E = P[np.asarray(self.model.capsules)]
-        radii = self.model.capsule_radii
+        E = np.ascontiguousarray(P[np.asarray(self.model.capsules)])
+        radii = self._radii
         capsules = capsule_data(E, radii)
         for v, (img, cam) in enumerate(zip(self._images, self.cameras)):
             if img is None:
                 continue
-            pix = mask_contour_pixels(render_mask(cam, E, radii, capsules=capsules))
-            if len(pix) > self.n_points:
-                pix = pix[np.floor(np.arange(self.n_points) * (len(pix) / self.n_points)).astype(np.int64)]
-            if not len(pix):
+            contour = self._silhouette_contour(v, E, radii, capsules)
+            if not len(contour):
                 continue
-            label, depth = render_labels_at(cam, E, radii, pix, capsules=capsules)
-            o, dirs, zaxis = pixel_rays(cam)
-            fr = np.empty(len(pix), np.int64)
-            loc = np.empty((len(pix), 3))
-            k = contour_kernel.back_project(np.ascontiguousarray(pix[:, 0]), np.ascontiguousarray(pix[:, 1]), label,
-                                            depth, o, dirs, cam.width, zaxis, self._cap_frames, R, P, fr, loc)
+            n = min(len(contour), self.n_points)
+            fr, loc = np.empty(n, np.int64), np.empty((n, 3))
+            k = contour_kernel.contour_points(contour, self.n_points, *ray_tiles(cam), cam.width, *capsules,
+                                              self._cap_frames, R, P, *self._scratch, fr, loc)
             if k:
                 out.append((v, fr[:k], loc[:k]))
         return out
+
+    def _silhouette_contour(self, v: int, E: np.ndarray, radii: np.ndarray, capsules: tuple) -> np.ndarray:
+        """``(k, 2)`` int32 outer contour pixels ``(u, v)`` of the model's silhouette in view ``v`` (capsule end points
+        ``E``): in a view without lens distortion the capsules' outlines drawn by scanlines
+        (:func:`~isa_mocap_ros.vision.outline.fill_capsules`: the scanline energy's silhouette), else the exact
+        silhouette ray-cast (:func:`~isa_mocap_ros.vision.render_mask`)."""
+        cam = self.cameras[v]
+        if cam.has_distortion:
+            sil = render_mask(cam, E, radii, capsules=capsules)
+        else:
+            sil = self._sil[v]
+            sil.fill(0)
+            fill_capsules(E, radii, *self._outline_cams[v], 0.0, sil, np.uint8(255))
+        contours, _ = cv2.findContours(sil, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+        if not contours:
+            return np.zeros((0, 2), dtype=np.int32)
+        return np.concatenate(contours).reshape(-1, 2)
 
     def _pairs(self, points: list, R: np.ndarray, P: np.ndarray):
         """:meth:`correspondences` of the pose with joint rotations ``R`` and positions ``P``, the matching

@@ -20,7 +20,9 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["back_project", "match", "mark_pixels"]
+from ..vision.render import raycast_at
+
+__all__ = ["back_project", "contour_points", "match", "mark_pixels"]
 
 
 @numba.njit(cache=True)
@@ -45,6 +47,28 @@ def back_project(px, py, label, depth, o, dirs, W, zaxis, cap_frames, R, P,
         frames[k] = f
         k += 1
     return k
+
+
+@numba.njit(cache=True)
+def contour_points(contour, n_points, o, dirs, axes, tcos, tsin, zaxis, W, caps, bs, nb, cap_frames, R, P, px, py, label,
+                   depth, frames, local):  # pragma: no cover - compiled
+    """The model contour points of one view in one call: at most ``n_points`` of the silhouette's contour pixels
+    ``contour (k, 2)`` ``(u, v)``, evenly spaced (rows ``floor(i k / n_points)``), labelled with the visible
+    capsule and its depth (:func:`~isa_mocap_ros.vision.render.raycast_at`, the renderer's per-camera data ``o``
+    … ``zaxis``: :func:`~isa_mocap_ros.vision.render.ray_tiles`, ``W`` the image width; capsules ``caps``, ``bs``, ``nb``:
+    :func:`~isa_mocap_ros.vision.capsule_data`) and back-projected (:func:`back_project`) into ``frames``,
+    ``local``; ``px`` … ``depth`` are scratch of ``n_points`` rows. Returns the number of rows written."""
+    k = contour.shape[0]
+    m = min(k, n_points)
+    q = k / n_points
+    for i in range(m):
+        j = int(np.floor(i * q)) if k > n_points else i
+        px[i] = contour[j, 0]
+        py[i] = contour[j, 1]
+        label[i] = -1
+        depth[i] = np.nan
+    raycast_at(o, dirs, W, axes, tcos, tsin, caps, bs, nb, zaxis, px[:m], py[:m], label[:m], depth[:m])
+    return back_project(px[:m], py[:m], label[:m], depth[:m], o, dirs, W, zaxis, cap_frames, R, P, frames, local)
 
 
 @numba.njit(cache=True)

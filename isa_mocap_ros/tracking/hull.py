@@ -42,7 +42,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .gate import GateError, GateResult, view_masks
+from .gate import GateError, GateResult, pose_joints, view_masks
 
 __all__ = ["hull_filter", "hull_filter_numpy", "pose_box", "prepare_cameras"]
 
@@ -54,10 +54,7 @@ except ImportError:  # pragma: no cover
 
 def pose_box(model, pose, pad: float) -> tuple[np.ndarray, np.ndarray]:
     """Axis-aligned box ``(lo, hi)`` of the model's joints at ``pose``, grown by ``pad`` metres."""
-    from isa_mocap_ros.body.kinematics import forward_kinematics
-
-    x = np.clip(np.asarray(pose, dtype=float), model.lower, model.upper)
-    P = forward_kinematics(model, x)[0][:, :3, 3]
+    P = pose_joints(model, pose)
     return P.min(axis=0) - pad, P.max(axis=0) + pad
 
 

@@ -62,6 +62,8 @@ class LoadSettings:
     reset_after: int = 10           # frame sets lost in a row (at the full budget) before re-initializing
     window: int = 30                # frames in the running step-time and energy statistics
     max_backoff: int = 8            # a step up that did not fit doubles the wait before the next one, up to this factor
+    contour_share: float = 0.3      # share of a step the contour stage takes (bench speed's profile: 32 % at 1500), to
+                                    # project a step down without it: one step down may skip the levels that would not fit
 
     def __post_init__(self) -> None:
         for name in ("evals", "down_after", "up_after", "min_evals", "reset_after", "window", "max_backoff"):
@@ -69,6 +71,7 @@ class LoadSettings:
         check_number("period_s", self.period_s, lo=0.0, lo_open=True, error=LoadError)
         check_number("headroom", self.headroom, lo=0.0, hi=1.0, lo_open=True, error=LoadError)
         check_number("lost_factor", self.lost_factor, lo=1.0, lo_open=True, error=LoadError)
+        check_number("contour_share", self.contour_share, lo=0.0, hi=1.0, hi_open=True, error=LoadError)
 
 
 class LoadGovernor:
@@ -81,8 +84,8 @@ class LoadGovernor:
     (1500, True)
     >>> for t in range(3):            # three sets of 50 ms each: over the 33 ms period
     ...     d = g.observe(step_s=0.05, energy=0.1)
-    >>> d.level, d.contour_stage
-    (1, False)
+    >>> d.level, d.evals, d.contour_stage        # projected: 50 x 0.7 = 35 ms > 28; x 0.67: 23 ms fits
+    (2, 1005, False)
     """
 
     def __init__(self, settings: LoadSettings):
@@ -122,6 +125,20 @@ class LoadGovernor:
         self.level = level
         self._over = self._room = 0
         self._steps.clear()
+
+    def _level_that_fits(self, step_s: float, limit: float) -> int:
+        """The level to step down to from this one, whose step ``step_s`` was over the period: the first level below
+        whose projected step fits ``limit`` (the whole step scaled with the evaluations, less ``contour_share`` where
+        the contour stage goes off), at least one level down, at most the last. Stepping one level at a time, each
+        after ``down_after`` sets over the period, a tracker at twice its idle step time dropped a set or two per
+        level on the way down (the emulated one-core-busy start-up, docs/history/issue35_speed.md, session 28)."""
+        here, contour_here = self.budget(self.level)
+        for level in range(self.level + 1, len(LEVELS)):
+            evals, contour = self.budget(level)
+            projected = step_s * evals / here * (1.0 - self.settings.contour_share * (contour_here and not contour))
+            if projected < limit:
+                return level
+        return len(LEVELS) - 1
 
     def observe(self, *, step_s: float, energy: float, fell_back: bool = False, dropped: int = 0) -> Decision:
         """Account for one tracked frame set and return the next one's budget.
@@ -169,8 +186,9 @@ class LoadGovernor:
                 self._since_up = None
                 self._backoff = 1
         if self._over >= s.down_after and self.level < len(LEVELS) - 1:
-            before = self.level
-            self._set_level(before + 1)
+            # from the sets over the period (the last down_after), not the level's median: the load came with them
+            recent = float(np.mean(list(self._steps)[-s.down_after:]))
+            self._set_level(self._level_that_fits(recent, limit))
             evals, contour = self.budget(self.level)
             return self.decision(f"over the frame period ({1e3 * step_s:.0f} ms > {1e3 * s.period_s:.0f} ms"
                                  + (f", {dropped} set(s) dropped" if dropped else "")

@@ -45,7 +45,7 @@ from .capsule_solid import capsule_contains, capsule_data
 from .errors import VisionError
 
 __all__ = ["render", "render_mask", "render_labels", "render_labels_at", "capsule_data", "capsule_contains",
-           "clear_ray_cache", "pixel_rays", "TILE"]
+           "clear_ray_cache", "pixel_rays", "ray_tiles", "raycast_at", "TILE"]
 
 #: tile edge in pixels for the culling
 TILE = 8
@@ -367,8 +367,8 @@ def _raycast_tile(o, dirs, H, W, tx, ty, caps, cand, nc, mode, colors, light, za
 
 
 @numba.njit(cache=True, nogil=True)
-def _raycast_at(o, dirs, W, axes, tcos, tsin, caps, bs, nb, zaxis, px, py, out_label,
-                out_depth):  # pragma: no cover - compiled
+def raycast_at(o, dirs, W, axes, tcos, tsin, caps, bs, nb, zaxis, px, py, out_label,
+               out_depth):  # pragma: no cover - compiled
     """Mode 1 of :func:`_raycast` at the pixels ``(px[i], py[i])`` only: the same tile candidates, the same
     nearest hit, the same label and depth. A tile's candidates are found again only when the tile
     changes (a contour's pixels come tile by tile)."""
@@ -510,8 +510,17 @@ def render_labels_at(camera: Camera, endpoints: Any, radii: Any, pixels: Any, *,
     depth = np.full(len(u), np.nan, np.float32)
     if caps.shape[0] and len(u):
         o, dirs, axes, tcos, tsin, zaxis = cd[:6]
-        _raycast_at(o, dirs, camera.width, axes, tcos, tsin, caps, bs, nb, zaxis, u, v, label, depth)
+        raycast_at(o, dirs, camera.width, axes, tcos, tsin, caps, bs, nb, zaxis, u, v, label, depth)
     return label, depth
+
+
+def ray_tiles(camera: Camera) -> tuple:
+    """The renderer's cached per-camera data that :func:`raycast_at` takes (compiled callers label pixels with it
+    directly): ``(origin (3,), directions (H*W, 3), tile axes (T, 3), tile cos (T,), tile sin (T,), optical axis
+    (3,))``, as :func:`pixel_rays` and the 8x8-pixel tiles' ray cones. Read-only."""
+    if not isinstance(camera, Camera):
+        raise VisionError(f"camera: expected a Camera, received {type(camera).__name__}")
+    return _camera_data(camera)[:6]
 
 
 def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

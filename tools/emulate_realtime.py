@@ -1,0 +1,149 @@
+#!/usr/bin/env python3
+"""The estimator's real-time schedule over a bag on a virtual clock (:func:`isa_mocap_ros.tracking.realtime`), for A/B
+of the start-up and load policies on any machine, contended or not:
+
+    NUMBA_NUM_THREADS=1 python tools/emulate_realtime.py BAG SHAPE.yaml --seeds 0,1,2,3 \\
+        --catch-up 0 --catch-up 12 [--catch-up-evals 300] [--load 2] [--cost 0.010,9e-6,0.005,0.060] --out R.json
+
+The bag's masks are segmented as ``isa-mocap track`` does (one background model per view, learnt on the bag's
+empty frames; cached beside ``--out``). Set ``k`` arrives at ``k`` frame periods; the tracker (the node's config:
+``TrackerConfig`` defaults, the estimator's own prediction through the JointState conversions) steps the set the
+node's :class:`~isa_mocap_ros.tracking.realtime.RealTimeSchedule` gives it, for a time a cost model says:
+``load × (fixed + per_eval × evaluations + contour if the contour stage ran + init if it initialized)``. The
+default cost is fitted to the idle bench (session 27: a tracked set ~28 ms, the initialization ~145 ms); the timing
+is deterministic, so every seed and policy sees the same clock and the differences are the policies'. Printed per
+run: sets dropped (those after the initialized one within 25 sets: the start-up's), latency p50/p95 of the
+estimated sets (virtual: arrival to estimate, without segmentation and transport), mean joint error, the governor's
+lowerings. docs/history/issue35_speed.md (session 28) has the figures this made.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+PERIOD = 1 / 30
+
+
+def segmented_masks(bag: Path, seq, cache: Path) -> list:
+    """One mask per view and frame, as ``isa-mocap track`` segments them (cached in ``cache``)."""
+    from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig
+
+    views = len(seq.cameras)
+    if cache.is_file():
+        z = np.load(cache)
+        return [[z[f"m{k}_{v}"] if f"m{k}_{v}" in z else None for v in range(views)] for k in range(len(seq.frames))]
+    learn = seq.empty_frames or next((f.index for f in seq.frames if f.truth_markers is not None), 0) or 10
+    segs = [BackgroundSegmenter(SegmentationConfig(learn_frames=learn)) for _ in seq.cameras]
+    out = [[None if img is None else seg.apply(img) for seg, img in zip(segs, fr.images)] for fr in seq.frames]
+    np.savez_compressed(cache, **{f"m{k}_{v}": m for k, ms in enumerate(out) for v, m in enumerate(ms) if m is not None})
+    return out
+
+
+def cost_model(fixed_s: float, per_eval_s: float, contour_s: float, init_s: float, load: float):
+    """A step's seconds from its result and budget (see the module docstring); a set without an estimate 2 ms."""
+    def step_s(result, budget) -> float:
+        if result.x is None or (result.fell_back and result.n_evals == 0):
+            return load * 0.002
+        t = fixed_s + per_eval_s * result.n_evals + (contour_s if budget.contour_stage else 0.0)
+        return load * (t + (init_s if result.initialized else 0.0))
+    return step_s
+
+
+def emulate(tracker, masks, schedule, *, step_s, stamps) -> tuple[list[dict], int]:
+    """:func:`isa_mocap_ros.tracking.realtime.emulate` with a cost model that sees the budget (the contour stage)."""
+    n = len(masks)
+    t_free, arrived, prev = 0.0, 0, None
+
+    def arrive(until: float) -> None:
+        nonlocal arrived
+        while arrived < n and arrived * PERIOD <= until + 1e-12:
+            schedule.slot.put((arrived, arrived * PERIOD))
+            arrived += 1
+
+    steps = []
+    while True:
+        arrive(t_free)
+        item = schedule.take(tracker, masks_of=lambda it: masks[it[0]])
+        if item is None:
+            if arrived >= n:
+                break
+            t_free = arrived * PERIOD
+            continue
+        k, t_ready = item
+        b = schedule.budget(tracker, (t_free - t_ready) * 1e3)
+        gap = 1 if prev is None else k - prev
+        prev = k
+        r = tracker.step(masks[k], stamps[k], frames_elapsed=gap, contour_stage=b.contour_stage, evals=b.evals)
+        t_free += step_s(r, b)
+        arrive(t_free)
+        schedule.after(tracker, r, budget=b, waited_ms=(t_free - t_ready) * 1e3, step_s=step_s(r, b))
+        steps.append(dict(k=k, x=r.x, initialized=r.initialized, evals=r.n_evals, budget=b.evals,
+                          contour=b.contour_stage, latency_ms=(t_free - t_ready) * 1e3, gap=gap))
+    return steps, schedule.slot.dropped
+
+
+def main(argv=None) -> int:
+    from isa_mocap_ros.body import make_model
+    from isa_mocap_ros.cli.track_io import read_sequence
+    from isa_mocap_ros.eval.report import score
+    from isa_mocap_ros.tracking.config import TrackerConfig
+    from isa_mocap_ros.tracking.load import LoadGovernor, LoadSettings, StartupCatchUp
+    from isa_mocap_ros.tracking.published import PublishedPredictor
+    from isa_mocap_ros.tracking.realtime import RealTimeSchedule
+    from isa_mocap_ros.tracking.tracker import Tracker
+
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("bag")
+    p.add_argument("shape", help="body-shape YAML the tracker uses")
+    p.add_argument("--seeds", default="0,1,2")
+    p.add_argument("--catch-up", type=int, action="append", help="startup_catch_up values to run (default 0)")
+    p.add_argument("--catch-up-evals", type=int, default=300, help="degrade_min_evals (default 300)")
+    p.add_argument("--catch-up-ms", type=float, default=1000.0, help="startup_catch_up_ms (default 1000)")
+    p.add_argument("--load", type=float, default=1.0, help="step times × this (2: one core busy)")
+    p.add_argument("--cost", default="0.010,9e-6,0.005,0.060",
+                   help="fixed_s,per_eval_s,contour_s,init_s of the step cost (default: fitted to the idle bench)")
+    p.add_argument("--out", required=True, help="JSON of every run (its steps included)")
+    a = p.parse_args(argv)
+    bag, out = Path(a.bag), Path(a.out)
+    seq = read_sequence(bag, want_images=True, want_masks=False)
+    masks = segmented_masks(bag, seq, out.with_name(bag.name + ".masks.npz"))
+    stamps = [int(f.stamp_ns) for f in seq.frames]
+    step_s = cost_model(*(float(v) for v in a.cost.split(",")), load=a.load)
+    rows = []
+    for catch_up in a.catch_up or [0]:
+        for seed in (int(s) for s in a.seeds.split(",")):
+            model = make_model(39, shape=Path(a.shape))
+            cfg = TrackerConfig.from_flat(seed=seed)
+            tracker = Tracker(model, seq.cameras, cfg)
+            tracker.predictor = PublishedPredictor(model, tracker.predictor)
+            schedule = RealTimeSchedule(
+                evals=cfg.search.evals, heading_sets=cfg.heading.init_confirm_frames,
+                startup=StartupCatchUp(sets=catch_up, evals=a.catch_up_evals, limit_ms=a.catch_up_ms),
+                governor=LoadGovernor(LoadSettings(evals=cfg.search.evals, period_s=PERIOD,
+                                                   min_evals=a.catch_up_evals)))
+            steps, dropped = emulate(tracker, masks, schedule, step_s=step_s, stamps=stamps)
+            acc = score(model, seq, {stamps[s["k"]]: s["x"] for s in steps if s["x"] is not None}) or {}
+            lat = [s["latency_ms"] for s in steps if s["x"] is not None]
+            k_init = next((s["k"] for s in steps if s["initialized"]), None)
+            done = {s["k"] for s in steps}
+            startup = [] if k_init is None else [k for k in range(k_init, min(k_init + 25, len(masks)))
+                                                 if k not in done]
+            row = dict(bag=bag.name, catch_up=catch_up, seed=seed, load=a.load, dropped=dropped,
+                       startup_dropped=startup, p50_ms=float(np.percentile(lat, 50)) if lat else None,
+                       p95_ms=float(np.percentile(lat, 95)) if lat else None, mpjpe_mm=acc.get("mpjpe_mm"),
+                       lowered=schedule.governor.lowered, caught_up=schedule.startup.caught_up,
+                       steps=[{k: v for k, v in s.items() if k != "x"} for s in steps])
+            rows.append(row)
+            print(f"{bag.name} catch-up {catch_up} seed {seed} load {a.load:g}: dropped {dropped} (start-up "
+                  f"{len(startup)}), latency p50 {row['p50_ms']:.0f} p95 {row['p95_ms']:.0f} ms (virtual), "
+                  f"{row['mpjpe_mm']:.1f} mm, budget lowered {row['lowered']}, caught up {row['caught_up']}", flush=True)
+            out.write_text(json.dumps(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
