@@ -34,7 +34,9 @@ def test_quick_json(capsys):
     total = sum(r["cpu_ms_per_frame"] for r in pr["by_stage"])
     assert abs(total - pr["profiled_cpu_ms_per_frame"]) < 1e-6 * total + 1e-9
     assert stages["bookkeeping (the rest of the step)"]["share"] < 0.5
-    assert len(pr["by_call"]) == 15 and any("silhouette" in r["function"] for r in pr["by_call"])
+    # the energy's kernels are among the top calls (the compiled search runs them inside its own frame)
+    energy_calls = ("silhouette", "raster_kernel", "compiled_search")
+    assert len(pr["by_call"]) == 15 and any(k in r["function"] for r in pr["by_call"] for k in energy_calls)
     md = bench_speed.render_markdown(res)
     assert "| the tracker's h-isa search (360 evaluations in generations of 30" in md
     assert "| scanline count (`method='raster'`" in md and "| the tracker's search on the scanline energy" in md

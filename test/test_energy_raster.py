@@ -148,13 +148,13 @@ def test_raster_restricted_equals_full_bit_for_bit(scene, stride, weights):
     bad[1, 7] += 1e-12                        # outside the coordinates: never a silent value
     with pytest.raises(EnergyError, match=r"row 1 with coordinate 7"):
         f(bad)
-    with pytest.raises(EnergyError, match="coarse level"):
-        f.coarse_kernel_args()
+    # its coarse level: every second row (test_energy_coarse checks its values)
+    assert f.coarse_kernel_args()[3].stride == 2 * en.downsample and f.coarse_kernel_args() is f.coarse_kernel_args()
 
 
 def test_compiled_search_on_the_raster_energy_equals_the_protocol(scene):
     """The tracker's compiled h-isa runs on the scanline energy (full kernel in the root partition, restricted in
-    the others) with the protocol's numbers, bit for bit; not with a coarse level."""
+    the others) with the protocol's numbers, bit for bit; with a coarse level (every second row) it runs compiled too."""
     from isa_mocap_ros.optim import compiled_search, make_optimizer, minimize
 
     model, rig, x0, masks, X = scene
@@ -186,7 +186,8 @@ def test_compiled_search_on_the_raster_energy_equals_the_protocol(scene):
         np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
     assert (got.energy, got.n_evals, got.n_iter) == (ref.energy, ref.n_evals, ref.n_iter)
     assert opt.rng.bit_generator.state == ref_opt.rng.bit_generator.state
-    assert compiled_search.search(hier(), energy, 900, coarse_fraction=0.5) is None
+    coarse = compiled_search.search(hier(), energy, 900, coarse_fraction=0.5)
+    assert coarse is not None and coarse.n_evals == 900 and not np.array_equal(coarse.x, got.x)
 
 
 # ---------------------------------------------------------------------- lens distortion

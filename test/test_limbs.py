@@ -315,3 +315,20 @@ def test_batch_energies_limb_by_limb_equal_one_call(scene, energy):
     assert tr.energy.n_evals - n0 == 1 + sum(len(P) for P in batches)
     want = ctx.objective(np.vstack([x[None, :]] + batches))
     assert got.shape == want.shape and np.array_equal(got, want)
+
+
+def test_intrinsic_euler_reads_angles_as_scipy_does():
+    """limbs.intrinsic_euler: the angles scipy's as_euler gives (to 1e-12) for every Tait-Bryan sequence, including
+    rotations at gimbal lock, and the rotation they compose is the input."""
+    from scipy.spatial.transform import Rotation
+
+    from isa_mocap_ros.tracking.limbs import intrinsic_euler
+
+    R = Rotation.random(500, random_state=3)
+    lock = Rotation.from_euler("XYZ", [[0.3, np.pi / 2, -0.2], [1.0, -np.pi / 2, 0.5]])
+    for seq in ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"):
+        q = intrinsic_euler(R.as_matrix(), seq)
+        np.testing.assert_allclose(q, R.as_euler(seq), atol=1e-12)
+        np.testing.assert_allclose(Rotation.from_euler(seq, q).as_matrix(), R.as_matrix(), atol=1e-12)
+    q = intrinsic_euler(lock.as_matrix(), "XYZ")
+    np.testing.assert_allclose(Rotation.from_euler("XYZ", q).as_matrix(), lock.as_matrix(), atol=1e-9)

@@ -29,12 +29,13 @@ a proposal distribution over the same energy, not a new energy.
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-__all__ = ["LIMBS", "Limb", "LimbMove"]
+__all__ = ["LIMBS", "Limb", "LimbMove", "intrinsic_euler"]
 
 #: Partition names a limb can have (:attr:`BodyModel.partitions`).
 LIMBS = ("left_arm", "right_arm", "left_leg", "right_leg")
@@ -108,10 +109,14 @@ class LimbMove:
         T = forward_kinematics(m, x)[0]
         Rp = T[int(m.parents[limb.base]), :3, :3]
         Rs = T[limb.base, :3, :3]
-        turned = Rotation.from_rotvec(np.outer(np.asarray(phi, dtype=float), Rs @ limb.axis)) * Rotation.from_matrix(Rs)
-        local = Rotation.from_matrix(Rp.T) * turned
+        a = Rs @ limb.axis
+        a = a / np.linalg.norm(a)
+        phi = np.asarray(phi, dtype=float)
+        K = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+        # Rot(a, phi) = I + sin(phi) K + (1 - cos(phi)) K^2 (Rodrigues), then the local rotation R_p^T Rot R_s
+        turn = np.eye(3) + np.sin(phi)[:, None, None] * K + (1.0 - np.cos(phi))[:, None, None] * (K @ K)
         X = np.repeat(x[None, :], len(phi), axis=0)
-        X[:, list(limb.base_dofs)] = local.as_euler(limb.seq)
+        X[:, list(limb.base_dofs)] = intrinsic_euler(Rp.T @ turn @ Rs, limb.seq)
         X[:, limb.hinge_dof] = theta
         return np.clip(X, m.lower, m.upper)
 
@@ -143,3 +148,22 @@ class LimbMove:
         phi = rng.uniform(-np.pi, np.pi, n)
         theta = rng.uniform(m.lower[k], m.upper[k], n)
         return self.proposals(x, limb, phi, theta)
+
+
+def intrinsic_euler(L: np.ndarray, seq: str) -> np.ndarray:
+    """Angles ``(n, 3)`` of the rotations ``L (n, 3, 3)`` in the intrinsic Tait-Bryan sequence ``seq`` (three distinct
+    upper-case axes, scipy's convention: ``L = R_i(q1) R_j(q2) R_k(q3)``, ``q2`` in [-pi/2, pi/2], ``q1``, ``q3`` in
+    [-pi, pi]): ``q2 = asin(e L_ik)``, ``q1 = atan2(-e L_jk, L_kk)``, ``q3 = atan2(-e L_ij, L_ii)`` with ``e`` the sign
+    of the permutation ``ijk``. Near gimbal lock (``|L_ik|`` within 1e-7 of 1) scipy's reading is taken."""
+    i, j, k = ("XYZ".index(c) for c in seq)
+    e = 1.0 if (i, j, k) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0
+    out = np.empty(L.shape[:-2] + (3,))
+    out[..., 1] = np.arcsin(np.clip(e * L[..., i, k], -1.0, 1.0))
+    out[..., 0] = np.arctan2(-e * L[..., j, k], L[..., k, k])
+    out[..., 2] = np.arctan2(-e * L[..., i, j], L[..., i, i])
+    lock = np.abs(L[..., i, k]) > 1.0 - 1e-7
+    if np.any(lock):        # scipy sets the third angle to 0 there (and warns that it does: expected here)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            out[lock] = Rotation.from_matrix(L[lock]).as_euler(seq)
+    return out
