@@ -10,8 +10,8 @@ track it prints, scored as ``bench real`` scores (each joint's mean offset remov
 - the tracked estimate;
 - the same model posed to the peer's own points in every frame (bounded least squares on the 14 scored joints,
   started at the tracked pose; the peer's points are the target here, so this is a bound, never a score): what a
-  rigid model of that shape could reach if the images were read perfectly. The IK minimises the raw distance, not
-  the offset-removed one, so the true floor is a little lower still.
+  rigid model of that shape could reach if the images were read perfectly. The IK is local (from the tracked pose)
+  and minimises the raw distance, not the offset-removed one, so the true floor is lower still.
 
 and once, the peer's own distances that a rigid body keeps constant (shoulder width, hip width, hips to neck) per
 third of the recording, mean ± standard deviation over the frames.
