@@ -20,20 +20,12 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 import msg_adapters as ma
-from isa_mocap_ros.bag import BagReader
+from rosnode import masks_by_stamp
 
 
 def main() -> None:
     bag = sys.argv[1]
-    frames: dict[int, dict] = {}
-    latched = {}
-    with BagReader(bag) as r:
-        for m in r.messages():
-            msg = ma.from_cdr(m.data, m.type)
-            if m.topic.endswith("/extrinsics"):
-                latched[m.topic] = msg
-            elif m.topic.endswith(("/mask", "/camera_info")):
-                frames.setdefault(ma.stamp_to_ns(msg.header), {})[m.topic] = msg
+    frames, latched = masks_by_stamp(bag)
     rclpy.init()
     node = Node("feeder", namespace="/mocap")
     pubs = {}

@@ -38,3 +38,21 @@ def spin_until(ex, cond, timeout: float, *, step_s: float = 0.01) -> bool:
             return True
         ex.spin_once(timeout_sec=step_s)
     return bool(cond())
+
+
+def masks_by_stamp(bag) -> tuple[dict[int, dict], dict]:
+    """A bag's ``/mask`` and ``/camera_info`` messages by stamp (stamp ns -> {topic: message}) and its latched
+    ``/extrinsics`` (topic -> message), as the estimator's tests and the mask feeder publish them."""
+    import msg_adapters as ma
+    from isa_mocap_ros.bag import BagReader
+
+    frames: dict[int, dict] = {}
+    latched: dict = {}
+    with BagReader(bag) as r:
+        for m in r.messages():
+            msg = ma.from_cdr(m.data, m.type)
+            if m.topic.endswith("/extrinsics"):
+                latched[m.topic] = msg
+            elif m.topic.endswith(("/mask", "/camera_info")):
+                frames.setdefault(ma.stamp_to_ns(msg.header), {})[m.topic] = msg
+    return frames, latched

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from isa_mocap_ros.bag import BagReader
-from rosnode import ros_node, spin_until
+from rosnode import masks_by_stamp, ros_node, spin_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(300)]
 HERE = Path(__file__).parent
@@ -65,15 +65,7 @@ def test_a_camera_that_changes_resolution_restarts_the_tracker_with_the_new_came
 
     import msg_adapters as ma
 
-    frames: dict[int, dict] = {}
-    latched = {}
-    with BagReader(FIXTURE) as r:
-        for m in r.messages():
-            msg = ma.from_cdr(m.data, m.type)
-            if m.topic.endswith("/extrinsics"):
-                latched[m.topic] = msg
-            elif m.topic.endswith(("/mask", "/camera_info")):
-                frames.setdefault(ma.stamp_to_ns(msg.header), {})[m.topic] = msg
+    frames, latched = masks_by_stamp(FIXTURE)
     stamps = sorted(frames)
     shift = stamps[-1] - stamps[0] + 10**9          # the second pass: one second after the first
 

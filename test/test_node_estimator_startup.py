@@ -10,8 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from isa_mocap_ros.bag import BagReader
-from rosnode import ros_node, spin_until
+from rosnode import masks_by_stamp, ros_node, spin_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(300)]
 HERE = Path(__file__).parent
@@ -32,15 +31,7 @@ def test_the_camera_data_are_built_from_the_camera_infos_before_the_first_frame_
 
     import msg_adapters as ma
 
-    frames: dict[int, dict] = {}
-    latched = {}
-    with BagReader(FIXTURE) as r:
-        for m in r.messages():
-            msg = ma.from_cdr(m.data, m.type)
-            if m.topic.endswith("/extrinsics"):
-                latched[m.topic] = msg
-            elif m.topic.endswith(("/mask", "/camera_info")):
-                frames.setdefault(ma.stamp_to_ns(msg.header), {})[m.topic] = msg
+    frames, latched = masks_by_stamp(FIXTURE)
     stamps = sorted(frames)
     est = spawn("estimator", "-m", "isa_mocap_ros.nodes.estimator", "--ros-args", "-r", "__ns:=/mocap",
                 "--params-file", str(CONFIG), "-p", "evals:=200", "-p", "optimizer:=isa", "-p", "use_prediction:=false")
