@@ -53,39 +53,6 @@ def cost_model(fixed_s: float, per_eval_s: float, contour_s: float, init_s: floa
     return step_s
 
 
-def emulate(tracker, masks, schedule, *, step_s, stamps) -> tuple[list[dict], int]:
-    """:func:`isa_mocap_ros.tracking.realtime.emulate` with a cost model that sees the budget (the contour stage)."""
-    n = len(masks)
-    t_free, arrived, prev = 0.0, 0, None
-
-    def arrive(until: float) -> None:
-        nonlocal arrived
-        while arrived < n and arrived * PERIOD <= until + 1e-12:
-            schedule.slot.put((arrived, arrived * PERIOD))
-            arrived += 1
-
-    steps = []
-    while True:
-        arrive(t_free)
-        item = schedule.take(tracker, masks_of=lambda it: masks[it[0]])
-        if item is None:
-            if arrived >= n:
-                break
-            t_free = arrived * PERIOD
-            continue
-        k, t_ready = item
-        b = schedule.budget(tracker, (t_free - t_ready) * 1e3)
-        gap = 1 if prev is None else k - prev
-        prev = k
-        r = tracker.step(masks[k], stamps[k], frames_elapsed=gap, contour_stage=b.contour_stage, evals=b.evals)
-        t_free += step_s(r, b)
-        arrive(t_free)
-        schedule.after(tracker, r, budget=b, waited_ms=(t_free - t_ready) * 1e3, step_s=step_s(r, b))
-        steps.append(dict(k=k, x=r.x, initialized=r.initialized, evals=r.n_evals, budget=b.evals,
-                          contour=b.contour_stage, latency_ms=(t_free - t_ready) * 1e3, gap=gap))
-    return steps, schedule.slot.dropped
-
-
 def main(argv=None) -> int:
     from isa_mocap_ros.body import make_model
     from isa_mocap_ros.cli.track_io import read_sequence
@@ -93,7 +60,7 @@ def main(argv=None) -> int:
     from isa_mocap_ros.tracking.config import TrackerConfig
     from isa_mocap_ros.tracking.load import LoadGovernor, LoadSettings, StartupCatchUp
     from isa_mocap_ros.tracking.published import PublishedPredictor
-    from isa_mocap_ros.tracking.realtime import RealTimeSchedule
+    from isa_mocap_ros.tracking.realtime import RealTimeSchedule, emulate
     from isa_mocap_ros.tracking.tracker import Tracker
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -125,7 +92,11 @@ def main(argv=None) -> int:
                 startup=StartupCatchUp(sets=catch_up, evals=a.catch_up_evals, limit_ms=a.catch_up_ms),
                 governor=LoadGovernor(LoadSettings(evals=cfg.search.evals, period_s=PERIOD,
                                                    min_evals=a.catch_up_evals)))
-            steps, dropped = emulate(tracker, masks, schedule, step_s=step_s, stamps=stamps)
+            done_steps, dropped = emulate(tracker, masks, schedule, period_s=PERIOD, step_s=step_s,
+                                          frame_key=lambda k: stamps[k])
+            steps = [dict(k=s.k, x=s.result.x, initialized=s.result.initialized, evals=s.result.n_evals,
+                          budget=s.budget.evals, contour=s.budget.contour_stage, latency_ms=s.latency_s * 1e3,
+                          gap=s.gap) for s in done_steps]
             acc = score(model, seq, {stamps[s["k"]]: s["x"] for s in steps if s["x"] is not None}) or {}
             lat = [s["latency_ms"] for s in steps if s["x"] is not None]
             k_init = next((s["k"] for s in steps if s["initialized"]), None)

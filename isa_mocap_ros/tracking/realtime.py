@@ -143,7 +143,7 @@ def step_cost(*, fixed_s: float = 0.005, per_eval_s: float = 28e-6, load: float 
     """A step's duration from its evaluations: ``load × (fixed_s + per_eval_s × n_evals)`` (defaults: bags/demo
     idle on this project's 2-core machine, ~47 ms for a 1500-evaluation frame, ~270 ms for the
     initialization's ~9400; ``load`` 2: another process takes half the core)."""
-    return lambda result: load * (fixed_s + per_eval_s * result.n_evals)
+    return lambda result, budget=None: load * (fixed_s + per_eval_s * result.n_evals)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -161,8 +161,8 @@ class EmulatedStep:
 def emulate(tracker, masks: Sequence, schedule: RealTimeSchedule, *, period_s: float,
             step_s: Callable, frame_key: Callable[[int], int] = lambda k: k) -> tuple[list[EmulatedStep], int]:
     """Real time on a virtual clock: set ``k`` (``masks[k]``, one mask per view) arrives at ``k × period_s``; the
-    tracker steps the set :meth:`RealTimeSchedule.take` gives whenever it is free, for ``step_s(result)``
-    seconds. Returns the tracked steps and the number of sets dropped."""
+    tracker steps the set :meth:`RealTimeSchedule.take` gives whenever it is free, for ``step_s(result, budget)``
+    seconds (:func:`step_cost`, or a cost model that sees the budget: ``tools/emulate_realtime.py``). Returns the tracked steps and the number of sets dropped."""
     n = len(masks)
     t_free, arrived, prev = 0.0, 0, None
 
@@ -186,7 +186,7 @@ def emulate(tracker, masks: Sequence, schedule: RealTimeSchedule, *, period_s: f
         gap = 1 if prev is None else k - prev
         prev = k
         r = tracker.step(masks[k], frame_key(k), frames_elapsed=gap, contour_stage=b.contour_stage, evals=b.evals)
-        dt = step_s(r)
+        dt = step_s(r, b)
         t_free += dt
         arrive(t_free)
         schedule.after(tracker, r, budget=b, waited_ms=(t_free - t_ready) * 1e3, step_s=dt)
