@@ -20,6 +20,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from ..vision.outline import project_point
 from ..vision.render import raycast_at
 
 __all__ = ["back_project", "contour_points", "match", "mark_pixels"]
@@ -92,24 +93,13 @@ def match(frames, local, R, P, cam_R, cam_t, K4, D8, hasd, index, max_px, lines_
     H, W = index.shape
     r = int(np.ceil(max_px))
     lim = max_px * max_px
-    k1, k2, p1, p2, k3, k4, k5, k6 = D8[0], D8[1], D8[2], D8[3], D8[4], D8[5], D8[6], D8[7]
     k = k0
     for i in range(frames.shape[0]):
         f = frames[i]
         X = np.empty(3)
         for a in range(3):
             X[a] = P[f, a] + R[f, a, 0] * local[i, 0] + R[f, a, 1] * local[i, 1] + R[f, a, 2] * local[i, 2]
-        xc = cam_R[0, 0] * X[0] + cam_R[0, 1] * X[1] + cam_R[0, 2] * X[2] + cam_t[0]
-        yc = cam_R[1, 0] * X[0] + cam_R[1, 1] * X[1] + cam_R[1, 2] * X[2] + cam_t[1]
-        zc = cam_R[2, 0] * X[0] + cam_R[2, 1] * X[1] + cam_R[2, 2] * X[2] + cam_t[2]
-        x, y = xc / zc, yc / zc
-        if hasd:
-            r2 = x * x + y * y
-            radial = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
-            x, y = (x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
-                    y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y)
-        u = K4[0] * x + K4[2]
-        v = K4[1] * y + K4[3]
+        u, v, _ = project_point(X[0], X[1], X[2], cam_R, cam_t, K4, D8, hasd)
         if not (np.isfinite(u) and np.isfinite(v)):
             continue
         cu, cv = int(np.floor(u + 0.5)), int(np.floor(v + 0.5))

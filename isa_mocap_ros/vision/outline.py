@@ -23,7 +23,7 @@ import numpy as np
 
 from .errors import VisionError
 
-__all__ = ["camera_arrays", "capsule_discs", "fill_capsules", "fill_outlines", "outline_mask"]
+__all__ = ["camera_arrays", "capsule_discs", "fill_capsules", "fill_outlines", "outline_mask", "project_point"]
 
 #: Projected coordinates are clipped to ±this many pixels (a capsule end near the camera plane projects far off).
 _FAR_PX = 1e6
@@ -45,27 +45,15 @@ def fill_capsules(E, radii, cam_R, cam_t, K4, D8, hasd, margin, out, value):  # 
     (``cam_R``, ``cam_t``; ``K4 = (fx, fy, cx, cy)``; ``D8`` the OpenCV distortion (k1, k2, p1, p2, k3, k4, k5,
     k6), applied when ``hasd``), each end disc of pixel radius ``fx r / z + margin``: :func:`capsule_discs`'s
     numbers, projected here (the same arithmetic as :meth:`~.camera.Camera.project`)."""
-    k1, k2, p1, p2, k3, k4, k5, k6 = D8[0], D8[1], D8[2], D8[3], D8[4], D8[5], D8[6], D8[7]
     uv = np.empty((2, 2))
     rr = np.empty(2)
     for c in range(E.shape[0]):
         ok = True
         for e in range(2):
-            X0, X1, X2 = E[c, e, 0], E[c, e, 1], E[c, e, 2]
-            xc = X0 * cam_R[0, 0] + X1 * cam_R[0, 1] + X2 * cam_R[0, 2] + cam_t[0]
-            yc = X0 * cam_R[1, 0] + X1 * cam_R[1, 1] + X2 * cam_R[1, 2] + cam_t[1]
-            zc = X0 * cam_R[2, 0] + X1 * cam_R[2, 1] + X2 * cam_R[2, 2] + cam_t[2]
+            u, v, zc = project_point(E[c, e, 0], E[c, e, 1], E[c, e, 2], cam_R, cam_t, K4, D8, hasd)
             if not zc > 1e-3:
                 ok = False
                 break
-            x, y = xc / zc, yc / zc
-            if hasd:
-                r2 = x * x + y * y
-                radial = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
-                x, y = (x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
-                        y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y)
-            u = K4[0] * x + K4[2]
-            v = K4[1] * y + K4[3]
             r = K4[0] * radii[c, e] / zc + margin
             if not (np.isfinite(u) and np.isfinite(v) and np.isfinite(r)):
                 ok = False
@@ -75,6 +63,25 @@ def fill_capsules(E, radii, cam_R, cam_t, K4, D8, hasd, margin, out, value):  # 
             rr[e] = min(max(r, 0.0), _FAR_PX)
         if ok:
             _fill_hull(uv[0, 0], uv[0, 1], uv[1, 0], uv[1, 1], rr[0], rr[1], out, value)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def project_point(X0, X1, X2, cam_R, cam_t, K4, D8, hasd):  # pragma: no cover - compiled
+    """The pixel ``(u, v)`` of the world point ``(X0, X1, X2)`` and its camera depth ``z`` (``cam_R``, ``cam_t``;
+    ``K4 = (fx, fy, cx, cy)``; ``D8`` the OpenCV distortion (k1, k2, p1, p2, k3, k4, k5, k6), applied when ``hasd``):
+    the arithmetic of :meth:`~.camera.Camera.project`, for compiled callers (a point at or behind the camera plane
+    gives non-finite or meaningless ``u, v``: callers check ``z``)."""
+    xc = X0 * cam_R[0, 0] + X1 * cam_R[0, 1] + X2 * cam_R[0, 2] + cam_t[0]
+    yc = X0 * cam_R[1, 0] + X1 * cam_R[1, 1] + X2 * cam_R[1, 2] + cam_t[1]
+    zc = X0 * cam_R[2, 0] + X1 * cam_R[2, 1] + X2 * cam_R[2, 2] + cam_t[2]
+    x, y = xc / zc, yc / zc
+    if hasd:
+        k1, k2, p1, p2, k3, k4, k5, k6 = D8[0], D8[1], D8[2], D8[3], D8[4], D8[5], D8[6], D8[7]
+        r2 = x * x + y * y
+        radial = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+        x, y = (x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
+                y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y)
+    return K4[0] * x + K4[2], K4[1] * y + K4[3], zc
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
