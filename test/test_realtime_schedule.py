@@ -109,7 +109,9 @@ def test_the_same_inputs_give_the_same_schedule(walk45):
 def test_warm_up_leaves_no_kernel_to_the_first_initialized_frame():
     """realtime.warm_up (the estimator node's, before "ready"): in a fresh process, the first automatically
     initialized frame and the frames after it load no numba kernel (a warm-up from a given pose left the first-frame
-    hull's projection kernel, with scipy.ndimage's import, to that frame: ~50 CPU ms, session 27)."""
+    hull's projection kernel, with scipy.ndimage's import, to that frame: ~50 CPU ms, session 27), also with cameras
+    whose rotations are column-major (a calibration file's: the first-frame hull's vote was typed apart for them and
+    loaded a second compiled version on that frame, ~10 CPU ms, session 29)."""
     import subprocess
     import sys
     from pathlib import Path
@@ -122,7 +124,12 @@ from walk_scene import walk_scene
 from isa_mocap_ros.tracking import realtime
 from isa_mocap_ros.tracking.config import TrackerConfig
 from isa_mocap_ros.tracking.tracker import Tracker
+import dataclasses
+import numpy as np
 model, cams, walk, masks = walk_scene(width=160, height=120, frames=3, duration_s=0.2, seed=0)
+# rotations stored column-major, as a calibration file's cameras have them (the warm-up's rig: row-major)
+cams = [dataclasses.replace(c, R=np.asfortranarray(c.R)) for c in cams]
+assert cams[0].R.flags.f_contiguous and not cams[0].R.flags.c_contiguous
 cfg = TrackerConfig.from_flat(seed=0, init_confirm_ratio=10.0)      # a heading check on the first frame, whatever the energy
 warm = realtime.warm_up(model, cfg)
 assert warm[0].initialized and not warm[1].fell_back, warm
