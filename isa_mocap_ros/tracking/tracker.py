@@ -487,7 +487,8 @@ class Tracker:
             notes.append(note)
         if cfg.objective.view_weights and self.track.last is not None and any(m is not None for m in ctx.masks):
             # Eq. 5's view weights (config.objective.view_weights): the share of the predicted body each view sees
-            ctx.weights = visible_shares(self.model, self.cameras, frame_prediction.prediction(self, ctx))
+            ctx.weights = visible_shares(self.model, self.cameras, frame_prediction.prediction(self, ctx),
+                                         joints=frame_prediction.prediction_joints(self, ctx))
         views = frame_masks.set_masks(self, ctx)
         if views == 0:
             notes.append("no usable view: falling back to the last estimate" if self.track.last is not None
