@@ -57,9 +57,32 @@ def test_normal_equations_match_finite_differences(scene):
                   for d in range(model.dof)], axis=1)
     R, P, axes = joint_frames(model, x[None], want_axes=True)
     A, g = _normal_equations(R[0], P[0], axes[0], frames, local, n, m, np.asarray(model.dof_joint),
-                             fit._below)
+                             fit._below, np.ones(model.dof, np.bool_))
     np.testing.assert_allclose(A, J.T @ J, rtol=1e-4, atol=1e-7)
     np.testing.assert_allclose(g, J.T @ e, rtol=1e-4, atol=1e-8)
+    # over some coordinates only (the stage's extra iterations): those rows and columns the same bits, the rest 0
+    use = np.zeros(model.dof, np.bool_)
+    coords = [0, 4, 9, *model.knee_dofs]
+    use[coords] = True
+    As, gs = _normal_equations(R[0], P[0], axes[0], frames, local, n, m, np.asarray(model.dof_joint), fit._below, use)
+    assert np.array_equal(As[np.ix_(coords, coords)], A[np.ix_(coords, coords)]) and np.array_equal(gs[coords], g[coords])
+    assert not As[~use].any() and not As[:, ~use].any() and not gs[~use].any()
+
+
+def test_plucker_lines_from_the_ray_table():
+    """The contour pixels' Plücker lines read from the renderer's per-pixel rays are plucker_lines' numbers (a
+    camera with lens distortion too: the table holds Camera.ray's undistorted rays)."""
+    from isa_mocap_ros.energy.correspondence import pixel_plucker_lines, plucker_lines
+    import dataclasses
+
+    cams = list(default_rig())
+    cams.append(dataclasses.replace(cams[0], name="distorted", dist=np.array([-0.2, 0.05, 0.001, -0.002, 0.0])))
+    assert cams[-1].has_distortion
+    rng = np.random.default_rng(4)
+    for cam in cams:
+        pix = np.stack([rng.integers(0, cam.width, 500), rng.integers(0, cam.height, 500)], 1)
+        for a, b in zip(pixel_plucker_lines(cam, pix), plucker_lines(cam, pix.astype(np.float64))):
+            assert np.array_equal(a, b)
 
 
 def test_fit_recovers_a_displaced_pose(scene):

@@ -50,7 +50,7 @@ from scipy.spatial import cKDTree
 from ..body import BodyModel
 from ..body import capsule_endpoints, forward_kinematics
 from ..body.kinematics import descendant_mask, frames_and_axes, joint_frames
-from ..energy.correspondence import mask_contour_pixels, capsule_contour_points, capsule_frames, plucker_lines
+from ..energy.correspondence import mask_contour_pixels, capsule_contour_points, capsule_frames, pixel_plucker_lines
 from ..geometry import exp_so3, log_so3
 from ..geometry.so3 import nearest_rotvec
 from ..vision import capsule_data, render_mask
@@ -95,10 +95,11 @@ def _check_positive(name: str, value, *, integer: bool = False, zero: bool = Fal
 
 
 @numba.njit(cache=True)
-def _normal_equations(R, P, axes, frames, local, n, m, dof_joint, below):  # pragma: no cover - compiled
+def _normal_equations(R, P, axes, frames, local, n, m, dof_joint, below, use):  # pragma: no cover - compiled
     """``JᵀJ (D, D)`` and ``Jᵀe (D,)`` of the residuals ``e_k = x_k × n_k − m_k`` (13.30) with the
     analytic Jacobian (root translation: identity; root rotation: left perturbation about the root;
-    a joint angle: ``a_d × (x − c_d)`` for the points below its joint), rows with zero columns skipped."""
+    a joint angle: ``a_d × (x − c_d)`` for the points below its joint), rows with zero columns skipped; only the
+    coordinates with ``use[d]`` (the others' rows and columns stay zero; those computed are the same numbers)."""
     D = axes.shape[0]
     A = np.zeros((D, D))
     g = np.zeros(D)
@@ -115,6 +116,8 @@ def _normal_equations(R, P, axes, frames, local, n, m, dof_joint, below):  # pra
         e2 = X[0] * ny - X[1] * nx - m[k, 2]
         na = 0
         for d in range(D):
+            if not use[d]:
+                continue
             if d < 3:                               # root translation: the unit vector e_d
                 dx, dy, dz = 1.0 if d == 0 else 0.0, 1.0 if d == 1 else 0.0, 1.0 if d == 2 else 0.0
             else:
@@ -178,6 +181,7 @@ class ContourFit:
         self.damping = _check_positive("damping", damping, zero=True)
         self._below = descendant_mask(model)                 # (J, J): [j, f] frame f at or below joint j
         self._dof_joint = np.asarray(model.dof_joint)
+        self._all = np.ones(model.dof, np.bool_)              # _normal_equations over every coordinate
         self._cap_frames = capsule_frames(model)
         self._radii = np.ascontiguousarray(model.capsule_radii, dtype=np.float64)
         self._images: list = [None] * len(self.cameras)
@@ -218,7 +222,7 @@ class ContourFit:
             contour_kernel.mark_pixels(index, pix, True)
             # the contour pixels, their KD-tree (the reference matching; built when first asked for), the
             # Plücker line of each (13.30) and the integer pixels, once per frame
-            self._images.append([c, None, *plucker_lines(cam, c), pix])
+            self._images.append([c, None, *pixel_plucker_lines(cam, pix), pix])
         return sum(c is not None for c in self._images)
 
     def _tree(self, v: int):
@@ -340,8 +344,12 @@ class ContourFit:
         model = self.model
         R, P, axes = joint_frames(model, x[None], want_axes=True) if fk is None else fk
         f64 = [np.ascontiguousarray(a, dtype=np.float64) for a in (local, n, m)]
+        use = self._all
+        if coords is not None:
+            use = np.zeros(model.dof, np.bool_)
+            use[coords] = True
         A, g = _normal_equations(R[0], P[0], axes[0], np.ascontiguousarray(frames, dtype=np.int64), *f64,
-                                 self._dof_joint, self._below)
+                                 self._dof_joint, self._below, use)
         D = model.dof
         A[np.diag_indices(D)] *= 1.0 + self.damping
         A[np.diag_indices(D)] += 1e-9
