@@ -142,6 +142,11 @@ def render_markdown(res: dict) -> str:
     L = []
     if d["name"].endswith("quick"):
         L += ["> **Smoke run** (`isa-mocap bench mesh_motions --quick`): the numbers say nothing about the tracker.", ""]
+    elif (len(d["sequences"]) != len(MOTIONS) * len(SUBJECTS) or tuple(seeds) != SEEDS
+          or round(seq["duration_s"] * seq["fps"]) != FRAMES):
+        L += [f"> **Reduced run** (`{res.get('command', 'isa-mocap bench mesh_motions')}`): fewer clips, subjects, seeds "
+              f"or frames than the design ({len(MOTIONS)} clips x {len(SUBJECTS)} subjects x seeds "
+              f"{', '.join(map(str, SEEDS))}, {FRAMES} frames).", ""]
     L += [f"CMU clips of several kinds on mesh subjects (the BVH's motion on the subject's own skeleton; `random`: "
           f"a different random body per clip), {round(seq['duration_s'] * seq['fps'])} frames from each clip's start, "
           f"clean, 4 views {seq['width']}x{seq['height']}; shape calibrated from the images, automatic "
