@@ -139,13 +139,14 @@ def _normal_equations(R, P, axes, frames, local, n, m, dof_joint, below, use):  
             na += 1
         for a in range(na):
             da = act[a]
-            g[da] += G[da, 0] * e0 + G[da, 1] * e1 + G[da, 2] * e2
-            for b in range(a, na):
+            g0, g1, g2 = G[da, 0], G[da, 1], G[da, 2]
+            g[da] += g0 * e0 + g1 * e1 + g2 * e2
+            for b in range(a, na):              # the upper triangle (act ascends); mirrored below
                 db = act[b]
-                v = G[da, 0] * G[db, 0] + G[da, 1] * G[db, 1] + G[da, 2] * G[db, 2]
-                A[da, db] += v
-                if db != da:
-                    A[db, da] += v
+                A[da, db] += g0 * G[db, 0] + g1 * G[db, 1] + g2 * G[db, 2]
+    for a in range(D):                          # the lower triangle took the same sums in the same order
+        for b in range(a + 1, D):
+            A[b, a] = A[a, b]
     return A, g
 
 
