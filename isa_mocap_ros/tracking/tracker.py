@@ -536,7 +536,8 @@ class Tracker:
                          f"end, grid best yaw {np.rad2deg(res0.yaw):.0f} deg {res0.variant}, {n_evals} evaluations)")
         x, energy = self.final_pose(res)
         if initialized and cfg.heading.init_confirm_frames > 0:
-            self.heading_check.rival_start = first_frame.pick_rival(self, runs, res, x, energy)
+            self.heading_check.rival_start, n = heading.init_rival(self, ctx, runs, res, x, energy, notes)
+            n_evals += n
         if initialized and cfg.first_frame.init_polish:
             # config.first_frame.init_polish: the winner (and the heading check's rival) searched once more, from itself
             x, energy, res, n = first_frame.polish_winner(self, ctx, x, energy, res)
