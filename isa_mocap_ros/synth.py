@@ -119,7 +119,7 @@ def _int(arg: str, value, *, lo: int) -> int:
 def make_clip(motion: str | Path, *, dof: int = 39, fps: float = 30.0, start_s: float = 0.0,
               duration_s: float | None = None, seed: int = 0, bvh_scale: float | None = None,
               progress: Callable[[int, int], None] | None = None, body: str = "capsules",
-              subject: str = "average_man", skirt: bool = False) -> MotionClip:
+              subject: str = "average_man", skirt: bool = False, stretch: bool = False) -> MotionClip:
     """The motion to render: a generated motion name or a BVH file.
 
     Parameters
@@ -145,12 +145,20 @@ def make_clip(motion: str | Path, *, dof: int = 39, fps: float = 30.0, start_s: 
         ``mesh``: a skinned MakeHuman mesh of ``subject`` (:mod:`isa_mocap_ros.body.mesh`). A
         generated motion is then generated on a model sized from the subject's skeleton; a BVH is
         scaled uniformly (``bvh_scale`` times ``mesh_scale`` in ``params``) so its hip-knee-ankle
-        length equals the subject's, and the mesh follows the BVH's joints.
+        length equals the subject's, its motion is carried onto the subject's own skeleton (each
+        segment turned as the BVH's, the mesh's own offsets: :func:`~isa_mocap_ros.body.mesh.joint_paths`)
+        and fitted by a model sized from that skeleton, which then moves the mesh, as a generated
+        motion does. The body keeps the subject's proportions; the ground truth is its joints.
     subject : str
         ``slim_woman``, ``average_man``, ``heavy_man`` or ``random`` (drawn from
         ``default_rng([seed, 3])``).
     skirt : bool
         Mesh only: add MakeHuman's CC0 helper skirt.
+    stretch : bool
+        Mesh and BVH only, a diagnostic: the mesh follows the BVH's joints instead, each segment
+        stretched to the BVH's length (clipped to [0.7, 1.4] of the mesh's; session 27's way): CMU
+        skeletons then squeeze the subject's trunk and head to 0.7 and put the ground-truth pelvis
+        at CMU's ``Hips`` joint, about 11 cm above the hip joints.
 
     Returns
     -------
@@ -203,7 +211,7 @@ def make_clip(motion: str | Path, *, dof: int = 39, fps: float = 30.0, start_s: 
             raise SynthError(f"motion: expected a BVH file or one of {', '.join(MOTIONS)}, received {text!r} "
                              "(no such file)")
         return _bvh_clip(path, dof=dof, fps=fps, start_s=start_s, duration_s=duration_s, bvh_scale=bvh_scale,
-                         progress=progress, mesh=mesh)
+                         progress=progress, mesh=mesh, stretch=bool(stretch))
     raise SynthError(f"motion: expected a BVH file or one of {', '.join(MOTIONS)}, received {text!r}")
 
 
@@ -216,7 +224,8 @@ def _leg_m(mot, mapping) -> float:
                      for a, b in (("hip", "knee"), ("knee", "ankle"))) / 2.0)
 
 
-def _bvh_clip(path: Path, *, dof, fps, start_s, duration_s, bvh_scale, progress, mesh=None) -> MotionClip:
+def _bvh_clip(path: Path, *, dof, fps, start_s, duration_s, bvh_scale, progress, mesh=None,
+              stretch=False) -> MotionClip:
     from .body import load_bvh, map_skeleton, model_from_bvh, retarget
 
     mot = load_bvh(path, scale=bvh_scale)
@@ -234,8 +243,16 @@ def _bvh_clip(path: Path, *, dof, fps, start_s, duration_s, bvh_scale, progress,
     mot = mot.slice(k0, k1)
     if mot.n_frames < 1:
         raise SynthError(f"duration_s: expected at least one frame in [{start_s}, {start_s}+{duration_s}) s, got none")
-    model = model_from_bvh(mot, dof)
-    X, report = retarget(mot, model, progress=progress)
+    if mesh is not None and not stretch:    # the BVH's motion on the subject's own skeleton
+        from .body.mesh import driver_from_bvh, joint_paths
+        from .body.retarget import fit_positions
+
+        model = model_from_bvh(mesh.rest_bvh(), dof)
+        paths = joint_paths(mesh, driver_from_bvh(mot, map_skeleton(mot)))
+        X, report = fit_positions(model, paths, progress=progress)
+    else:
+        model = model_from_bvh(mot, dof)
+        X, report = retarget(mot, model, progress=progress)
     X = np.array(X, dtype=float)
     centre = 0.5 * (X[:, :2].min(axis=0) + X[:, :2].max(axis=0))
     X[:, :2] -= centre
@@ -247,7 +264,13 @@ def _bvh_clip(path: Path, *, dof, fps, start_s, duration_s, bvh_scale, progress,
     from .body.mesh import driver_from_bvh
 
     params["mesh_scale"] = round(float(mesh_scale), 9)
-    drv = driver_from_bvh(mot, map_skeleton(mot), shift=(-centre[0], -centre[1], 0.0))
+    params["mesh_fit"] = "stretch" if stretch else "own_skeleton"
+    if stretch:
+        drv = driver_from_bvh(mot, map_skeleton(mot), shift=(-centre[0], -centre[1], 0.0))
+    else:
+        from .body.mesh import driver_from_model
+
+        drv = driver_from_model(model, X)
     return MotionClip(model, X, fps, "bvh", str(path), params, mesh, drv)
 
 

@@ -13,14 +13,12 @@ import time
 
 import numpy as np
 import rclpy
-from geometry_msgs.msg import TransformStamped
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
 import msg_adapters as ma
-from rosnode import masks_by_stamp
+from rosnode import mask_publishers, masks_by_stamp
 
 
 def main() -> None:
@@ -28,13 +26,7 @@ def main() -> None:
     frames, latched = masks_by_stamp(bag)
     rclpy.init()
     node = Node("feeder", namespace="/mocap")
-    pubs = {}
-    for t in sorted({t for f in frames.values() for t in f}):
-        pubs[t] = node.create_publisher(Image if t.endswith("mask") else CameraInfo, t, 10)
-    qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    ext_pubs = [node.create_publisher(TransformStamped, t, qos) for t in latched]
-    for p, msg in zip(ext_pubs, latched.values()):
-        p.publish(msg)
+    pubs = mask_publishers(node, frames, latched)
     done: set[int] = set()
     node.create_subscription(Header, "/mocap/estimator/done", lambda h: done.add(ma.stamp_to_ns(h)), 10)
     deadline = time.monotonic() + 30

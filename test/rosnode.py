@@ -56,3 +56,18 @@ def masks_by_stamp(bag) -> tuple[dict[int, dict], dict]:
             elif m.topic.endswith(("/mask", "/camera_info")):
                 frames.setdefault(ma.stamp_to_ns(msg.header), {})[m.topic] = msg
     return frames, latched
+
+
+def mask_publishers(node, frames: dict[int, dict], latched: dict) -> dict:
+    """Publishers for every mask and camera_info topic in ``frames`` (from :func:`masks_by_stamp`), with the latched
+    extrinsics published once on transient-local publishers (kept alive on ``node``); topic -> publisher."""
+    from geometry_msgs.msg import TransformStamped
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from sensor_msgs.msg import CameraInfo, Image
+
+    pubs = {t: node.create_publisher(Image if t.endswith("mask") else CameraInfo, t, 10)
+            for t in sorted({t for f in frames.values() for t in f})}
+    qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    for topic, msg in latched.items():
+        node.create_publisher(TransformStamped, topic, qos).publish(msg)
+    return pubs

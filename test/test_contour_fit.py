@@ -57,9 +57,62 @@ def test_normal_equations_match_finite_differences(scene):
                   for d in range(model.dof)], axis=1)
     R, P, axes = joint_frames(model, x[None], want_axes=True)
     A, g = _normal_equations(R[0], P[0], axes[0], frames, local, n, m, np.asarray(model.dof_joint),
-                             fit._below)
+                             fit._below, np.ones(model.dof, np.bool_))
     np.testing.assert_allclose(A, J.T @ J, rtol=1e-4, atol=1e-7)
     np.testing.assert_allclose(g, J.T @ e, rtol=1e-4, atol=1e-8)
+    # over some coordinates only (the stage's extra iterations): those rows and columns the same bits, the rest 0
+    use = np.zeros(model.dof, np.bool_)
+    coords = [0, 4, 9, *model.knee_dofs]
+    use[coords] = True
+    As, gs = _normal_equations(R[0], P[0], axes[0], frames, local, n, m, np.asarray(model.dof_joint), fit._below, use)
+    assert np.array_equal(As[np.ix_(coords, coords)], A[np.ix_(coords, coords)]) and np.array_equal(gs[coords], g[coords])
+    assert not As[~use].any() and not As[:, ~use].any() and not gs[~use].any()
+
+
+def test_step_equals_the_numpy_formula(scene):
+    """ContourFit.step's pose update (compiled: contour_kernel.compose_root / finish_step) is the numpy formula's
+    to the bit: ``x + δ``, the root ``nearest_rotvec(log_so3(exp_so3(δ_r) @ exp_so3(r)), r)``, clipped."""
+    from isa_mocap_ros.geometry.so3 import nearest_rotvec
+
+    model, rig, x0, masks = scene
+    fit = ContourFit(model, rig, n_points=80, max_px=20.0)
+    fit.set_masks(masks)
+    rng = np.random.default_rng(5)
+    for k in range(12):
+        x = x0 + rng.normal(0, 0.05, model.dof)
+        x[3:6] = rng.standard_normal(3) * (3.1 if k % 3 == 0 else 1.0)       # turned far, through π too
+        frames, local, n, m, _ = fit.correspondences(x)
+        coords = None if k % 2 else np.array([0, 1, 2, 3, 4, 5, *model.knee_dofs])
+        got = fit.step(x, frames, local, n, m, coords=coords)
+        R, P, axes = joint_frames(model, x[None], want_axes=True)
+        use = np.zeros(model.dof, np.bool_)
+        use[np.arange(model.dof) if coords is None else coords] = True
+        A, g = _normal_equations(R[0], P[0], axes[0], frames, local, n, m, np.asarray(model.dof_joint), fit._below,
+                                 use)
+        A[np.diag_indices(model.dof)] *= 1.0 + fit.damping
+        A[np.diag_indices(model.dof)] += 1e-9
+        c = np.arange(model.dof) if coords is None else coords
+        delta = np.zeros(model.dof)
+        delta[c] = -np.linalg.solve(A[np.ix_(c, c)], g[c])
+        want = x + delta
+        want[3:6] = nearest_rotvec(log_so3(exp_so3(delta[3:6]) @ exp_so3(x[3:6])), x[3:6])
+        assert np.array_equal(got, np.clip(want, model.lower, model.upper))
+
+
+def test_plucker_lines_from_the_ray_table():
+    """The contour pixels' Plücker lines read from the renderer's per-pixel rays are plucker_lines' numbers (a
+    camera with lens distortion too: the table holds Camera.ray's undistorted rays)."""
+    from isa_mocap_ros.energy.correspondence import pixel_plucker_lines, plucker_lines
+    import dataclasses
+
+    cams = list(default_rig())
+    cams.append(dataclasses.replace(cams[0], name="distorted", dist=np.array([-0.2, 0.05, 0.001, -0.002, 0.0])))
+    assert cams[-1].has_distortion
+    rng = np.random.default_rng(4)
+    for cam in cams:
+        pix = np.stack([rng.integers(0, cam.width, 500), rng.integers(0, cam.height, 500)], 1)
+        for a, b in zip(pixel_plucker_lines(cam, pix), plucker_lines(cam, pix.astype(np.float64))):
+            assert np.array_equal(a, b)
 
 
 def test_fit_recovers_a_displaced_pose(scene):

@@ -55,6 +55,34 @@ def test_far_blob_is_removed_and_the_person_kept(scene):
         assert np.all(g.lost_share > 0.1) and np.all(g.lost_share < 1)
 
 
+def test_the_frames_joints_are_passed_not_remembered(scene):
+    """The gate, the hull box and the view weights draw from the joint positions they are given (the tracker's
+    frame computes its prediction's once: frame_prediction.prediction_joints); no module-level memo."""
+    from isa_mocap_ros.tracking import gate
+    from isa_mocap_ros.tracking.frame_context import FrameContext
+    from isa_mocap_ros.tracking.hull import pose_box
+
+    model, cams, walk, masks = scene
+    blobbed = _with_blobs(masks[2])
+    P = gate.pose_joints(model, walk[2])
+    assert not any(isinstance(v, list) and v and isinstance(v[0], tuple) for v in vars(gate).values())
+    same = gate_masks(blobbed, cams, model, walk[2], 6, joints=P)
+    for a, b in zip(same.masks, gate_masks(blobbed, cams, model, walk[2], 6).masks):
+        np.testing.assert_array_equal(a, b)
+    moved = P + np.array([0.3, 0.0, 0.0])           # other joints: another silhouette, another box
+    pix = [gate_masks(blobbed, cams, model, walk[2], 6, rule="pixels", joints=J).masks for J in (P, moved)]
+    assert any(not np.array_equal(a, b) for a, b in zip(*pix))
+    np.testing.assert_allclose(pose_box(model, walk[2], 0.1, joints=moved)[0], pose_box(model, walk[2], 0.1)[0] + [0.3, 0, 0])
+    np.testing.assert_array_equal(gate.visible_shares(model, cams, walk[2], joints=P), gate.visible_shares(model, cams, walk[2]))
+    # a tracked frame computes them once, for its prediction
+    tr = Tracker(model, cams, TrackerConfig.from_flat(evals=300, seed=1, contour_iterations=0, energy="fast"))
+    tr.initialize(pose=walk[1])
+    ctx = tr.frame_context(2)
+    tr.track_frame(masks[2], ctx)
+    np.testing.assert_array_equal(ctx.prediction_joints, gate.pose_joints(model, ctx.prediction))
+    assert isinstance(ctx, FrameContext)
+
+
 def test_person_components_are_kept_whole_from_an_off_prediction(scene):
     """The prediction 12 cm to the side: the pixel rule trims the person at the margin, the
     component rule keeps every person pixel (and still drops the far blobs)."""

@@ -216,6 +216,13 @@ def test_startup_catch_up_holds_the_sets_then_tracks_them_cheaply_until_none_wai
     assert c.after(waiting=8, waited_ms=320.0) is True
     c.budget(1500, initialized=True, checking_heading=False)
     assert c.after(waiting=9, waited_ms=330.0) is False
+    # stale sets (stale_ms): only while catching up, only those that waited longer
+    assert not c.stale(1e6)                                   # (not catching up now)
+    s = StartupCatchUp(sets=12, evals=300, limit_ms=1000.0, stale_ms=50.0)
+    assert not s.stale(80.0)
+    s.hold(3)
+    assert s.stale(80.0) and not s.stale(50.0) and not s.stale(20.0)
+    assert not StartupCatchUp(sets=12, evals=300, limit_ms=1000.0).stale(1e6)    # 0: never
     # off: only the heading check's sets are held
     off = StartupCatchUp(sets=0, evals=300, limit_ms=600.0)
     assert off.hold(3) == 3 and not off.active
@@ -227,7 +234,8 @@ def test_startup_catch_up_holds_the_sets_then_tracks_them_cheaply_until_none_wai
     (dict(sets=2, evals=0, limit_ms=1.0), "evals: expected an integer >= 1, received 0"),
     (dict(sets=2, evals=True, limit_ms=1.0), "evals: expected an integer >= 1, received True"),
     (dict(sets=2, evals=10, limit_ms=float("nan")), "limit_ms: expected a finite number >= 0"),
-    (dict(sets=2, evals=10, limit_ms=-1.0), "limit_ms: expected a finite number >= 0")])
+    (dict(sets=2, evals=10, limit_ms=-1.0), "limit_ms: expected a finite number >= 0"),
+    (dict(sets=2, evals=10, limit_ms=1.0, stale_ms=-1.0), "stale_ms: expected a finite number >= 0")])
 def test_startup_catch_up_bad_settings(kwargs, match):
     from isa_mocap_ros.tracking.load import LoadError, StartupCatchUp
 

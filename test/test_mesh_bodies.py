@@ -105,9 +105,9 @@ def test_mesh_bag_is_the_default_and_byte_identical(tmp_path):
 
 
 @pytest.mark.skipif(not CMU_WALK.is_file(), reason=f"{CMU_WALK} absent (shared data)")
-def test_bvh_mesh_bag_markers_match_the_bvh_joints(tmp_path):
-    """Markers of a BVH-driven mesh bag = the BVH's own joints scaled by bvh_scale and shifted by
-    xy_shift_m (the documented placement), within 5 mm; read back from the bag."""
+def test_stretched_bvh_mesh_bag_markers_match_the_bvh_joints(tmp_path):
+    """``--stretch-mesh`` (the diagnostic): markers of a BVH-driven mesh bag = the BVH's own joints scaled by
+    bvh_scale and shifted by xy_shift_m (the documented placement), within 5 mm; read back from the bag."""
     from isa_mocap_ros.bag import BagReader
     from isa_mocap_ros.body import load_bvh, map_skeleton
     from isa_mocap_ros.cli.synth import write_bag
@@ -115,7 +115,7 @@ def test_bvh_mesh_bag_markers_match_the_bvh_joints(tmp_path):
     import yaml
 
     out = tmp_path / "bvh_mesh"
-    write_bag(_synth_args(CMU_WALK, out, subject="slim_woman", duration_s=0.5))
+    write_bag(_synth_args(CMU_WALK, out, subject="slim_woman", duration_s=0.5, stretch_mesh=True))
     with BagReader(out) as bag:
         info = yaml.safe_load(from_cdr(*next((m.data, m.type) for m in bag.messages(["/mocap/ground_truth/model"]))).data)
         markers = [np.array([(p.position.x, p.position.y, p.position.z) for p in from_cdr(m.data, m.type).poses])
@@ -131,6 +131,53 @@ def test_bvh_mesh_bag_markers_match_the_bvh_joints(tmp_path):
     for k, M in enumerate(markers):
         ref = np.array([W[k, mot.joint_index(mp[n])] for n in names]) + shift
         assert np.linalg.norm(M - ref, axis=1).max() < 0.005
+
+
+def _marker_bones(M, names):
+    i = {n: k for k, n in enumerate(names)}
+    pairs = [("pelvis", "neck"), ("neck", "head"), ("left_shoulder", "right_shoulder"), ("left_hip", "right_hip"),
+             ("left_hip", "left_knee"), ("left_knee", "left_ankle"), ("left_shoulder", "left_elbow"),
+             ("left_elbow", "left_wrist"), ("pelvis", "left_hip")]
+    return {f"{a}-{b}": np.linalg.norm(M[..., i[a], :] - M[..., i[b], :], axis=-1) for a, b in pairs}
+
+
+@pytest.mark.skipif(not CMU_WALK.is_file(), reason=f"{CMU_WALK} absent (shared data)")
+@pytest.mark.parametrize("subject", ["heavy_man", "random"])
+def test_bvh_mesh_keeps_the_subjects_skeleton_and_the_bvhs_knees(subject):
+    """The default BVH-on-mesh clip: every frame's ground-truth skeleton has the subject's own bone lengths (the
+    mesh at rest, within 3 mm; the bending spine's pelvis-neck within 3 cm), where the stretched diagnostic squeezes the trunk (CMU's pelvis-to-neck is far
+    shorter than the mesh's); and the knees bend as the BVH's (3-D knee angle within 3° rms)."""
+    from isa_mocap_ros.body import load_bvh, map_skeleton
+    from isa_mocap_ros.body.mesh import MESH_MARKERS
+    from isa_mocap_ros.eval.metrics import knee_flexion_from_points
+    from isa_mocap_ros.synth import MeshSceneRenderer, make_clip
+    from isa_mocap_ros.vision import default_rig
+
+    def markers(stretch):
+        clip = make_clip(CMU_WALK, body="mesh", subject=subject, seed=5, start_s=1.0, duration_s=0.5, stretch=stretch)
+        r = MeshSceneRenderer(clip, default_rig(n_views=1, width=64, height=48), seed=0)
+        return clip, np.array([r.posed(j)[1] for j in range(clip.n_frames)])
+
+    clip, M = markers(False)
+    assert clip.params["mesh_fit"] == "own_skeleton" and clip.params["retarget_mean_mm"] < 10.0
+    rest = {n: clip.mesh.joints[n] for n in MESH_MARKERS}
+    rest_bones = _marker_bones(np.array([rest[n] for n in MESH_MARKERS]), MESH_MARKERS)
+    for k, v in _marker_bones(M, MESH_MARKERS).items():     # the spine bends: pelvis-neck is not one bone
+        assert np.abs(v - rest_bones[k]).max() < (0.03 if k == "pelvis-neck" else 0.003), k
+    _, Ms = markers(True)
+    trunk = _marker_bones(Ms, MESH_MARKERS)["pelvis-neck"]
+    assert rest_bones["pelvis-neck"] - trunk.mean() > 0.1        # CMU's trunk, not the subject's
+    # the knees bend as the BVH's (its own joints, same frames)
+    p = clip.params
+    mot = load_bvh(CMU_WALK, scale=p["bvh_scale"]).resample(30.0)
+    k0 = int(round(1.0 * 30.0))
+    mp = map_skeleton(mot)
+    W = mot.world_positions()[k0:k0 + clip.n_frames]
+    i = {n: k for k, n in enumerate(MESH_MARKERS)}
+    for s in ("left", "right"):
+        kb = knee_flexion_from_points(*(W[:, mot.joint_index(mp[f"{s}_{j}"])] for j in ("hip", "knee", "ankle")))
+        km = knee_flexion_from_points(*(M[:, i[f"{s}_{j}"]] for j in ("hip", "knee", "ankle")))
+        assert np.degrees(np.sqrt(np.mean((km - kb) ** 2))) < 3.0
 
 
 def test_marker_score_equals_a_recomputation():

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from isa_mocap_ros.bag import BagReader
-from rosnode import masks_by_stamp, ros_node, spin_until
+from rosnode import mask_publishers, masks_by_stamp, ros_node, spin_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(300)]
 HERE = Path(__file__).parent
@@ -58,9 +58,7 @@ def test_a_camera_that_changes_resolution_restarts_the_tracker_with_the_new_came
     K scaled) with later stamps: the estimator takes the new cameras (camera_info and mask of one stamp agree),
     restarts its tracker, and estimates the new frames; lone masks of the old size are dropped."""
     import numpy as np
-    from geometry_msgs.msg import TransformStamped
-    from rclpy.qos import DurabilityPolicy, QoSProfile
-    from sensor_msgs.msg import CameraInfo, Image, JointState
+    from sensor_msgs.msg import Image, JointState
     from std_msgs.msg import Header
 
     import msg_adapters as ma
@@ -83,12 +81,7 @@ def test_a_camera_that_changes_resolution_restarts_the_tracker_with_the_new_came
                 "--params-file", str(CONFIG), "-p", "evals:=200", "-p", "optimizer:=isa", "-p", "use_prediction:=false")
     assert est.wait_for_output("estimator: ready", 120), est.output()
     with ros_node(rosenv, "resize_test") as (node, ex):
-        pubs = {t: node.create_publisher(Image if t.endswith("mask") else CameraInfo, t, 10)
-                for t in sorted({t for f in frames.values() for t in f})}
-        qos_latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        ext = [node.create_publisher(TransformStamped, t, qos_latched) for t in latched]
-        for p, msg in zip(ext, latched.values()):
-            p.publish(msg)
+        pubs = mask_publishers(node, frames, latched)
         done, estimates = set(), set()
         node.create_subscription(Header, "/mocap/estimator/done", lambda h: done.add(ma.stamp_to_ns(h)), 10)
         node.create_subscription(JointState, "/mocap/joint_states",

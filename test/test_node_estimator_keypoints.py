@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from rosnode import masks_by_stamp, ros_node, spin_until
+from rosnode import mask_publishers, masks_by_stamp, ros_node, spin_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(300)]
 HERE = Path(__file__).parent
@@ -25,9 +25,6 @@ ANSWER_AFTER_S = 2.5  # the stand-in keypoint node answers this much later
 
 
 def test_lockstep_waits_for_a_slow_keypoint_node_and_goes_on_without_one(spawn, rosenv):
-    from geometry_msgs.msg import TransformStamped
-    from rclpy.qos import DurabilityPolicy, QoSProfile
-    from sensor_msgs.msg import CameraInfo, Image
     from std_msgs.msg import Header
 
     import msg_adapters as ma
@@ -40,12 +37,7 @@ def test_lockstep_waits_for_a_slow_keypoint_node_and_goes_on_without_one(spawn, 
                 "-p", f"keypoint_wait_s:={WAIT_S}")
     assert est.wait_for_output("estimator: ready", 120), est.output()
     with ros_node(rosenv, "slow_keypoints") as (node, ex):
-        pubs = {t: node.create_publisher(Image if t.endswith("mask") else CameraInfo, t, 10)
-                for t in sorted({t for f in frames.values() for t in f})}
-        ext = [node.create_publisher(TransformStamped, t, QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-               for t in latched]
-        for p, msg in zip(ext, latched.values()):
-            p.publish(msg)
+        pubs = mask_publishers(node, frames, latched)
         skipped = [node.create_publisher(Header, f"/mocap/cam{v}/keypoints_skipped", 10) for v in range(4)]
         done: dict[int, float] = {}
         node.create_subscription(Header, "/mocap/estimator/done",

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from rosnode import masks_by_stamp, ros_node, spin_until
+from rosnode import mask_publishers, masks_by_stamp, ros_node, spin_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(300)]
 HERE = Path(__file__).parent
@@ -24,9 +24,6 @@ def _diag(msg) -> dict:
 
 def test_the_camera_data_are_built_from_the_camera_infos_before_the_first_frame_set(spawn, rosenv):
     from diagnostic_msgs.msg import DiagnosticArray
-    from geometry_msgs.msg import TransformStamped
-    from rclpy.qos import DurabilityPolicy, QoSProfile
-    from sensor_msgs.msg import CameraInfo, Image
     from std_msgs.msg import Header
 
     import msg_adapters as ma
@@ -37,12 +34,7 @@ def test_the_camera_data_are_built_from_the_camera_infos_before_the_first_frame_
                 "--params-file", str(CONFIG), "-p", "evals:=200", "-p", "optimizer:=isa", "-p", "use_prediction:=false")
     assert est.wait_for_output("estimator: ready", 120), est.output()
     with ros_node(rosenv, "startup_test") as (node, ex):
-        pubs = {t: node.create_publisher(Image if t.endswith("mask") else CameraInfo, t, 10)
-                for t in sorted({t for f in frames.values() for t in f})}
-        qos_latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        ext = [node.create_publisher(TransformStamped, t, qos_latched) for t in latched]
-        for p, msg in zip(ext, latched.values()):
-            p.publish(msg)
+        pubs = mask_publishers(node, frames, latched)
         diag, done = [{}], set()
         node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: diag.__setitem__(0, _diag(m) or diag[0]), 10)
         node.create_subscription(Header, "/mocap/estimator/done", lambda h: done.add(ma.stamp_to_ns(h)), 10)

@@ -34,6 +34,40 @@ def _schedule(evals=1500, **kw):
                                governor=RT.governor_for(evals, PERIOD), **kw)
 
 
+class _Tracker:
+    """What the schedule reads of a tracker (no frames stepped)."""
+    def __init__(self):
+        self.initialized, self.checking_heading = False, False
+
+    def heading_recheck_pending(self, masks):
+        return False
+
+
+@pytest.mark.parametrize("stale_ms, tracked, dropped", [(0.0, [1, 2, 3, 4, 5, 6], 0), (50.0, [1, 5, 6], 3)])
+def test_the_catch_up_drops_its_stale_sets_oldest_first_and_catches_up_the_newer(stale_ms, tracked, dropped):
+    """startup_catch_up_stale_ms: after the initialization (set 0, 200 ms) and a heading check's frame (set 1), the held
+    sets that already waited longer than stale_ms are dropped, the oldest first; the newer ones are caught up."""
+    tr = _Tracker()
+    sch = RT.RealTimeSchedule(evals=1500, heading_sets=3,
+                              startup=StartupCatchUp(sets=12, evals=300, limit_ms=1000.0, stale_ms=stale_ms))
+    now = [0.0]
+    waited = lambda item: now[0] - item[1]          # noqa: E731 - ms on the fake clock
+    sch.slot.put((0, 0.0))
+    assert sch.take(tr, masks_of=lambda it: None, waited_ms=waited)[0] == 0       # initializes: holds the next sets
+    for k in range(1, 7):
+        sch.slot.put((k, 33.3 * k))
+    now[0] = 210.0
+    tr.initialized, tr.checking_heading = True, True
+    assert sch.take(tr, masks_of=lambda it: None, waited_ms=waited)[0] == 1       # the check's frame, however late
+    tr.checking_heading = False
+    got = [1]
+    while (item := sch.take(tr, masks_of=lambda it: None, waited_ms=waited)) is not None:
+        got.append(item[0])
+        assert sch.budget(tr, waited(item)).evals == 300                        # caught up cheaply
+        now[0] += 10.0
+    assert got == tracked and sch.slot.dropped == dropped
+
+
 def test_a_track_facing_backwards_recovers_by_itself_under_load(walk45):
     """One core busy (every step twice as long as idle): sets are dropped and the budget lowered, yet the travel
     cue's heading re-check gets the consecutive sets its check needs (held) and turns a track that faces
@@ -109,7 +143,9 @@ def test_the_same_inputs_give_the_same_schedule(walk45):
 def test_warm_up_leaves_no_kernel_to_the_first_initialized_frame():
     """realtime.warm_up (the estimator node's, before "ready"): in a fresh process, the first automatically
     initialized frame and the frames after it load no numba kernel (a warm-up from a given pose left the first-frame
-    hull's projection kernel, with scipy.ndimage's import, to that frame: ~50 CPU ms, session 27)."""
+    hull's projection kernel, with scipy.ndimage's import, to that frame: ~50 CPU ms, session 27), also with cameras
+    whose rotations are column-major (a calibration file's: the first-frame hull's vote was typed apart for them and
+    loaded a second compiled version on that frame, ~10 CPU ms, session 29)."""
     import subprocess
     import sys
     from pathlib import Path
@@ -122,7 +158,12 @@ from walk_scene import walk_scene
 from isa_mocap_ros.tracking import realtime
 from isa_mocap_ros.tracking.config import TrackerConfig
 from isa_mocap_ros.tracking.tracker import Tracker
+import dataclasses
+import numpy as np
 model, cams, walk, masks = walk_scene(width=160, height=120, frames=3, duration_s=0.2, seed=0)
+# rotations stored column-major, as a calibration file's cameras have them (the warm-up's rig: row-major)
+cams = [dataclasses.replace(c, R=np.asfortranarray(c.R)) for c in cams]
+assert cams[0].R.flags.f_contiguous and not cams[0].R.flags.c_contiguous
 cfg = TrackerConfig.from_flat(seed=0, init_confirm_ratio=10.0)      # a heading check on the first frame, whatever the energy
 warm = realtime.warm_up(model, cfg)
 assert warm[0].initialized and not warm[1].fell_back, warm

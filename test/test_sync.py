@@ -124,6 +124,23 @@ def test_latest_slot_hold_keeps_the_sets_in_sequence():
     assert [lock.take() for _ in range(5)] == [0, 1, 2, 3, 4] and lock.dropped == 0
 
 
+def test_latest_slot_drop_oldest_takes_a_held_set_first_and_counts_it():
+    slot = LatestSlot()
+    assert slot.oldest() is None
+    slot.drop_oldest()                                # nothing waits: nothing dropped
+    assert slot.dropped == 0
+    slot.hold(3)
+    for k in range(5):
+        slot.put(k)                                   # held 0, 1, 2 and the newest 4 (3 replaced)
+    assert slot.dropped == 1 and slot.oldest() == 0 and slot.held == 3
+    slot.drop_oldest()                                # the start-up catch-up's stale set
+    assert slot.dropped == 2 and slot.held == 2 and slot.oldest() == 1 and len(slot) == 3
+    assert slot.take() == 1 and slot.held == 1
+    slot.drop_oldest()
+    slot.drop_oldest()                                # past the hold: the newest goes too when asked
+    assert slot.held == 0 and len(slot) == 0 and slot.dropped == 4
+
+
 @pytest.mark.parametrize("bad", [-1, 1.5, True, "2"])
 def test_latest_slot_bad_hold(bad):
     with pytest.raises(SyncError, match="hold: expected an integer >= 0"):

@@ -693,3 +693,47 @@ def test_after_a_gap_from_the_first_estimate_the_root_follows_the_foreground(sce
     assert abs(r.prediction[0] - far[0]) < 0.05, (r.prediction[0], far[0])
     r = tr.step(masks[4], 4, frames_elapsed=2)
     assert not any("root moved" in n for n in r.notes)
+
+
+def test_a_side_on_rival_is_searched_again_from_the_winners_opposite(scene320, monkeypatch):
+    """heading.init_rival: when the heading check's rival (the best run heading > 90 deg away) ended side-on, the
+    frame is searched again from the winner's opposite and the better rival is checked (the 35-occluder mesh bag:
+    a backwards winner over a rival 46-48 deg off, docs/history/issue33_mesh_accuracy_s29.md). Here the runs heading
+    like the truth are turned 60 deg and scored 1.4x, so a backwards run wins over a side-on rival."""
+    import dataclasses
+
+    from isa_mocap_ros.geometry import exp_so3, log_so3
+    from isa_mocap_ros.tracking.init import wrap_angle, yaw_of, yaw_rotvec
+
+    model, cams, walk, masks = scene320
+    yaw = yaw_of(walk[0][3:6])
+    orig = first_frame.initial_runs
+    turn = exp_so3(yaw_rotvec(np.radians(60.0)))
+
+    def side_on(r):
+        x = np.array(r.x, dtype=float)
+        x[3:6] = log_so3(turn @ exp_so3(x[3:6]))
+        return dataclasses.replace(r, x=x, best_x=x, energy=1.4 * r.energy, best_energy=1.4 * r.best_energy)
+
+    def runs(tr, ctx, starts, notes, budget, stream=()):
+        out, n = orig(tr, ctx, starts, notes, budget, stream)
+        if stream:                                  # the searches from the opposite are left alone
+            return out, n
+        return [(j, side_on(r) if abs(wrap_angle(yaw_of(r.x[3:6]) - yaw)) < np.pi / 2 else r, p)
+                for j, r, p in out], n
+
+    def track(opposite_deg):
+        monkeypatch.setattr(first_frame, "initial_runs", runs)
+        monkeypatch.setattr(heading, "RIVAL_OPPOSITE_DEG", opposite_deg)
+        tr = Tracker(model, cams, TrackerConfig.from_flat(seed=0, init_confirm_ratio=1.5))
+        out = [tr.step(m, k) for k, m in enumerate(masks)]
+        monkeypatch.undo()
+        return out, frame_errors_mm(marker_positions(model, np.array([r.x for r in out])),
+                                    marker_positions(model, walk))
+
+    out, err = track(heading.RIVAL_OPPOSITE_DEG)
+    assert any("off the winner's opposite" in n and "and is the rival" in n for n in out[0].notes), out[0].notes
+    assert err.max() < 60.0
+    off, err_off = track(180.0)                     # the side-on rival checked as it is
+    assert not any("off the winner's opposite" in n for r in off for n in r.notes)
+    assert err_off[0] > 200.0

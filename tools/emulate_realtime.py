@@ -70,6 +70,8 @@ def main(argv=None) -> int:
     p.add_argument("--catch-up", type=int, action="append", help="startup_catch_up values to run (default 0)")
     p.add_argument("--catch-up-evals", type=int, default=300, help="degrade_min_evals (default 300)")
     p.add_argument("--catch-up-ms", type=float, default=1000.0, help="startup_catch_up_ms (default 1000)")
+    p.add_argument("--catch-up-stale-ms", type=float, default=0.0,
+                   help="startup_catch_up_stale_ms: held sets that waited longer are dropped, oldest first (default 0)")
     p.add_argument("--load", type=float, default=1.0, help="step times × this (2: one core busy)")
     p.add_argument("--cost", default="0.010,9e-6,0.005,0.060",
                    help="fixed_s,per_eval_s,contour_s,init_s of the step cost (default: fitted to the idle bench)")
@@ -89,7 +91,8 @@ def main(argv=None) -> int:
             tracker.predictor = PublishedPredictor(model, tracker.predictor)
             schedule = RealTimeSchedule(
                 evals=cfg.search.evals, heading_sets=cfg.heading.init_confirm_frames,
-                startup=StartupCatchUp(sets=catch_up, evals=a.catch_up_evals, limit_ms=a.catch_up_ms),
+                startup=StartupCatchUp(sets=catch_up, evals=a.catch_up_evals, limit_ms=a.catch_up_ms,
+                                       stale_ms=a.catch_up_stale_ms),
                 governor=LoadGovernor(LoadSettings(evals=cfg.search.evals, period_s=PERIOD,
                                                    min_evals=a.catch_up_evals)))
             done_steps, dropped = emulate(tracker, masks, schedule, period_s=PERIOD, step_s=step_s,
@@ -103,13 +106,13 @@ def main(argv=None) -> int:
             done = {s["k"] for s in steps}
             startup = [] if k_init is None else [k for k in range(k_init, min(k_init + 25, len(masks)))
                                                  if k not in done]
-            row = dict(bag=bag.name, catch_up=catch_up, seed=seed, load=a.load, dropped=dropped,
+            row = dict(bag=bag.name, catch_up=catch_up, stale_ms=a.catch_up_stale_ms, seed=seed, load=a.load, dropped=dropped,
                        startup_dropped=startup, p50_ms=float(np.percentile(lat, 50)) if lat else None,
                        p95_ms=float(np.percentile(lat, 95)) if lat else None, mpjpe_mm=acc.get("mpjpe_mm"),
                        lowered=schedule.governor.lowered, caught_up=schedule.startup.caught_up,
                        steps=[{k: v for k, v in s.items() if k != "x"} for s in steps])
             rows.append(row)
-            print(f"{bag.name} catch-up {catch_up} seed {seed} load {a.load:g}: dropped {dropped} (start-up "
+            print(f"{bag.name} catch-up {catch_up} (stale {a.catch_up_stale_ms:g} ms) seed {seed} load {a.load:g}: dropped {dropped} (start-up "
                   f"{len(startup)}), latency p50 {row['p50_ms']:.0f} p95 {row['p95_ms']:.0f} ms (virtual), "
                   f"{row['mpjpe_mm']:.1f} mm, budget lowered {row['lowered']}, caught up {row['caught_up']}", flush=True)
             out.write_text(json.dumps(rows))

@@ -308,6 +308,7 @@ def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path, lockstep:
     s = json.loads((out / "summary.json").read_text())
     bag_fps = _bag_fps(bag)
     keep = ("frame_sets_played", "frames_processed", "frames_estimated", "fps", "latency_ms_p50", "latency_ms_p95",
+            "latency_mask_ms_p95", "latency_estimator_ms_p95",
             "dropped_frames", "dropped_by_estimator", "sets_bunched", "dropped_at_bunched_arrivals", "dropped_while_initializing", "startup_sets_caught_up", "frames_without_contour_stage", "budget_lowered", "track_resets", "init_ms", "tracker_ms_p50", "tracker_ms_p95", "mpjpe_mm", "knee_rmse_deg", "evals_per_frame", "optimizer")
     r = {"mode": mode, "busy_core": bool(busy), "single_process": bool(single),
          "body_shape": str(out / "body.yaml") if (out / "body.yaml").is_file() else (None if shape == "auto" else shape), **{k: s.get(k) for k in keep}, "bag_fps": bag_fps,
@@ -459,7 +460,8 @@ def render_markdown(res: dict) -> str:
               "those its queue replaced while the tracker was busy (the rest were lost before it: best-effort image and "
               "mask subscriptions, the synchronizer), of them those that came less than half a period after the set "
               "before (the inputs bunched: segmentation or transport late, not the tracker); budget lowered: the governor's steps down (docs/nodes.md); latency: "
-              "image received → joint_states received (the recorder's clock); vs lockstep: mean joint error "
+              "image received → joint_states received (the recorder's clock), and its parts' p95: image → the set's last "
+              "mask received (segmentation, transport), that mask → joint_states (the estimator's wait, step, publishing); vs lockstep: mean joint error "
               "minus the lockstep run's (same body shape, calibrated once by the first run). Every row without the "
               "keypoint node (`--no-keypoints`: real time's default, decision 014).", ""]
         L += network_table(n["rows"])
@@ -468,16 +470,17 @@ def render_markdown(res: dict) -> str:
 
 def network_table(rows: list[dict]) -> list[str]:
     """The network part's table (markdown lines): one row per run, a failed run as a row saying so."""
-    L = ["| mode | frame sets played | processed | frames/s | real-time factor | latency p50 (ms) | latency p95 (ms) | dropped | of them while initializing | of them by the estimator (its queue) / at bunched arrivals | caught up after start-up | without the contour stage | budget lowered (times) | initialization (ms) | tracker ms per set p50 / p95 | mean joint error (mm) | vs lockstep (mm) |",
-         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    L = ["| mode | frame sets played | processed | frames/s | real-time factor | latency p50 (ms) | latency p95 (ms) | of it p95: image → masks / masks → estimate | dropped | of them while initializing | of them by the estimator (its queue) / at bunched arrivals | caught up after start-up | without the contour stage | budget lowered (times) | initialization (ms) | tracker ms per set p50 / p95 | mean joint error (mm) | vs lockstep (mm) |",
+         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if "error" in r:
-            L.append(f"| {r['mode']} | failed: {r['error']} | | | | | | | | | | | | | | | |")
+            L.append(f"| {r['mode']} | failed: {r['error']} | | | | | | | | | | | | | | | | |")
             continue
         share = f" ({100 * r['dropped_share']:.0f} %)" if r.get("dropped_share") is not None else ""
         L.append(f"| {r['mode']} | {r['frame_sets_played']} | {r['frames_processed']} | {_f(r['fps'], '{:.2f}')} | "
                  f"{_f(r['real_time_factor'], '{:.2f}')} | {_f(r['latency_ms_p50'], '{:.0f}')} | "
-                 f"{_f(r['latency_ms_p95'], '{:.0f}')} | {r['dropped_frames']}{share} | "
+                 f"{_f(r['latency_ms_p95'], '{:.0f}')} | {_f(r.get('latency_mask_ms_p95'), '{:.0f}')} / "
+                 f"{_f(r.get('latency_estimator_ms_p95'), '{:.0f}')} | {r['dropped_frames']}{share} | "
                  f"{_f(r.get('dropped_while_initializing'), '{}')} | {_f(r.get('dropped_by_estimator'), '{}')} / "
                  f"{_f(r.get('dropped_at_bunched_arrivals'), '{}')} | "
                  f"{_f(r.get('startup_sets_caught_up'), '{}')} | "

@@ -47,7 +47,7 @@ from .mesh_assets import MACRO_AXES, load_assets
 from .model import BodyError, BodyModel
 
 __all__ = ["PRESETS", "SUBJECTS", "SEGMENTS", "MESH_MARKERS", "Subject", "MeshBody", "Driver", "make_subject",
-           "mesh_body", "driver_from_bvh", "driver_from_model", "pose_mesh", "rest_bvh"]
+           "mesh_body", "driver_from_bvh", "driver_from_model", "joint_paths", "pose_mesh", "rest_bvh"]
 
 # segment: (head joint, tail joint, parent segment, mesh bones)
 _SEGS = [
@@ -510,6 +510,38 @@ def pose_mesh(body: MeshBody, drv: Driver, frame: int, *, plan: _Plan | None = N
         i = seg_names.index(plan.seg_of[seg_names[head_seg[name]]])
         markers[m] = L[i] @ plan.joints[name] + t[i]
     return out, markers
+
+
+def joint_paths(body: MeshBody, drv: Driver) -> dict:
+    """The driver's motion on the mesh's own skeleton: world positions ``(F, 3)`` of every joint of
+    :data:`SEGMENTS` with each segment turned as :func:`segment_maps` turns it (towards the driver's next joint,
+    twisted as the driver's joint) but keeping the mesh's own rest offsets, not the driver's lengths.
+
+    The chain starts at the mid-hip point: the mesh pelvis is placed so its hips' midpoint is the driver's, so the
+    legs stand where the driver's stand whatever the two skeletons call the pelvis (CMU's ``Hips`` joint sits about
+    11 cm above its hip joints, the mesh's at their height). Joints the driver lacks follow their parent segment.
+    """
+    pl = _plan(body, drv)
+    J = pl.joints
+    rot, out = {}, {}
+    for s, (a, b, parent) in SEGMENTS.items():              # parents come before their children
+        if pl.seg_of[s] != s:
+            rot[s] = rot[pl.seg_of[s]]
+        else:
+            Rr = drv.R[a] @ drv.R0[a].T @ pl.A[s]
+            if b in drv.P:
+                Rr = _minrot(Rr @ pl.u[s], drv.P[b] - drv.P[a]) @ Rr
+            rot[s] = Rr
+        if parent is None:
+            hips = 0.5 * (drv.P["left_hip"] + drv.P["right_hip"])
+            out[a] = hips - rot[s] @ (0.5 * (J["left_hip"] + J["right_hip"]) - J[a])
+        else:
+            pa = SEGMENTS[parent][0]
+            out[a] = out[pa] + rot[parent] @ (J[a] - J[pa])
+    for s, (a, b, _parent) in SEGMENTS.items():
+        if b not in out:
+            out[b] = out[a] + rot[s] @ (J[b] - J[a])
+    return out
 
 
 def plan(body: MeshBody, drv: Driver) -> _Plan:

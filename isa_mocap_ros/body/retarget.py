@@ -37,7 +37,7 @@ from .bvh import BVH_TO_WORLD, BvhMotion
 from .kinematics import _position_jacobian_dk, joint_positions
 from .model import BodyError, BodyModel, default_shape, make_model
 
-__all__ = ["map_skeleton", "model_from_bvh", "retarget", "RetargetReport"]
+__all__ = ["map_skeleton", "model_from_bvh", "retarget", "fit_positions", "RetargetReport"]
 
 _PREFIXES = ("mixamorig", "bip01", "bip001", "character1", "characters", "skeleton", "armature")
 _WRIST_PARTS = ("wrist", "hand")
@@ -468,15 +468,37 @@ def retarget(motion: BvhMotion, model: BodyModel, *, iters: int = 25, warm_iters
         Poses (root rotation vectors continuous over time).
     report : RetargetReport
     """
-    t0 = time.perf_counter()
     mapping = map_skeleton(motion, lower_body_only=model.dof == 18)
     mapping = {k: v for k, v in mapping.items() if k in model.joint_names}
-    if "pelvis" not in mapping:
-        raise BodyError(f"model: no model joint matches the BVH skeleton ({model.joint_names})")
-    names = tuple(n for n in model.joint_names if n in mapping)
-    idx = np.array([model.joint_index(n) for n in names])
     W = motion.world_positions()
-    target = W[:, [motion.joint_index(mapping[n]) for n in names]]
+    targets = {n: W[:, motion.joint_index(b)] for n, b in mapping.items()}
+    return fit_positions(model, targets, iters=iters, warm_iters=warm_iters, warm_rounds=warm_rounds, reg=reg,
+                         progress=progress, mapping=mapping)
+
+
+def fit_positions(model: BodyModel, targets: Mapping[str, np.ndarray], *, iters: int = 25, warm_iters: int = 10,
+                  warm_rounds: int = 4, reg: float = 1e-4, progress: Callable[[int, int], None] | None = None,
+                  mapping: Mapping[str, str] | None = None) -> tuple[np.ndarray, RetargetReport]:
+    """Poses of ``model`` whose joint centres meet ``targets`` (the fit of :func:`retarget`).
+
+    Parameters
+    ----------
+    model : BodyModel
+    targets : mapping str -> (F, 3) ndarray
+        World positions (metres, z up) per model joint name; names the model lacks are ignored.
+        Must contain ``pelvis`` and both hips.
+    mapping : mapping str -> str, optional
+        Where each target came from (kept in the report; default: the names themselves).
+
+    Other parameters and the returns are :func:`retarget`'s.
+    """
+    t0 = time.perf_counter()
+    names = tuple(n for n in model.joint_names if n in targets)
+    if "pelvis" not in names:
+        raise BodyError(f"model: no model joint matches the BVH skeleton ({model.joint_names})")
+    idx = np.array([model.joint_index(n) for n in names])
+    target = np.stack([np.asarray(targets[n], dtype=float) for n in names], axis=1)
+    mapping = {n: n for n in names} if mapping is None else {n: mapping[n] for n in names}
     total = 4
     X = _init_root(model, {n: target[:, k] for k, n in enumerate(names)})
     if progress:

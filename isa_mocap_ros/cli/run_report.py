@@ -28,6 +28,7 @@ def read_estimates(path: Path, model) -> dict:
     poses: dict[int, np.ndarray] = {}
     js_time: dict[int, int] = {}
     img_time: dict[int, int] = {}
+    mask_time: dict[int, int] = {}       # the last of a set's masks to reach the recorder
     done: list[int] = []
     overlays: list[tuple[int, str, np.ndarray]] = []
     diag: dict[str, str] = {}
@@ -41,6 +42,9 @@ def read_estimates(path: Path, model) -> dict:
                 js_time[s] = m.log_time_ns
             elif m.topic == "/mocap/cam0/image_raw":
                 img_time.setdefault(ma.header_stamp_ns_from_cdr(m.data), m.log_time_ns)
+            elif m.topic.startswith("/mocap/cam") and m.topic.endswith("/mask"):
+                s = ma.header_stamp_ns_from_cdr(m.data)
+                mask_time[s] = max(mask_time.get(s, 0), m.log_time_ns)
             elif m.topic == "/mocap/estimator/done":
                 done.append(ma.header_stamp_ns_from_cdr(m.data))
             elif m.topic.endswith("/overlay"):
@@ -52,7 +56,12 @@ def read_estimates(path: Path, model) -> dict:
                     if st.name.endswith("estimator"):
                         diag = {kv.key: kv.value for kv in st.values}
     lat = [(js_time[s] - img_time[s]) / 1e6 for s in js_time if s in img_time]
-    return {"poses": poses, "latencies_ms": lat, "done": done, "overlays": overlays, "diagnostics": diag}
+    # the latency's two parts per estimated set: image -> its last mask (segmentation, transport) and that mask ->
+    # the estimate (the estimator's wait for its worker, the tracker's step, publishing)
+    masks_lat = [(mask_time[s] - img_time[s]) / 1e6 for s in js_time if s in img_time and s in mask_time]
+    est_lat = [(js_time[s] - mask_time[s]) / 1e6 for s in js_time if s in img_time and s in mask_time]
+    return {"poses": poses, "latencies_ms": lat, "mask_latencies_ms": masks_lat, "estimator_latencies_ms": est_lat,
+            "done": done, "overlays": overlays, "diagnostics": diag}
 
 
 def read_masks(path: Path) -> dict[tuple[int, int], bytes]:
@@ -145,6 +154,8 @@ def summary_rows(summary: dict) -> list[tuple[str, object]]:
         acc = [("accuracy", summary.get("accuracy", "no ground truth"))]
     return acc + [("frames estimated", summary.get("frames_estimated")), ("frames/s", summary["fps"]),
                   ("latency p50 / p95 (ms)", (summary["latency_ms_p50"], summary["latency_ms_p95"])),
+                  ("  image -> masks / masks -> estimate", tuple(summary.get(f"latency_{p}_ms_p{q}", float("nan"))
+                                                            for p in ("mask", "estimator") for q in (50, 95))),
                   ("dropped frame sets", summary["dropped_frames"]), ("bad inputs", summary.get("bad_inputs")),
                   ("optimizer", summary["optimizer"]), ("evaluations per frame", summary["evals_per_frame"])]
 
@@ -176,6 +187,10 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
         "fps": len(rec["done"]) / play_summary["seconds"] if play_summary.get("seconds") else float("nan"),
         "latency_ms_p50": float(np.percentile(lat, 50)) if lat.size else float("nan"),
         "latency_ms_p95": float(np.percentile(lat, 95)) if lat.size else float("nan"),
+        # its parts (the recorder's receive times): image -> the set's last mask, that mask -> the estimate
+        **{f"latency_{part}_ms_p{q}": (float(np.percentile(rec[f"{part}_latencies_ms"], q))
+                                       if rec[f"{part}_latencies_ms"] else float("nan"))
+           for part in ("mask", "estimator") for q in (50, 95)},
         # every frame set the player sent that the estimator did not process: replaced while the tracker
         # was busy (the estimator's own count, "dropped_by_estimator"), or lost before it (best-effort image
         # and mask subscriptions drop what a busy segmentation/estimator cannot take; the estimator's last

@@ -66,6 +66,9 @@ def register(sub) -> None:
                    help="mesh subject: slim_woman (1.60 m), average_man (1.78 m, default), heavy_man (1.88 m), "
                         "random (drawn from --seed)")
     p.add_argument("--skirt", action="store_true", help="mesh subject wears MakeHuman's (CC0) helper skirt")
+    p.add_argument("--stretch-mesh", action="store_true",
+                   help="BVH on a mesh, a diagnostic: the mesh follows the BVH's own joints, each segment stretched to "
+                        "the BVH's bone length (default: the BVH's motion on the subject's own skeleton)")
     p.add_argument("--masks", action="store_true", help="also write the exact silhouettes on /mocap/cam<i>/mask")
     p.add_argument("--compression", choices=("zstd", "lz4", "none"), default="zstd", help="MCAP chunk compression")
     p.add_argument("--chunk-mb", type=float, default=32.0, metavar="MB",
@@ -178,7 +181,8 @@ def write_bag(args) -> dict:
     show = not args.no_progress
     clip = make_clip(args.motion, dof=args.model, fps=args.fps, start_s=args.start_s, duration_s=args.duration_s,
                      seed=args.seed, bvh_scale=args.bvh_scale, body=getattr(args, "body", "mesh"),
-                     subject=getattr(args, "subject", "average_man"), skirt=getattr(args, "skirt", False))
+                     subject=getattr(args, "subject", "average_man"), skirt=getattr(args, "skirt", False),
+                     stretch=getattr(args, "stretch_mesh", False))
     renderer = make_renderer(clip, rig, seed=args.seed, noise=args.noise, occluders=args.occluders)
     V = len(rig)
     frames_total = args.empty_frames + clip.n_frames

@@ -35,10 +35,11 @@ from scipy.spatial import cKDTree
 
 from ..body import BodyModel, capsule_endpoints, forward_kinematics
 from ..vision import Camera, capsule_data, render_labels_at, render_mask
+from ..vision.render import pixel_rays
 from ._checks import EnergyError, _check_cameras, _check_model, _check_poses
 from .silhouette import mask_problem
 
-__all__ = ["CorrespondenceEnergy", "plucker_lines", "model_contour_points", "capsule_frames", "mask_contour_pixels",
+__all__ = ["CorrespondenceEnergy", "plucker_lines", "pixel_plucker_lines", "model_contour_points", "capsule_frames", "mask_contour_pixels",
            "capsule_contour_points"]
 
 
@@ -65,6 +66,15 @@ def plucker_lines(camera: Camera, pixels: Any) -> tuple[np.ndarray, np.ndarray]:
     c, d = camera.ray(uv[:, 0], uv[:, 1])
     d = np.asarray(d).reshape(-1, 3)
     return d, np.cross(c, d)
+
+
+def pixel_plucker_lines(camera: Camera, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`plucker_lines` of integer pixels ``(m, 2)`` ``(u, v)`` inside the image, read from the renderer's
+    per-camera ray table (:func:`~isa_mocap_ros.vision.render.pixel_rays`: :meth:`Camera.ray` at every pixel centre,
+    built once per camera) instead of undistorting them again: the same numbers."""
+    o, dirs, _ = pixel_rays(camera)
+    d = dirs[pixels[:, 1] * camera.width + pixels[:, 0]]
+    return d, np.cross(o, d)
 
 
 def capsule_frames(model: BodyModel) -> np.ndarray:

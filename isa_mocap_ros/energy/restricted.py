@@ -75,21 +75,31 @@ class RestrictedSilhouetteEnergy:
             idx = np.asarray(coords)
         except (TypeError, ValueError) as exc:
             raise EnergyError(f"coords: expected integer indices in [0, {D}), received {coords!r}") from exc
-        if idx.ndim != 1 or (idx.size and not np.issubdtype(idx.dtype, np.integer)):
-            raise EnergyError(f"coords: expected a 1-D sequence of integer indices in [0, {D}), received {coords!r}")
-        idx = idx.astype(np.int64)
-        if idx.size and (idx.min() < 0 or idx.max() >= D):
-            raise EnergyError(f"coords: expected indices in [0, {D}), received {idx.tolist()}")
-        if np.unique(idx).size != idx.size:
-            raise EnergyError(f"coords: expected no repeated index, received {idx.tolist()}")
+        # the coordinates' checks and structure once per distinct coords array (the tracker restricts ~11 times a
+        # frame, to the same few coordinate sets)
+        raw = (idx.dtype.str, idx.shape, idx.tobytes()) if idx.dtype.kind in "iu" else None
+        hit = energy.restriction_cache.get(raw) if raw is not None else None
+        if hit is None:
+            if idx.ndim != 1 or (idx.size and not np.issubdtype(idx.dtype, np.integer)):
+                raise EnergyError(f"coords: expected a 1-D sequence of integer indices in [0, {D}), received {coords!r}")
+            idx = idx.astype(np.int64)
+            if idx.size and (idx.min() < 0 or idx.max() >= D):
+                raise EnergyError(f"coords: expected indices in [0, {D}), received {idx.tolist()}")
+            if np.unique(idx).size != idx.size:
+                raise EnergyError(f"coords: expected no repeated index, received {idx.tolist()}")
+            srt = np.sort(idx)
+            key = tuple(srt.tolist())
+            st = energy.restriction_cache.get(key)
+            if st is None:
+                st = energy.restriction_cache[key] = _restriction_structure(energy, srt)
+            hit = (srt, st)
+            if raw is not None:
+                energy.restriction_cache[raw] = hit
         self.energy = energy
         self.x_base = x
-        self.coords = np.sort(idx)
+        self.coords = hit[0].copy()
         self._frame = energy.frame_data
-        key = tuple(self.coords.tolist())
-        st = energy.restriction_cache.get(key)
-        if st is None:
-            st = energy.restriction_cache[key] = _restriction_structure(energy, self.coords)
+        st = hit[1]
         (self._fixed, self._fixed_mask, self._fk_joints, self._cam_joints, self.moving_capsules, self._mov_ci,
          self._moving_ci, moving, structural_full) = st
         self.full = energy.method == "exact" or structural_full

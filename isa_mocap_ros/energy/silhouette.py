@@ -271,8 +271,8 @@ class SilhouetteEnergy:
         self.n_evals = 0
         self._used: list[int] = []
         self._frame: dict | None = None
-        # coords -> what a restriction depends on besides pose and masks (RestrictedSilhouetteEnergy's cache;
-        # its presence marks an energy that restricted.py can restrict, which does not import this module)
+        # RestrictedSilhouetteEnergy's cache (coords -> what a restriction needs besides pose and masks; a coords
+        # array's dtype, shape, bytes -> (sorted coords, that)); it marks an energy restricted.py can restrict
         self.restriction_cache: dict = {}
         if masks is not None:
             self.set_masks(masks)

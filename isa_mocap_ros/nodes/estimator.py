@@ -130,6 +130,10 @@ class EstimatorNode(EstimatorIntake, Node):
             self, "startup_catch_up_ms", 1000.0, "startup_catch_up: a caught-up set that waited longer than this, "
             "or no shorter than the one before (the tracker does not gain on the stream), ends the catch-up (the "
             "sets still waiting are dropped)", lo=0.0, hi=60_000.0)
+        self.startup_catch_up_stale_ms = declare(
+            self, "startup_catch_up_stale_ms", 0.0, "startup_catch_up: a held set that already waited longer than this "
+            "when its turn comes is dropped instead, the oldest first (its estimate would come too late, and tracking "
+            "it would make the newer sets late too); the newer ones are caught up (0 = never)", lo=0.0, hi=60_000.0)
         degrade = declare(self, "degrade", True, "real time: while the tracker does not keep up with the frame sets, "
                           "lower its budget (contour stage off, then fewer evaluations) before dropping sets, and "
                           "return to the full budget when it catches up (isa_mocap_ros.tracking.load; lockstep: never)")
@@ -170,7 +174,7 @@ class EstimatorNode(EstimatorIntake, Node):
             evals=self.tracker_config.search.evals, heading_sets=self.tracker_config.heading.init_confirm_frames,
             lockstep=self.lockstep, backlog=self.backlog, catch_up_ms=self.catch_up_ms,
             startup=StartupCatchUp(sets=self.startup_catch_up, evals=degrade_min_evals,
-                                   limit_ms=self.startup_catch_up_ms),
+                                   limit_ms=self.startup_catch_up_ms, stale_ms=self.startup_catch_up_stale_ms),
             governor=LoadGovernor(LoadSettings(
                 evals=self.tracker_config.search.evals, period_s=self.frame_period_s, headroom=degrade_headroom,
                 min_evals=degrade_min_evals)) if degrade else None)
@@ -310,7 +314,7 @@ class EstimatorNode(EstimatorIntake, Node):
             with self._cv:
                 # the oldest waiting set, with the sets after it held in sequence where the tracker's
                 # initialization or a heading re-check needs them (tracking/realtime.py)
-                item = self.schedule.take(self.tracker)
+                item = self.schedule.take(self.tracker, waited_ms=lambda it: (time.monotonic() - it[1]) * 1e3)
                 if item is None:
                     # idle: the per-camera data of the cameras the camera_infos announce, built before their
                     # first frame set needs them (tracking/camera_data.py)

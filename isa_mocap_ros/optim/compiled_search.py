@@ -33,16 +33,17 @@ from isa_mocap_ros.optim import _fast, _fast_so3
 from isa_mocap_ros.optim._base import GenerationInfo, Result
 from isa_mocap_ros.optim.isa import C_SCALES, VARIANCE_READINGS, covariance_constant
 
-__all__ = ["supported", "run_hisa", "HisaRun", "supported_flat", "run_isa", "rotation_mean"]
+__all__ = ["supported", "run_hisa", "HisaRun", "supported_flat", "run_isa", "rotation_mean", "register_dependent_cache"]
 
 
 #: The modules whose compiled functions the functions here call (their hashes key this module's numba cache).
 DEPENDENCIES = (_k, _rk, _kp, _kinematics, _fast, _fast_so3)
 
 
-def _register_dependent_cache() -> None:
-    """Make numba's on-disk cache of this module's functions depend on the files whose compiled
-    functions they call as well. numba keys a cached function on its own source file only, so after an
+def register_dependent_cache(path: str = __file__, extra=()) -> None:
+    """Make numba's on-disk cache of the functions of the module at ``path`` (default: this one; also
+    :mod:`.compiled_stage`) depend on the files whose compiled functions they call as well
+    (:data:`DEPENDENCIES`, this module and the modules ``extra``). numba keys a cached function on its own source file only, so after an
     edit (or a ``git pull``) of the energy kernels or the optimizer helpers the functions here would
     load their old machine code, kernels included. A locator placed first among numba's asks the
     locator numba would have chosen for everything but the stamp, which it extends with the
@@ -63,10 +64,11 @@ def _register_dependent_cache() -> None:
     impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
     if impl is None or not hasattr(caching, "_CacheLocator"):                # pragma: no cover
         return
-    deps = tuple(m.__file__ for m in DEPENDENCIES)
-    dep_names = " ".join(m.__name__ for m in DEPENDENCIES)
+    mods = DEPENDENCIES + tuple(extra)
+    here = os.path.abspath(path)
+    deps = tuple(m.__file__ for m in mods) + ((os.path.abspath(__file__),) if here != os.path.abspath(__file__) else ())
+    dep_names = " ".join(m.__name__ for m in mods)
     dep_tag = hashlib.sha256(dep_names.encode()).hexdigest()[:8]
-    here = os.path.abspath(__file__)
 
     class _DependentLocator(caching._CacheLocator):
         def __init__(self, inner):
@@ -102,11 +104,12 @@ def _register_dependent_cache() -> None:
                         return cls(inner)
             return None
 
-    if not any(getattr(c, "__name__", "") == "_DependentLocator" for c in impl._locator_classes):
+    if not any(getattr(c, "_isa_mocap_path", None) == here for c in impl._locator_classes):
+        _DependentLocator._isa_mocap_path = here
         impl._locator_classes.insert(0, _DependentLocator)
 
 
-_register_dependent_cache()
+register_dependent_cache()
 
 #: Inner ISA parameters this path implements (others: the protocol).
 _PARAMS = {"n_particles", "kernel", "schedule", "target_ess", "c", "c_scale", "rho", "variance", "resampling"}

@@ -50,9 +50,7 @@ from scipy.spatial import cKDTree
 from ..body import BodyModel
 from ..body import capsule_endpoints, forward_kinematics
 from ..body.kinematics import descendant_mask, frames_and_axes, joint_frames
-from ..energy.correspondence import mask_contour_pixels, capsule_contour_points, capsule_frames, plucker_lines
-from ..geometry import exp_so3, log_so3
-from ..geometry.so3 import nearest_rotvec
+from ..energy.correspondence import mask_contour_pixels, capsule_contour_points, capsule_frames, pixel_plucker_lines
 from ..vision import capsule_data, render_mask
 from ..vision.outline import camera_arrays, fill_capsules
 from ..vision.render import ray_tiles
@@ -95,10 +93,11 @@ def _check_positive(name: str, value, *, integer: bool = False, zero: bool = Fal
 
 
 @numba.njit(cache=True)
-def _normal_equations(R, P, axes, frames, local, n, m, dof_joint, below):  # pragma: no cover - compiled
+def _normal_equations(R, P, axes, frames, local, n, m, dof_joint, below, use):  # pragma: no cover - compiled
     """``JᵀJ (D, D)`` and ``Jᵀe (D,)`` of the residuals ``e_k = x_k × n_k − m_k`` (13.30) with the
     analytic Jacobian (root translation: identity; root rotation: left perturbation about the root;
-    a joint angle: ``a_d × (x − c_d)`` for the points below its joint), rows with zero columns skipped."""
+    a joint angle: ``a_d × (x − c_d)`` for the points below its joint), rows with zero columns skipped; only the
+    coordinates with ``use[d]`` (the others' rows and columns stay zero; those computed are the same numbers)."""
     D = axes.shape[0]
     A = np.zeros((D, D))
     g = np.zeros(D)
@@ -115,6 +114,8 @@ def _normal_equations(R, P, axes, frames, local, n, m, dof_joint, below):  # pra
         e2 = X[0] * ny - X[1] * nx - m[k, 2]
         na = 0
         for d in range(D):
+            if not use[d]:
+                continue
             if d < 3:                               # root translation: the unit vector e_d
                 dx, dy, dz = 1.0 if d == 0 else 0.0, 1.0 if d == 1 else 0.0, 1.0 if d == 2 else 0.0
             else:
@@ -138,13 +139,14 @@ def _normal_equations(R, P, axes, frames, local, n, m, dof_joint, below):  # pra
             na += 1
         for a in range(na):
             da = act[a]
-            g[da] += G[da, 0] * e0 + G[da, 1] * e1 + G[da, 2] * e2
-            for b in range(a, na):
+            g0, g1, g2 = G[da, 0], G[da, 1], G[da, 2]
+            g[da] += g0 * e0 + g1 * e1 + g2 * e2
+            for b in range(a, na):              # the upper triangle (act ascends); mirrored below
                 db = act[b]
-                v = G[da, 0] * G[db, 0] + G[da, 1] * G[db, 1] + G[da, 2] * G[db, 2]
-                A[da, db] += v
-                if db != da:
-                    A[db, da] += v
+                A[da, db] += g0 * G[db, 0] + g1 * G[db, 1] + g2 * G[db, 2]
+    for a in range(D):                          # the lower triangle took the same sums in the same order
+        for b in range(a + 1, D):
+            A[b, a] = A[a, b]
     return A, g
 
 
@@ -178,6 +180,11 @@ class ContourFit:
         self.damping = _check_positive("damping", damping, zero=True)
         self._below = descendant_mask(model)                 # (J, J): [j, f] frame f at or below joint j
         self._dof_joint = np.asarray(model.dof_joint)
+        self._all = np.ones(model.dof, np.bool_)              # _normal_equations over every coordinate
+        self._diag = np.diag_indices(model.dof)
+        self._lower = np.ascontiguousarray(model.lower, dtype=np.float64)
+        self._upper = np.ascontiguousarray(model.upper, dtype=np.float64)
+        self._Rc = np.empty((3, 3))                           # step's scratch: the composed root rotation
         self._cap_frames = capsule_frames(model)
         self._radii = np.ascontiguousarray(model.capsule_radii, dtype=np.float64)
         self._images: list = [None] * len(self.cameras)
@@ -218,7 +225,7 @@ class ContourFit:
             contour_kernel.mark_pixels(index, pix, True)
             # the contour pixels, their KD-tree (the reference matching; built when first asked for), the
             # Plücker line of each (13.30) and the integer pixels, once per frame
-            self._images.append([c, None, *plucker_lines(cam, c), pix])
+            self._images.append([c, None, *pixel_plucker_lines(cam, pix), pix])
         return sum(c is not None for c in self._images)
 
     def _tree(self, v: int):
@@ -338,22 +345,29 @@ class ContourFit:
         coordinates ``coords`` (default all; the others held); ``fk``: ``joint_frames(model, x, want_axes=True)``
         if known."""
         model = self.model
+        x = np.ascontiguousarray(x, dtype=np.float64)
         R, P, axes = joint_frames(model, x[None], want_axes=True) if fk is None else fk
         f64 = [np.ascontiguousarray(a, dtype=np.float64) for a in (local, n, m)]
+        use = self._all
+        if coords is not None:
+            use = np.zeros(model.dof, np.bool_)
+            use[coords] = True
         A, g = _normal_equations(R[0], P[0], axes[0], np.ascontiguousarray(frames, dtype=np.int64), *f64,
-                                 self._dof_joint, self._below)
+                                 self._dof_joint, self._below, use)
         D = model.dof
-        A[np.diag_indices(D)] *= 1.0 + self.damping
-        A[np.diag_indices(D)] += 1e-9
+        A[self._diag] *= 1.0 + self.damping
+        A[self._diag] += 1e-9
         if coords is None:
             delta = -np.linalg.solve(A, g)
         else:
             delta = np.zeros(D)
             delta[coords] = -np.linalg.solve(A[np.ix_(coords, coords)], g[coords])
         out = x + delta
-        w = log_so3(exp_so3(delta[3:6]) @ exp_so3(x[3:6]))
-        out[3:6] = nearest_rotvec(w, x[3:6])
-        return np.clip(out, model.lower, model.upper)
+        # the root rotation perturbed on the left, log(exp(δ_r) exp(r)) nearest the old one, then the limits
+        # (geometry.so3's numbers, compiled; the logarithm's angle by numpy's arctan2)
+        s, c = contour_kernel.compose_root(x, delta, self._Rc)
+        contour_kernel.finish_step(out, x, self._Rc, float(np.arctan2(s, c)), self._lower, self._upper)
+        return out
 
     def fit(self, x: Any, *, iterations: int, coords: Any = None,
             render_each: bool = True) -> tuple[np.ndarray, ContourFitInfo]:

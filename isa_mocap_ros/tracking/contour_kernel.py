@@ -8,6 +8,9 @@ a dozen array operations each:
 * :func:`back_project`: the hit point ``X = o + (z / (d·ẑ)) d`` of each contour pixel's ray (``z`` the
   renderer's camera-frame depth, ``d`` the pixel's unit ray, ``ẑ`` the optical axis), stored in the frame
   of the joint that carries its capsule: ``R_fᵀ (X − p_f)``;
+* :func:`compose_root`, :func:`finish_step`: the step's new pose ``x + δ`` with the root rotation composed on the
+  left, ``log(exp(δ_r) exp(r))`` nearest the old one, clipped to the limits (:mod:`isa_mocap_ros.geometry.so3`'s
+  numbers: :mod:`~isa_mocap_ros.geometry.so3_kernel`; the logarithm's angle is numpy's ``arctan2`` between the two);
 * :func:`match`: each model point moved with its joint (``X = p_f + R_f l``), projected with the lens
   distortion (as :meth:`~isa_mocap_ros.vision.Camera.project`), paired with the closest image contour
   pixel within ``max_px`` (an exact search of the integer pixels around it in an index image that holds
@@ -20,10 +23,11 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from ..geometry.so3_kernel import exp_into, log_args, log_into, matmul3, nearest_rotvec_into
 from ..vision.outline import project_point
 from ..vision.render import raycast_at
 
-__all__ = ["back_project", "contour_points", "match", "mark_pixels"]
+__all__ = ["back_project", "contour_points", "match", "mark_pixels", "compose_root", "finish_step"]
 
 
 @numba.njit(cache=True)
@@ -127,3 +131,28 @@ def match(frames, local, R, P, cam_R, cam_t, K4, D8, hasd, index, max_px, lines_
             out_d[k] = np.sqrt(best)
             k += 1
     return k
+
+
+@numba.njit(cache=True)
+def compose_root(x, delta, Rc):  # pragma: no cover - compiled
+    """``Rc ← exp_so3(δ[3:6]) exp_so3(x[3:6])`` (the root rotation perturbed on the left); returns
+    :func:`~isa_mocap_ros.geometry.so3_kernel.log_args` of it (the caller takes ``θ = numpy.arctan2(s, c)``)."""
+    A = np.empty((3, 3))
+    B = np.empty((3, 3))
+    exp_into(delta[3], delta[4], delta[5], A)
+    exp_into(x[3], x[4], x[5], B)
+    matmul3(A, B, Rc)
+    return log_args(Rc)
+
+
+@numba.njit(cache=True)
+def finish_step(out, x, Rc, theta, lower, upper):  # pragma: no cover - compiled
+    """``out`` (``x + δ``) in place: its root rotation ``nearest_rotvec(log_so3(Rc), x[3:6])`` (``theta``: the
+    logarithm's angle), then clipped to ``[lower, upper]``."""
+    w = np.empty(3)
+    r = np.empty(3)
+    log_into(Rc, theta, w)
+    nearest_rotvec_into(w, x[3:6], r)
+    out[3], out[4], out[5] = r[0], r[1], r[2]
+    for i in range(out.size):
+        out[i] = min(max(out[i], lower[i]), upper[i])

@@ -41,6 +41,9 @@ class FrameContext:
         The filtered masks: what the energy scores and the contour stage fits.
     prediction : (D,) ndarray or None
         The frame's damped prediction, once made (:func:`.frame_prediction.prediction`).
+    prediction_joints : (J, 3) ndarray or None
+        Its joint positions, once computed (:func:`.frame_prediction.prediction_joints`: the gate's, the hull
+        filter's and the view weights').
     weights : (V,) ndarray or None
         Eq. 5's view weights (``TrackerConfig.objective.view_weights``), None = views counted alike.
     after_gap : bool
@@ -59,6 +62,7 @@ class FrameContext:
     raw_masks: list | None = None
     masks: list | None = None
     prediction: np.ndarray | None = None
+    prediction_joints: np.ndarray | None = None
     weights: np.ndarray | None = None
     after_gap: bool = False
     t0: float = 0.0

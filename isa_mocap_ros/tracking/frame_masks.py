@@ -111,32 +111,35 @@ def filter_masks(tr, ctx) -> None:
             or not any(m is not None for m in usable):
         return
     pred = frame_prediction.prediction(tr, ctx)
+    joints = frame_prediction.prediction_joints(tr, ctx)
     if cfg.masks.gate_margin_px > 0:
-        usable = gate(tr, usable, pred, ctx.notes)
+        usable = gate(tr, usable, pred, ctx.notes, joints)
     if cfg.masks.hull_filter:
-        usable = hull(tr, usable, pred, ctx.notes)
+        usable = hull(tr, usable, pred, ctx.notes, joints)
     ctx.masks = tr.track.masks_now = usable
 
 
-def gate(tr, usable: list, pred: np.ndarray, notes: list[str]) -> list:
-    """The usable masks gated around ``pred`` (:func:`.gate.gate_masks`); views left empty become None."""
-    g = gate_masks(usable, tr.cameras, tr.model, pred, tr.config.masks.gate_margin_px)
+def gate(tr, usable: list, pred: np.ndarray, notes: list[str], joints=None) -> list:
+    """The usable masks gated around ``pred`` (:func:`.gate.gate_masks`; ``joints``: its joint positions if known);
+    views left empty become None."""
+    g = gate_masks(usable, tr.cameras, tr.model, pred, tr.config.masks.gate_margin_px, joints=joints)
     return _noted(g, notes, "the gate", lambda total: f"all {total} foreground pixels farther than "
                   f"{tr.config.masks.gate_margin_px} px from the predicted silhouette")
 
 
-def hull(tr, usable: list, pred: np.ndarray, notes: list[str]) -> list:
+def hull(tr, usable: list, pred: np.ndarray, notes: list[str], joints=None) -> list:
     """The usable masks through the visual-hull filter (:func:`.hull.hull_filter`) in the box of
-    ``pred``, keeping ``pred``'s silhouette grown by ``hull_keep_px``; views left empty become None."""
+    ``pred`` (``joints``: its joint positions if known), keeping ``pred``'s silhouette grown by ``hull_keep_px``;
+    views left empty become None."""
     cfg = tr.config
     if sum(m is not None for m in usable) < 2:
         return usable
     idx = [v for v, m in enumerate(usable) if m is not None]
     keep: list = [None] * len(usable)
     for v, s in zip(idx, predicted_silhouettes(tr.model, [tr.cameras[v] for v in idx], pred,
-                                               margin_px=cfg.masks.hull_keep_px)):
+                                               margin_px=cfg.masks.hull_keep_px, joints=joints)):
         keep[v] = s
-    g = hull_filter(usable, tr.cameras, pose_box(tr.model, pred, cfg.masks.hull_pad_m),
+    g = hull_filter(usable, tr.cameras, pose_box(tr.model, pred, cfg.masks.hull_pad_m, joints=joints),
                     dilate_px=cfg.masks.hull_dilate_px, keep=keep)
     return _noted(g, notes, "the hull filter", lambda total: "no foreground pixel confirmed by the other views")
 

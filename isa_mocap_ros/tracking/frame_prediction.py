@@ -10,6 +10,7 @@ import numpy as np
 from isa_mocap_ros.geometry import nearest_rotvec
 
 from .config import ROOT_VELOCITY_GAIN
+from .gate import pose_joints
 from .init import InitError, root_from_masks
 from .predict import frames_kwargs
 
@@ -19,6 +20,15 @@ def prediction(tr, ctx) -> np.ndarray:
     if ctx.prediction is None:
         ctx.prediction = predict(tr, ctx)
     return ctx.prediction
+
+
+def prediction_joints(tr, ctx) -> np.ndarray:
+    """The joint positions ``(J, 3)`` of the frame's prediction (:func:`.gate.pose_joints`), computed once per frame
+    (``ctx.prediction_joints``) for the mask gate, the hull filter (its box and kept silhouette) and the view
+    weights."""
+    if ctx.prediction_joints is None:
+        ctx.prediction_joints = pose_joints(tr.model, prediction(tr, ctx))
+    return ctx.prediction_joints
 
 
 def predict(tr, ctx) -> np.ndarray:

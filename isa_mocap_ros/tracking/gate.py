@@ -61,23 +61,12 @@ class GateResult:
         return np.where(self.total_px > 0, self.lost_px / np.maximum(self.total_px, 1), 0.0)
 
 
-#: The last pose's joint positions: ``(model, clipped pose's bytes, P (J, 3))`` (:func:`pose_joints`).
-_LAST_JOINTS: list = [None]
-
-
 def pose_joints(model, pose) -> np.ndarray:
-    """Joint positions ``(J, 3)`` of ``model`` at ``pose`` clipped into its limits (read-only). The last pose's are
-    kept: a frame's gate, hull filter (its box and kept silhouette) and view weights all take the frame's
-    prediction, so its forward kinematics runs once."""
+    """Joint positions ``(J, 3)`` of ``model`` at ``pose`` clipped into its limits: what the gate, the hull filter
+    (its box and kept silhouette) and the view weights draw from. The tracker computes them once per frame for the
+    frame's prediction (:func:`.frame_prediction.prediction_joints`) and passes them as ``joints=``."""
     x = np.clip(np.asarray(pose, dtype=float), model.lower, model.upper)
-    key = x.tobytes()
-    hit = _LAST_JOINTS[0]
-    if hit is not None and hit[0] is model and hit[1] == key:
-        return hit[2]
-    P = joint_positions(model, x[None])[0]
-    P.setflags(write=False)
-    _LAST_JOINTS[0] = (model, key, P)
-    return P
+    return joint_positions(model, x[None])[0]
 
 
 def _disc(margin_px: int) -> np.ndarray:
@@ -87,9 +76,9 @@ def _disc(margin_px: int) -> np.ndarray:
 
 
 def predicted_silhouettes(model, cameras: Sequence, pose, *, margin_px: int = 0,
-                          exact: bool = False) -> list[np.ndarray]:
+                          exact: bool = False, joints=None) -> list[np.ndarray]:
     """The model's silhouette at ``pose`` in each camera, ``(H, W)`` uint8 (255 inside), grown by
-    ``margin_px`` pixels.
+    ``margin_px`` pixels (``joints``: :func:`pose_joints` of ``pose`` if known).
 
     ``exact=False`` (the gate's): each capsule filled as the hull of its projected end discs (radius
     ``f r / z + margin``) by scanlines (:func:`isa_mocap_ros.vision.outline.fill_capsules`, one compiled call
@@ -101,7 +90,7 @@ def predicted_silhouettes(model, cameras: Sequence, pose, *, margin_px: int = 0,
     """
     import cv2
 
-    E = pose_joints(model, pose)[np.asarray(model.capsules)]     # (C, 2, 3)
+    E = (pose_joints(model, pose) if joints is None else joints)[np.asarray(model.capsules)]     # (C, 2, 3)
     radii = np.ascontiguousarray(model.capsule_radii, dtype=float)   # (C, 2)
     out = []
     if exact:
@@ -119,9 +108,10 @@ def predicted_silhouettes(model, cameras: Sequence, pose, *, margin_px: int = 0,
     return out
 
 
-def visible_shares(model, cameras: Sequence, pose, *, scale: float = 0.25) -> np.ndarray:
+def visible_shares(model, cameras: Sequence, pose, *, scale: float = 0.25, joints=None) -> np.ndarray:
     """``(V,)`` share of the model's silhouette at ``pose`` that falls inside each camera's image,
-    in [0, 1] (0 when the model projects nowhere, e.g. behind the camera).
+    in [0, 1] (0 when the model projects nowhere, e.g. behind the camera; ``joints``: :func:`pose_joints` of
+    ``pose`` if known).
 
     The silhouette of :func:`predicted_silhouettes` is drawn at ``scale`` of the image's size on a
     canvas three times as wide and high, the image in its middle; the share is the drawn area
@@ -131,7 +121,7 @@ def visible_shares(model, cameras: Sequence, pose, *, scale: float = 0.25) -> np
     """
     bigs = [_share_canvas(cam, scale) for cam in cameras]
     out = np.zeros(len(cameras))
-    for v, img in enumerate(predicted_silhouettes(model, bigs, pose)):
+    for v, img in enumerate(predicted_silhouettes(model, bigs, pose, joints=joints)):
         total = np.count_nonzero(img)
         if total:
             w, h = img.shape[1] // 3, img.shape[0] // 3
@@ -176,7 +166,7 @@ def view_masks(masks: Sequence, cameras: Sequence, name: str = "masks") -> list:
 
 
 def gate_masks(masks: Sequence, cameras: Sequence, model, pose, margin_px: int, *,
-               rule: str = "components") -> GateResult:
+               rule: str = "components", joints=None) -> GateResult:
     """Keep the foreground near the model's silhouette at ``pose`` (see the module docstring).
 
     Parameters
@@ -193,6 +183,8 @@ def gate_masks(masks: Sequence, cameras: Sequence, model, pose, margin_px: int, 
     rule : {"components", "pixels"}
         ``"components"``: keep every 8-connected foreground component touching the dilated
         silhouette, whole; ``"pixels"``: keep the foreground inside the dilated silhouette.
+    joints : (J, 3) ndarray, optional
+        :func:`pose_joints` of ``pose`` if known.
 
     Returns
     -------
@@ -222,7 +214,8 @@ def gate_masks(masks: Sequence, cameras: Sequence, model, pose, margin_px: int, 
     if margin_px == 0 or not any(f is not None and t > 0 for f, t in zip(fg, total)):
         return GateResult([None if f is None else f.astype(np.uint8) * np.uint8(255) for f in fg],
                           np.zeros(V, np.int64), total)
-    sil = predicted_silhouettes(model, [c for c, f in zip(cameras, fg) if f is not None], x, margin_px=int(margin_px))
+    sil = predicted_silhouettes(model, [c for c, f in zip(cameras, fg) if f is not None], x, margin_px=int(margin_px),
+                                joints=joints)
     out, lost, j = [], np.zeros(V, np.int64), 0
     for v, f in enumerate(fg):
         if f is None:

@@ -19,6 +19,13 @@ from .plan import FrameBudget
 from .config import (UNDECIDED_RECHECK_FRAMES, TRAVEL_FRAMES, TRAVEL_MIN_M_PER_FRAME,
                      TRAVEL_BACKWARDS_DEG, TRAVEL_RECHECK_FRAMES, FrameResult)
 
+#: The initialization's heading-check rival must head within this many degrees of the winner's opposite (front and
+#: back are what the check tells apart); a rival further off, the best opposite run of the first frame's pruned runs
+#: ended side-on, is searched for again from the standing variants at the winner's heading + 180 deg (the re-check's
+#: search) and the lower-energy rival of the two is checked. 35-occluder mesh bag, slim woman: 3 of 8 seeds kept a
+#: backwards winner over a rival 46-48 deg off the opposite for 6 frames (docs/history/issue33_mesh_accuracy_s29.md).
+RIVAL_OPPOSITE_DEG = 30.0
+
 
 def heading_recheck_pending(tr, masks: Sequence) -> bool:
     """True when stepping ``masks`` next may start a heading re-check (more views with foreground
@@ -37,6 +44,38 @@ def heading_recheck_pending(tr, masks: Sequence) -> bool:
         return False
     usable, _ = frame_masks.check_masks(tr, masks)
     return sum(m is not None for m in usable) > tr.heading_check.views
+
+
+def init_rival(tr, ctx, runs: list, winner, x: np.ndarray, energy: float, notes: list[str]) -> tuple:
+    """The heading check's rival after the automatic initialization (``TrackerConfig.heading.init_confirm_frames``):
+    :func:`.first_frame.pick_rival` of the initialized frame ``ctx``'s ``runs`` (``winner`` the result of the
+    winner's pose ``x``, energy ``energy``); when that rival heads more than :data:`RIVAL_OPPOSITE_DEG` away from the
+    winner's opposite, the frame's search from the standing variants at the opposite (stream 8, as
+    :func:`recheck_heading`'s) gives another and the lower-energy one is the rival. Returns ``(rival start or
+    None, evaluations spent here)``; a replacement is noted in ``notes``."""
+    from .init import wrap_angle, yaw_of, standing_poses
+
+    rival = first_frame.pick_rival(tr, runs, winner, x, energy)
+    if rival is None:
+        return None, 0
+    yaw = yaw_of(x[3:6])
+    off = math.degrees(abs(float(wrap_angle(yaw_of(rival[0][3:6]) - yaw - np.pi))))
+    if off <= RIVAL_OPPOSITE_DEG:
+        return rival, 0
+    starts, _ = standing_poses(tr.model, x[:3], [yaw + np.pi])
+    try:
+        turned, n = first_frame.initial_runs(tr, ctx, list(starts), None, FrameBudget(ctx.budget.evals), stream=(8,))
+    except ValueError as exc:
+        notes.append(f"heading check: the rival heads {off:.0f} deg off the winner's opposite; its search from the "
+                     f"opposite failed ({exc})")
+        return rival, 0
+    xr, er = min((tr.final_pose(r) for _, r, _ in turned), key=lambda t: t[1])
+    turned_away = abs(float(wrap_angle(yaw_of(xr[3:6]) - yaw))) > np.pi / 2
+    better = turned_away and np.isfinite(er) and er < rival[1]
+    notes.append(f"heading check: the rival heads {off:.0f} deg off the winner's opposite ({rival[1]:.4g}); a search "
+                 f"from the opposite ended {er:.4g}{'' if turned_away else ' turned back'}"
+                 f"{' and is the rival' if better else '; kept the first'}")
+    return ((xr, er, energy) if better else rival), n
 
 
 def start_rival(tr, frame_index: int) -> None:

@@ -52,9 +52,10 @@ except ImportError:  # pragma: no cover
     numba = None
 
 
-def pose_box(model, pose, pad: float) -> tuple[np.ndarray, np.ndarray]:
-    """Axis-aligned box ``(lo, hi)`` of the model's joints at ``pose``, grown by ``pad`` metres."""
-    P = pose_joints(model, pose)
+def pose_box(model, pose, pad: float, *, joints=None) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned box ``(lo, hi)`` of the model's joints at ``pose`` (``joints``: their positions
+    :func:`.gate.pose_joints` if known), grown by ``pad`` metres."""
+    P = pose_joints(model, pose) if joints is None else joints
     return P.min(axis=0) - pad, P.max(axis=0) + pad
 
 

@@ -143,7 +143,9 @@ def _blobs(F: dict, cameras: Sequence, lo: np.ndarray, hi: np.ndarray, voxel_m: 
     UV = project_batch([cameras[v] for v in views], G[None])[:, 0]       # compiled: no BLAS call per view
     for j, v in enumerate(views):
         cam = cameras[v]
-        _carve(G, UV[j], np.ascontiguousarray(cam.R[2], dtype=np.float64), float(cam.t[2]), cam.width, cam.height,
+        # a writable copy of the optical axis whatever the camera's R (a view of a read-only R, as the rigs' cameras
+        # have, is typed apart: numba then loaded a second compiled _carve on the first real frame after the warm-up)
+        _carve(G, UV[j], np.array(cam.R[2], dtype=np.float64), float(cam.t[2]), cam.width, cam.height,
                np.ascontiguousarray(F[v]), seen, denied)
     allowed = np.where(seen >= 3, misses, 0)
     keep = (seen >= min_views) & (denied <= allowed)

@@ -221,8 +221,10 @@ class StartupCatchUp:
     with ``evals`` evaluations and no contour stage (:meth:`budget`), a fraction of a frame period each, so it
     gains on the stream, until none waits (:meth:`after`). It gives up, and the rest is dropped, when a
     caught-up set waited longer than ``limit_ms`` or no shorter than the caught-up set before it: a tracker
-    that does not gain on the stream (a loaded machine) would only fall further behind. A pure policy: the
-    caller passes the waiting count and the times.
+    that does not gain on the stream (a loaded machine) would only fall further behind. With ``stale_ms`` > 0
+    a held set that already waited longer than that when its turn comes is dropped instead (:meth:`stale`, the
+    oldest first): its estimate would come too late to be of use, and tracking it would make the newer sets
+    late too; the newer ones are caught up. A pure policy: the caller passes the waiting count and the times.
 
     Examples
     --------
@@ -235,11 +237,12 @@ class StartupCatchUp:
     False
     """
 
-    def __init__(self, *, sets: int, evals: int, limit_ms: float) -> None:
+    def __init__(self, *, sets: int, evals: int, limit_ms: float, stale_ms: float = 0.0) -> None:
         check_number("sets", sets, lo=0, integer=True, error=LoadError)
         check_number("evals", evals, lo=1, integer=True, error=LoadError)
         check_number("limit_ms", limit_ms, lo=0.0, error=LoadError)
-        self.sets, self.evals, self.limit_ms = int(sets), int(evals), float(limit_ms)
+        check_number("stale_ms", stale_ms, lo=0.0, error=LoadError)
+        self.sets, self.evals, self.limit_ms, self.stale_ms = int(sets), int(evals), float(limit_ms), float(stale_ms)
         self.active = False             # catching up (from an initialization until caught up or given up)
         self.caught_up = 0              # sets tracked at the catch-up budget (all initializations)
         self._cheap = False             # the last budget given was the catch-up budget
@@ -251,6 +254,11 @@ class StartupCatchUp:
         self.active = self.sets > 0
         self._cheap, self._last_wait = False, None
         return max(int(heading_sets), self.sets)
+
+    def stale(self, waited_ms: float) -> bool:
+        """Whether a held set that waited ``waited_ms`` when the catch-up would take it is dropped instead (``stale_ms``
+        > 0 and it waited longer; see the class)."""
+        return self.active and self.stale_ms > 0 and waited_ms > self.stale_ms
 
     def budget(self, evals: int, *, initialized: bool, checking_heading: bool) -> tuple[int, bool]:
         """``(evaluations, contour stage allowed)`` of the next set, whose budget would otherwise be

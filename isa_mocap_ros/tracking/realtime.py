@@ -77,9 +77,14 @@ class RealTimeSchedule:
         self._dropped_seen = 0
         self._checking = False             # the set taken last is a heading check's frame
 
-    def take(self, tracker, masks_of: Callable = lambda item: item[0].items):
+    def take(self, tracker, masks_of: Callable = lambda item: item[0].items, waited_ms: Callable | None = None):
         """The next waiting set (None: none waits), with the holds its step needs (see the module docstring);
-        ``tracker``: the tracker about to step it (None: not made yet); ``masks_of(item)``: its masks."""
+        ``tracker``: the tracker about to step it (None: not made yet); ``masks_of(item)``: its masks;
+        ``waited_ms(item)``: how long it has waited (for the start-up catch-up's stale sets, dropped here)."""
+        if waited_ms is not None and tracker is not None and tracker.initialized and not tracker.checking_heading:
+            # the start-up catch-up: held sets too old to be worth an estimate go, the oldest first (never the newest)
+            while self.slot.held and len(self.slot) > 1 and self.startup.stale(waited_ms(self.slot.oldest())):
+                self.slot.drop_oldest()
         item = self.slot.take()
         if item is None or self.lockstep:
             return item
@@ -175,7 +180,7 @@ def emulate(tracker, masks: Sequence, schedule: RealTimeSchedule, *, period_s: f
     steps: list[EmulatedStep] = []
     while True:
         arrive(t_free)
-        item = schedule.take(tracker, masks_of=lambda it: masks[it[0]])
+        item = schedule.take(tracker, masks_of=lambda it: masks[it[0]], waited_ms=lambda it: (t_free - it[1]) * 1e3)
         if item is None:
             if arrived >= n:
                 break

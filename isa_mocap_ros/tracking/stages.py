@@ -10,7 +10,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from isa_mocap_ros.optim import compiled_search
+from isa_mocap_ros.optim import compiled_search, compiled_stage
 
 from . import plan
 from .contour import ContourFitInfo
@@ -75,7 +75,9 @@ def refit_pelvis(tr, ctx, x, *, evals: int, rng: np.random.Generator, optimizer:
     opt = make_optimizer(optimizer, x1[:6], np.array(spread[:6]), rng=rng,
                          bounds=(lo[:6], hi[:6]), rotation_blocks=((3, 4, 5),), **dict(params or {}))
     evals_search = whole_generations(int(evals) - 1, opt.generation_size)
-    r = compiled_search.search(opt, energy, evals_search) if tr.use_compiled_search else None
+    r = _moved_search(tr, ctx, opt, evals_search, tr.pelvis_reaim, x1) if tr.use_compiled_search else None
+    if r is None and tr.use_compiled_search:
+        r = compiled_search.search(opt, energy, evals_search)
     if r is None:                                 # not covered by the compiled path (the same numbers)
         r = minimize(opt, energy, max_evals=evals_search)
     out = np.clip(move(r.x)[0], m.lower, m.upper)
@@ -114,23 +116,38 @@ def refit_torso(tr, ctx, x, *, evals: int, rng: np.random.Generator, energy: flo
     move = tr.torso_reaim.around(x)
     # the poses differ from x in the torso and the re-aimed joints only: the restricted energy (same values)
     changed = np.union1d(c, [d for j in tr.torso_reaim.ops for d in m.joint_dofs[j]])
-    data = ctx.objective.restrict(x, changed) or ctx.objective
-
-    def energy_of(C):
-        return data(np.clip(move(C), m.lower, m.upper))
-
     name, params = plan.flat_algorithm(tr)
     opt = make_optimizer(name, x[c], spread, rng=rng, bounds=(lo, hi), **params)
     evals_search = whole_generations(int(evals) - used - 1, opt.generation_size)
-    r = compiled_search.search(opt, energy_of, evals_search) if tr.use_compiled_search else None
+    r = _moved_search(tr, ctx, opt, evals_search, tr.torso_reaim, x, changed) if tr.use_compiled_search else None
     if r is None:
-        r = minimize(opt, energy_of, max_evals=evals_search)
+        data = ctx.objective.restrict(x, changed) or ctx.objective
+
+        def energy_of(C):
+            return data(np.clip(move(C), m.lower, m.upper))
+
+        r = compiled_search.search(opt, energy_of, evals_search) if tr.use_compiled_search else None
+        if r is None:
+            r = minimize(opt, energy_of, max_evals=evals_search)
     y = np.clip(move(r.x[None, :])[0], m.lower, m.upper)
     ey = float(ctx.objective(y[None, :])[0])
     used += r.n_evals + 1
     if ey < energy:
         return y, ey, used, True
     return x, float(energy), used, False
+
+
+def _moved_search(tr, ctx, opt, evals: int, reaim, x, changed=None):
+    """The pelvis or torso stage's search of ``ctx.objective(clip(reaim.around(x)(C)))`` in one compiled call
+    (:func:`~isa_mocap_ros.optim.compiled_stage.run_isa_moved`, the same numbers as the Python energy through
+    :func:`~isa_mocap_ros.optim.compiled_search.search`), on the data energy restricted to ``changed`` when given;
+    None when that path does not cover it (a prior, another data energy or optimizer)."""
+    if ctx.objective.extra_terms or not compiled_stage.supported_moved(opt, tr.energy):
+        return None
+    rest = tr.energy.restrict(x, changed) if changed is not None else None
+    return compiled_stage.run_isa_moved(opt, tr.energy, evals, move=reaim.kernel_args(x), coords=reaim.coords,
+                                        limits=(tr.model.lower, tr.model.upper), restricted=rest,
+                                        keypoints=ctx.objective.weighted_keypoints)
 
 
 def propose_limbs(tr, ctx, x, *, n: int, rng: np.random.Generator, limbs: Sequence[str] | None = None,

@@ -202,6 +202,18 @@ class LatestSlot:
             self.dropped += n
             del self._items[self._hold:self._hold + n]
 
+    def oldest(self):
+        """The oldest waiting set (the next :meth:`take`), or None."""
+        return self._items[0] if self._items else None
+
+    def drop_oldest(self) -> None:
+        """Drop (and count) the oldest waiting set, a held one first (the start-up catch-up's stale sets)."""
+        if self._items:
+            del self._items[0]
+            self.dropped += 1
+            if self._hold:
+                self._hold -= 1
+
     def take(self):
         item = self._items.pop(0) if self._items else None
         if item is not None and self._hold:

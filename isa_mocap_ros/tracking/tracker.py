@@ -487,7 +487,8 @@ class Tracker:
             notes.append(note)
         if cfg.objective.view_weights and self.track.last is not None and any(m is not None for m in ctx.masks):
             # Eq. 5's view weights (config.objective.view_weights): the share of the predicted body each view sees
-            ctx.weights = visible_shares(self.model, self.cameras, frame_prediction.prediction(self, ctx))
+            ctx.weights = visible_shares(self.model, self.cameras, frame_prediction.prediction(self, ctx),
+                                         joints=frame_prediction.prediction_joints(self, ctx))
         views = frame_masks.set_masks(self, ctx)
         if views == 0:
             notes.append("no usable view: falling back to the last estimate" if self.track.last is not None
@@ -535,7 +536,8 @@ class Tracker:
                          f"end, grid best yaw {np.rad2deg(res0.yaw):.0f} deg {res0.variant}, {n_evals} evaluations)")
         x, energy = self.final_pose(res)
         if initialized and cfg.heading.init_confirm_frames > 0:
-            self.heading_check.rival_start = first_frame.pick_rival(self, runs, res, x, energy)
+            self.heading_check.rival_start, n = heading.init_rival(self, ctx, runs, res, x, energy, notes)
+            n_evals += n
         if initialized and cfg.first_frame.init_polish:
             # config.first_frame.init_polish: the winner (and the heading check's rival) searched once more, from itself
             x, energy, res, n = first_frame.polish_winner(self, ctx, x, energy, res)

@@ -228,7 +228,13 @@ class Camera:
 
     @property
     def has_distortion(self) -> bool:
-        return bool(np.any(self.dist != 0))
+        """Whether any distortion coefficient is non-zero (made once: the camera is frozen and its arrays
+        read-only; the contour stage, hull filter and mask undistortion ask ~25 times a frame)."""
+        d = self.__dict__.get("_has_distortion")
+        if d is None:
+            d = bool(np.any(self.dist != 0))
+            object.__setattr__(self, "_has_distortion", d)
+        return d
 
     # ------------------------------------------------------------------ ROS views (CameraInfo, TF)
     def intrinsics_fields(self) -> dict[str, Any]:
