@@ -169,10 +169,10 @@ def rival_second(ranked: list) -> list:
     """The runs ``ranked`` (by their best energy at the checkpoint) with the lowest-energy one heading more than 90°
     away from the first (its best pose's heading) moved to second place: pruned to two, the first frame keeps the
     heading check's rival (:func:`pick_rival`) instead of a run heading sideways. With the four heading sectors'
-    runs pruned to 2 so, 13 of 18 tracks (bags/demo, the fixture, three mesh walks, the real recording's first 20
-    frames; seeds 0-2) were the same as with the 3 lowest, 4 within their spread, and an occluded walk that started
-    backwards for 6 frames no longer did; the initialized frame ~8 % cheaper (docs/history/issue35_speed.md, session
-    29). Pruned to the 2 lowest instead, no heading check started on bags/demo and the clean walks."""
+    runs pruned to 2 so, 12 of 18 tracks (bags/demo, the fixture, three mesh walks, the real recording's first 20
+    frames; seeds 0-2) were the same as with the 3 lowest, the rest within their spread, none backwards; the initialized
+    frame ~6 % cheaper (docs/history/issue35_speed.md, session 29). Pruned to the 2 lowest instead, no heading check
+    started on bags/demo and the clean walks."""
     from .init import wrap_angle, yaw_of
 
     if len(ranked) < 3:
