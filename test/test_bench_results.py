@@ -21,7 +21,7 @@ def test_all_quick_writes_the_page(tmp_path):
                  "## Renderer speed", "## Message adapter speed", "Fried. Stat.", "70 % pixel noise", "#### Offline tracker",
                  "## Mesh bodies vs capsules", "## Headline: mesh subjects", "mesh subjects, everything automatic",
                  "| target (issue 33) |", "## Learned keypoints: cost and tracking with the term",
-                 "## The real recording"):
+                 "## The real recording", "## Unseen motions on mesh subjects"):
         assert head in md, head
     # every target has a status computed from the numbers
     targets = md.split("## Targets", 1)[1].split("\n## ", 1)[0]
@@ -45,14 +45,14 @@ def test_all_quick_writes_the_page(tmp_path):
                  "--no-progress"]) == 0
     md2 = page.read_text()
     assert ("not re-run this time (last saved results shown): ackley, adapters, compare, keypoints, mesh, "
-            "mesh_baseline, real, render, robustness, speed") in md2
+            "mesh_baseline, mesh_motions, real, render, robustness, speed") in md2
     assert "## Robustness" in md2 and "## Silhouette energy speed" in md2
     assert main(["bench", "all", "--quick", "--only", "nope", "--results", str(page)]) == 2
     # --render runs nothing: every section from the saved results
     assert main(["bench", "all", "--render", "--results", str(page), "--out", str(tmp_path / "work")]) == 0
     md3 = page.read_text()
     assert "--render" in md3 and ("not re-run this time (last saved results shown): ackley, adapters, compare, energy, "
-                                  "keypoints, mesh, mesh_baseline, real, render, robustness, speed") in md3
+                                  "keypoints, mesh, mesh_baseline, mesh_motions, real, render, robustness, speed") in md3
 
 
 def test_findings_and_targets_from_data():

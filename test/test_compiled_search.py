@@ -155,7 +155,7 @@ def test_tracker_with_and_without_the_compiled_search(scene, init):
             tr.initialize(pose=walk[0])
         else:
             first = [tr.step(masks[0], 0)]
-            assert first[0].initialized and any("3 searched to the end" in n for n in first[0].notes)
+            assert first[0].initialized and any("2 searched to the end" in n for n in first[0].notes)
         out.append(first + [tr.step(masks[k], k) for k in range(1, len(masks))])
     for a, b in zip(*out):
         np.testing.assert_array_equal(a.x, b.x)

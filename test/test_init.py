@@ -95,3 +95,23 @@ def test_init_bad_arguments():
         initial_pose(model, rig.cameras, [None] * 4, lambda X: np.zeros(len(X)), n_yaw=2)
     with pytest.raises(InitError, match="rng"):
         initial_pose(model, rig.cameras, [None] * 4, lambda X: np.zeros(len(X)), rng=None)
+
+
+def test_rival_second_moves_the_best_opposite_heading_run_to_second_place():
+    """first_frame.rival_second: the first frame's candidate runs pruned to two keep the heading check's rival (the
+    lowest-energy run heading more than 90 deg from the best), not the next run heading sideways."""
+    from types import SimpleNamespace
+
+    from isa_mocap_ros.tracking.first_frame import rival_second
+
+    def run(j, yaw):
+        x = np.zeros(39)
+        x[3:6] = [0.0, 0.0, yaw]
+        return (j, SimpleNamespace(best_x=x), None, None)
+
+    ranked = [run(0, 0.1), run(1, 1.6), run(2, -1.4), run(3, 3.0)]      # best, two sideways, then the opposite
+    assert [r[0] for r in rival_second(ranked)] == [0, 3, 1, 2]
+    ranked = [run(0, 0.1), run(2, -3.0), run(1, 1.6)]                    # the opposite already second: unchanged
+    assert [r[0] for r in rival_second(ranked)] == [0, 2, 1]
+    ranked = [run(0, 0.1), run(1, 0.5), run(2, -1.0)]                    # none opposite: unchanged
+    assert [r[0] for r in rival_second(ranked)] == [0, 1, 2]

@@ -1,11 +1,13 @@
 """The keypoint schedule shared by the keypoint node and `isa-mocap track`: which frames of a view are detected on."""
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
 from isa_mocap_ros.vision.errors import VisionError
-from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, KeypointSchedule, detect_in_mask
+from isa_mocap_ros.vision.keypoint_schedule import (CROP, DENSE_FRAMES, KeypointSchedule, body_axis_angle, crop_box,
+                                                     detect_in_mask, person_pixels)
 
 
 def _due(schedule, persons):
@@ -46,3 +48,44 @@ def test_detect_in_mask_refuses_a_mask_of_another_size_and_finds_nobody_in_an_em
     with pytest.raises(VisionError, match="mask: expected the image's size 80x60"):
         detect_in_mask(None, img, np.zeros((10, 10), np.uint8))
     assert detect_in_mask(None, img, np.zeros((60, 80), np.uint8)) is None     # no crop, no model call
+
+
+def test_person_crop_leaves_out_small_blobs_and_keeps_large_parts():
+    m = np.zeros((200, 160), np.uint8)
+    m[40:160, 70:90] = 255            # the person: 2400 px
+    m[180:190, 0:20] = 255            # a reflection far off: 200 px (< 20 % of the person)
+    m[20:40, 120:150] = 255           # an arm cut off by a mask hole: 600 px (>= 20 %), kept
+    whole = crop_box(m, crop="mask", box_scale=1.0)
+    person = crop_box(m, crop="person", box_scale=1.0)
+    np.testing.assert_allclose(whole, [75.0, 105.0, 170.0, 0.0])          # bounding box 0..150 x 20..190
+    np.testing.assert_allclose(person, [110.0, 90.0, 140.0, 0.0])         # 70..150 x 20..160
+    assert np.array_equal(person_pixels(m)[180:190, 0:20], np.zeros((10, 20), np.uint8))
+    assert crop_box(np.zeros_like(m), crop="person") is None
+
+
+def test_person_crop_is_the_mask_crop_when_the_mask_is_one_component():
+    # the renders' masks (bags/demo, the fixture, the mesh bags) are one blob: their keypoints, and so their tracks,
+    # are those of the crop around the whole mask, bit for bit
+    m = np.zeros((240, 320), np.uint8)
+    cv2.ellipse(m, (150, 120), (30, 90), 10, 0, 360, 255, -1)
+    cv2.line(m, (150, 60), (230, 30), 255, 5)
+    assert np.array_equal(crop_box(m, crop="person"), crop_box(m, crop="mask"))
+    assert CROP == "person"
+
+
+def test_turned_crop_follows_a_leaning_body_and_stays_upright_for_a_wide_one():
+    lean = np.zeros((200, 200), np.uint8)
+    cv2.line(lean, (60, 180), (120, 40), 255, 12)       # leaning to the image's right, 23.2° from up
+    box = crop_box(lean, crop="person_turned")
+    assert box[3] == pytest.approx(np.arctan2(60, 140), abs=np.radians(1.0))
+    # the turned square holds the body: its side is the body's length and width (x 1.25)
+    assert box[2] == pytest.approx(1.25 * np.hypot(60, 140) + 1.25 * 12, rel=0.1)
+    flat = np.zeros((200, 200), np.uint8)
+    flat[90:110, 20:180] = 255                            # arms spread: the long axis is horizontal
+    assert crop_box(flat, crop="person_turned")[3] == 0.0
+    assert body_axis_angle(np.zeros((10, 10), np.uint8)) == 0.0
+
+
+def test_crop_names_are_checked():
+    with pytest.raises(VisionError, match="crop: expected one of mask, person, person_turned, received 'x'"):
+        crop_box(np.ones((10, 10), np.uint8), crop="x")

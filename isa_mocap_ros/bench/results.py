@@ -1,8 +1,8 @@
 """``isa-mocap bench all``: run every benchmark and regenerate the results page (``docs/RESULTS.md``).
 
 ``isa-mocap bench all [--quick] [--results PATH] [--out DIR] [--jobs N] [--only A,B] [--render]``. Runs, in
-order, ackley, adapters, render, energy, compare, robustness, speed, mesh_baseline (mesh bodies vs
-capsules, reduced), mesh (the headline: mesh subjects, automatic shape and initialization) and keypoints (a reduced
+order, ackley, adapters, render, energy, compare, robustness, speed, mesh_baseline (mesh bodies vs capsules,
+reduced), mesh (the headline: mesh subjects, automatic shape and init.), mesh_motions, keypoints (a reduced
 ``bench keypoints``: the detector's cost per rate, tracking with and without the term, :mod:`.keypoints_summary`)
 and real (the Pose2Sim recording offline and in lockstep, :mod:`.real`)
 with their default designs (compare and robustness on mesh bodies since issue 32)
@@ -35,6 +35,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from importlib import import_module
 from pathlib import Path
 
 import numpy as np
@@ -45,8 +46,9 @@ from isa_mocap_ros.bench._common import energy_sizes, json_of
 #: both cores at full load that ackley, compare and robustness take, the node network's real-time run
 #: in ``speed`` dropped 24 of 145 frame sets (tracker 31 ms a frame, p50) where the same bench alone
 #: a minute later dropped 6 (22.7 ms; session 12, docs/evaluation.md).
-ORDER = ("energy", "speed", "adapters", "render", "ackley", "compare", "robustness", "mesh_baseline", "mesh", "keypoints",
-         "real")
+ORDER = ("energy", "speed", "adapters", "render", "ackley", "compare", "robustness", "mesh_baseline", "mesh",
+         "mesh_motions", "keypoints", "real")
+_MOTIONS = "isa_mocap_ros.bench.mesh_motions"      # its runner and section live there (bench all: for_all, section)
 _SRC_ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -191,7 +193,7 @@ def _bench_speed(quick: bool, ctx: dict) -> dict:
 RUNNERS = {"ackley": _bench_ackley, "adapters": _bench_adapters, "render": _bench_render, "energy": _bench_energy,
            "compare": _bench_compare, "robustness": _bench_robustness, "speed": _bench_speed,
            "mesh_baseline": _bench_mesh_baseline, "mesh": _bench_mesh, "keypoints": _bench_keypoints,
-           "real": _bench_real}
+           "real": _bench_real, "mesh_motions": lambda quick, ctx: import_module(_MOTIONS).for_all(quick, ctx)}
 
 
 # ------------------------------------------------------------------ markdown sections
@@ -436,6 +438,7 @@ SECTIONS = (("mesh", "Headline: mesh subjects, automatic shape and initializatio
             ("ackley", "Ackley function (ISA §13.4.1, Tables 13.1-13.2)", md_ackley),
             ("compare", "Optimizer comparison (EA-vs-PF §5.2-5.4, with pycma and scipy-DE)", md_compare),
             ("robustness", "Robustness: noise and occlusions (ISA §13.4.2)", md_robustness),
+            ("mesh_motions", "Unseen motions on mesh subjects (issue 33)", lambda d: import_module(_MOTIONS).section(d)),
             ("mesh_baseline", "Mesh bodies vs capsules (issue 32's baseline)", md_mesh_baseline),
             ("keypoints", "Learned keypoints: cost and tracking with the term (issue 36)", md_keypoints),
             ("real", "The real recording: Pose2Sim demo against the peer's keypoints (issue 34)", md_real),

@@ -294,14 +294,15 @@ class FirstFrameConfig:
     init_refine_evals : int
         Evaluations of each of the initialization's four root refinements (400; 0 = none).
     init_keep : int
-        Heading-candidate runs kept after the first partition on the first frame (3; 0 = all run to the end).
+        Heading-candidate runs kept after the first partition on the first frame, the heading check's rival second
+        (2; 0 = all run to the end).
     init_polish : bool
         The first frame's winner is searched once more from itself with every stage (True).
     """
 
     init_yaw_steps: int = 24
     init_refine_evals: int = 400
-    init_keep: int = 3
+    init_keep: int = 2
     init_polish: bool = True
 
     def __post_init__(self) -> None:

@@ -20,6 +20,11 @@ from .plan import FrameBudget, flat_algorithm
 #: ``init_polish``) searches with: at half the budget the initialized frame costs ~45 CPU ms less (bags/demo) and
 #: the tracks of 5 sequences x 3 seeds were as accurate (docs/history/issue35_speed.md, session 26)
 POLISH_SHARE = 0.5
+#: Runs a heading re-check's search (:func:`.heading.recheck_heading`: the standing variants heading the other way)
+#: keeps at its checkpoint, at least: ``init_keep``'s count before it became 2 (session 29), with which the re-checks
+#: were measured (pruned to 2, a track thrown 2 m off started a heading check on a re-check and was re-initialized
+#: 2 sets later, ``test_a_lost_track_is_reinitialized_by_itself``)
+RECHECK_KEEP = 3
 
 
 def initialize(tr, masks: Sequence | None = None, pose=None, *, frame_index: int = 0,
@@ -106,7 +111,8 @@ def init_energy_fn(tr, ctx):
 def initial_runs(tr, ctx, starts: list, notes: list[str] | None, budget: FrameBudget,
                  stream: tuple = ()) -> tuple[list, int]:
     """The automatically initialized frame's (``ctx``) search from every start (heading candidate), pruned
-    to ``config.first_frame.init_keep`` runs at the checkpoint (see :class:`TrackerConfig`): the list of
+    to ``config.first_frame.init_keep`` runs at the checkpoint (see :class:`TrackerConfig`; on the first frame the
+    lowest-energy run and the lowest heading more than 90° from it first, :func:`rival_second`): the list of
     ``(start index, result, start)`` of the runs that ended, and the evaluations of all runs.
     Raises the optimizer's errors."""
     cfg = tr.config
@@ -131,7 +137,11 @@ def initial_runs(tr, ctx, starts: list, notes: list[str] | None, budget: FrameBu
         shares = getattr(opt, "shares", None)
         runs.append((j, opt, pred, shares[0] if shares else evals // 6))
     n_pruned = 0
-    if 0 < cfg.first_frame.init_keep < len(runs):
+    # the heading re-check's runs (``stream``: all heading one way, no rival among them) keep at least
+    # RECHECK_KEEP, the count their re-checks were measured with
+    keep = cfg.first_frame.init_keep if not stream or not cfg.first_frame.init_keep \
+        else max(cfg.first_frame.init_keep, RECHECK_KEEP)
+    if 0 < keep < len(runs):
         for _, opt, _, checkpoint in runs:
             if checkpoint is None:
                 opt.advance(1)
@@ -140,8 +150,10 @@ def initial_runs(tr, ctx, starts: list, notes: list[str] | None, budget: FrameBu
                 if opt.n_evals >= checkpoint:
                     break
         ranked = sorted(runs, key=lambda r: r[1].best_energy)      # stable: ties keep the start order
-        n_pruned = sum(r[1].n_evals for r in ranked[cfg.first_frame.init_keep:])
-        runs = sorted(ranked[:cfg.first_frame.init_keep], key=lambda r: r[0])
+        if not stream and tr.has_heading:
+            ranked = rival_second(ranked)
+        n_pruned = sum(r[1].n_evals for r in ranked[keep:])
+        runs = sorted(ranked[:keep], key=lambda r: r[0])
     out = []
     for j, opt, pred, checkpoint in runs:
         if checkpoint is None:
@@ -151,6 +163,25 @@ def initial_runs(tr, ctx, starts: list, notes: list[str] | None, budget: FrameBu
             pass
         out.append((j, opt.result(), pred))
     return out, n_pruned + sum(res.n_evals for _, res, _ in out)
+
+
+def rival_second(ranked: list) -> list:
+    """The runs ``ranked`` (by their best energy at the checkpoint) with the lowest-energy one heading more than 90°
+    away from the first (its best pose's heading) moved to second place: pruned to two, the first frame keeps the
+    heading check's rival (:func:`pick_rival`) instead of a run heading sideways. With the four heading sectors'
+    runs pruned to 2 so, 12 of 18 tracks (bags/demo, the fixture, three mesh walks, the real recording's first 20
+    frames; seeds 0-2) were the same as with the 3 lowest, the rest within their spread, none backwards; the initialized
+    frame ~6 % cheaper (docs/history/issue35_speed.md, session 29). Pruned to the 2 lowest instead, no heading check
+    started on bags/demo and the clean walks."""
+    from .init import wrap_angle, yaw_of
+
+    if len(ranked) < 3:
+        return ranked
+    y0 = yaw_of(np.asarray(ranked[0][1].best_x)[3:6])
+    for i, run in enumerate(ranked[1:], 1):
+        if abs(float(wrap_angle(yaw_of(np.asarray(run[1].best_x)[3:6]) - y0))) > np.pi / 2:
+            return [ranked[0], run] + ranked[1:i] + ranked[i + 1:]
+    return ranked
 
 
 def polish_budget(budget: FrameBudget) -> FrameBudget:

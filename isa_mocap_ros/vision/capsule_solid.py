@@ -121,7 +121,8 @@ def capsule_data(endpoints: Any, radii: Any) -> tuple:
     pass it as ``capsules=`` to :func:`.render.render_mask` / :func:`.render.render_labels_at` (``endpoints`` and
     ``radii`` are then ignored)."""
     E, Rr = _check_capsules(endpoints, radii)
-    return _capsule_params_compiled(np.ascontiguousarray(E), np.ascontiguousarray(Rr))
+    # writable C-order copies: one compiled signature for every caller (a read-only model array would load a second)
+    return _capsule_params_compiled(np.array(E, order="C"), np.array(Rr, order="C"))
 
 
 def capsule_contains(X: Any, endpoints: Any, radii: Any) -> np.ndarray:

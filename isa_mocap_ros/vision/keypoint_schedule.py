@@ -7,7 +7,10 @@ network gives the offline tracker's estimates bit for bit (docs/keypoints.md):
 * of a view's frames with a person, the first ``dense_frames`` are all detected on: the automatic
   initialization and the heading check that follows it (``TrackerConfig.init_confirm_frames`` frames) are
   where the keypoints tell front from back;
-* after those, every ``every_k``-th frame with a person (counted from the view's first one).
+* after those, every ``every_k``-th frame with a person (counted from the view's first one);
+* the detector's square is placed around the person's foreground components (:func:`crop_box`, :data:`CROP`):
+  components smaller than a fifth of the largest (a shadow, a reflection, a ghost in the background model) do not
+  widen it.
 
 The schedule counts frames per view from what the view shows, not from clocks or the tracker's state, so two
 processes that see the same frames decide alike.
@@ -18,12 +21,14 @@ from __future__ import annotations
 
 from typing import Any
 
+import cv2
 import numpy as np
 
 from .errors import VisionError
-from .landmarks import Landmarks2D, PoseLandmarker, box_from_mask
+from .landmarks import Landmarks2D, PoseLandmarker, box_from_mask, box_from_points
 
-__all__ = ["KeypointSchedule", "detect_in_mask", "DENSE_FRAMES", "EVERY_K"]
+__all__ = ["KeypointSchedule", "detect_in_mask", "crop_box", "person_pixels", "body_axis_angle", "CROP", "CROPS",
+           "DENSE_FRAMES", "EVERY_K"]
 
 #: frames with a person detected on at the start of a view: the initialization's frame and the heading
 #: check's 3 frames after it (TrackerConfig.init_confirm_frames' default)
@@ -68,10 +73,81 @@ class KeypointSchedule:
         return c < self.dense_frames or (self.every_k > 0 and c % self.every_k == 0)
 
 
+#: ``detect_in_mask``'s crops: the square around every foreground pixel (``"mask"``, until session 29), around the
+#: person's components only (``"person"``), and around those turned to the components' long axis (``"person_turned"``,
+#: measured and not the default: docs/keypoints.md "The crop")
+CROPS = ("mask", "person", "person_turned")
+#: the crop of the keypoint node and ``track`` (one rule, so a lockstep run equals ``track``): a shadow, a reflection
+#: or a ghost apart from the person no longer widens the square and shrinks the person in it (docs/keypoints.md)
+CROP = "person"
+#: ``"person"``: foreground components smaller than this share of the largest are not the person (a shadow,
+#: a reflection, a ghost in the background model) and do not widen the crop
+PERSON_COMPONENT_SHARE = 0.2
+#: ``"person_turned"``: the largest turn of the crop from upright, rad; a longer axis farther from vertical
+#: (arms spread, lying down) is no body axis, and the crop stays upright
+MAX_TURN_RAD = np.radians(45.0)
+
+
+def person_pixels(mask: Any, *, share: float = PERSON_COMPONENT_SHARE) -> np.ndarray:
+    """The foreground of ``mask`` ((H, W), nonzero = foreground) in components (8-connected) of at least
+    ``share`` of the largest one's area, as a (H, W) uint8 0/1 image."""
+    fg = (np.asarray(mask) > 0).view(np.uint8)
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(fg, connectivity=8, ltype=cv2.CV_16U)
+    if n <= 2:
+        return fg
+    area = stats[1:, cv2.CC_STAT_AREA]
+    keep = np.zeros(n, np.uint8)
+    keep[1:] = area >= share * area.max()
+    if keep.all() or n > 256:
+        return keep[lab]
+    return cv2.LUT(lab.astype(np.uint8), np.pad(keep, (0, 256 - n)))
+
+
+def body_axis_angle(fg: np.ndarray, *, max_turn_rad: float = MAX_TURN_RAD) -> float:
+    """Angle (rad, positive = leaning to the image's right, as :func:`~.landmarks.upright_angle`) of the
+    foreground's longer principal axis (second moments) from image up; 0 when it lies farther than
+    ``max_turn_rad`` from vertical or the foreground is empty."""
+    M = cv2.moments(fg, binaryImage=True)
+    if M["m00"] <= 0:
+        return 0.0
+    theta = 0.5 * np.arctan2(2.0 * M["mu11"], M["mu20"] - M["mu02"])      # longer axis, from image +u
+    du, dv = np.cos(theta), np.sin(theta)
+    if dv > 0:                                                               # the end pointing up
+        du, dv = -du, -dv
+    angle = float(np.arctan2(du, -dv))
+    return angle if abs(angle) <= max_turn_rad else 0.0
+
+
+def crop_box(mask: Any, *, crop: str = "mask", box_scale: float = 1.25, min_pixels: int = 20) -> np.ndarray | None:
+    """The detector's region ``(cu, cv, side, angle_rad)`` for a view's ``mask`` (:data:`CROPS`), or None when the
+    mask has fewer than ``min_pixels`` foreground pixels."""
+    if crop not in CROPS:
+        raise VisionError(f"crop: expected one of {', '.join(CROPS)}, received {crop!r}")
+    m = np.asarray(mask)
+    if m.ndim == 3:
+        m = m[..., 0]
+    fg = (m > 0).view(np.uint8)
+    if crop == "mask" or cv2.countNonZero(fg) < min_pixels:
+        return box_from_mask(m, scale=box_scale, min_pixels=min_pixels)
+    x, y, w, h = cv2.boundingRect(fg)               # the work on the foreground's bounding rectangle only
+    fg = person_pixels(fg[y:y + h, x:x + w])
+    if crop == "person":
+        box = box_from_mask(fg, scale=box_scale, min_pixels=min_pixels)
+        return None if box is None else box + np.array([x, y, 0.0, 0.0])
+    whole = np.zeros_like(m, np.uint8)      # moments over the whole image (over the rectangle: other last bits)
+    whole[y:y + h, x:x + w] = fg
+    angle = body_axis_angle(whole)
+    # a linear function's extremes over the pixels lie on their outer boundary: the turned box of the contours'
+    # points (segment ends) is the box of every pixel
+    contours, _ = cv2.findContours(fg, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    pts = np.concatenate([c.reshape(-1, 2) for c in contours]).astype(np.float64) + np.array([x, y], np.float64)
+    return box_from_points(pts, scale=box_scale, angle_rad=angle)
+
+
 def detect_in_mask(detector: PoseLandmarker, image: Any, mask: Any, *, box_scale: float = 1.25,
-                   min_score: float = 0.5, bgr: bool = False) -> Landmarks2D | None:
-    """The landmarks of the person in the square around ``mask``'s foreground, or None (empty mask, or a pose
-    score below ``min_score``: nobody there).
+                   min_score: float = 0.5, bgr: bool = False, crop: str | None = None) -> Landmarks2D | None:
+    """The landmarks of the person in the square around ``mask``'s foreground (``crop``: :data:`CROPS`, default
+    :data:`CROP`), or None (empty mask, or a pose score below ``min_score``: nobody there).
 
     Raises
     ------
@@ -85,7 +161,7 @@ def detect_in_mask(detector: PoseLandmarker, image: Any, mask: Any, *, box_scale
     if m.shape[:2] != img.shape[:2]:
         raise VisionError(f"mask: expected the image's size {img.shape[1]}x{img.shape[0]}, received "
                           f"{m.shape[1] if m.ndim > 1 else '?'}x{m.shape[0]}")
-    box = box_from_mask(m, scale=box_scale)
+    box = crop_box(m, crop=CROP if crop is None else crop, box_scale=box_scale)
     if box is None:
         return None
     lm = detector.detect(img, box, bgr=bgr)
