@@ -154,6 +154,31 @@ def test_restarts_keep_the_lowest_judged_energy_and_the_prior_holds_the_arm_spli
     assert prior(cfg, z) == pytest.approx(cfg.regularization * 0.02)
 
 
+def test_the_track_judge_keeps_the_restart_whose_shape_tracks_the_judge_frames_with_the_lowest_energy():
+    import dataclasses
+
+    from isa_mocap_ros.tracking.shape_judge import tracked_energy
+    from isa_mocap_ros.tracking.tracker import TrackerConfig
+
+    model = make_model(39, shape=shape_from_params(default_shape(), KNOWN_SHAPE))
+    cams, frames = _rendered_frames(model, 4)
+    cfg = ShapeCalibrationConfig(window_frames=3, n_frames=2, rounds=1, pose_steps=1, shape_evals=150, seed=2,
+                                 restarts=2, judge="track", judge_frames=4)
+    res = calibrate_shape(39, cams, frames, config=cfg)
+    assert res.notes[-1].startswith("restart ") and "(track judge; judged energies " in res.notes[-1]
+    kept = int(res.notes[-1].split()[1])
+    # each restart's shape tracked over all four frames (one past the window) with the first restart's tracker seed
+    tcfg = TrackerConfig.from_flat(seed=2)
+    judge = [(f[0], f[1], None) for f in frames]
+    e = [tracked_energy(39, cams, judge, calibrate_shape(39, cams, frames[:3], config=dataclasses.replace(
+        cfg, restarts=1, seed=2 + 7919 * r), tracker_config=tcfg.replace(seed=2 + 7919 * r)).shape, tcfg)
+         for r in range(2)]
+    listed = [float(v) for v in res.notes[-1].split("energies ")[1].rstrip(")").split(", ")]
+    assert listed == pytest.approx(e, abs=5e-5) and e[kept - 1] == min(e) and e[0] != e[1]
+    with pytest.raises(ShapeCalibrationError, match="judge: expected 'fit' or 'track'"):
+        ShapeCalibrationConfig(judge="tracked")
+
+
 def test_radius_prior_is_off_by_default_and_pulls_only_the_radius_factors_towards_their_centre():
     import argparse
     import dataclasses

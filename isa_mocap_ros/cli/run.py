@@ -196,7 +196,7 @@ def _body_shape(args: argparse.Namespace, bag: Path, out: Path, learn: int | Non
     n_learn = learn or 10
     calib = argparse.Namespace(seed=args.seed or 0, **{k: getattr(args, k, None)
                                                         for k in ("calib_frames", "calib_rounds", "calib_evals",
-                                                                  "calib_restarts", "calib_combine",
+                                                                  "calib_restarts", "calib_combine", "calib_judge",
                                                                   "calib_energy", "calib_radius_prior")})
     try:
         res, report = calibrate_sequence(seq, calib, dof=args.model or 39, use_masks=False, learn=n_learn,

@@ -23,6 +23,9 @@ def add_calibration_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calib-combine", choices=("lowest", "median"), default=None,
                    help="shape calibration with restarts: keep the lowest judged energy, or the median of each factor "
                         "(default lowest)")
+    p.add_argument("--calib-judge", choices=("fit", "track"), default=None,
+                   help="shape calibration with restarts: judge each restart by its own shape fit's energy (fit, the "
+                        "default) or by the mean tracker energy of the first 60 frames tracked with its shape (track)")
     p.add_argument("--calib-radius-prior", type=float, default=None, metavar="W",
                    help="shape calibration: weight of a prior pulling the radius factors towards 1.15 (their level on "
                         "clean mesh bags; 0 = off, the default: docs/shape_calibration.md)")
@@ -37,7 +40,7 @@ def calibration_config(args, seed: int):
     kw = {"seed": seed}
     for opt, key in (("calib_frames", "window_frames"), ("calib_rounds", "rounds"), ("calib_evals", "shape_evals"),
                      ("calib_restarts", "restarts"), ("calib_combine", "combine"), ("calib_energy", "energy"),
-                     ("calib_radius_prior", "radius_prior")):
+                     ("calib_radius_prior", "radius_prior"), ("calib_judge", "judge")):
         v = getattr(args, opt, None)
         if v is not None:
             kw[key] = v
@@ -79,7 +82,8 @@ def calibrate_sequence(seq, args, *, dof: int, use_masks: bool, learn: int, firs
                                                           marker_bone_lengths)
 
     cfg = calibration_config(args, args.seed)
-    frames = calibration_frames(seq, use_masks=use_masks, learn=learn, first=first, n=cfg.window_frames)
+    n = max(cfg.window_frames, cfg.judge_frames if cfg.judge == "track" and cfg.restarts > 1 else 0)
+    frames = calibration_frames(seq, use_masks=use_masks, learn=learn, first=first, n=n)
     res = calibrate_shape(dof, seq.cameras, frames, tracker_config=tracker_config, config=cfg, progress=progress)
     model = make_model(dof, shape=res.shape)
     report = {"params": {k: round(v, 4) for k, v in res.params.items()},

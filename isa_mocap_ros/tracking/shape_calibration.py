@@ -37,6 +37,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from .shape_judge import tracked_energy
+
 __all__ = ["SHAPE_PARAMS", "BONES", "LIMB_BONES", "ShapeCalibrationConfig", "ShapeCalibrationResult", "ShapeCalibrationError",
            "shape_from_params", "bone_lengths", "marker_bone_lengths", "bone_errors", "prior", "calibrate_shape"]
 
@@ -102,13 +104,15 @@ class ShapeCalibrationConfig:
     restarts: int = 3               # whole calibrations from other seeds (x cost each), combined as `combine` says:
                                     # one calibration is a lottery of round 0's poses (docs/shape_calibration.md)
     combine: str = "lowest"         # restarts: "lowest" judged energy kept (measured better), or "median" of each factor
+    judge: str = "fit"              # restarts judged by "fit" (each one's own shape-fit energy) or "track" (the mean
+    judge_frames: int = 60          # tracker energy of the first judge_frames frames tracked with its shape: shape_judge)
     masks: str = "hull"             # the calibration frames' masks: "hull" = cut to the visual hull's person blob
                                     # (tracking/init_hull.py: occluders and noise no other view confirms go), "raw"
     seed: int = 0                   # all random streams derive from it
 
     def __post_init__(self):
         for name in ("window_frames", "n_frames", "rounds", "pose_steps", "shape_evals", "n_model_points", "n_mask_points",
-                     "restarts"):
+                     "restarts", "judge_frames"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ShapeCalibrationError(f"{name}: expected an integer >= 1, received {v!r}")
@@ -118,6 +122,8 @@ class ShapeCalibrationConfig:
             raise ShapeCalibrationError(f"masks: expected 'hull' or 'raw', received {self.masks!r}")
         if self.energy not in ("raster", "fast"):
             raise ShapeCalibrationError(f"energy: expected 'raster' or 'fast', received {self.energy!r}")
+        if self.judge not in ("fit", "track"):
+            raise ShapeCalibrationError(f"judge: expected 'fit' or 'track', received {self.judge!r}")
         if self.combine not in ("lowest", "median"):
             raise ShapeCalibrationError(f"combine: expected 'lowest' or 'median', received {self.combine!r}")
         if not (np.isfinite(self.radius_centre) and self.radius_centre > 0):
@@ -438,6 +444,7 @@ def calibrate_shape(dof: int, cameras: Sequence, frames: Sequence[tuple[int, Seq
 
     if not isinstance(config, ShapeCalibrationConfig):
         raise ShapeCalibrationError(f"config: expected a ShapeCalibrationConfig, received {type(config).__name__}")
+    judge_frames = [(f[0], f[1], f[2] if len(f) > 2 else None) for f in list(frames)[:config.judge_frames]]
     frames = [(f[0], f[1], f[2] if len(f) > 2 else None) for f in list(frames)[:config.window_frames]]
     if not frames:
         raise ShapeCalibrationError("frames: expected at least one frame with masks, received none")
@@ -455,12 +462,13 @@ def calibrate_shape(dof: int, cameras: Sequence, frames: Sequence[tuple[int, Seq
         cfg_r = dataclasses.replace(config, seed=seed, restarts=1)
         say(f"shape calibration restart {r + 1}/{config.restarts} (seed {seed})")
         res = _calibrate_once(dof, cameras, frames, tcfg.replace(seed=tcfg.search.seed + 7919 * r), cfg_r, base, say)
-        out.append((_judged(dof, cameras, frames, base, config, res, res.params), r, res))
+        out.append((_judged(dof, cameras, frames, base, config, res, res.params) if config.judge == "fit" else
+                    tracked_energy(dof, cameras, judge_frames, res.shape, tcfg), r, res))
     listed = ", ".join(f"{t[0]:.4f}" for t in out)
     e, r, best = min(out, key=lambda t: t[0])
     if config.combine == "lowest":
-        return dataclasses.replace(best, notes=best.notes + (f"restart {r + 1} of {config.restarts} kept (judged "
-                                                             f"energies {listed})",))
+        return dataclasses.replace(best, notes=best.notes + (f"restart {r + 1} of {config.restarts} kept ({config.judge} "
+                                                             f"judge; judged energies {listed})",))
     # the median of each factor over the restarts (their poses: those of the restart that fits it best)
     logs = np.array([[np.log(t[2].params[n]) for n, _, _ in SHAPE_PARAMS] for t in out])
     factors = {n: float(v) for (n, _, _), v in zip(SHAPE_PARAMS, np.exp(np.median(logs, axis=0)))}
