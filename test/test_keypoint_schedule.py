@@ -70,7 +70,7 @@ def test_person_crop_is_the_mask_crop_when_the_mask_is_one_component():
     cv2.ellipse(m, (150, 120), (30, 90), 10, 0, 360, 255, -1)
     cv2.line(m, (150, 60), (230, 30), 255, 5)
     assert np.array_equal(crop_box(m, crop="person"), crop_box(m, crop="mask"))
-    assert CROP == "person"
+    assert CROP == "mask"
 
 
 def test_turned_crop_follows_a_leaning_body_and_stays_upright_for_a_wide_one():

@@ -8,9 +8,8 @@ network gives the offline tracker's estimates bit for bit (docs/keypoints.md):
   initialization and the heading check that follows it (``TrackerConfig.init_confirm_frames`` frames) are
   where the keypoints tell front from back;
 * after those, every ``every_k``-th frame with a person (counted from the view's first one);
-* the detector's square is placed around the person's foreground components (:func:`crop_box`, :data:`CROP`):
-  components smaller than a fifth of the largest (a shadow, a reflection, a ghost in the background model) do not
-  widen it.
+* the detector's square is placed around the mask's foreground (:func:`crop_box`, :data:`CROP`); the crop around
+  the person's components only (``"person"``) is an option.
 
 The schedule counts frames per view from what the view shows, not from clocks or the tracker's state, so two
 processes that see the same frames decide alike.
@@ -73,13 +72,14 @@ class KeypointSchedule:
         return c < self.dense_frames or (self.every_k > 0 and c % self.every_k == 0)
 
 
-#: ``detect_in_mask``'s crops: the square around every foreground pixel (``"mask"``, until session 29), around the
-#: person's components only (``"person"``), and around those turned to the components' long axis (``"person_turned"``,
-#: measured and not the default: docs/keypoints.md "The crop")
+#: ``detect_in_mask``'s crops: the square around every foreground pixel (``"mask"``, the default), around the
+#: person's components only (``"person"``), and around those turned to the components' long axis
+#: (``"person_turned"``); the last two measured and not the default (docs/keypoints.md "The crop around the person")
 CROPS = ("mask", "person", "person_turned")
-#: the crop of the keypoint node and ``track`` (one rule, so a lockstep run equals ``track``): a shadow, a reflection
-#: or a ghost apart from the person no longer widens the square and shrinks the person in it (docs/keypoints.md)
-CROP = "person"
+#: the crop of the keypoint node and ``track`` (one rule, so a lockstep run equals ``track``): the square around every
+#: foreground pixel. ``"person"`` reads the real recording's landmarks better but lets the detector find a partly
+#: hidden person among occluders, whose landmarks then pull the fit off (docs/keypoints.md)
+CROP = "mask"
 #: ``"person"``: foreground components smaller than this share of the largest are not the person (a shadow,
 #: a reflection, a ghost in the background model) and do not widen the crop
 PERSON_COMPONENT_SHARE = 0.2
