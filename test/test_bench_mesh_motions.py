@@ -47,3 +47,12 @@ def test_design(tmp_path):
     d = mm.make_design(motions=("kick", "jog"), root=tmp_path)
     assert [s.name for s in d.sequences] == ["kick-average_man", "kick-random"]
     assert any("jog skipped" in n for n in d.notes)
+
+
+def test_bench_all_skips_it_clearly_without_the_shared_clips(tmp_path, monkeypatch):
+    # a checkout without ../shared (CI): bench all's runner says why and the page says "Not run"
+    monkeypatch.setenv("ISA_MOCAP_SHARED", str(tmp_path / "nowhere"))
+    res = mm.for_all(True, {"out": tmp_path / "w", "jobs": 1, "progress": False})
+    assert "skipped" in res and str(tmp_path / "nowhere") in res["skipped"]
+    assert mm.section(res).startswith("Not run: the shared CMU clips are not under")
+    assert not (tmp_path / "w").exists()

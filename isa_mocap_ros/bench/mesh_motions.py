@@ -172,7 +172,11 @@ def render_markdown(res: dict) -> str:
 
 
 def for_all(quick: bool, ctx: dict) -> dict:
-    """``bench all``'s run: the default (or quick) design, bags cached with the robustness bench's."""
+    """``bench all``'s run: the default (or quick) design, bags cached with the robustness bench's; ``{"skipped":
+    why}`` where the shared CMU clips are absent (a checkout without ``../shared``)."""
+    root = cmu_dir()
+    if not any((root / CLIPS[m][0]).is_file() for m in MOTIONS):
+        return {"skipped": f"the shared CMU clips are not under {root} (set ISA_MOCAP_SHARED)"}
     design = make_design("quick" if quick else "default", tracker=(("keypoint_weight", default_keypoint_weight()[0]),))
     return collect(design, cache=ctx["out"] / "cache" / "robustness", out=ctx["out"] / "mesh_motions",
                    jobs=ctx["jobs"], progress=ctx["progress"])
@@ -180,6 +184,8 @@ def for_all(quick: bool, ctx: dict) -> dict:
 
 def section(res: dict) -> str:
     """``bench all``'s section of the results page."""
+    if "skipped" in res:
+        return f"Not run: {res['skipped']}.\n"
     return ("`isa-mocap bench mesh_motions` (module docstring; docs/history/issue33_generalisation.md).\n\n"
             + render_markdown(res) + "\n")
 
