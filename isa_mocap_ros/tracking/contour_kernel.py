@@ -20,14 +20,21 @@ Pure numba (no ROS).
 """
 from __future__ import annotations
 
+from importlib import import_module
+
 import numba
 import numpy as np
 
 from ..geometry.so3_kernel import exp_into, log_args, log_into, matmul3, nearest_rotvec_into
+from ..optim.compiled_search import register_dependent_cache
 from ..vision.outline import project_point
 from ..vision.render import raycast_at
 
 __all__ = ["back_project", "contour_points", "match", "mark_pixels", "compose_root", "finish_step"]
+
+# numba keys a cached function on its own file only: the functions here compile the rotations, the projection and the
+# ray cast of these modules into their machine code, so an edit there must also miss this module's cache
+register_dependent_cache(__file__, tuple(import_module(f.__module__) for f in (exp_into, project_point, raycast_at)))
 
 
 @numba.njit(cache=True)
