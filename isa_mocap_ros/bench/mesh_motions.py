@@ -32,6 +32,7 @@ import numpy as np
 
 from isa_mocap_ros.bench import robustness as br
 from isa_mocap_ros.bench._common import write_result
+from isa_mocap_ros.bench.mesh import _names
 from isa_mocap_ros.cli.keypoint_options import default_keypoint_weight
 from isa_mocap_ros.eval.compare import SequenceSpec
 
@@ -201,10 +202,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default=None, metavar="DIR", help="work directory (default: a temporary one)")
     p.add_argument("--json", default="docs/results/mesh_motions.json", metavar="FILE",
                    help="where to write the results")
-
-
-def _names(v):
-    return None if v is None else tuple(x.strip() for x in str(v).split(",") if x.strip())
 
 
 def run(args: argparse.Namespace) -> int:
