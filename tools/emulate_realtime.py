@@ -65,7 +65,7 @@ def main(argv=None) -> int:
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("bag")
-    p.add_argument("shape", help="body-shape YAML the tracker uses")
+    p.add_argument("shape", help="body-shape YAML the tracker uses (- = the default shape)")
     p.add_argument("--seeds", default="0,1,2")
     p.add_argument("--catch-up", type=int, action="append", help="startup_catch_up values to run (default 0)")
     p.add_argument("--catch-up-evals", type=int, default=300, help="degrade_min_evals (default 300)")
@@ -85,7 +85,7 @@ def main(argv=None) -> int:
     rows = []
     for catch_up in a.catch_up or [0]:
         for seed in (int(s) for s in a.seeds.split(",")):
-            model = make_model(39, shape=Path(a.shape))
+            model = make_model(39, shape=None if a.shape == "-" else Path(a.shape))
             cfg = TrackerConfig.from_flat(seed=seed)
             tracker = Tracker(model, seq.cameras, cfg)
             tracker.predictor = PublishedPredictor(model, tracker.predictor)
