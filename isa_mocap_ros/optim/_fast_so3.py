@@ -8,7 +8,8 @@ The results are bit-identical to the numpy reference on this machine: elementwis
 numpy's order, ``sin``/``cos``/``arccos``/``sqrt`` are the C library's, sums of three terms add left
 to right (numpy's pairwise sum below 8 elements), and 3x3 products accumulate
 ``C_ij = fma(A_i2, B_2j, fma(A_i1, B_1j, A_i0 B_0j))``, the order of OpenBLAS's Haswell ``dgemm``
-that numpy's ``@`` calls (measured; ``test/test_optim_rotations.py`` checks it). ``llvm.fma`` is
+that numpy's ``@`` calls (measured; ``test/test_optim_rotations.py`` checks it;
+:func:`isa_mocap_ros.geometry.so3_kernel.matmul3`, shared with the contour stage's rotations). ``llvm.fma`` is
 correctly rounded on every CPU, so the compiled results are deterministic everywhere; only the
 agreement with numpy depends on the BLAS kernel. No fastmath.
 """
