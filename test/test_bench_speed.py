@@ -57,7 +57,8 @@ def test_network_rows_change_estimator_parameters_in_a_copy_of_the_parameter_fil
     from isa_mocap_ros.bench.speed import NETWORK_MODES, _params_with
     from isa_mocap_ros.resources import resource_dir
 
-    assert any(m[4] == {"startup_catch_up": 12} and not m[1] for m in NETWORK_MODES)
+    assert any(m[4] == {"startup_catch_up": 3} and not m[1] and not m[2] for m in NETWORK_MODES)
+    assert any(m[4] == {"startup_catch_up": 3} and m[2] for m in NETWORK_MODES)     # one core busy, A/B
     orig = yaml.safe_load((resource_dir("config") / "pipeline.yaml").read_text())
     got = yaml.safe_load(_params_with({"startup_catch_up": 12, "degrade": False}, tmp_path / "p.yaml").read_text())
     est, ref = got["/mocap/estimator"]["ros__parameters"], orig["/mocap/estimator"]["ros__parameters"]
