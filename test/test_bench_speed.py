@@ -78,7 +78,7 @@ def test_the_network_table_says_where_the_drops_came_from():
            "real_time_factor": 0.88, "latency_ms_p50": 50.0, "latency_ms_p95": 120.0, "dropped_frames": 16,
            "dropped_share": 16 / 145, "dropped_while_initializing": 6, "dropped_by_estimator": 14,
            "dropped_at_bunched_arrivals": 5, "startup_sets_caught_up": 0, "frames_without_contour_stage": 14,
-           "budget_lowered": 3, "init_ms": 168.0, "tracker_ms_p50": 21.0, "tracker_ms_p95": 44.0, "mpjpe_mm": 38.2,
+           "budget_lowered": 3, "init_ms": 168.0, "init_cpu_ms": 101.4, "tracker_ms_p50": 21.0, "tracker_ms_p95": 44.0, "mpjpe_mm": 38.2,
            "mpjpe_vs_lockstep_mm": 2.9}
     lines = bench_speed.network_table([row, {"mode": "lockstep", "error": "x"}])
     head = next(ln for ln in lines if ln.startswith("| mode |"))
@@ -88,5 +88,6 @@ def test_the_network_table_says_where_the_drops_came_from():
     at = dict(zip(names, cells))
     assert at["of them by the estimator (its queue) / at bunched arrivals"] == "14 / 5"
     assert at["budget lowered (times)"] == "3" and at["dropped"] == "16 (11 %)"
+    assert at["initialization wall / CPU (ms)"] == "168 / 101"      # the estimator's init_ms and init_cpu_ms
     failed = next(ln for ln in lines if ln.startswith("| lockstep |"))
     assert failed.count("|") == head.count("|")
