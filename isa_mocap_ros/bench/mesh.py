@@ -33,8 +33,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +40,7 @@ import numpy as np
 from isa_mocap_ros.eval.compare import SequenceSpec
 
 from . import robustness as br
-from isa_mocap_ros.bench._common import write_result
+from isa_mocap_ros.bench._common import collect_and_write
 from isa_mocap_ros.cli.keypoint_options import default_keypoint_weight
 
 SUBJECTS = ("slim_woman", "average_man", "heavy_man")
@@ -244,10 +242,4 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"isa-mocap bench mesh: error: {exc}", file=sys.stderr)
         return 2
-    out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="isa_mocap_mesh_"))
-    cache = Path(args.cache) if args.cache else out / "cache"
-    t0 = time.perf_counter()
-    res = collect(design, cache=cache, out=out, jobs=args.jobs)
-    res["seconds"] = round(time.perf_counter() - t0, 1)
-    res["command"] = "isa-mocap bench mesh " + " ".join(sys.argv[3:])
-    return write_result("mesh", res, args.json, render_markdown(res))
+    return collect_and_write("mesh", collect, design, args, render_markdown)
