@@ -70,3 +70,23 @@ def test_calibrated_shape_keeps_the_offsets_and_they_scale_with_the_leg():
     d0 = np.diff(capsule_endpoints(m0, X)[0, c], axis=0)
     d1 = np.diff(capsule_endpoints(m1, X)[0, c], axis=0)
     assert np.allclose(d1, d0 * 1.2 * 1.1)
+
+
+def test_a_default_shape_with_offsets_reaches_bvh_models_and_the_model_yaml(tmp_path, monkeypatch):
+    from isa_mocap_ros.body import model as model_module
+    from isa_mocap_ros.body.bvh import parse_bvh
+    from isa_mocap_ros.body.retarget import model_from_bvh
+    from isa_mocap_ros.sequence import model_from_yaml, model_to_yaml
+    from test_bvh import MB_NAMES, model_poses, write_bvh_from_model
+
+    source = make_model(39)
+    X = model_poses(source, 3, np.random.default_rng(2))
+    bvh = parse_bvh(write_bvh_from_model(source, X, MB_NAMES, unit=0.01, order="YXZ"))
+    save_shape(shifted_shape(), tmp_path / "default.yaml")
+    monkeypatch.setattr(model_module, "DEFAULT_SHAPE_PATH", tmp_path / "default.yaml")
+    for dof in (39, 18):
+        m = model_from_bvh(bvh, dof)
+        assert m.shape["axis_offsets"].keys() == {"left_thigh", "right_thigh", "left_shin", "right_shin"}
+        back = model_from_yaml(model_to_yaml(m))[0]
+        assert back.joint_names == m.joint_names
+        assert np.allclose(capsule_endpoints(back, m.rest_pose()), capsule_endpoints(m, m.rest_pose()), atol=1e-8)
