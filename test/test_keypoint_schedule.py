@@ -118,21 +118,26 @@ def _same(a, b):
 
 def test_checked_person_crop_is_taken_where_the_model_sees_the_person_and_not_where_it_does_not(
         landmark_model, rendered_person):
-    from isa_mocap_ros.vision.landmarks import PoseLandmarker
+    from isa_mocap_ros.vision.landmarks import LANDMARK_NAMES, PoseLandmarker, box_from_points, upright_angle
 
     det = PoseLandmarker(landmark_model)
     img, person = rendered_person
     # one component: one detection, the mask crop's
     assert _same(detect_in_mask(det, img, person, crop="person_checked"), detect_in_mask(det, img, person))
-    # a small blob far off (a reflection): the person square differs, the model's segmentation agrees with the
-    # person component, and the person crop's landmarks are kept
+    # a small blob far off (a reflection): the person square differs, the model finds the person there and its
+    # segmentation agrees with the person component, so the person square's landmarks are accepted and refined by
+    # a second detection in the square around them, turned by their hips and shoulders
     m = person.copy()
     m[340:350, 0:12] = 255
     assert not np.array_equal(crop_box(m, crop="person"), crop_box(m, crop="mask"))
-    lm = detect_in_mask(det, img, m, crop="person_checked")
-    assert _same(lm, detect_in_mask(det, img, m, crop="person"))
+    refined = detect_in_mask(det, img, m, crop="person_checked")
+    first = detect_in_mask(det, img, m, crop="person")
     prob, _ = det.person_probability(img, crop_box(m, crop="person"))
-    assert segmentation_iou(prob, person_pixels(m)) >= AGREE_IOU
+    assert first.score >= 0.5 and segmentation_iou(prob, person_pixels(m)) >= AGREE_IOU
+    L = LANDMARK_NAMES.index
+    turn = upright_angle(0.5 * (first.uv[L("left_hip")] + first.uv[L("right_hip")]),
+                         0.5 * (first.uv[L("left_shoulder")] + first.uv[L("right_shoulder")]))
+    assert _same(refined, det.detect(img, box_from_points(first.uv, angle_rad=turn)))
     # a large grey block with nobody in it, in the image and the mask, beside the person: the person components are
     # the block, the model finds nobody there (its segmentation alone would take the block for a person), and the
     # mask square is detected on as well
@@ -160,9 +165,10 @@ def test_checked_person_crop_is_taken_where_the_model_sees_the_person_and_not_wh
     assert lm is None or np.array_equal(lm.roi, mask_box)
     prob, _ = det.person_probability(img2, np.array(person_box))
     assert segmentation_iou(prob, person_pixels(m2)) >= AGREE_IOU          # why the score is asked too
-    # the reflection case asks the person square only
+    # the reflection case asks the person square, then the square around its landmarks
     asked.clear()
     detect_in_mask(Spy(), img, m, crop="person_checked")
-    assert asked == [("person_probability", tuple(crop_box(m, crop="person")))]
+    assert [a[0] for a in asked] == ["person_probability", "detect"] and asked[0][1] == tuple(crop_box(m, crop="person"))
+    assert asked[1][1] == tuple(refined.roi)
     with pytest.raises(VisionError, match="crop: expected one of mask, person, person_turned, person_checked"):
         detect_in_mask(det, img, m, crop="x")

@@ -10,7 +10,8 @@ network gives the offline tracker's estimates bit for bit (docs/keypoints.md):
 * after those, every ``every_k``-th frame with a person (counted from the view's first one);
 * the detector's square is placed around the mask's foreground (:func:`crop_box`, :data:`CROP`); the crop around
   the person's components only (``"person"``) is an option, and ``"person_checked"`` takes it only where the
-  model's own person segmentation agrees with those components (:func:`detect_in_mask`).
+  model finds a person there whose segmentation agrees with those components, then detects again in a square
+  turned by that detection's own hips and shoulders (:func:`detect_in_mask`).
 
 The schedule counts frames per view from what the view shows, not from clocks or the tracker's state, so two
 processes that see the same frames decide alike.
@@ -25,7 +26,7 @@ import cv2
 import numpy as np
 
 from .errors import VisionError
-from .landmarks import Landmarks2D, PoseLandmarker, box_from_mask, box_from_points
+from .landmarks import LANDMARK_NAMES, Landmarks2D, PoseLandmarker, box_from_mask, box_from_points, upright_angle
 
 __all__ = ["KeypointSchedule", "detect_in_mask", "crop_box", "person_pixels", "body_axis_angle", "segmentation_iou",
            "CROP", "CROPS", "DETECT_CROPS", "AGREE_IOU", "DENSE_FRAMES", "EVERY_K"]
@@ -90,7 +91,9 @@ MAX_TURN_RAD = np.radians(45.0)
 #: :func:`detect_in_mask`'s crops: :data:`CROPS` (a region from the mask alone) and ``"person_checked"``: the
 #: ``"person"`` square where it differs from the ``"mask"`` one is kept only when the model finds a person in it
 #: (pose score >= ``min_score``) whose segmentation agrees with the mask's person components (intersection over
-#: union >= :data:`AGREE_IOU`), else the ``"mask"`` square is detected on instead (a second model call)
+#: union >= :data:`AGREE_IOU`), and then refined by a second detection in the square around its landmarks turned
+#: by its hips and shoulders (as MediaPipe places its next region); else the ``"mask"`` square is detected on
+#: (a second model call either way)
 DETECT_CROPS = CROPS + ("person_checked",)
 #: ``"person_checked"``: the least intersection over union of the model's person segmentation (probability > 0.5)
 #: with the mask's person components. Measured (every 3rd frame, the views where the two squares differ): the real
@@ -170,11 +173,12 @@ def detect_in_mask(detector: PoseLandmarker, image: Any, mask: Any, *, box_scale
     default :data:`CROP`), or None (empty mask, or a pose score below ``min_score``: nobody there).
 
     ``"person_checked"``: where the ``"person"`` square is the ``"mask"`` one (the mask is the person), one
-    detection; elsewhere the detection in the ``"person"`` square is kept when it finds a person (score >=
-    ``min_score``) and the model's person segmentation of the square agrees with the mask's person components
-    (:func:`segmentation_iou` >= :data:`AGREE_IOU`; the segmentation alone also covers a plain grey block where
-    nobody is), and the ``"mask"`` square is detected on otherwise (a model without the segmentation output:
-    always).
+    detection, the ``"mask"`` crop's; elsewhere the detection in the ``"person"`` square is accepted when it
+    finds a person (score >= ``min_score``) and the model's person segmentation of the square agrees with the
+    mask's person components (:func:`segmentation_iou` >= :data:`AGREE_IOU`; the segmentation alone also covers
+    a plain grey block where nobody is), and then detected again in the square around its 33 landmarks turned
+    so that its hips-to-shoulders direction points up (:func:`~.landmarks.upright_angle`); not accepted, the
+    ``"mask"`` square is detected on (a model without the segmentation output: always).
 
     Raises
     ------
@@ -208,6 +212,12 @@ def _detect_checked(detector: PoseLandmarker, img: np.ndarray, m: np.ndarray, bo
     if box is None or np.array_equal(box, box_mask) or not detector.has_segmentation:
         return detector.detect(img, box_mask, bgr=bgr)
     probability, lm = detector.person_probability(img, box, bgr=bgr)
-    if lm.score >= min_score and segmentation_iou(probability, person_pixels(m)) >= AGREE_IOU:
-        return lm
-    return detector.detect(img, box_mask, bgr=bgr)
+    if lm.score < min_score or segmentation_iou(probability, person_pixels(m)) < AGREE_IOU:
+        return detector.detect(img, box_mask, bgr=bgr)
+    uv = lm.uv
+    turn = upright_angle(0.5 * (uv[_HIPS[0]] + uv[_HIPS[1]]), 0.5 * (uv[_SHOULDERS[0]] + uv[_SHOULDERS[1]]))
+    return detector.detect(img, box_from_points(uv, scale=box_scale, angle_rad=turn), bgr=bgr)
+
+
+_HIPS = (LANDMARK_NAMES.index("left_hip"), LANDMARK_NAMES.index("right_hip"))
+_SHOULDERS = (LANDMARK_NAMES.index("left_shoulder"), LANDMARK_NAMES.index("right_shoulder"))
