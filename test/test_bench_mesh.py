@@ -62,3 +62,37 @@ def test_design_and_targets():
     assert t["clean: mean joint error ≤ 30 mm (mapped)"] and t["clean: knee RMSE ≤ 3° (mapped)"]
     assert not t["clean: no frame > 100 mm (mapped, worst run)"] and not t["clean: no run tracked facing backwards"]
     assert s["conditions"][0]["backwards_runs"] == 1
+
+
+def test_quick_with_two_calibration_seeds_tracks_each_seed_with_its_calibration(tmp_path):
+    js = tmp_path / "mesh.json"
+    assert main(["bench", "mesh", "--quick", "--seeds", "0,1", "--calib-seeds", "0,1", "--jobs", "1",
+                 "--out", str(tmp_path / "w"), "--json", str(js)]) == 0
+    res = json.loads(js.read_text())
+    assert res["design"]["calib_seeds"] == [0, 1]
+    cals = {c["calib_seed"]: c for c in res["calibrations"]}
+    assert sorted(cals) == [0, 1] and cals[0]["shape_file"] != cals[1]["shape_file"]
+    cache = tmp_path / "w" / "cache"
+    # tracker seed i tracks with calibration seed i mod 2; the seed-0 file is the one-calibration bench's file
+    assert {r["seed"]: r["shape"] for r in res["runs"]} == {0: str(cache / cals[0]["shape_file"]),
+                                                          1: str(cache / cals[1]["shape_file"])}
+    assert cals[0]["shape_file"] == bm.br.calibration_path(cache / cals[0]["bag"], bm.make_design("quick")).name
+    v = res["conditions"][0]["per_subject"]["average_man"]
+    assert sorted(v["per_calibration"]) == ["0", "1"]
+    assert v["calibration_range_mm"] == [min(r["mapped_mpjpe_mm"] for r in res["runs"]),
+                                         max(r["mapped_mpjpe_mm"] for r in res["runs"])]
+
+
+def test_calibration_seeds_of_the_design():
+    assert bm.make_design("default").calib_seeds == bm.CALIB_SEEDS == (0, 1, 2)
+    assert bm.make_design("quick", seeds=(3, 4)).calib_seeds == (3,)
+    assert bm.make_design("default", calib_seeds=(5,)).calib_seeds == (5,)
+    with pytest.raises(ValueError, match="calibration seeds"):
+        bm.make_design("default", calib_seeds=(1, 1))
+    # runs of one calibration have no per-calibration figures
+    run = {"condition": "clean", "sequence": "a", "mpjpe_mm": 40.0, "offset_removed_mpjpe_mm": 12.0, "knee_rmse_deg": 9.0,
+           "max_frame_error_mm": 130.0, "backwards_share": 0.0, "mapped_mpjpe_mm": 20.0, "mapped_knee_rmse_deg": 2.0,
+           "mapped_max_frame_error_mm": 90.0, "calib_seed": 0}
+    assert "per_calibration" not in bm.summarize([run, dict(run)])["conditions"][0]["per_subject"]["a"]
+    two = bm.summarize([run, dict(run, calib_seed=1, mapped_mpjpe_mm=30.0)])["conditions"][0]["per_subject"]["a"]
+    assert two["calibration_range_mm"] == [20.0, 30.0] and two["per_calibration"]["1"]["mapped_mpjpe_mm"] == 30.0

@@ -5,6 +5,9 @@ import argparse
 import contextlib
 import io
 import json
+import sys
+import tempfile
+import time
 from pathlib import Path
 
 
@@ -46,3 +49,16 @@ def write_result(bench: str, res: dict, json_path, markdown: str) -> int:
     print(markdown)
     print(f"bench {bench}: wrote {json_path}")
     return 0
+
+
+def collect_and_write(bench: str, collect, design, args: argparse.Namespace, render_markdown) -> int:
+    """The shared tail of the mesh benches: ``collect(design, cache=, out=, jobs=)`` in ``args.out`` (a temporary
+    directory when unset) with rendered bags in ``args.cache`` (default ``OUT/cache``), the wall time and the command
+    line added, written by :func:`write_result` to ``args.json``; the bench's exit code."""
+    out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix=f"isa_mocap_{bench}_"))
+    cache = Path(args.cache) if args.cache else out / "cache"
+    t0 = time.perf_counter()
+    res = collect(design, cache=cache, out=out, jobs=args.jobs)
+    res["seconds"] = round(time.perf_counter() - t0, 1)
+    res["command"] = f"isa-mocap bench {bench} " + " ".join(sys.argv[3:])
+    return write_result(bench, res, args.json, render_markdown(res))

@@ -24,14 +24,12 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
 from isa_mocap_ros.bench import robustness as br
-from isa_mocap_ros.bench._common import write_result
+from isa_mocap_ros.bench._common import collect_and_write
 from isa_mocap_ros.bench.mesh import _names
 from isa_mocap_ros.cli.keypoint_options import default_keypoint_weight
 from isa_mocap_ros.eval.compare import SequenceSpec
@@ -218,10 +216,4 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"isa-mocap bench mesh_motions: error: {exc}", file=sys.stderr)
         return 2
-    out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="isa_mocap_motions_"))
-    cache = Path(args.cache) if args.cache else out / "cache"
-    t0 = time.perf_counter()
-    res = collect(design, cache=cache, out=out, jobs=args.jobs)
-    res["seconds"] = round(time.perf_counter() - t0, 1)
-    res["command"] = "isa-mocap bench mesh_motions " + " ".join(sys.argv[3:])
-    return write_result("mesh_motions", res, args.json, render_markdown(res))
+    return collect_and_write("mesh_motions", collect, design, args, render_markdown)

@@ -106,6 +106,9 @@ class RobustDesign:
     calib: tuple = ()
     #: tracker options beyond the defaults (``track``'s arguments, e.g. ``silhouette_core_px``): (name, value) pairs
     tracker: tuple = ()
+    #: shape calibration seeds with ``shape="auto"``: each bag calibrated once per seed, the i-th tracker seed tracking
+    #: with calibration ``calib_seeds[i % n]``; empty = one calibration, the first tracker seed's
+    calib_seeds: tuple = ()
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -187,32 +190,40 @@ def prepare_bag(seq: SequenceSpec, cond: str, cache: Path) -> Path:
     return path
 
 
-def calibration_path(bag: Path, design: RobustDesign) -> Path:
-    """Where :func:`calibrate_bag` keeps ``bag``'s calibrated body shape: beside the bag in the cache, named by
-    what the calibration depends on (the calibration options and seed, the model, the calibration module's
-    source) and not by the tracker seed, so every seed and later runs of the bench reuse it."""
+def calibration_seeds(design: RobustDesign) -> tuple:
+    """The design's shape calibration seeds: ``calib_seeds``, or the first tracker seed alone."""
+    return tuple(getattr(design, "calib_seeds", ()) or ()) or ((design.seeds[0] if design.seeds else design.seed),)
+
+
+def calibration_path(bag: Path, design: RobustDesign, calib_seed: int | None = None) -> Path:
+    """Where :func:`calibrate_bag` keeps ``bag``'s calibrated body shape of calibration seed ``calib_seed`` (default
+    the design's first): beside the bag in the cache, named by what the calibration depends on (the calibration
+    options and seed, the model, the calibration module's source) and not by the tracker seed, so every seed and
+    later runs of the bench reuse it."""
     import hashlib
 
     from isa_mocap_ros.tracking import shape_calibration
 
-    key = repr((sorted(dict(design.calib).items()), design.seeds[0] if design.seeds else design.seed, 39))
+    seed = calibration_seeds(design)[0] if calib_seed is None else int(calib_seed)
+    key = repr((sorted(dict(design.calib).items()), seed, 39))
     src = Path(shape_calibration.__file__).read_bytes()
     h = hashlib.sha256(key.encode() + src).hexdigest()[:12]
     return bag.parent / f"{bag.name}.shape_{h}.yaml"
 
 
-def calibrate_bag(bag: Path, design: RobustDesign) -> dict:
-    """The body shape of ``bag`` calibrated once (``isa-mocap calibrate``'s code, calibration seed
-    ``design.seeds[0]``) into :func:`calibration_path`, unless it is there; returns its report (bone-length
+def calibrate_bag(bag: Path, design: RobustDesign, calib_seed: int | None = None) -> dict:
+    """The body shape of ``bag`` calibrated once (``isa-mocap calibrate``'s code, calibration seed ``calib_seed``,
+    default the design's first) into :func:`calibration_path`, unless it is there; returns its report (bone-length
     errors against the bag's joint centres when it has them)."""
     from isa_mocap_ros.cli.calibrate import run as calibrate
 
-    path = calibration_path(bag, design)
+    seed = calibration_seeds(design)[0] if calib_seed is None else int(calib_seed)
+    path = calibration_path(bag, design, seed)
     report = path.with_suffix(".json")
     if not (path.is_file() and report.is_file()):
         t0 = time.perf_counter()
         tmp = path.with_suffix(".tmp.yaml")
-        ns = argparse.Namespace(bag=str(bag), out=str(tmp), model=39, seed=design.seeds[0] if design.seeds else design.seed,
+        ns = argparse.Namespace(bag=str(bag), out=str(tmp), model=39, seed=seed,
                                 start=0, use_masks=False, learn_frames=None, report=str(report), overwrite=True,
                                 **{"calib_frames": None, "calib_rounds": None, "calib_evals": None, **dict(design.calib)})
         with contextlib.redirect_stdout(sys.stderr):        # the bench's stdout may be its JSON
@@ -224,7 +235,7 @@ def calibrate_bag(bag: Path, design: RobustDesign) -> dict:
         report.write_text(json.dumps(r, indent=2) + "\n")
         tmp.rename(path)
     r = json.loads(report.read_text())
-    return {"bag": bag.name, "shape_file": path.name, "seconds": r.get("seconds"),
+    return {"bag": bag.name, "calib_seed": seed, "shape_file": path.name, "seconds": r.get("seconds"),
             "bone_error_mm": (r.get("bone_error") or {}).get("mean_mm"),
             "bone_error_default_shape_mm": (r.get("bone_error_default_shape") or {}).get("mean_mm"),
             "limb_bone_error_mm": (r.get("bone_error") or {}).get("limbs_mean_mm"),
@@ -302,12 +313,14 @@ def track_condition(bag: Path, out: Path, design: RobustDesign, seed: int | None
 
 
 def _track_job(job: tuple) -> dict:
-    """One run (a worker process's job): ``(bag, out, design, seed, sequence, condition, synth_seconds)``;
-    with ``design.shape == "auto"`` tracked with the bag's shape calibrated once (:func:`calibrate_bag`)."""
-    bag, out, design, seed, seq, cond, t_synth = job
-    shape = str(calibration_path(bag, design)) if getattr(design, "shape", "truth") == "auto" else None
+    """One run (a worker process's job): ``(bag, out, design, seed, sequence, condition, synth_seconds,
+    calib_seed)``; with ``design.shape == "auto"`` tracked with the bag's shape of that calibration seed
+    (:func:`calibrate_bag`)."""
+    bag, out, design, seed, seq, cond, t_synth, calib_seed = job
+    auto = getattr(design, "shape", "truth") == "auto"
+    shape = str(calibration_path(bag, design, calib_seed)) if auto else None
     r = track_condition(bag, out, design, seed, shape=shape)
-    r.update(sequence=seq, condition=cond, synth_seconds=t_synth)
+    r.update(sequence=seq, condition=cond, synth_seconds=t_synth, **({"calib_seed": calib_seed} if auto else {}))
     return r
 
 
@@ -328,6 +341,7 @@ def collect(design: RobustDesign, *, cache: Path, out: Path, progress: bool = Tr
     """
     t0 = time.perf_counter()
     seeds = tuple(design.seeds) or (design.seed,)
+    cseeds = calibration_seeds(design)
     todo = []
     for seq in design.sequences:
         for cond in design.conditions:
@@ -336,7 +350,8 @@ def collect(design: RobustDesign, *, cache: Path, out: Path, progress: bool = Tr
             t_synth = round(time.perf_counter() - ts, 2)
             for i, seed in enumerate(seeds):
                 run_out = out / (bag_name(seq, cond) + (f"_t{seed}" if len(seeds) > 1 else ""))
-                todo.append((bag, run_out, design, seed, seq.name, cond, t_synth if i == 0 else 0.0))
+                todo.append((bag, run_out, design, seed, seq.name, cond, t_synth if i == 0 else 0.0,
+                             cseeds[i % len(cseeds)]))
 
     def report(r: dict) -> None:
         if progress:
@@ -344,11 +359,11 @@ def collect(design: RobustDesign, *, cache: Path, out: Path, progress: bool = Tr
                   f"{r['knee_rmse_deg']:6.2f} deg, {r['mpjpe_mm']:6.1f} mm over {r['frames']} frames "
                   f"({r['fps']:.1f} frames/s)", file=sys.stderr, flush=True)
 
-    # the calibrations first (one per bag, whatever the seeds), then the runs
-    bags = list(dict.fromkeys(job[0] for job in todo)) if getattr(design, "shape", "truth") == "auto" else []
+    # the calibrations first (one per bag and calibration seed, whatever the tracker seeds), then the runs
+    cal = list(dict.fromkeys((job[0], job[7]) for job in todo)) if getattr(design, "shape", "truth") == "auto" else []
     jobs = max(1, min(int(jobs), len(todo)))
     if jobs == 1:
-        calibrations = [calibrate_bag(b, design) for b in bags]
+        calibrations = [calibrate_bag(b, design, k) for b, k in cal]
         runs = []
         for job in todo:
             runs.append(_track_job(job))
@@ -360,7 +375,7 @@ def collect(design: RobustDesign, *, cache: Path, out: Path, progress: bool = Tr
         os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
         # spawn: numba's threading layer is not fork-safe once initialized
         with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn"), initializer=_worker_init) as ex:
-            calibrations = list(ex.map(calibrate_bag, bags, [design] * len(bags)))
+            calibrations = list(ex.map(calibrate_bag, [b for b, _ in cal], [design] * len(cal), [k for _, k in cal]))
             futs = {ex.submit(_track_job, job): k for k, job in enumerate(todo)}
             done: dict = {}
             for f in as_completed(futs):

@@ -32,12 +32,18 @@ import numpy as np
 from numba import types
 from numba.extending import intrinsic
 
+from ..numba_cache import register_dependent_cache
+from . import silhouette_kernel
 from .silhouette_kernel import (DETERMINISTIC_FASTMATH, G_AX, G_AY, G_CA, G_COLS, G_CONE, G_LEN, G_RA, G_RB, G_SB,
                                 G_UX, G_UY, G_VALID, SERIAL_PIPELINE, _fk_joint, _fk_one, _project_cap, _project_caps,
                                 _to_camera, _to_camera_joint)
 
 __all__ = ["Raster", "RasterStage", "raster_batch", "raster_batch_serial", "raster_restrict_prepare", "raster_restricted",
            "foreground_bits", "raster_static"]
+
+# numba keys a cached function on its own file only: the kernels here compile silhouette_kernel's projection into
+# their machine code, so an edit there must also miss this module's cache
+register_dependent_cache(__file__, (silhouette_kernel,))
 
 # the serial kernel has no parallel loop by design (numba warns at compile time), as in silhouette_kernel
 warnings.filterwarnings("ignore", message=r"(?s).*no transformation for parallel execution.*raster_kernel\.py",
