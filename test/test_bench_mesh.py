@@ -89,6 +89,12 @@ def test_calibration_seeds_of_the_design():
     assert bm.make_design("default", calib_seeds=(5,)).calib_seeds == (5,)
     with pytest.raises(ValueError, match="calibration seeds"):
         bm.make_design("default", calib_seeds=(1, 1))
+    # a calibration option: its own cache name, the seed-0 name of the defaults unchanged
+    from pathlib import Path
+    rp = bm.make_design("default", calib=[("calib_radius_prior", 0.05)])
+    assert dict(rp.calib) == {"calib_radius_prior": 0.05} and bm.make_design("default").calib == ()
+    bag = Path("/x/bag")
+    assert bm.br.calibration_path(bag, rp, 0) != bm.br.calibration_path(bag, bm.make_design("default"), 0)
     # runs of one calibration have no per-calibration figures
     run = {"condition": "clean", "sequence": "a", "mpjpe_mm": 40.0, "offset_removed_mpjpe_mm": 12.0, "knee_rmse_deg": 9.0,
            "max_frame_error_mm": 130.0, "backwards_share": 0.0, "mapped_mpjpe_mm": 20.0, "mapped_knee_rmse_deg": 2.0,

@@ -66,11 +66,13 @@ _MEANS = ("mpjpe_mm", "mapped_mpjpe_mm", "offset_removed_mpjpe_mm", "knee_rmse_d
 
 
 def make_design(kind: str = "default", *, seeds=None, frames: int | None = None, subjects=None,
-                conditions=None, tracker=(), calib_seeds=None) -> br.RobustDesign:
+                conditions=None, tracker=(), calib_seeds=None, calib=()) -> br.RobustDesign:
     """``"default"`` (3 subjects x 3 conditions x seeds 0-7, 60 frames, calibration seeds 0-2) or ``"quick"`` (the
     smoke test, one calibration); ``tracker``: ``track`` options beyond the defaults, (name, value) pairs (e.g.
     ``("keypoint_weight", 1.0)``); ``calib_seeds``: the shape calibration seeds (tracker seed i tracks with the
-    calibration of ``calib_seeds[i % n]``)."""
+    calibration of ``calib_seeds[i % n]``); ``calib``: calibration options beyond the defaults, (name, value) pairs of
+    ``track``'s ``--calib-*`` (e.g. ``("calib_radius_prior", 0.05)``)."""
+    calib = tuple((str(k), v) for k, v in calib)
     tracker = tuple((str(k), v) for k, v in tracker)
     subjects = tuple(subjects or (SUBJECTS[1:2] if kind == "quick" else SUBJECTS))
     conditions = tuple(conditions or (("clean",) if kind == "quick" else CONDITIONS))
@@ -85,7 +87,7 @@ def make_design(kind: str = "default", *, seeds=None, frames: int | None = None,
                                   subject=s) for s in subjects)
         seeds = tuple(seeds or (0,))
         return br.RobustDesign("mesh quick", seqs, conditions, "h-isa", 300, seeds[0], "auto", seeds=seeds,
-                               shape="auto", calib=br.QUICK_CALIB, tracker=tracker,
+                               shape="auto", calib=br.QUICK_CALIB + calib, tracker=tracker,
                                calib_seeds=_calib_seeds(calib_seeds or (seeds[0],)))
     if kind != "default":
         raise ValueError(f"kind: expected 'quick' or 'default', received {kind!r}")
@@ -95,7 +97,7 @@ def make_design(kind: str = "default", *, seeds=None, frames: int | None = None,
     seqs = tuple(SequenceSpec(s, "walk", duration_s=n / 30.0, **br.SEQUENCE_DEFAULTS, subject=s) for s in subjects)
     seeds = tuple(seeds or br.DEFAULT_SEEDS)
     return br.RobustDesign("mesh", seqs, conditions, "h-isa", 1500, seeds[0], "auto", seeds=seeds, shape="auto",
-                           tracker=tracker, calib_seeds=_calib_seeds(calib_seeds or CALIB_SEEDS))
+                           tracker=tracker, calib_seeds=_calib_seeds(calib_seeds or CALIB_SEEDS), calib=calib)
 
 
 def _calib_seeds(v) -> tuple:
@@ -240,7 +242,8 @@ def _calibration_settings(design: dict) -> str:
     cfg = calibration_config(argparse.Namespace(**dict(design.get("calib") or ())), 0)
     return (f"shape-fit energy {cfg.energy}, {cfg.restarts} restart{'s' if cfg.restarts > 1 else ''}"
             + (f" combined by the {cfg.combine}" if cfg.restarts > 1 else "")
-            + f", {cfg.rounds} rounds x {cfg.shape_evals} evaluations on {cfg.n_frames} of {cfg.window_frames} frames")
+            + f", {cfg.rounds} rounds x {cfg.shape_evals} evaluations on {cfg.n_frames} of {cfg.window_frames} frames"
+            + (f", radius prior {cfg.radius_prior:g}" if cfg.radius_prior else ""))
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -252,6 +255,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frames", type=int, default=None, metavar="N", help=f"frames per run (default {FRAMES})")
     p.add_argument("--subjects", default=None, metavar="A,B", help=f"mesh subjects (default {','.join(SUBJECTS)})")
     p.add_argument("--conditions", default=None, metavar="A,B", help=f"conditions (default {','.join(CONDITIONS)})")
+    p.add_argument("--calib-radius-prior", type=float, default=None, metavar="W",
+                   help="the shape calibration's radius prior (isa-mocap calibrate's --calib-radius-prior; default: "
+                        "calibrate's, off); the calibrations are cached under their own name")
     p.add_argument("--keypoint-weight", type=float, default=None, metavar="W",
                    help="weight of the learned-keypoint term (docs/keypoints.md; 0 = off; default: track's, 1 when "
                         "the landmark model is installed)")
@@ -281,7 +287,9 @@ def run(args: argparse.Namespace) -> int:
         cseeds = None if getattr(args, "calib_seeds", None) is None else tuple(int(x) for x in _names(args.calib_seeds))
         design = make_design("quick" if args.quick else "default", seeds=seeds, frames=args.frames,
                              subjects=_names(args.subjects), conditions=_names(args.conditions), tracker=tracker,
-                             calib_seeds=cseeds)
+                             calib_seeds=cseeds,
+                             calib=tuple((k, getattr(args, k)) for k in ("calib_radius_prior",)
+                                         if getattr(args, k, None) is not None))
         if args.jobs < 1:
             raise ValueError(f"--jobs: expected an integer >= 1, received {args.jobs}")
     except ValueError as exc:

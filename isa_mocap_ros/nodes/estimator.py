@@ -77,10 +77,10 @@ from isa_mocap_ros.tracking.realtime import RealTimeSchedule, warm_up
 from isa_mocap_ros.vision.overlay import draw_overlay
 
 
-#: frame sets in a row without foreground before the worker rehearses the automatic initialization (``startup_rehearsal``):
-#: a rehearsal (~130 CPU ms on bags/demo) started right before the person's first set would delay its initialization;
-#: the segmentation's 10 learning frames leave ~7 sets after it
-REHEARSAL_AFTER_EMPTY_SETS = 3
+#: frame sets in a row without foreground before the worker rehearses the first-frame hull (``startup_rehearsal``): a
+#: rehearsal (15-33 CPU ms on bags/demo) started right before the person's first set would delay its initialization by
+#: that much; the segmentation's 10 learning frames leave 8 sets after it
+REHEARSAL_AFTER_EMPTY_SETS = 2
 
 #: TrackerConfig fields that are not parameters of this node (none: every setting is one)
 NOT_PARAMETERS: tuple[str, ...] = ()
@@ -148,9 +148,9 @@ class EstimatorNode(EstimatorIntake, Node):
                                    "below this share of frame_period_s", lo=0.05, hi=1.0)
         self.rehearsal = declare(
             self, "startup_rehearsal", True, "while the frame sets are empty (the segmentation's learning frames, "
-            "nobody in view yet), run the automatic initialization once on the real cameras with a rendered standing "
-            "body, so the first real one does not pay its one-time costs (~15-20 CPU ms on bags/demo); the estimates do "
-            "not depend on it (docs/nodes.md)")
+            "nobody in view yet), run the first-frame hull once on the real cameras with a rendered standing body, so "
+            "the first real initialization does not pay its one-time costs (~15-20 CPU ms on bags/demo); the estimates "
+            "do not depend on it (docs/nodes.md)")
         self.use_prediction = declare(self, "use_prediction", True, "use prediction/joint_states when it arrives")
         self.keypoint_wait_s = declare(self, "keypoint_wait_s", 10.0, "lockstep, keypoint_weight > 0: longest wait "
                                        "for a view's keypoints (or skip notice) of a frame set while no keypoint node "
@@ -340,12 +340,17 @@ class EstimatorNode(EstimatorIntake, Node):
                 else:
                     frame_set, t_ready = item
                     prediction, keypoints = self._inputs_of(frame_set)
+                    # a worker that is never idle (a loaded machine) rehearses before an empty set: that set gives no
+                    # estimate, so its wait costs nothing
+                    rehearse = self._rehearsal_due() and not any(m is not None and np.any(m) for m in frame_set.items)
             if item is None:
                 if rehearse:
                     self._rehearse()
                 else:
                     self._prepare(cams)
                 continue
+            if rehearse:
+                self._rehearse()
             try:
                 self._process(frame_set, prediction, t_ready, keypoints)
             except Exception as exc:  # noqa: BLE001 - a node must survive any one bad frame set
@@ -392,7 +397,7 @@ class EstimatorNode(EstimatorIntake, Node):
         self.prepare_ms += (time.thread_time() - t0) * 1e3
 
     def _rehearsal_due(self) -> bool:
-        """(Under ``_cv``.) Whether the worker, idle, rehearses the automatic initialization now: a tracker made and
+        """(Under ``_cv``.) Whether the worker, idle, rehearses the first-frame hull now: a tracker made and
         not initialized, :data:`REHEARSAL_AFTER_EMPTY_SETS` frame sets in a row without foreground just tracked (the
         segmentation's learning frames: the person's first set is likely some sets away), not done yet for this
         tracker."""
@@ -400,14 +405,14 @@ class EstimatorNode(EstimatorIntake, Node):
                 and self._rehearsed is not self.tracker and self._empty_sets >= REHEARSAL_AFTER_EMPTY_SETS)
 
     def _rehearse(self) -> None:
-        """The start-up rehearsal (:func:`~isa_mocap_ros.tracking.realtime.rehearse`) on the tracker's cameras; a
-        failure only costs the first initialization its one-time costs."""
+        """The start-up rehearsal (:func:`~isa_mocap_ros.tracking.realtime.rehearse`: the first-frame hull) on the
+        tracker's cameras; a failure only costs the first initialization its one-time costs."""
         from isa_mocap_ros.tracking.realtime import rehearse
 
         self._rehearsed = self.tracker
         t0 = time.thread_time()
         try:
-            rehearse(self.model, self.tracker.cameras, self.tracker_config)
+            rehearse(self.model, self.tracker.cameras)
         except Exception as exc:  # noqa: BLE001 - an optimisation, never fatal
             self.problems.event("rehearsal", f"start-up rehearsal failed ({type(exc).__name__}: {exc})")
         self.rehearsal_ms += (time.thread_time() - t0) * 1e3

@@ -228,26 +228,24 @@ def warm_up(model, config) -> list:
     return [tracker.step(masks, 0), tracker.step(masks, 1)]
 
 
-def rehearse(model, cameras, config) -> list:
-    """The automatic initialization and a tracked frame once on ``cameras`` themselves, at their size, before the
+def rehearse(model, cameras) -> list:
+    """The first-frame hull (:func:`.init_hull.person_masks`) once on ``cameras`` themselves, at their size, before the
     person is in view: the rest pose of ``model`` standing in the middle of the rig's capture volume
-    (:func:`.init_hull.capture_volume`), rendered into every camera, stepped twice by a throwaway
-    :class:`~.tracker.Tracker` with ``config``. :func:`warm_up` loads the kernels on 80×60 views; the first real
-    initialization in a process still paid ~15-18 CPU ms more than the next ones (bags/demo, 98 -> 115 ms), nearly all
-    of it ~520 first-touch page faults of the first-frame hull's arrays at the cameras' size (~12 µs each on this
-    machine's VM) — a cost the estimator node now pays on an empty frame set instead (docs/nodes.md, "Start-up"). The
-    caches it fills are keyed by content (camera geometry), so a tracker's estimates do not depend on it. Returns the
-    two steps' :class:`~.result.FrameResult`."""
+    (:func:`.init_hull.capture_volume`), rendered into every camera. :func:`warm_up` loads the kernels on 80×60 views;
+    the first real initialization in a process still paid 15-23 CPU ms more than the next ones (bags/demo, ~98 -> 111-123
+    ms), nearly all of it ~520 first-touch page faults (~12 µs each on this machine's VM) of the hull's arrays at the
+    cameras' size (~123,000 cubes × 4 views), which this call takes on instead (15-33 CPU ms; after it the
+    initialization has 6-8 faults and ~97 ms; the whole initialization rehearsed instead cost ~130 ms for the same gain).
+    The estimator node calls it on an empty frame set (docs/nodes.md, "Start-up"); it changes no estimate (nothing it
+    computes is kept but the process's memory). Returns the rendered masks cut to the hull's blob."""
     from isa_mocap_ros.body import capsule_endpoints
     from isa_mocap_ros.vision import render_mask
 
-    from .init_hull import capture_volume
-    from .tracker import Tracker
+    from .init_hull import capture_volume, person_masks
 
     lo, hi = capture_volume(cameras)
     x = model.rest_pose()
     x[:2] = 0.5 * (lo[:2] + hi[:2])
     ends = capsule_endpoints(model, x[None])[0]
     masks = [render_mask(c, ends, model.capsule_radii) for c in cameras]
-    tracker = Tracker(model, list(cameras), config)
-    return [tracker.step(masks, 0), tracker.step(masks, 1)]
+    return person_masks(masks, list(cameras))[0]
