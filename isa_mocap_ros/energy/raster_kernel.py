@@ -221,9 +221,10 @@ def _raster_rows(X, lo, hi, body, views, raster, out):  # pragma: no cover - com
                 for j in range(jlo, jhi + 1):
                     k = numba.uint64(w * Hs + j)
                     u = U[k]
-                    cm += _popcount(u)
-                    cmf += _popcount(u & fbits[v, k])
-                    U[k] = z64
+                    if u != z64:    # an empty word adds nothing and is clear already
+                        cm += _popcount(u)
+                        cmf += _popcount(u & fbits[v, k])
+                        U[k] = z64
             t1 = (cm - cmf) / cm if cm > 0 else 1.0     # no model pixel: Eq. 4's 0/0, its worst value
             t2 = (nfg[v] - cmf) / nfg[v] if nfg[v] > 0 else 1.0
             total += view_w[v] * (0.5 * t1 + 0.5 * t2)
@@ -302,6 +303,7 @@ def raster_restricted(X, restriction, body, views, raster, stage, n_chunks, out)
     Hs = (fbits.shape[1] - 8) // nw
     Lv = fbits.shape[1]
     nm = mov_caps.shape[0]
+    z64 = numba.uint64(0)
     wsum = 0.0
     for v in range(V):
         wsum += view_w[v]
@@ -346,10 +348,11 @@ def raster_restricted(X, restriction, body, views, raster, stage, n_chunks, out)
                         k = w * Hs + j
                         u = U[v * Lv + k]
                         f = Ufix[v, k]
-                        fb = fbits[v, k]
-                        cm += _popcount(u) - _popcount(f)
-                        cmf += _popcount(u & fb) - _popcount(f & fb)
-                        U[v * Lv + k] = f
+                        d = u ^ f   # the moving capsules' new pixels (u holds f): |u| - |f| = |d|
+                        if d != z64:    # a word they left alone changes neither count and needs no restoring
+                            cm += _popcount(d)
+                            cmf += _popcount(d & fbits[v, k])
+                            U[v * Lv + k] = f
                 t1 = (cm - cmf) / cm if cm > 0 else 1.0
                 t2 = (nfg[v] - cmf) / nfg[v] if nfg[v] > 0 else 1.0
                 total += view_w[v] * (0.5 * t1 + 0.5 * t2)
