@@ -232,12 +232,10 @@ def rehearse(model, cameras) -> list:
     """The first-frame hull (:func:`.init_hull.person_masks`) once on ``cameras`` themselves, at their size, before the
     person is in view: the rest pose of ``model`` standing in the middle of the rig's capture volume
     (:func:`.init_hull.capture_volume`), rendered into every camera. :func:`warm_up` loads the kernels on 80×60 views;
-    the first real initialization in a process still paid 15-23 CPU ms more than the next ones (bags/demo, ~98 -> 111-123
-    ms), nearly all of it ~520 first-touch page faults (~12 µs each on this machine's VM) of the hull's arrays at the
-    cameras' size (~123,000 cubes × 4 views), which this call takes on instead (15-33 CPU ms; after it the
-    initialization has 6-8 faults and ~97 ms; the whole initialization rehearsed instead cost ~130 ms for the same gain).
-    The estimator node calls it on an empty frame set (docs/nodes.md, "Start-up"); it changes no estimate (nothing it
-    computes is kept but the process's memory). Returns the rendered masks cut to the hull's blob."""
+    this call touches the hull's arrays at the cameras' size, so the first real initialization does not pay their
+    first-touch page faults (figures: docs/history/issue35_speed.md, session 30). The estimator node calls it on an
+    empty frame set (docs/nodes.md, "Start-up"); it changes no estimate (nothing it computes is kept but the process's
+    memory). Returns the rendered masks cut to the hull's blob."""
     from isa_mocap_ros.body import capsule_endpoints
     from isa_mocap_ros.vision import render_mask
 
