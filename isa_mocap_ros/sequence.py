@@ -82,7 +82,9 @@ def model_to_yaml(model, *, role: str = "estimator", **extra) -> str:
             "model": {"name": model.name, "dof": model.dof, "dof_names": list(model.dof_names),
                       "marker_joints": [model.joint_names[j] for j in model.markers],
                       "shape": plain({"name": model.shape["name"], "offsets": dict(model.shape["offsets"]),
-                                      "radii": dict(model.shape["radii"])})},
+                                      "radii": dict(model.shape["radii"]),
+                                      **({"axis_offsets": dict(model.shape["axis_offsets"])}
+                                         if model.shape.get("axis_offsets") else {})})},
             "root": ("root_tx, root_ty, root_tz: pelvis position in world (m); root_rx, root_ry, root_rz: roll, "
                      "pitch, yaw (rad) with R = Rz(yaw) Ry(pitch) Rx(roll) (isa_mocap_ros.body.joint_state_to_pose)")}
     data.update(plain(extra))

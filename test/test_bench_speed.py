@@ -57,7 +57,8 @@ def test_network_rows_change_estimator_parameters_in_a_copy_of_the_parameter_fil
     from isa_mocap_ros.bench.speed import NETWORK_MODES, _params_with
     from isa_mocap_ros.resources import resource_dir
 
-    assert any(m[4] == {"startup_catch_up": 12} and not m[1] for m in NETWORK_MODES)
+    assert any(m[4] == {"startup_catch_up": 3} and not m[1] and not m[2] for m in NETWORK_MODES)
+    assert any(m[4] == {"startup_catch_up": 3} and m[2] for m in NETWORK_MODES)     # one core busy, A/B
     orig = yaml.safe_load((resource_dir("config") / "pipeline.yaml").read_text())
     got = yaml.safe_load(_params_with({"startup_catch_up": 12, "degrade": False}, tmp_path / "p.yaml").read_text())
     est, ref = got["/mocap/estimator"]["ros__parameters"], orig["/mocap/estimator"]["ros__parameters"]
@@ -77,7 +78,7 @@ def test_the_network_table_says_where_the_drops_came_from():
            "real_time_factor": 0.88, "latency_ms_p50": 50.0, "latency_ms_p95": 120.0, "dropped_frames": 16,
            "dropped_share": 16 / 145, "dropped_while_initializing": 6, "dropped_by_estimator": 14,
            "dropped_at_bunched_arrivals": 5, "startup_sets_caught_up": 0, "frames_without_contour_stage": 14,
-           "budget_lowered": 3, "init_ms": 168.0, "tracker_ms_p50": 21.0, "tracker_ms_p95": 44.0, "mpjpe_mm": 38.2,
+           "budget_lowered": 3, "init_ms": 168.0, "init_cpu_ms": 101.4, "tracker_ms_p50": 21.0, "tracker_ms_p95": 44.0, "mpjpe_mm": 38.2,
            "mpjpe_vs_lockstep_mm": 2.9}
     lines = bench_speed.network_table([row, {"mode": "lockstep", "error": "x"}])
     head = next(ln for ln in lines if ln.startswith("| mode |"))
@@ -87,5 +88,6 @@ def test_the_network_table_says_where_the_drops_came_from():
     at = dict(zip(names, cells))
     assert at["of them by the estimator (its queue) / at bunched arrivals"] == "14 / 5"
     assert at["budget lowered (times)"] == "3" and at["dropped"] == "16 (11 %)"
+    assert at["initialization wall / CPU (ms)"] == "168 / 101"      # the estimator's init_ms and init_cpu_ms
     failed = next(ln for ln in lines if ln.startswith("| lockstep |"))
     assert failed.count("|") == head.count("|")

@@ -201,24 +201,29 @@ def test_cached_code_depends_on_the_kernels_it_calls():
     # optimizer helpers of other files, so its cache stamp carries their hashes too (a git pull that
     # changes a kernel recompiles it instead of loading old machine code)
     import hashlib
+    import os
 
+    from isa_mocap_ros import numba_cache
     from isa_mocap_ros.body import kinematics
     from isa_mocap_ros.energy import keypoint_kernel, raster_kernel, silhouette_kernel
     from isa_mocap_ros.optim import _fast, _fast_so3
 
     deps = (silhouette_kernel, raster_kernel, keypoint_kernel, kinematics, _fast, _fast_so3)
     assert set(compiled_search.DEPENDENCIES) == set(deps)
+    files = numba_cache.dependencies(compiled_search.__file__)      # these, then what they depend on in turn
+    assert {os.path.abspath(m.__file__) for m in deps} <= set(files)
     for fn in (compiled_search._partition, compiled_search.rotation_mean):
         locator = fn._cache._impl.locator
         assert type(locator).__name__ == "_DependentLocator"
         h = hashlib.sha256()
-        for m in compiled_search.DEPENDENCIES:
-            h.update(open(m.__file__, "rb").read())
+        for f in files:
+            h.update(open(f, "rb").read())
         assert locator.get_source_stamp()[1] == h.hexdigest()
         # and the cache files' names carry the dependencies' module names: an index pickled before one was
         # renamed names a module that is gone, and must be missed rather than loaded (ModuleNotFoundError)
-        names = " ".join(m.__name__ for m in compiled_search.DEPENDENCIES)
-        tag = hashlib.sha256(names.encode()).hexdigest()[:8]
+        names = numba_cache.dependency_names(compiled_search.__file__)
+        assert {m.__name__ for m in deps} <= set(names) and len(names) == len(files)
+        tag = hashlib.sha256(" ".join(names).encode()).hexdigest()[:8]
         assert locator.get_disambiguator() == f"{locator._inner.get_disambiguator()}-{tag}"
 
 

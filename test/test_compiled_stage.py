@@ -87,11 +87,17 @@ def test_what_the_moved_search_does_not_cover(scene):
 def test_cached_stage_code_depends_on_the_kernels_it_calls():
     # as the compiled search's (test_compiled_search): the stage loop calls the search's helpers, the energy
     # kernels and the move's kernel of other files, so its cache stamp carries their hashes
+    import os
+
+    from isa_mocap_ros import numba_cache
     from isa_mocap_ros.body import reaim_kernel
 
     locator = compiled_stage._moved_isa._cache._impl.locator
     assert type(locator).__name__ == "_DependentLocator"
     h = hashlib.sha256()
-    for path in [m.__file__ for m in (*compiled_search.DEPENDENCIES, reaim_kernel)] + [compiled_search.__file__]:
+    files = numba_cache.dependencies(compiled_stage.__file__)
+    for m in (*compiled_search.DEPENDENCIES, reaim_kernel, compiled_search):
+        assert os.path.abspath(m.__file__) in files
+    for path in files:
         h.update(open(path, "rb").read())
     assert locator.get_source_stamp()[1] == h.hexdigest()

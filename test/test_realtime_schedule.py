@@ -183,6 +183,24 @@ print("LOADS", loads)
     assert "LOADS []" in res.stdout, res.stdout
 
 
+def test_a_rehearsal_changes_no_estimate():
+    """realtime.rehearse (the estimator node's start-up rehearsal of the first-frame hull on the real cameras,
+    ``startup_rehearsal``): its rendered body keeps its foreground in every view, and a tracker's estimates after it are
+    the ones without it, bit for bit."""
+    model, cams, walk, masks = walk_scene(width=160, height=120, frames=4, duration_s=0.2, seed=1)
+    cfg = TrackerConfig.from_flat(seed=0, evals=300)
+
+    def track():
+        tracker = Tracker(model, cams, cfg)
+        return [tracker.step(masks[k], k).x for k in range(4)]
+
+    before = track()
+    rehearsal = RT.rehearse(model, cams)
+    assert len(rehearsal) == len(cams) and all(m is not None and m.any() for m in rehearsal)
+    after = track()
+    assert all(np.array_equal(a, b) for a, b in zip(before, after))
+
+
 def test_the_start_up_is_not_load_for_the_governor():
     """The initialization and the heading check's frames take several periods by design (the check's rival is stepped
     beside the track), and the sets dropped meanwhile or when the check ends are theirs: the governor counts none of

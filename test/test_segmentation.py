@@ -355,6 +355,51 @@ def test_colour_agreement_numba_equals_numpy(channels):
         assert a[25:, :][fg[25:, :] > 0].mean() < 0.2
 
 
+def _thin_missed(scene, memory: float, step_px: int = 2, n_track: int = 8) -> tuple[float, float]:
+    """Pixel noise 0.7, a person walking ``step_px`` a frame: the shares of the truth missed and added over the
+    last frames (the first two build the memory)."""
+    from isa_mocap_ros.vision.distort import pixel_noise
+
+    rng = np.random.default_rng(20)
+    seg = BackgroundSegmenter(SegmentationConfig(field_memory=memory))
+    for _ in range(10):
+        seg.apply(pixel_noise(noisy(scene, rng), 0.7, rng=rng))
+    missed = added = total = 0
+    for k in range(n_track):
+        truth = person_mask(80 + step_px * k) > 0
+        m = seg.apply(pixel_noise(compose(scene, truth.astype(np.uint8) * 255, rng), 0.7, rng=rng)) > 0
+        if k >= 2:
+            missed, added, total = missed + (truth & ~m).sum(), added + (m & ~truth).sum(), total + truth.sum()
+    return missed / total, added / total
+
+
+def test_field_memory_keeps_more_of_the_person_under_pixel_noise(scene):
+    # pixel noise is drawn anew each frame: the earlier frames' person evidence (field_memory) makes up for
+    # the 70 % of a frame's person pixels that carry none. Measured here: missed 0.021 -> 0.009, added
+    # 0.039 -> 0.072 at 2 px a frame (the rim lags; 6 px: 0.026 -> 0.013, 0.036 -> 0.078)
+    miss0, add0 = _thin_missed(scene, 0.0)
+    miss1, add1 = _thin_missed(scene, 0.25)
+    assert miss1 < 0.5 * miss0, (miss0, miss1)
+    assert add1 < add0 + 0.1, (add0, add1)
+
+
+def test_field_memory_is_forgotten_on_reset(scene):
+    from isa_mocap_ros.vision.distort import pixel_noise
+
+    def run(seg, rng):
+        for _ in range(10):
+            seg.apply(pixel_noise(noisy(scene, rng), 0.7, rng=rng))
+        return [seg.apply(pixel_noise(compose(scene, person_mask(90 + 3 * k), rng), 0.7, rng=rng)) for k in range(3)]
+
+    seg = BackgroundSegmenter(SegmentationConfig(field_memory=0.25))
+    first = run(seg, np.random.default_rng(5))
+    seg.reset()
+    again = run(seg, np.random.default_rng(5))
+    assert all((a == b).all() for a, b in zip(first, again))
+    with pytest.raises(SegmentationError, match=r"field_memory"):
+        SegmentationConfig(field_memory=1.0)
+
+
 def test_field_vote_numpy_kernel_gives_the_same_masks(scene):
     _, a = _noisy_run(scene, 0.7, "auto", n_track=3)
     _, b = _noisy_run(scene, 0.7, "auto", n_track=3, kernel="numpy")

@@ -65,10 +65,12 @@ def main(argv=None) -> int:
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("bag")
-    p.add_argument("shape", help="body-shape YAML the tracker uses")
+    p.add_argument("shape", help="body-shape YAML the tracker uses (- = the default shape)")
     p.add_argument("--seeds", default="0,1,2")
     p.add_argument("--catch-up", type=int, action="append", help="startup_catch_up values to run (default 0)")
-    p.add_argument("--catch-up-evals", type=int, default=300, help="degrade_min_evals (default 300)")
+    p.add_argument("--catch-up-evals", type=int, default=300,
+                   help="the catch-up's evaluations per held set (the node's degrade_min_evals; default 300)")
+    p.add_argument("--min-evals", type=int, default=300, help="the governor's fewest evaluations (degrade_min_evals)")
     p.add_argument("--catch-up-ms", type=float, default=1000.0, help="startup_catch_up_ms (default 1000)")
     p.add_argument("--catch-up-stale-ms", type=float, default=0.0,
                    help="startup_catch_up_stale_ms: held sets that waited longer are dropped, oldest first (default 0)")
@@ -85,7 +87,7 @@ def main(argv=None) -> int:
     rows = []
     for catch_up in a.catch_up or [0]:
         for seed in (int(s) for s in a.seeds.split(",")):
-            model = make_model(39, shape=Path(a.shape))
+            model = make_model(39, shape=None if a.shape == "-" else Path(a.shape))
             cfg = TrackerConfig.from_flat(seed=seed)
             tracker = Tracker(model, seq.cameras, cfg)
             tracker.predictor = PublishedPredictor(model, tracker.predictor)
@@ -94,7 +96,7 @@ def main(argv=None) -> int:
                 startup=StartupCatchUp(sets=catch_up, evals=a.catch_up_evals, limit_ms=a.catch_up_ms,
                                        stale_ms=a.catch_up_stale_ms),
                 governor=LoadGovernor(LoadSettings(evals=cfg.search.evals, period_s=PERIOD,
-                                                   min_evals=a.catch_up_evals)))
+                                                   min_evals=a.min_evals)))
             done_steps, dropped = emulate(tracker, masks, schedule, period_s=PERIOD, step_s=step_s,
                                           frame_key=lambda k: stamps[k])
             steps = [dict(k=s.k, x=s.result.x, initialized=s.result.initialized, evals=s.result.n_evals,

@@ -2,6 +2,12 @@
 """How far the detected landmarks lie from a reference, per view, for each of the detector's crops (issue 34).
 
     python tools/keypoint_crops.py BAG [--every K]
+    python tools/keypoint_crops.py BAG --changed
+
+``--changed`` (any bag with images; no reference needed): on every frame and view, whether the ``"person_checked"``
+crop gives other landmarks than the ``"mask"`` crop, and on how many of the frames the keypoint schedule detects on
+(``track``'s and the node's: each view's first 4 frames with a person, then every 8th). Where it gives the same on
+every scheduled frame, ``track`` and the network give the same estimates with either crop, bit for bit.
 
 ``BAG``: an imported recording with reference markers (``bench real``'s ``demo_bag_320``, docs/real_cameras.md
 section 3). The masks are the default segmentation's, learnt from the bag's background frames as ``track`` learns
@@ -29,7 +35,10 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("bag", type=Path)
     p.add_argument("--every", type=int, default=2, help="every K-th frame with reference markers (default 2)")
+    p.add_argument("--changed", action="store_true", help="where 'person_checked' differs from 'mask' (see above)")
     a = p.parse_args(argv)
+    if a.changed:
+        return changed(a.bag)
     from isa_mocap_ros.cli.track_io import read_sequence
     from isa_mocap_ros.energy.keypoints import LANDMARK_TO_JOINT
     from isa_mocap_ros.vision.keypoint_schedule import CROPS, crop_box
@@ -82,6 +91,45 @@ def main(argv=None) -> int:
               + " / ".join(f"{np.nanmean(e):.1f}" for e in E) + ", > 15 px " + " / ".join(f"{np.nanmean(e > 15):.2f}"
                                                                                  for e in E)
               + f", all views mean {np.nanmean(np.concatenate(E)):.1f}; left-right swapped frames {swaps[c]}")
+    return 0
+
+
+def changed(bag: Path) -> int:
+    """``--changed``: the views where ``"person_checked"`` gives other landmarks than ``"mask"``."""
+    from isa_mocap_ros.cli.track_io import read_sequence
+    from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, EVERY_K, KeypointSchedule, detect_in_mask
+    from isa_mocap_ros.vision.landmarks import PoseLandmarker
+    from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig
+
+    seq = read_sequence(bag, want_images=True, want_masks=False)
+    learn = seq.empty_frames or next((f.index for f in seq.frames if f.truth_markers is not None), 0)
+    det = PoseLandmarker()
+    V = len(seq.cameras)
+    segs = [BackgroundSegmenter(SegmentationConfig(learn_frames=learn)) for _ in range(V)]
+    schedules = [KeypointSchedule(EVERY_K, dense_frames=DENSE_FRAMES) for _ in range(V)]
+    views = differ = differ_due = due_n = 0
+    where = []
+    for f in seq.frames:
+        masks = [s.apply(img) for s, img in zip(segs, f.images)]
+        if f.index < learn:
+            continue
+        for v in range(V):
+            due = schedules[v].due(bool((masks[v] > 0).any()))
+            if not (masks[v] > 0).any():
+                continue
+            a = detect_in_mask(det, f.images[v], masks[v], crop="mask")        # the default min_score, as track
+            b = detect_in_mask(det, f.images[v], masks[v], crop="person_checked")
+            views += 1
+            due_n += due
+            same = (a is None and b is None) or (a is not None and b is not None and np.array_equal(a.uv, b.uv)
+                                                 and a.score == b.score and np.array_equal(a.roi, b.roi))
+            if not same:
+                differ += 1
+                differ_due += due
+                where.append(f"{f.index}/cam{v}{'*' if due else ''}")
+    print(f"{bag.name}: {views} views with a person in the mask, {due_n} of them scheduled; 'person_checked' differs from 'mask' "
+          f"in {differ} ({differ_due} scheduled){': ' + ' '.join(where[:40]) if where else ''}"
+          f"{' ...' if len(where) > 40 else ''} (frame/view, * = scheduled)")
     return 0
 
 

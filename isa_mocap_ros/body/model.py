@@ -146,8 +146,12 @@ def load_shape(path) -> dict:
     Returns
     -------
     shape : dict
-        ``{"name": str, "offsets": {joint: [x, y, z]}, "radii": {capsule: [r0, r1]}}`` with right
-        sides mirrored from left sides where missing; validated.
+        ``{"name": str, "offsets": {joint: [x, y, z]}, "radii": {capsule: [r0, r1]}, "axis_offsets":
+        {capsule: [[x, y, z], [x, y, z]]}}`` with right sides mirrored from left sides where missing;
+        validated. ``axis_offsets`` (optional, limb capsules only) moves each end of a capsule off its joint
+        centre, in the capsule's first joint's frame (x forward, y left, z up at rest), as fractions of the
+        capsule's rest length: a capsule then follows the limb's volume rather than its bone (a calf lies
+        behind the knee-ankle line). Absent = on the joint line.
     """
     path = Path(path)
     if not path.is_file():
@@ -168,6 +172,9 @@ def save_shape(shape: Mapping, path) -> None:
     data = {"name": shape["name"],
             "offsets": {k: [float(v) for v in val] for k, val in shape["offsets"].items()},
             "radii": {k: [float(v) for v in val] for k, val in shape["radii"].items()}}
+    if shape["axis_offsets"]:
+        data["axis_offsets"] = {k: [[float(v) for v in end] for end in val]
+                                for k, val in shape["axis_offsets"].items()}
     Path(path).write_text(yaml.safe_dump(data, sort_keys=False))
 
 
@@ -216,7 +223,37 @@ def complete_shape(data, *, source: str) -> dict:
     missing = [n for n in cap_names if n not in radii]
     if missing:
         raise BodyError(f"{source}: radii: missing capsules {missing}")
-    return {"name": str(data.get("name", "custom")), "offsets": offsets, "radii": radii}
+    return {"name": str(data.get("name", "custom")), "offsets": offsets, "radii": radii,
+            "axis_offsets": _axis_offsets(data.get("axis_offsets"), source=source)}
+
+
+#: capsules whose ends may leave the joint line (``axis_offsets``): one joint and its child, both ends rigid in
+#: the first joint's frame
+_LIMB_CAPSULES = tuple(n for n, a, b in _full_capsules() if n.startswith(("left_", "right_")))
+
+
+def _axis_offsets(data, *, source: str) -> dict:
+    """``axis_offsets`` checked (``(2, 3)`` finite fractions per limb capsule), right sides mirrored where
+    missing, all-zero entries dropped."""
+    if data is None:
+        return {}
+    if not isinstance(data, Mapping):
+        raise BodyError(f"{source}: expected a mapping under 'axis_offsets', got {data!r}")
+    out = {}
+    for name, val in data.items():
+        if name not in _LIMB_CAPSULES:
+            raise BodyError(f"{source}: axis_offsets: unknown or non-limb capsule '{name}' "
+                            f"(expected one of {', '.join(_LIMB_CAPSULES)})")
+        arr = np.asarray(val, dtype=float)
+        if arr.shape != (2, 3) or not np.all(np.isfinite(arr)) or np.any(np.abs(arr) > 0.5):
+            raise BodyError(f"{source}: axis_offsets.{name}: expected two [x, y, z] fractions of the capsule's "
+                            f"length in [-0.5, 0.5] (one per end), got {val!r}")
+        out[name] = arr
+    for name in list(out):
+        r = _mirror_name(name)
+        if r not in out:
+            out[r] = out[name] * np.array([1.0, -1.0, 1.0])
+    return {k: v for k, v in out.items() if np.any(v != 0)}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -395,6 +432,23 @@ def make_model(dof: int = 39, *, shape=None) -> BodyModel:
         raise AssertionError(f"model table gives {len(dof_names)} DOF, expected {dof}")
 
     caps = [(n, a, b) for n, a, b in _full_capsules() if a in index and b in index]
+    # a capsule off its joint line joins two fixed end sites of its first joint, appended after every real
+    # joint (the real joints keep their indices); they scale with the segment's offset, so the calibration's
+    # length factors move them too
+    ends = []
+    for n, a, b in caps:
+        if n in shp["axis_offsets"]:
+            length = float(np.linalg.norm(offsets[index[b]]))
+            off = shp["axis_offsets"][n] * length
+            ends.append((n, (f"{n}_end0", index[a], off[0]), (f"{n}_end1", index[a], offsets[index[b]] + off[1])))
+    for _n, *pair in ends:
+        for jn, parent, off in pair:
+            index[jn] = len(joint_names)
+            joint_names += (jn,)
+            parents = np.append(parents, parent)
+            offsets = np.vstack([offsets, off])
+            joint_dofs.append(())
+    caps = [(n, f"{n}_end0", f"{n}_end1") if n in shp["axis_offsets"] else (n, a, b) for n, a, b in caps]
     capsules = np.array([[index[a], index[b]] for _, a, b in caps], dtype=int)
     radii = np.array([shp["radii"][n] for n, _, _ in caps])
     markers = np.array([index[m] for m in _full_markers() if m in index], dtype=int)

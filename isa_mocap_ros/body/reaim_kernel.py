@@ -9,9 +9,15 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from ..numba_cache import register_dependent_cache
+from . import kinematics
 from .kinematics import rodrigues_into
 
 __all__ = ["rebuild", "pose_fk", "euler"]
+
+# numba keys a cached function on its own file only: the kernels here compile kinematics' Rodrigues turn into
+# their machine code, so an edit there must also miss this module's cache
+register_dependent_cache(__file__, (kinematics,))
 
 
 @numba.njit(cache=True)

@@ -278,13 +278,14 @@ def model_from_bvh(motion: BvhMotion, dof: int = 39, *, mapping: Mapping[str, st
     leg0 = np.linalg.norm(d_off["left_knee"]) + np.linalg.norm(d_off["left_ankle"])
     ratio = leg / leg0
     for name in model_default.joint_names[1:]:
-        if name not in offsets:
+        if name not in offsets and name in d_off:       # not the end sites of capsules off their joint line
             offsets[name] = np.asarray(d_off[name]) * ratio
     for name in d_off:  # joints of the full tree the 18-DOF model does not use
         offsets.setdefault(name, np.asarray(d_off[name]) * ratio)
     radii = {k: np.asarray(v) * ratio for k, v in shape["radii"].items()}
     stem = str(motion.source).rsplit("/", 1)[-1].rsplit(".", 1)[0] or "bvh"
-    return make_model(dof, shape={"name": stem, "offsets": offsets, "radii": radii})
+    return make_model(dof, shape={"name": stem, "offsets": offsets, "radii": radii,
+                                  "axis_offsets": shape["axis_offsets"]})
 
 
 # ---------------------------------------------------------------------------------------------

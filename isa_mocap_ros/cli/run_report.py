@@ -213,6 +213,9 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
         "tracker_ms_p95": float(diag.get("tracker_ms_p95", "nan")),
         # Tracker.step of the set the automatic initialization ran on (nan: initialized otherwise)
         "init_ms": float(diag.get("init_ms", "nan")),
+        # its worker-thread CPU, and the CPU of the start-up rehearsal on the empty sets before it (startup_rehearsal)
+        "init_cpu_ms": float(diag.get("init_cpu_ms", "nan")),
+        "init_rehearsal_ms": float(diag.get("init_rehearsal_ms", "nan")),
         "bad_inputs": int(diag.get("bad_inputs", 0) or 0), "wall_seconds": round(wall_seconds, 1),
         # frame sets tracked with keypoints (run --keypoints; the estimator's last 1 Hz figure)
         "keypoint_sets": int(diag.get("keypoint_sets", 0) or 0),

@@ -113,6 +113,10 @@ def register(sub) -> None:
                    help="model-guided mask refinement: a graph cut (GrabCut) per view seeded by the previous "
                         "estimate's silhouette (ISA eq. 13.29's shape prior; isa_mocap_ros.vision.refine), for "
                         "parts the background subtraction misses (dark clothes on a dark floor)")
+    p.add_argument("--field-memory", type=float, default=None, metavar="W",
+                   help="segmentation under pixel noise (robust mode's field vote): weight of the earlier frames' "
+                        "person evidence in a pixel's, 0 <= W < 1 (default: the segmentation's, 0 = off; "
+                        "docs/history/issue33_noise_s30.md)")
     p.add_argument("--overlays", default=None, metavar="DIR",
                    help="also draw the estimate on every view: DIR/strip.png (a few frames, all views) and "
                         "DIR/overlay.mp4 (every tracked frame, all views side by side)")
@@ -240,7 +244,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         learn = args.learn_frames if args.learn_frames is not None else (seq.empty_frames or before_markers or 10)
         if learn < 1:
             raise ValueError(f"--learn-frames: expected an integer >= 1, received {learn}")
-        segmenters = [BackgroundSegmenter(SegmentationConfig(learn_frames=learn)) for _ in seq.cameras]
+        memory = {} if getattr(args, "field_memory", None) is None else {"field_memory": args.field_memory}
+        segmenters = [BackgroundSegmenter(SegmentationConfig(learn_frames=learn, **memory)) for _ in seq.cameras]
     first = max(args.start, learn if not use_masks else 0)
     if args.init == "truth":
         with_truth = [f.index for f in seq.frames if f.truth is not None and f.index >= first]
@@ -442,6 +447,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     if overlay_store:
         summary["overlays"] = write_overlay_media(Path(overlay_dir), model, seq, overlay_store)
     summary["refine_masks"] = refine
+    summary["field_memory"] = segmenters[0].config.field_memory if segmenters else None
     if refine_seconds:
         summary["refine_ms_per_frame_set"] = float(np.mean(refine_seconds) * 1e3)
     if coverage:

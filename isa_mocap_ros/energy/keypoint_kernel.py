@@ -19,9 +19,15 @@ from collections import namedtuple
 import numba
 import numpy as np
 
+from isa_mocap_ros.body import kinematics
 from isa_mocap_ros.body.kinematics import fk_pose_into
+from isa_mocap_ros.numba_cache import register_dependent_cache
 
 __all__ = ["KeypointTerm", "keypoint_batch", "no_keypoints"]
+
+# numba keys a cached function on its own file only: the kernels here compile kinematics' forward kinematics into
+# their machine code, so an edit there must also miss this module's cache
+register_dependent_cache(__file__, (kinematics,))
 
 #: The keypoint term as the compiled search takes it: the body's kinematic tables
 #: (``body.kinematics.kernel_tables``: ``parents (J,)``, ``offsets (J, 3)``, ``ptr (J + 1,)``, ``dofs``,

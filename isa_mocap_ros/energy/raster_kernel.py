@@ -32,12 +32,18 @@ import numpy as np
 from numba import types
 from numba.extending import intrinsic
 
+from ..numba_cache import register_dependent_cache
+from . import silhouette_kernel
 from .silhouette_kernel import (DETERMINISTIC_FASTMATH, G_AX, G_AY, G_CA, G_COLS, G_CONE, G_LEN, G_RA, G_RB, G_SB,
                                 G_UX, G_UY, G_VALID, SERIAL_PIPELINE, _fk_joint, _fk_one, _project_cap, _project_caps,
                                 _to_camera, _to_camera_joint)
 
 __all__ = ["Raster", "RasterStage", "raster_batch", "raster_batch_serial", "raster_restrict_prepare", "raster_restricted",
            "foreground_bits", "raster_static"]
+
+# numba keys a cached function on its own file only: the kernels here compile silhouette_kernel's projection into
+# their machine code, so an edit there must also miss this module's cache
+register_dependent_cache(__file__, (silhouette_kernel,))
 
 # the serial kernel has no parallel loop by design (numba warns at compile time), as in silhouette_kernel
 warnings.filterwarnings("ignore", message=r"(?s).*no transformation for parallel execution.*raster_kernel\.py",
@@ -215,9 +221,10 @@ def _raster_rows(X, lo, hi, body, views, raster, out):  # pragma: no cover - com
                 for j in range(jlo, jhi + 1):
                     k = numba.uint64(w * Hs + j)
                     u = U[k]
-                    cm += _popcount(u)
-                    cmf += _popcount(u & fbits[v, k])
-                    U[k] = z64
+                    if u != z64:    # an empty word adds nothing and is clear already
+                        cm += _popcount(u)
+                        cmf += _popcount(u & fbits[v, k])
+                        U[k] = z64
             t1 = (cm - cmf) / cm if cm > 0 else 1.0     # no model pixel: Eq. 4's 0/0, its worst value
             t2 = (nfg[v] - cmf) / nfg[v] if nfg[v] > 0 else 1.0
             total += view_w[v] * (0.5 * t1 + 0.5 * t2)
@@ -296,6 +303,7 @@ def raster_restricted(X, restriction, body, views, raster, stage, n_chunks, out)
     Hs = (fbits.shape[1] - 8) // nw
     Lv = fbits.shape[1]
     nm = mov_caps.shape[0]
+    z64 = numba.uint64(0)
     wsum = 0.0
     for v in range(V):
         wsum += view_w[v]
@@ -340,10 +348,11 @@ def raster_restricted(X, restriction, body, views, raster, stage, n_chunks, out)
                         k = w * Hs + j
                         u = U[v * Lv + k]
                         f = Ufix[v, k]
-                        fb = fbits[v, k]
-                        cm += _popcount(u) - _popcount(f)
-                        cmf += _popcount(u & fb) - _popcount(f & fb)
-                        U[v * Lv + k] = f
+                        d = u ^ f   # the moving capsules' new pixels (u holds f): |u| - |f| = |d|
+                        if d != z64:    # a word they left alone changes neither count and needs no restoring
+                            cm += _popcount(d)
+                            cmf += _popcount(d & fbits[v, k])
+                            U[v * Lv + k] = f
                 t1 = (cm - cmf) / cm if cm > 0 else 1.0
                 t2 = (nfg[v] - cmf) / nfg[v] if nfg[v] > 0 else 1.0
                 total += view_w[v] * (0.5 * t1 + 0.5 * t2)

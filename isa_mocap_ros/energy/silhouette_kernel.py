@@ -34,7 +34,9 @@ import numpy as np
 
 from collections import namedtuple
 
+from isa_mocap_ros.body import kinematics
 from isa_mocap_ros.body.kinematics import rodrigues_into
+from isa_mocap_ros.numba_cache import register_dependent_cache
 
 # ---------------------------------------------------------------------- argument bundles
 # The kernels take their arrays in a few named tuples (numba types each as a tuple of its arrays' types
@@ -94,6 +96,10 @@ G32_COLS = 12
 
 __all__ = ["fk_positions_batch", "silhouette_batch", "silhouette_batch_serial", "project_capsules", "inside_points", "Body", "Views", "Template",
            "Foreground", "Restriction", "Stage"]
+
+# numba keys a cached function on its own file only: the kernels here compile kinematics' Rodrigues turn into
+# their machine code, so an edit there must also miss this module's cache
+register_dependent_cache(__file__, (kinematics,))
 
 
 @numba.njit(cache=True, inline="always")

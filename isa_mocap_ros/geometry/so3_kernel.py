@@ -19,15 +19,16 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
-__all__ = ["exp_into", "log_args", "log_into", "matmul3", "nearest_rotvec_into"]
+__all__ = ["exp_into", "fma", "log_args", "log_into", "matmul3", "nearest_rotvec_into"]
 
 _SMALL = 1e-4          # .so3._SMALL
 _NEAR_PI = 1e-2        # .so3._NEAR_PI
 
 
 @intrinsic
-def _fma(typingctx, a, b, c):
-    """``a * b + c`` rounded once (LLVM's ``llvm.fma.f64``)."""
+def fma(typingctx, a, b, c):
+    """``a * b + c`` rounded once (LLVM's ``llvm.fma.f64``), for compiled callers (also
+    :mod:`isa_mocap_ros.optim._fast_so3`)."""
     sig = types.float64(types.float64, types.float64, types.float64)
 
     def codegen(context, builder, signature, args):
@@ -40,7 +41,7 @@ def _fma(typingctx, a, b, c):
 @numba.njit(cache=True, inline="always")
 def _dot3(a0, a1, a2, b0, b1, b2):  # pragma: no cover - compiled
     """``a @ b`` of two 3-vectors as numpy's ``@`` (OpenBLAS ddot) sums them: ``fma(a2, b2, fma(a1, b1, a0 b0))``."""
-    return _fma(a2, b2, _fma(a1, b1, a0 * b0))
+    return fma(a2, b2, fma(a1, b1, a0 * b0))
 
 
 @numba.njit(cache=True)
@@ -50,7 +51,7 @@ def matmul3(A, B, C):  # pragma: no cover - compiled
         for j in range(3):
             s = 0.0
             for k in range(3):
-                s = _fma(A[i, k], B[k, j], s)
+                s = fma(A[i, k], B[k, j], s)
             C[i, j] = s
 
 

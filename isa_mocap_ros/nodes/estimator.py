@@ -77,6 +77,11 @@ from isa_mocap_ros.tracking.realtime import RealTimeSchedule, warm_up
 from isa_mocap_ros.vision.overlay import draw_overlay
 
 
+#: frame sets in a row without foreground before the worker rehearses the first-frame hull (``startup_rehearsal``): a
+#: rehearsal (15-33 CPU ms on bags/demo) started right before the person's first set would delay its initialization by
+#: that much; the segmentation's 10 learning frames leave 8 sets after it
+REHEARSAL_AFTER_EMPTY_SETS = 2
+
 #: TrackerConfig fields that are not parameters of this node (none: every setting is one)
 NOT_PARAMETERS: tuple[str, ...] = ()
 
@@ -141,6 +146,11 @@ class EstimatorNode(EstimatorIntake, Node):
                                     lo=1, hi=1_000_000)
         degrade_headroom = declare(self, "degrade_headroom", 0.85, "degrade: a budget fits when its step time is "
                                    "below this share of frame_period_s", lo=0.05, hi=1.0)
+        self.rehearsal = declare(
+            self, "startup_rehearsal", True, "while the frame sets are empty (the segmentation's learning frames, "
+            "nobody in view yet), run the first-frame hull once on the real cameras with a rendered standing body, so "
+            "the first real initialization does not pay its one-time costs (~15-20 CPU ms on bags/demo); the estimates "
+            "do not depend on it (docs/nodes.md)")
         self.use_prediction = declare(self, "use_prediction", True, "use prediction/joint_states when it arrives")
         self.keypoint_wait_s = declare(self, "keypoint_wait_s", 10.0, "lockstep, keypoint_weight > 0: longest wait "
                                        "for a view's keypoints (or skip notice) of a frame set while no keypoint node "
@@ -217,6 +227,10 @@ class EstimatorNode(EstimatorIntake, Node):
         self.latencies_ms: deque[float] = deque(maxlen=300)
         self.step_ms: deque[float] = deque(maxlen=300)   # Tracker.step wall time per tracked set
         self.init_ms = float("nan")     # Tracker.step wall time of the automatic initialization's set
+        self.init_cpu_ms = float("nan")  # its worker-thread CPU time
+        self._empty_sets = 0            # frame sets in a row without foreground (and no estimate yet)
+        self._rehearsed: object = None  # the tracker the start-up rehearsal ran for (_rehearse)
+        self.rehearsal_ms = 0.0         # worker CPU of the rehearsal
         self._published_any = False
         self._stop = threading.Event()
 
@@ -317,17 +331,26 @@ class EstimatorNode(EstimatorIntake, Node):
                 item = self.schedule.take(self.tracker, waited_ms=lambda it: (time.monotonic() - it[1]) * 1e3)
                 if item is None:
                     # idle: the per-camera data of the cameras the camera_infos announce, built before their
-                    # first frame set needs them (tracking/camera_data.py)
+                    # first frame set needs them (tracking/camera_data.py); then the start-up rehearsal
                     cams = self._hinted_cameras()
-                    if not cams:
+                    rehearse = not cams and self._rehearsal_due()
+                    if not cams and not rehearse:
                         self._cv.wait(0.1)
                         continue
                 else:
                     frame_set, t_ready = item
                     prediction, keypoints = self._inputs_of(frame_set)
+                    # a worker that is never idle (a loaded machine) rehearses before an empty set: that set gives no
+                    # estimate, so its wait costs nothing
+                    rehearse = self._rehearsal_due() and not any(m is not None and np.any(m) for m in frame_set.items)
             if item is None:
-                self._prepare(cams)
+                if rehearse:
+                    self._rehearse()
+                else:
+                    self._prepare(cams)
                 continue
+            if rehearse:
+                self._rehearse()
             try:
                 self._process(frame_set, prediction, t_ready, keypoints)
             except Exception as exc:  # noqa: BLE001 - a node must survive any one bad frame set
@@ -373,6 +396,27 @@ class EstimatorNode(EstimatorIntake, Node):
             return
         self.prepare_ms += (time.thread_time() - t0) * 1e3
 
+    def _rehearsal_due(self) -> bool:
+        """(Under ``_cv``.) Whether the worker, idle, rehearses the first-frame hull now: a tracker made and
+        not initialized, :data:`REHEARSAL_AFTER_EMPTY_SETS` frame sets in a row without foreground just tracked (the
+        segmentation's learning frames: the person's first set is likely some sets away), not done yet for this
+        tracker."""
+        return (self.rehearsal and self.tracker is not None and not self.tracker.initialized
+                and self._rehearsed is not self.tracker and self._empty_sets >= REHEARSAL_AFTER_EMPTY_SETS)
+
+    def _rehearse(self) -> None:
+        """The start-up rehearsal (:func:`~isa_mocap_ros.tracking.realtime.rehearse`: the first-frame hull) on the
+        tracker's cameras; a failure only costs the first initialization its one-time costs."""
+        from isa_mocap_ros.tracking.realtime import rehearse
+
+        self._rehearsed = self.tracker
+        t0 = time.thread_time()
+        try:
+            rehearse(self.model, self.tracker.cameras)
+        except Exception as exc:  # noqa: BLE001 - an optimisation, never fatal
+            self.problems.event("rehearsal", f"start-up rehearsal failed ({type(exc).__name__}: {exc})")
+        self.rehearsal_ms += (time.thread_time() - t0) * 1e3
+
     def _process(self, frame_set, prediction_msg, t_ready: float, keypoints=None) -> None:
         if self._camera_changed is not None and self.tracker is not None:
             self.tracker = None          # made again below with the new cameras; it initializes itself anew
@@ -410,6 +454,7 @@ class EstimatorNode(EstimatorIntake, Node):
         # real time: the governor's budget under load, the start-up catch-up's, no contour stage for a set that
         # waited longer than catch_up_ms (tracking/realtime.py); lockstep: the full budget
         budget = self.schedule.budget(self.tracker, (time.monotonic() - t_ready) * 1e3)
+        cpu0 = time.thread_time()
         result = self.tracker.step(masks, frame_set.stamp_ns, prediction=prediction, frames_elapsed=gap,
                                    contour_stage=budget.contour_stage, evals=budget.evals, keypoints=keypoints)
         self.keypoint_sets += keypoints is not None
@@ -425,6 +470,9 @@ class EstimatorNode(EstimatorIntake, Node):
             self.step_ms.append(result.time_s * 1e3)   # tracked sets (not the initialization)
         if result.initialized:
             self.init_ms = result.time_s * 1e3
+            self.init_cpu_ms = (time.thread_time() - cpu0) * 1e3
+        # sets in a row with nobody in view before the first estimate: the rehearsal's cue
+        self._empty_sets = self._empty_sets + 1 if result.x is None and result.views_used == 0 else 0
         if result.x is not None:
             with one_numba_thread():
                 self._publish(frame_set.stamp_ns, result)
@@ -502,6 +550,7 @@ class EstimatorNode(EstimatorIntake, Node):
             "views_used": getattr(r, "views_used", 0), "keypoint_sets": self.keypoint_sets,
             "latency_ms_p50": p50, "latency_ms_p95": p95,
             "tracker_ms_p50": t50, "tracker_ms_p95": t95, "init_ms": self.init_ms,
+            "init_cpu_ms": round(self.init_cpu_ms, 1), "init_rehearsal_ms": round(self.rehearsal_ms, 1),
             # the per-camera data built ahead from the camera_infos (CPU ms; cameras), and how many of the tracker's
             # cameras found theirs ready when it was made
             "camera_data_ahead_ms": round(self.prepare_ms, 1), "cameras_built_ahead": len(self._prepared_keys),

@@ -102,6 +102,8 @@ _PARAMS = {
                       0.0, 50.0),
     "field_coupling": ("robust mode, vote=field: coupling of a pixel to its 8 neighbours", 0.0, 10.0),
     "field_iterations": ("robust mode, vote=field: mean-field iterations", 0, 1000),
+    "field_memory": ("robust mode, vote=field: weight of the earlier frames' evidence (leaky sum of the "
+                     "positive part; 0 = each frame on its own)", 0.0, 0.99),
     "learn_from": ("colour: frames (the learning frames show the empty scene) or stable (the person may be in "
                    "them: per pixel the frames where the background shows, plus the clean plate)", None, None),
     "work_scale": ("working resolution of the model as a share of the image side (1 = the image's; the mask "

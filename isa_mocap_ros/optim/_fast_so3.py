@@ -8,7 +8,8 @@ The results are bit-identical to the numpy reference on this machine: elementwis
 numpy's order, ``sin``/``cos``/``arccos``/``sqrt`` are the C library's, sums of three terms add left
 to right (numpy's pairwise sum below 8 elements), and 3x3 products accumulate
 ``C_ij = fma(A_i2, B_2j, fma(A_i1, B_1j, A_i0 B_0j))``, the order of OpenBLAS's Haswell ``dgemm``
-that numpy's ``@`` calls (measured; ``test/test_optim_rotations.py`` checks it). ``llvm.fma`` is
+that numpy's ``@`` calls (measured; ``test/test_optim_rotations.py`` checks it;
+:func:`isa_mocap_ros.geometry.so3_kernel.matmul3`, shared with the contour stage's rotations). ``llvm.fma`` is
 correctly rounded on every CPU, so the compiled results are deterministic everywhere; only the
 agreement with numpy depends on the BLAS kernel. No fastmath.
 """
@@ -16,34 +17,15 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from llvmlite import ir
-from numba import types
-from numba.extending import intrinsic
+
+from isa_mocap_ros.geometry import so3_kernel
+from isa_mocap_ros.geometry.so3_kernel import matmul3 as _matmul
+from isa_mocap_ros.numba_cache import register_dependent_cache
 
 __all__ = ["exp_many", "relative_logs", "compose"]
 
-
-@intrinsic
-def _fma(typingctx, a, b, c):
-    """``a * b + c`` rounded once (LLVM's ``llvm.fma.f64``)."""
-    sig = types.float64(types.float64, types.float64, types.float64)
-
-    def codegen(context, builder, signature, args):
-        d = ir.DoubleType()
-        f = builder.module.declare_intrinsic("llvm.fma", [d], ir.FunctionType(d, [d, d, d]))
-        return builder.call(f, args)
-    return sig, codegen
-
-
-@numba.njit(cache=True)
-def _matmul(A, B, C):  # pragma: no cover - compiled
-    """``C = A @ B`` for 3x3 matrices, accumulated as OpenBLAS's dgemm does (see module docstring)."""
-    for i in range(3):
-        for j in range(3):
-            s = 0.0
-            for k in range(3):
-                s = _fma(A[i, k], B[k, j], s)
-            C[i, j] = s
+# the 3x3 product (``fma`` chains) is geometry's: this module's cache keyed on that file too
+register_dependent_cache(__file__, (so3_kernel,))
 
 
 @numba.njit(cache=True)

@@ -18,9 +18,6 @@ for everything but the energy.
 """
 from __future__ import annotations
 
-import hashlib
-import os
-
 import numba
 import numpy as np
 from numba.extending import overload
@@ -29,87 +26,20 @@ from isa_mocap_ros.body import kinematics as _kinematics
 from isa_mocap_ros.energy import keypoint_kernel as _kp
 from isa_mocap_ros.energy import raster_kernel as _rk
 from isa_mocap_ros.energy import silhouette_kernel as _k
+from isa_mocap_ros.numba_cache import register_dependent_cache
 from isa_mocap_ros.optim import _fast, _fast_so3
 from isa_mocap_ros.optim._base import GenerationInfo, Result
 from isa_mocap_ros.optim.isa import C_SCALES, VARIANCE_READINGS, covariance_constant
 
-__all__ = ["supported", "run_hisa", "HisaRun", "supported_flat", "run_isa", "rotation_mean", "register_dependent_cache"]
+__all__ = ["supported", "run_hisa", "HisaRun", "supported_flat", "run_isa", "rotation_mean"]
 
 
-#: The modules whose compiled functions the functions here call (their hashes key this module's numba cache).
+#: The modules whose compiled functions the functions here call (their hashes, and those of the files they depend on,
+#: key this module's numba cache: :func:`isa_mocap_ros.numba_cache.register_dependent_cache`).
 DEPENDENCIES = (_k, _rk, _kp, _kinematics, _fast, _fast_so3)
 
 
-def register_dependent_cache(path: str = __file__, extra=()) -> None:
-    """Make numba's on-disk cache of the functions of the module at ``path`` (default: this one; also
-    :mod:`.compiled_stage`) depend on the files whose compiled functions they call as well
-    (:data:`DEPENDENCIES`, this module and the modules ``extra``). numba keys a cached function on its own source file only, so after an
-    edit (or a ``git pull``) of the energy kernels or the optimizer helpers the functions here would
-    load their old machine code, kernels included. A locator placed first among numba's asks the
-    locator numba would have chosen for everything but the stamp, which it extends with the
-    dependencies' hashes. Best effort: if numba's (internal) caching API differs, nothing changes.
-
-    Why numba's private ``CacheImpl._locator_classes`` (and ``_CacheLocator``, the locators' base): numba
-    (0.68) offers no public way to make a cached function's key depend on other files. Its documented
-    options choose *where* the cache lives (``NUMBA_CACHE_DIR``) and *which* of its locators run
-    (``NUMBA_CACHE_LOCATOR_CLASSES``, read from the process environment: it would replace the locator
-    list of every package in the process, and a class named there still has to subclass the private
-    ``_CacheLocator``); ``cache=False`` on these functions would recompile them (about a minute) in every
-    process. The insertion touches this module's functions only: the locator returns None for any
-    other file, and numba's own locator list follows unchanged."""
-    try:
-        from numba.core import caching
-    except ImportError:                                                    # pragma: no cover
-        return
-    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
-    if impl is None or not hasattr(caching, "_CacheLocator"):                # pragma: no cover
-        return
-    mods = DEPENDENCIES + tuple(extra)
-    here = os.path.abspath(path)
-    deps = tuple(m.__file__ for m in mods) + ((os.path.abspath(__file__),) if here != os.path.abspath(__file__) else ())
-    dep_names = " ".join(m.__name__ for m in mods)
-    dep_tag = hashlib.sha256(dep_names.encode()).hexdigest()[:8]
-
-    class _DependentLocator(caching._CacheLocator):
-        def __init__(self, inner):
-            self._inner = inner
-
-        def ensure_cache_path(self):
-            self._inner.ensure_cache_path()
-
-        def get_cache_path(self):
-            return self._inner.get_cache_path()
-
-        def get_disambiguator(self):
-            # the dependencies' module names are part of the cache files' names: an index pickles the kernel
-            # module's types by module name, so an index written before a dependency was renamed would fail to
-            # load (ModuleNotFoundError) instead of missing
-            return f"{self._inner.get_disambiguator()}-{dep_tag}"
-
-        def get_source_stamp(self):
-            h = hashlib.sha256()
-            for path in deps:
-                with open(path, "rb") as f:
-                    h.update(f.read())
-            return self._inner.get_source_stamp(), h.hexdigest()
-
-        @classmethod
-        def from_function(cls, py_func, py_file):
-            if os.path.abspath(py_file) != here:
-                return None
-            for other in impl._locator_classes:
-                if other is not cls:
-                    inner = other.from_function(py_func, py_file)
-                    if inner is not None:
-                        return cls(inner)
-            return None
-
-    if not any(getattr(c, "_isa_mocap_path", None) == here for c in impl._locator_classes):
-        _DependentLocator._isa_mocap_path = here
-        impl._locator_classes.insert(0, _DependentLocator)
-
-
-register_dependent_cache()
+register_dependent_cache(__file__, DEPENDENCIES)
 
 #: Inner ISA parameters this path implements (others: the protocol).
 _PARAMS = {"n_particles", "kernel", "schedule", "target_ess", "c", "c_scale", "rho", "variance", "resampling"}

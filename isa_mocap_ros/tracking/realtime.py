@@ -29,7 +29,7 @@ from typing import Callable, Sequence
 from .load import Decision, LoadGovernor, LoadSettings, StartupCatchUp
 from .sync import LatestSlot
 
-__all__ = ["RealTimeSchedule", "Budget", "EmulatedStep", "emulate", "step_cost", "warm_up"]
+__all__ = ["RealTimeSchedule", "Budget", "EmulatedStep", "emulate", "step_cost", "warm_up", "rehearse"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -76,6 +76,7 @@ class RealTimeSchedule:
         self.last_decision: Decision | None = None   # the governor's last change of budget
         self._dropped_seen = 0
         self._checking = False             # the set taken last is a heading check's frame
+        self._took_held = False            # the set taken last was a held one (in sequence with the one before)
 
     def take(self, tracker, masks_of: Callable = lambda item: item[0].items, waited_ms: Callable | None = None):
         """The next waiting set (None: none waits), with the holds its step needs (see the module docstring);
@@ -85,6 +86,7 @@ class RealTimeSchedule:
             # the start-up catch-up: held sets too old to be worth an estimate go, the oldest first (never the newest)
             while self.slot.held and len(self.slot) > 1 and self.startup.stale(waited_ms(self.slot.oldest())):
                 self.slot.drop_oldest()
+        self._took_held = self.slot.held > 0
         item = self.slot.take()
         if item is None or self.lockstep:
             return item
@@ -107,7 +109,7 @@ class RealTimeSchedule:
         d = self.governor.decision() if self.governor is not None else None
         evals = self.evals if d is None or d.level == 0 else d.evals
         evals, contour = self.startup.budget(evals, initialized=tracker.initialized,
-                                             checking_heading=tracker.checking_heading)
+                                             checking_heading=tracker.checking_heading, in_sequence=self._took_held)
         contour = contour and not late and (d is None or d.contour_stage)
         return Budget(None if evals == self.evals else evals, contour, late)
 
@@ -224,3 +226,26 @@ def warm_up(model, config) -> list:
     masks = [render_mask(c, ends, model.capsule_radii) for c in rig.cameras]
     tracker = Tracker(model, rig.cameras, config)
     return [tracker.step(masks, 0), tracker.step(masks, 1)]
+
+
+def rehearse(model, cameras) -> list:
+    """The first-frame hull (:func:`.init_hull.person_masks`) once on ``cameras`` themselves, at their size, before the
+    person is in view: the rest pose of ``model`` standing in the middle of the rig's capture volume
+    (:func:`.init_hull.capture_volume`), rendered into every camera. :func:`warm_up` loads the kernels on 80×60 views;
+    the first real initialization in a process still paid 15-23 CPU ms more than the next ones (bags/demo, ~98 -> 111-123
+    ms), nearly all of it ~520 first-touch page faults (~12 µs each on this machine's VM) of the hull's arrays at the
+    cameras' size (~123,000 cubes × 4 views), which this call takes on instead (15-33 CPU ms; after it the
+    initialization has 6-8 faults and ~97 ms; the whole initialization rehearsed instead cost ~130 ms for the same gain).
+    The estimator node calls it on an empty frame set (docs/nodes.md, "Start-up"); it changes no estimate (nothing it
+    computes is kept but the process's memory). Returns the rendered masks cut to the hull's blob."""
+    from isa_mocap_ros.body import capsule_endpoints
+    from isa_mocap_ros.vision import render_mask
+
+    from .init_hull import capture_volume, person_masks
+
+    lo, hi = capture_volume(cameras)
+    x = model.rest_pose()
+    x[:2] = 0.5 * (lo[:2] + hi[:2])
+    ends = capsule_endpoints(model, x[None])[0]
+    masks = [render_mask(c, ends, model.capsule_radii) for c in cameras]
+    return person_masks(masks, list(cameras))[0]

@@ -200,7 +200,8 @@ def shape_from_params(base: Mapping, factors: Mapping[str, float] | Sequence[flo
         elif part in _R_LEGS:
             k *= g["r_legs"]
         radii[c] = np.array(r, dtype=float) * k
-    return complete_shape({"name": name, "offsets": offsets, "radii": radii}, source=name)
+    return complete_shape({"name": name, "offsets": offsets, "radii": radii,
+                           "axis_offsets": shp["axis_offsets"]}, source=name)
 
 
 def bone_lengths(model) -> dict[str, float]:

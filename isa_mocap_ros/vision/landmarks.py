@@ -231,6 +231,11 @@ class PoseLandmarker:
         return Landmarks2D(uv=uv, visibility=_sigmoid(raw[:, 3]), presence=_sigmoid(raw[:, 4]),
                            score=float(np.clip(flag, 0.0, 1.0)), roi=b)
 
+    @property
+    def has_segmentation(self) -> bool:
+        """Whether the model has the person segmentation output (:meth:`person_probability`)."""
+        return self._out_segmentation is not None
+
     def person_probability(self, image: Any, roi: Any, *, bgr: bool = False) -> tuple[np.ndarray, Landmarks2D]:
         """``(prob, landmarks)``: the model's person segmentation of the region ``roi`` as a per-pixel
         probability ``(H, W)`` float32 of the full image (0 outside the region), and :meth:`detect`'s landmarks."""

@@ -52,7 +52,8 @@ then learns a standard deviation of ~60 levels everywhere and finds nothing.
   strong person evidence. The three kinds of pixel (matches; differs and agrees; differs alone) are
   weighed by their likelihood ratios (background rates measured on every frame outside the
   previous dilated mask) and smoothed by a mean-field Markov random field
-  (:meth:`BackgroundSegmenter._field`); then the usual clean-up.
+  (:meth:`BackgroundSegmenter._field`); then the usual clean-up. Optionally (``field_memory``) the
+  earlier frames' positive evidence is carried into a pixel's (a leaky sum): noise is drawn anew each frame.
 * Per frame (``vote="window"``, the earlier decision): ``f`` is re-measured on every frame (reliable pixels outside the
   previous dilated mask), and a pixel is foreground when the Gaussian-weighted share of ``D`` over
   reliable pixels around it exceeds ``f + (1 - f) / 2``. The window's ``sigma`` (``vote_sigma_px``,
@@ -185,6 +186,7 @@ class BackgroundSegmenter:
         self._vote_exclude = None  # robust mode: previous dilated mask (left out of the noise level)
         self._outlier_fraction: float | None = None
         self._agree_fraction = 0.0  # robust field vote: share of background pixels of kind A
+        self._field_evidence = None  # robust field vote with field_memory: the leaky sum of evidence
         self._buffer: list[np.ndarray] | None = None   # learn_from="stable": the learning images
         if self.config.method != "colour":
             c = self.config
@@ -512,6 +514,10 @@ class BackgroundSegmenter:
         l_m = np.log(pm / (1.0 - f))
         h = np.where(agree > 0, np.float32(l_a), np.where(fg > 0, np.float32(l_b), np.float32(l_m)))
         h = (h * rel).astype(np.float32) * np.float32(0.5)
+        if c.field_memory > 0:              # H_t = h_t + w max(H_{t-1}, 0): the earlier frames' person evidence
+            if self._field_evidence is not None:
+                h = h + np.float32(c.field_memory) * np.maximum(self._field_evidence, 0)
+            self._field_evidence = h
         m = np.tanh(h)
         J = np.float32(c.field_coupling)
         for _ in range(c.field_iterations if J > 0 else 0):

@@ -98,6 +98,13 @@ class SegmentationConfig:
         iteration (0: no smoothing, every pixel decided by its own evidence).
     field_iterations : int
         ``vote="field"``: mean-field iterations (synchronous; deterministic).
+    field_memory : float
+        ``vote="field"``: weight ``w`` in [0, 1) of the earlier frames' person evidence in a pixel's
+        (``H_t = h_t + w max(H_{t-1}, 0)``, the field then run on ``H_t``). Pixel noise is drawn anew each
+        frame, so a person pixel that carries no evidence in this frame (70 % of them at 70 % noise) keeps
+        what it showed in the last ones; only the positive part is carried, as a part that moves onto the
+        background would otherwise be held back by its old background evidence. The rim lags the motion:
+        the mask grows on the trailing side. 0 (default): each frame decided on its own evidence.
     learn_from : {"frames", "stable"}
         ``"colour"`` only. ``"frames"``: the ``learn_frames`` first images are the background samples
         (they must show the empty scene). ``"stable"``: the person may be in them -- they are buffered,
@@ -141,6 +148,7 @@ class SegmentationConfig:
     vote_sigma_px: float = 0.0
     field_coupling: float = 0.3
     field_iterations: int = 8
+    field_memory: float = 0.0
     learn_from: str = "frames"
     work_scale: float = 1.0
 
@@ -160,6 +168,7 @@ class SegmentationConfig:
         check_choice("vote", self.vote, VOTES, error=err)
         check_number("field_coupling", self.field_coupling, lo=0.0, hi=10.0, error=err)
         check_number("field_iterations", self.field_iterations, lo=0, integer=True, error=err)
+        check_number("field_memory", self.field_memory, lo=0.0, hi=1.0, hi_open=True, error=err)
         check_number("vote_sigma_px", self.vote_sigma_px, lo=0.0, hi=50.0, error=err)
         check_number("learn_frames", self.learn_frames, lo=1, integer=True, error=err)
         for name in ("threshold", "min_std", "initial_std", "shadow_chroma_threshold",
