@@ -27,6 +27,11 @@ def json_of(mod, argv: list[str]) -> dict:
         return json.loads(text.splitlines()[-1])
 
 
+def comma_list(v) -> tuple | None:
+    """A ``--flag A,B`` value as a tuple of its non-empty items (stripped); None for None (the flag not given)."""
+    return None if v is None else tuple(x.strip() for x in str(v).split(",") if x.strip())
+
+
 def energy_sizes(d: dict) -> str:
     """The fast energy's sample sizes and threads, when ``bench energy`` reports them."""
     parts = []

@@ -42,7 +42,7 @@ import numpy as np
 from isa_mocap_ros.eval.compare import SequenceSpec
 
 from . import robustness as br
-from isa_mocap_ros.bench._common import collect_and_write
+from isa_mocap_ros.bench._common import collect_and_write, comma_list
 from isa_mocap_ros.cli.keypoint_options import default_keypoint_weight
 
 SUBJECTS = ("slim_woman", "average_man", "heavy_man")
@@ -271,22 +271,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", default="docs/results/mesh.json", metavar="FILE", help="where to write the results")
 
 
-def _names(v):
-    return None if v is None else tuple(x.strip() for x in str(v).split(",") if x.strip())
-
-
 def run(args: argparse.Namespace) -> int:
     try:
-        seeds = None if args.seeds is None else tuple(int(x) for x in _names(args.seeds))
+        seeds = None if args.seeds is None else tuple(int(x) for x in comma_list(args.seeds))
         if getattr(args, "keypoint_weight", None) is None:     # the main job's default (cli.keypoint_options)
             args.keypoint_weight, note = default_keypoint_weight()
             if note:
                 print(f"isa-mocap bench mesh: {note}", file=sys.stderr)
         tracker = tuple((k, getattr(args, k)) for k in ("keypoint_weight", "keypoint_every", "silhouette_core_px")
                         if getattr(args, k, None) is not None)
-        cseeds = None if getattr(args, "calib_seeds", None) is None else tuple(int(x) for x in _names(args.calib_seeds))
+        cseeds = None if getattr(args, "calib_seeds", None) is None else tuple(int(x) for x in comma_list(args.calib_seeds))
         design = make_design("quick" if args.quick else "default", seeds=seeds, frames=args.frames,
-                             subjects=_names(args.subjects), conditions=_names(args.conditions), tracker=tracker,
+                             subjects=comma_list(args.subjects), conditions=comma_list(args.conditions), tracker=tracker,
                              calib_seeds=cseeds,
                              calib=tuple((k, getattr(args, k)) for k in ("calib_radius_prior",)
                                          if getattr(args, k, None) is not None))

@@ -29,8 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from isa_mocap_ros.bench import robustness as br
-from isa_mocap_ros.bench._common import collect_and_write
-from isa_mocap_ros.bench.mesh import _names
+from isa_mocap_ros.bench._common import collect_and_write, comma_list
 from isa_mocap_ros.cli.keypoint_options import default_keypoint_weight
 from isa_mocap_ros.eval.compare import SequenceSpec
 
@@ -204,12 +203,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        seeds = None if args.seeds is None else tuple(int(x) for x in _names(args.seeds))
+        seeds = None if args.seeds is None else tuple(int(x) for x in comma_list(args.seeds))
         w, note = default_keypoint_weight()        # the main job's default (cli.keypoint_options)
         if note:
             print(f"isa-mocap bench mesh_motions: {note}", file=sys.stderr)
-        design = make_design("quick" if args.quick else "default", motions=_names(args.motions),
-                             subjects=_names(args.subjects), seeds=seeds, frames=args.frames,
+        design = make_design("quick" if args.quick else "default", motions=comma_list(args.motions),
+                             subjects=comma_list(args.subjects), seeds=seeds, frames=args.frames,
                              tracker=(("keypoint_weight", w),))
         if args.jobs < 1:
             raise ValueError(f"--jobs: expected an integer >= 1, received {args.jobs}")
