@@ -265,8 +265,7 @@ class StartupCatchUp:
         """``(evaluations, contour stage allowed)`` of the next set, whose budget would otherwise be
         ``evals``; a set tracked at the catch-up budget is counted. Only a held set (``in_sequence``: it follows the
         set tracked before it) gets the catch-up budget: the set after the held ones comes after a gap, where the
-        motion since the last estimate is larger (one core busy, emulated: caught up at 300 evaluations after a gap
-        of 8 periods, bags/demo seed 0 lost its legs, 41.7 -> 62.0 mm; docs/history/issue35_speed.md, session 30)."""
+        motion since the last estimate is larger and a cheap search loses limbs (measured: docs/history/issue35_speed.md)."""
         self._cheap = self.active and initialized and not checking_heading and in_sequence
         if not self._cheap:
             return int(evals), True
