@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Sequence
 
+import numba
 import numpy as np
 
 from isa_mocap_ros.body.kinematics import joint_positions
@@ -67,6 +68,19 @@ def pose_joints(model, pose) -> np.ndarray:
     frame's prediction (:func:`.frame_prediction.prediction_joints`) and passes them as ``joints=``."""
     x = np.clip(np.asarray(pose, dtype=float), model.lower, model.upper)
     return joint_positions(model, x[None])[0]
+
+
+@numba.njit(cache=True)
+def _touching(labels, sil, n):  # pragma: no cover - compiled
+    """``(n,)`` bool: the components of ``labels`` (``cv2.connectedComponents``' ``n`` labels, 0 off the
+    foreground, which is no component) with a pixel where ``sil`` (the same shape) is nonzero."""
+    out = np.zeros(n, np.bool_)
+    for j in range(labels.shape[0]):
+        for i in range(labels.shape[1]):
+            if sil[j, i] != 0:
+                out[labels[j, i]] = True
+    out[0] = False
+    return out
 
 
 def _disc(margin_px: int) -> np.ndarray:
@@ -234,13 +248,12 @@ def gate_masks(masks: Sequence, cameras: Sequence, model, pose, margin_px: int, 
                 box = (slice(r0, r0 + h), slice(c0, c0 + w))
                 fb = f[box]
                 n, labels = cv2.connectedComponents(fb.view(np.uint8), connectivity=8)
-                touching = np.zeros(n, bool)
-                touching[labels[s[box] > 0]] = True     # labels are 0 off the foreground ...
-                touching[0] = False                     # ... and 0 is no component
-                if touching[1:].all():                  # every component kept (a clean person): f
+                touching = _touching(labels, s[box], n)     # the components the grown silhouette meets
+                if touching[1:].all():                  # every component kept (a clean person): f, nothing lost
                     kept[box] = fb.view(np.uint8) * np.uint8(255)
-                else:
-                    kept[box] = np.where(touching, np.uint8(255), np.uint8(0))[labels]
+                    out.append(kept)
+                    continue
+                kept[box] = np.where(touching, np.uint8(255), np.uint8(0))[labels]
         out.append(kept)
         lost[v] = total[v] - int(np.count_nonzero(kept))
     return GateResult(out, lost, total)

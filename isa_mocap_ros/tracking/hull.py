@@ -59,7 +59,7 @@ def pose_box(model, pose, pad: float, *, joints=None) -> tuple[np.ndarray, np.nd
     return P.min(axis=0) - pad, P.max(axis=0) + pad
 
 
-def _check(masks, cameras, box, dilate_px, step_m, misses):
+def _check(masks, cameras, box, dilate_px, step_m, misses, copy: bool = True):
     masks, cameras = list(masks), list(cameras)
     if len(masks) != len(cameras):
         raise GateError(f"masks: expected {len(cameras)} (one per camera), received {len(masks)}")
@@ -73,18 +73,51 @@ def _check(masks, cameras, box, dilate_px, step_m, misses):
         raise GateError(f"box: expected two finite 3-vectors (lo, hi), received shapes {lo.shape}, {hi.shape}")
     if np.any(hi < lo):
         raise GateError(f"box: expected lo <= hi, received lo {lo.tolist()} and hi {hi.tolist()}")
-    fg = [None if f is None else f.view(np.uint8) for f in view_masks(masks, cameras)]
+    fg = [None if f is None else f.view(np.uint8) for f in view_masks(masks, cameras)] if copy \
+        else _uint8_views(masks, cameras)
     return fg, cameras, lo, hi
 
 
-def _check_keep(keep, fg, cameras):
-    """``keep`` as a list of bool arrays (or None per view), checked against the masks."""
+def _check_keep(keep, fg, cameras, copy: bool = True):
+    """``keep`` as a list of bool arrays (or None per view), checked against the masks (``copy=False``: uint8
+    masks as they are, nonzero = kept, :func:`_uint8_views`)."""
     if keep is None:
         return [None] * len(fg)
     keep = list(keep)
     if len(keep) != len(fg):
         raise GateError(f"keep: expected {len(fg)} masks or None (one per camera), received {len(keep)}")
-    return view_masks(keep, cameras, "keep")
+    return view_masks(keep, cameras, "keep") if copy else _uint8_views(keep, cameras, "keep")
+
+
+def _uint8_views(masks, cameras, name: str = "masks") -> list:
+    """Each view's mask as a C-contiguous writable uint8 array, nonzero = foreground: a uint8 mask as it is (the
+    kernel and the support read nonzero, so 0/255 and 0/1 give the same pixels), anything else through
+    :func:`.gate.view_masks` (bool) viewed as uint8 (None stays None; shapes checked there)."""
+    out = []
+    for v, (cam, m) in enumerate(zip(cameras, masks)):
+        if m is None:
+            out.append(None)
+            continue
+        a = np.asarray(m)
+        if a.shape != (cam.height, cam.width):
+            raise GateError(f"{name}[{v}]: expected shape ({cam.height}, {cam.width}), received {a.shape}")
+        if not (a.dtype == np.uint8 and a.flags.c_contiguous and a.flags.writeable):
+            a = np.ascontiguousarray(a > 0 if a.dtype != bool else a).view(np.uint8)     # view_masks' conversion
+        out.append(a)
+    return out
+
+
+def _as255(f: np.ndarray) -> np.ndarray:
+    """A nonzero-is-foreground uint8 mask as 0/255 (a new array)."""
+    return np.where(f != 0, np.uint8(255), np.uint8(0))
+
+
+def _box(f: np.ndarray) -> np.ndarray:
+    """``(j0, j1, i0, i1)``: the rows and columns of ``f``'s foreground (its bounding box; empty: zeros)."""
+    import cv2
+
+    i0, j0, w, h = cv2.boundingRect(f)
+    return np.array([j0, j0 + h, i0, i0 + w], dtype=np.int64)
 
 
 def _support(fg, cameras, dilate_px):
@@ -104,6 +137,29 @@ def _support(fg, cameras, dilate_px):
             d = cv2.remap(d, mu, mv, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=1)
         out.append(np.ascontiguousarray(d))
     return out
+
+
+def _support_into(S, has, fg, cameras, dilate_px, boxes) -> None:
+    """:func:`_support` written into ``S (V, H, W)`` (zeros; nonzero = support) and ``has``: a view without lens
+    distortion dilated within its foreground box ``boxes[v]`` (:func:`_box`) grown by ``dilate_px`` only (beyond it
+    the dilation is 0: the same pixels)."""
+    import cv2
+
+    ker = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * dilate_px + 1, 2 * dilate_px + 1))
+    for v, (cam, f) in enumerate(zip(cameras, fg)):
+        if f is None:
+            continue
+        has[v] = True
+        if cam.has_distortion:
+            d = _support([f], [cam], dilate_px)[0]
+            S[v, :d.shape[0], :d.shape[1]] = d
+            continue
+        j0, j1, i0, i1 = (int(b) for b in boxes[v])
+        if j1 <= j0:
+            continue                    # no foreground: no support
+        j0, i0 = max(j0 - dilate_px, 0), max(i0 - dilate_px, 0)
+        j1, i1 = min(j1 + dilate_px, f.shape[0]), min(i1 + dilate_px, f.shape[1])
+        S[v, j0:j1, i0:i1] = cv2.dilate(f[j0:j1, i0:i1], ker) if dilate_px > 0 else f[j0:j1, i0:i1]
 
 
 def _pinhole_map(cam):
@@ -146,12 +202,15 @@ def _entry_exit(c, d, lo, hi):
 
 if numba is not None:
     @numba.njit(cache=True)
-    def _carve_numba(a, fg, skip, dirs, c, S, WH, has, K, R, t, lo, hi, step, misses):  # pragma: no cover - compiled
+    def _carve_numba(a, fg, skip, dirs, c, S, WH, has, K, R, t, lo, hi, step, misses, box):  # pragma: no cover
+        """View ``a``'s kept pixels: ``fg``'s foreground within ``box = (j0, j1, i0, i1)`` (rows, columns; it holds
+        every foreground pixel) kept where ``skip`` says so or some sample of its ray in the box ``lo, hi`` projects
+        onto the support ``S`` of every other view ``has`` (at most ``misses`` failing)."""
         V = S.shape[0]
         H, W = fg.shape
         out = np.zeros((H, W), np.uint8)
-        for j in range(H):
-            for i in range(W):
+        for j in range(box[0], box[1]):
+            for i in range(box[2], box[3]):
                 if fg[j, i] == 0:
                     continue
                 if skip[j, i]:              # kept without confirmation (``keep``)
@@ -226,6 +285,47 @@ _RAYS = _PerCamera(_rays)
 _MAPS = _PerCamera(_pinhole_map)
 
 
+class _Rig:
+    """The kernel's numbers of a list of cameras (:func:`_stack`'s ``K, R, t``, the image sizes ``WH``, the largest
+    ``HW``, the centres), made once per list of camera geometries (:data:`_RIGS`)."""
+
+    def __init__(self, cameras) -> None:
+        self.K, self.R, self.t = _stack(cameras)
+        self.WH = np.array([(c.width, c.height) for c in cameras], dtype=np.int64)
+        self.HW = (max(c.height for c in cameras), max(c.width for c in cameras))
+        self.centers = [np.asarray(c.center, dtype=float) for c in cameras]
+
+
+class _PerRig:
+    """``_Rig(cameras)`` cached by the cameras' geometries."""
+
+    def __init__(self) -> None:
+        self._cache: dict = {}
+
+    def __call__(self, cameras) -> _Rig:
+        key = tuple(c.key() for c in cameras)
+        r = self._cache.get(key)
+        if r is None:
+            if len(self._cache) > 16:
+                self._cache.clear()
+            r = self._cache[key] = _Rig(cameras)
+        return r
+
+
+_RIGS = _PerRig()
+
+
+def _no_skip(shape) -> np.ndarray:
+    """A zero ``skip`` image (nothing kept without confirmation) of ``shape``, shared (the kernel only reads it)."""
+    z = _ZEROS.get(shape)
+    if z is None:
+        z = _ZEROS[shape] = np.zeros(shape, np.uint8)
+    return z
+
+
+_ZEROS: dict = {}
+
+
 def prepare_cameras(cameras: Sequence) -> None:
     """Build the filter's per-camera data of ``cameras`` now (each pixel's ray, the pinhole maps of a distorted
     camera; ~20 ms per 320x240 camera), so the first frame filtered does not: they depend on the calibration only
@@ -267,37 +367,32 @@ def hull_filter(masks: Sequence, cameras: Sequence, box, *, dilate_px: int = 2, 
     GateError
         A bad argument (names it, the expected and the received value).
     """
-    fg, cameras, lo, hi = _check(masks, cameras, box, dilate_px, step_m, misses)
-    kp = _check_keep(keep, fg, cameras)
+    if numba is None:  # pragma: no cover
+        return hull_filter_numpy(masks, cameras, box, dilate_px=dilate_px, step_m=step_m, misses=misses, keep=keep)
+    fg, cameras, lo, hi = _check(masks, cameras, box, dilate_px, step_m, misses, copy=False)
+    kp = _check_keep(keep, fg, cameras, copy=False)
     V = len(fg)
     total = np.array([0 if f is None else int(np.count_nonzero(f)) for f in fg], dtype=np.int64)
-    if sum(f is not None for f in fg) < 2 or numba is None:
-        if numba is None and sum(f is not None for f in fg) >= 2:   # pragma: no cover
-            return hull_filter_numpy(masks, cameras, (lo, hi), dilate_px=dilate_px, step_m=step_m, misses=misses,
-                                     keep=keep)
-        return GateResult([None if f is None else f * np.uint8(255) for f in fg], np.zeros(V, np.int64), total)
-    sup = _support(fg, cameras, dilate_px)
-    H = max(c.height for c in cameras)
-    W = max(c.width for c in cameras)
+    if sum(f is not None for f in fg) < 2:
+        return GateResult([None if f is None else _as255(f) for f in fg], np.zeros(V, np.int64), total)
+    # each view's foreground box (rows j0:j1, columns i0:i1): the kernel scans it, the support is dilated there
+    boxes = [None if f is None else _box(f) for f in fg]
+    rig = _RIGS(cameras)
+    H, W = rig.HW
     S = np.zeros((V, H, W), np.uint8)
     has = np.zeros(V, np.bool_)
-    WH = np.array([(c.width, c.height) for c in cameras], dtype=np.int64)
-    for v, s in enumerate(sup):
-        if s is not None:
-            S[v, :s.shape[0], :s.shape[1]] = s
-            has[v] = True
-    K, R, t = _stack(cameras)
+    _support_into(S, has, fg, cameras, dilate_px, boxes)
     out, lost = [], np.zeros(V, np.int64)
     for v, (cam, f) in enumerate(zip(cameras, fg)):
         if f is None:
             out.append(None)
             continue
         if total[v] == 0:
-            out.append(f * np.uint8(255))
+            out.append(_as255(f))
             continue
-        skip = np.zeros(f.shape, np.uint8) if kp[v] is None else np.ascontiguousarray(kp[v]).view(np.uint8)
-        kept = _carve_numba(v, f, skip, _RAYS(cam), np.asarray(cam.center, dtype=float), S, WH, has, K, R, t, lo,
-                            hi, float(step_m), int(misses))
+        skip = _no_skip(f.shape) if kp[v] is None else kp[v]
+        kept = _carve_numba(v, f, skip, _RAYS(cam), rig.centers[v], S, rig.WH, has, rig.K, rig.R, rig.t, lo, hi,
+                            float(step_m), int(misses), boxes[v])
         out.append(kept)
         lost[v] = total[v] - int(np.count_nonzero(kept))
     return GateResult(out, lost, total)

@@ -17,7 +17,8 @@ from .contour import ContourFitInfo
 from .config import CONTOUR_KEEP_TOLERANCE, TrackerError, whole_generations
 
 
-def fit_contours(tr, ctx, x, *, iterations: int | None = None, extra_iterations: int | None = None):
+def fit_contours(tr, ctx, x, *, iterations: int | None = None, extra_iterations: int | None = None,
+                 energy: float | None = None):
     """The contour stage on pose ``x`` under the frame's masks ``ctx.masks`` (:class:`~.contour.ContourFit`):
     ``config.stages.contour_iterations`` (or ``iterations``) steps over all coordinates, then
     ``config.stages.contour_extra_iterations`` (or ``extra_iterations``) over the coordinates of
@@ -26,7 +27,9 @@ def fit_contours(tr, ctx, x, *, iterations: int | None = None, extra_iterations:
     together). The fitted pose replaces ``x`` unless its silhouette energy is more than
     :data:`CONTOUR_KEEP_TOLERANCE` above ``x``'s (both evaluated in one batch: a mask contour bent by an
     occluder or noise can pull the fit away); the evaluations charged are ``(D + 1)`` per iteration
-    taken over all coordinates, ``(k + 1)`` per iteration over ``k`` of them, + 2."""
+    taken over all coordinates, ``(k + 1)`` per iteration over ``k`` of them, + 2. ``energy``: ``x``'s energy under
+    ``ctx.objective`` if known to the bit (a stage's returned energy), so only the fit's is evaluated (not with a
+    prior, whose batch of both poses may round otherwise)."""
     if ctx.masks is None:
         raise TrackerError("fit_contours: no masks yet (call step first)")
     iterations = tr.config.stages.contour_iterations if iterations is None else iterations
@@ -41,7 +44,10 @@ def fit_contours(tr, ctx, x, *, iterations: int | None = None, extra_iterations:
         n += more.iterations * (tr.contour_extra_coords.size + 1)
         info = ContourFitInfo(info.iterations + more.iterations, info.correspondences + more.correspondences,
                               info.rms_px + more.rms_px, more.stopped)
-    e_x, e_y = (float(v) for v in ctx.objective(np.stack([x, y])))
+    if energy is None or ctx.objective.prior_active:
+        e_x, e_y = (float(v) for v in ctx.objective(np.stack([x, y])))
+    else:
+        e_x, e_y = float(energy), float(ctx.objective(y[None, :])[0])
     return (y, e_y, n, info) if e_y < e_x + CONTOUR_KEEP_TOLERANCE * abs(e_x) else (x, e_x, n, info)
 
 
@@ -182,13 +188,19 @@ def propose_limbs(tr, ctx, x, *, n: int, rng: np.random.Generator, limbs: Sequen
     E = _limb_batch_energies(ctx, x, chosen, batches)
     out, changed = x.copy(), []
     size = n + len(factors)
+    energy, row = float(E[0]), None
     for k, (limb, P) in enumerate(zip(chosen, batches)):
         Ek = E[1 + k * size: 1 + (k + 1) * size]
         i = int(np.argmin(Ek))
         if Ek[i] < E[0]:
             out[limb.dofs] = P[i, limb.dofs]
             changed.append(limb.name)
-    return out, float(ctx.objective(out[None, :])[0]), size * len(chosen) + 2, changed
+            energy, row = float(Ek[i]), P[i]
+    # the returned pose's energy: the batch's row of that very pose when at most one limb changed (the same
+    # bits: each row is scored alone; not with a prior, whose batch sums may round otherwise), else evaluated
+    if len(changed) > 1 or ctx.objective.prior_active or (row is not None and not np.array_equal(row, out)):
+        energy = float(ctx.objective(out[None, :])[0])
+    return out, energy, size * len(chosen) + 2, changed
 
 
 def _limb_batch_energies(ctx, x, chosen, batches) -> np.ndarray:

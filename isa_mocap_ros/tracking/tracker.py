@@ -324,17 +324,20 @@ class Tracker:
             res = minimize(opt, ctx.objective, max_evals=budget)
         # what a search leaves unspent (less than a generation: whole generations) goes to the next stage
         spare = budget - res.n_evals
+        exact = False           # res.energy is res.x's (a stage's returned energy), not the search's best particle's
         if share is not None:
             x, e, n = frame_stages.refit_pelvis(self, ctx, res.x, evals=share + spare, rng=rng, bounds=(lo, hi),
                                                 spread=spread)
             spare += share - n
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
+            exact = True
         if torso is not None:
             x, e, n, _ = frame_stages.refit_torso(self, ctx, res.x, evals=torso + spare, rng=rng,
                                                   energy=res.energy if share is not None else None,
                                                   bounds=(lo, hi), spread=spread)
             spare += torso - n
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
+            exact = True
         limbs, hinge, n_limb = limbs
         if limbs:
             extra = spare // len(limbs)       # more proposals with the rest
@@ -342,8 +345,9 @@ class Tracker:
                                                     hinge_only=hinge, last=self.track.last)
             spare -= extra * len(limbs)
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
+            exact = True
         if contour is not None:
-            x, e, n, info = frame_stages.fit_contours(self, ctx, res.x)
+            x, e, n, info = frame_stages.fit_contours(self, ctx, res.x, energy=res.energy if exact else None)
             if info.stopped and notes is not None:
                 notes.append(f"contour stage: stopped after {info.iterations} iterations ({info.stopped})")
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
