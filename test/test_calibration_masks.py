@@ -62,3 +62,30 @@ def test_persistent_masks_bad_input_and_the_config_option():
         ShapeCalibrationConfig(persist_px=-1)
     with pytest.raises(ShapeCalibrationError, match="persist_px: expected an integer >= 0, received 1.5"):
         ShapeCalibrationConfig(persist_px=1.5)
+
+
+def test_the_option_reaches_the_calibration_and_its_notes():
+    import argparse
+
+    from isa_mocap_ros.body import capsule_endpoints, make_model
+    from isa_mocap_ros.body.motion import generate_motion
+    from isa_mocap_ros.cli.shape_options import calibration_config
+    from isa_mocap_ros.tracking.shape_calibration import calibrate_shape
+    from isa_mocap_ros.vision import default_rig, render_mask
+
+    assert calibration_config(argparse.Namespace(calib_persist_px=4), 0).persist_px == 4
+    assert calibration_config(argparse.Namespace(), 0).persist_px == 0
+    model = make_model(39)
+    rig = list(default_rig())
+    X = generate_motion("walk", model, duration_s=0.2, fps=30.0, rng=np.random.default_rng(0))[:3]
+    frames = [(k, [render_mask(c, capsule_endpoints(model, x[None, :])[0], model.capsule_radii) for c in rig])
+              for k, x in enumerate(X)]
+    cfg = ShapeCalibrationConfig(window_frames=3, n_frames=2, rounds=1, pose_steps=1, shape_evals=40, seed=4,
+                                 restarts=1, persist_px=3)
+    res = calibrate_shape(39, rig, frames, config=cfg)
+    note = next(n for n in res.notes if "of the neighbouring frames' kept" in n)
+    assert "within 3 px" in note and "over 2 frames" in note
+    # both calibration frames are the window's ends (neighbours 1 and 2 frames away): the fast limbs' edges go
+    assert 0.0 < float(note.split("(")[1].split(" %")[0]) < 50.0
+    assert not any("neighbouring frames" in n for n in calibrate_shape(39, rig, frames, config=ShapeCalibrationConfig(
+        window_frames=3, n_frames=2, rounds=1, pose_steps=1, shape_evals=40, seed=4, restarts=1)).notes)
