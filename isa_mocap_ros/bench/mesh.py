@@ -258,8 +258,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calib-radius-prior", type=float, default=None, metavar="W",
                    help="the shape calibration's radius prior (isa-mocap calibrate's --calib-radius-prior; default: "
                         "calibrate's, off); the calibrations are cached under their own name")
-    p.add_argument("--calib-persist-px", type=int, default=None, metavar="PX",
-                   help="the shape calibration's --calib-persist-px (isa-mocap calibrate's; default: calibrate's)")
     p.add_argument("--keypoint-weight", type=float, default=None, metavar="W",
                    help="weight of the learned-keypoint term (docs/keypoints.md; 0 = off; default: track's, 1 when "
                         "the landmark model is installed)")
@@ -286,7 +284,7 @@ def run(args: argparse.Namespace) -> int:
         design = make_design("quick" if args.quick else "default", seeds=seeds, frames=args.frames,
                              subjects=comma_list(args.subjects), conditions=comma_list(args.conditions), tracker=tracker,
                              calib_seeds=cseeds,
-                             calib=tuple((k, getattr(args, k)) for k in ("calib_radius_prior", "calib_persist_px")
+                             calib=tuple((k, getattr(args, k)) for k in ("calib_radius_prior",)
                                          if getattr(args, k, None) is not None))
         if args.jobs < 1:
             raise ValueError(f"--jobs: expected an integer >= 1, received {args.jobs}")

@@ -29,9 +29,6 @@ def add_calibration_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calib-radius-prior", type=float, default=None, metavar="W",
                    help="shape calibration: weight of a prior pulling the radius factors towards 1.15 (their level on "
                         "clean mesh bags; 0 = off, the default: docs/shape_calibration.md)")
-    p.add_argument("--calib-persist-px", type=int, default=None, metavar="PX",
-                   help="shape calibration: keep only calibration-mask foreground within PX pixels of foreground in both "
-                        "neighbouring frames (clutter drawn anew each frame; 0 = off; docs/shape_calibration.md)")
     p.add_argument("--calib-energy", choices=("raster", "fast"), default=None,
                    help="shape calibration: the shape fit's silhouette energy, raster (counted on the pixel grid, no "
                         "sample) or fast (sampled) (default raster)")
@@ -43,8 +40,7 @@ def calibration_config(args, seed: int):
     kw = {"seed": seed}
     for opt, key in (("calib_frames", "window_frames"), ("calib_rounds", "rounds"), ("calib_evals", "shape_evals"),
                      ("calib_restarts", "restarts"), ("calib_combine", "combine"), ("calib_energy", "energy"),
-                     ("calib_radius_prior", "radius_prior"), ("calib_judge", "judge"),
-                     ("calib_persist_px", "persist_px")):
+                     ("calib_radius_prior", "radius_prior"), ("calib_judge", "judge")):
         v = getattr(args, opt, None)
         if v is not None:
             kw[key] = v

@@ -37,7 +37,6 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .calibration_masks import hull_masks, persistent_masks
 from .shape_judge import tracked_energy
 
 __all__ = ["SHAPE_PARAMS", "BONES", "LIMB_BONES", "ShapeCalibrationConfig", "ShapeCalibrationResult", "ShapeCalibrationError",
@@ -109,8 +108,6 @@ class ShapeCalibrationConfig:
     judge_frames: int = 60          # tracker energy of the first judge_frames frames tracked with its shape: shape_judge)
     masks: str = "hull"             # the calibration frames' masks: "hull" = cut to the visual hull's person blob
                                     # (tracking/init_hull.py: occluders and noise no other view confirms go), "raw"
-    persist_px: int = 0             # > 0: a calibration mask keeps only foreground within persist_px pixels of foreground
-                                    # in the two nearest window frames (clutter drawn anew each frame: calibration_masks.py)
     seed: int = 0                   # all random streams derive from it
 
     def __post_init__(self):
@@ -121,8 +118,6 @@ class ShapeCalibrationConfig:
                 raise ShapeCalibrationError(f"{name}: expected an integer >= 1, received {v!r}")
         if not (np.isfinite(self.translation_m) and self.translation_m > 0):
             raise ShapeCalibrationError(f"translation_m: expected a number > 0, received {self.translation_m!r}")
-        if isinstance(self.persist_px, bool) or not isinstance(self.persist_px, (int, np.integer)) or self.persist_px < 0:
-            raise ShapeCalibrationError(f"persist_px: expected an integer >= 0, received {self.persist_px!r}")
         if self.masks not in ("hull", "raw"):
             raise ShapeCalibrationError(f"masks: expected 'hull' or 'raw', received {self.masks!r}")
         if self.energy not in ("raster", "fast"):
@@ -380,16 +375,34 @@ def _prepared_masks(dof, cameras, masks, cfg: ShapeCalibrationConfig) -> list:
     return [f.prepare_masks(m) for m in masks]
 
 
-def _calibration_masks(masks_of, keys, cameras, config: ShapeCalibrationConfig) -> tuple[list, str | None]:
-    """The masks of calibration frames ``keys`` (``masks_of``: the window's masks by frame key) as ``config`` says: with
-    ``persist_px`` the foreground the neighbouring frames confirm (:func:`.calibration_masks.persistent_masks`), then
-    ``hull``: :func:`.calibration_masks.hull_masks`, ``raw``: as given; and the notes (or None)."""
-    masks, note = (persistent_masks(masks_of, keys, config.persist_px) if config.persist_px else
-                   ([masks_of[k] for k in keys], None))
+def _hull_masks(masks_per_frame, cameras) -> tuple[list, str | None]:
+    """Each frame's masks cut to the largest blob of its visual hull (:func:`.init_hull.person_masks`, what the
+    tracker does to its first frame): foreground one view alone reports (an occluder drawn into one image, pixel
+    noise) does not enter the shape fit. A view left empty becomes None. Returns the masks and a note on the share
+    of foreground removed (None when nothing was)."""
+    from .init_hull import person_masks
+
+    out, cut, total = [], 0, 0
+    for masks in masks_per_frame:
+        kept, _ = person_masks(masks, cameras)
+        for m, k in zip(masks, kept):
+            if m is not None:
+                n = int(np.count_nonzero(m))
+                total += n
+                cut += n - int(np.count_nonzero(k))
+        out.append([None if k is None or not np.any(k) else k for k in kept])
+    if not cut:
+        return out, None
+    return out, (f"calibration masks: the visual hull's person blob kept; {cut} of {total} foreground pixels "
+                 f"({100 * cut / max(total, 1):.1f} %) removed over {len(out)} frames")
+
+
+def _calibration_masks(masks_per_frame, cameras, config: ShapeCalibrationConfig) -> tuple[list, str | None]:
+    """The calibration frames' masks as ``config.masks`` says (``hull``: :func:`_hull_masks`; ``raw``: as given)
+    and the cut's note (or None)."""
     if config.masks == "hull":
-        masks, cut = hull_masks(masks, cameras)
-        note = "; ".join(n for n in (note, cut) if n) or None
-    return masks, note
+        return _hull_masks(masks_per_frame, cameras)
+    return list(masks_per_frame), None
 
 
 def _tracker(model, cameras, tracker_config):
@@ -472,7 +485,7 @@ def _judged(dof, cameras, frames, base, config, res, params) -> float:
     """The energy (one sample seed for every restart) of the shape ``params`` with restart ``res``'s calibration
     frames and poses, on those frames' masks as its fits used them (``config.masks``)."""
     masks_of = {int(k): m for k, m, _ in frames}
-    cal, _ = _calibration_masks(masks_of, list(res.frame_keys), cameras, config)
+    cal, _ = _calibration_masks([masks_of[k] for k in res.frame_keys], cameras, config)
     judge = _ShapeEnergy(dof, base, cameras, _prepared_masks(dof, cameras, cal, config), res.poses, config,
                          [config.seed, 33, 2])
     z = np.concatenate([np.log([params[n] for n, _, _ in SHAPE_PARAMS]), np.zeros(len(res.poses))])
@@ -506,7 +519,7 @@ def _calibrate_once(dof, cameras, frames, tcfg, config, base, say) -> ShapeCalib
     masks_of = {int(k): m for k, m, _ in frames}
     kps_of = {int(k): kp for k, _, kp in frames}
     # the pose fits' (the tracker filters them further) and the shape fit's: what one view alone reports stays out
-    cal_raw, note = _calibration_masks(masks_of, cal_keys, cameras, config)
+    cal_raw, note = _calibration_masks([masks_of[k] for k in cal_keys], cameras, config)
     if note:
         notes.append(note)
     cal_masks = _prepared_masks(dof, cameras, cal_raw, config)     # the shape fit's energies'
