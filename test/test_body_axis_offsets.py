@@ -90,3 +90,32 @@ def test_a_default_shape_with_offsets_reaches_bvh_models_and_the_model_yaml(tmp_
         back = model_from_yaml(model_to_yaml(m))[0]
         assert back.joint_names == m.joint_names
         assert np.allclose(capsule_endpoints(back, m.rest_pose()), capsule_endpoints(m, m.rest_pose()), atol=1e-8)
+
+
+@pytest.mark.parametrize("dof", [39, 18])
+def test_a_pelvis_off_the_hip_line_moves_with_the_root_only(dof):
+    """The pelvis capsule (hip to hip) with its ends moved forward: two end sites of the root, so the hips'
+    rotations (the thighs) leave it in place; hip joints moved back by the same amount keep the rest volume."""
+    shape = default_shape()
+    width = 2 * shape["offsets"]["left_hip"][1]
+    d = 0.03
+    shape["axis_offsets"] = {"pelvis": [[d / width, 0.0, 0.0], [d / width, 0.0, 0.0]]}
+    plain, moved = make_model(dof), make_model(dof, shape=shape)
+    assert moved.joint_names[-2:] == ("pelvis_end0", "pelvis_end1")
+    assert all(moved.parents[moved.joint_index(n)] == 0 for n in ("pelvis_end0", "pelvis_end1"))
+    X = poses(plain, 4)
+    c = plain.capsule_names.index("pelvis")
+    T = forward_kinematics(plain, X)
+    want = capsule_endpoints(plain, X)[:, c] + T[:, 0, None, :3, 0] * d       # both ends d along the root's x
+    assert np.allclose(capsule_endpoints(moved, X)[:, c], want, atol=1e-12)
+    Y = X.copy()
+    hips = [i for i, n in enumerate(plain.dof_names) if n.startswith(("left_hip", "right_hip"))]
+    Y[:, hips] += 0.3
+    assert np.allclose(capsule_endpoints(moved, Y)[:, c], want, atol=1e-12)
+    back = default_shape()
+    back["offsets"]["left_hip"] = back["offsets"]["left_hip"] - np.array([d, 0.0, 0.0])
+    back["offsets"]["right_hip"] = back["offsets"]["right_hip"] - np.array([d, 0.0, 0.0])
+    back["axis_offsets"] = shape["axis_offsets"]
+    R = plain.rest_pose()[None]
+    assert np.allclose(capsule_endpoints(make_model(dof, shape=back), R)[0, c], capsule_endpoints(plain, R)[0, c],
+                       atol=1e-12)

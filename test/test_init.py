@@ -115,3 +115,28 @@ def test_rival_second_moves_the_best_opposite_heading_run_to_second_place():
     assert [r[0] for r in rival_second(ranked)] == [0, 2, 1]
     ranked = [run(0, 0.1), run(1, 0.5), run(2, -1.0)]                    # none opposite: unchanged
     assert [r[0] for r in rival_second(ranked)] == [0, 1, 2]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_tracker_s_compiled_root_refinements_give_the_protocol_s_candidates(seed):
+    """The tracker's root refinements run whole in its compiled search (first_frame.root_search: a one-partition
+    h-isa with the energy inside) give the candidates, energies and evaluation count of the flat ISA run
+    generation by generation on the frame's objective, bit for bit."""
+    from isa_mocap_ros.tracking import Tracker, TrackerConfig, first_frame, frame_masks
+    from isa_mocap_ros.tracking.plan import flat_algorithm
+    from walk_scene import walk_scene
+
+    model, cams, poses, masks = walk_scene(width=160, height=120, frames=1, duration_s=0.1, seed=seed)
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=seed, evals=600))
+    ctx = tr.frame_context(0)
+    ctx.raw_masks, _ = frame_masks.check_masks(tr, masks[0])
+    frame_masks.filter_masks(tr, ctx)
+    frame_masks.set_masks(tr, ctx)
+    search = first_frame.root_search(tr, ctx)
+    assert search is not None
+    out = [initial_pose(model, cams, ctx.masks, first_frame.init_energy_fn(tr, ctx), rng=ctx.rng(1), refine_evals=150,
+                        refine_optimizer=flat_algorithm(tr), refine_search=s) for s in (None, search)]
+    assert out[0].n_evals == out[1].n_evals and len(out[0].candidates) == len(out[1].candidates) == 4
+    for (xa, ea), (xb, eb) in zip(out[0].candidates, out[1].candidates):
+        np.testing.assert_array_equal(xa, xb)
+        assert ea == eb

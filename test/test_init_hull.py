@@ -99,3 +99,46 @@ def test_the_compiled_carve_counts_as_its_numpy_reference(scene):
         np.testing.assert_array_equal(got[0], ref[0])
         np.testing.assert_array_equal(got[1], ref[1])
         assert ref[0].sum() > 1000 and 0 < ref[1].sum() < ref[0].sum()
+
+
+def test_the_compiled_discs_are_opencvs_filled_circles_pixel_for_pixel():
+    """init_hull._discs (the first-frame hull's discs, compiled) against cv2.circle(..., -1) one by one: the same
+    pixels for discs inside, across the edges and wholly outside images of odd and even sizes, radius 0 included."""
+    from isa_mocap_ros.tracking import init_hull as H
+
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        h, w = (int(v) for v in rng.integers(3, 90, 2))
+        n = int(rng.integers(1, 40))
+        uv = np.stack([rng.integers(-30, w + 30, n), rng.integers(-30, h + 30, n)], axis=1).astype(np.int64)
+        r = rng.integers(0, 35, n).astype(np.int64)
+        got, ref = np.zeros((h, w), np.uint8), np.zeros((h, w), np.uint8)
+        H._discs(got, uv, r)
+        H._discs_reference(ref, uv, r)
+        np.testing.assert_array_equal(got, ref)
+
+
+def test_the_cached_grid_and_the_cropped_labels_change_no_mask(scene):
+    """The first pass's grid and pixels kept between calls (init_hull._grid) and the blobs labelled within the kept
+    cubes' box give the masks and note of a fresh call with the whole volume labelled, call after call."""
+    from scipy import ndimage
+
+    from isa_mocap_ros.tracking import init_hull as H
+
+    model, cams, poses, masks = scene
+    noisy = _occluded(masks[0], 5)
+    H._GRIDS.clear()
+    first = H.person_masks(noisy, cams)
+    again = H.person_masks(noisy, cams)           # from the cache
+    for a, b in zip(first[0], again[0]):
+        np.testing.assert_array_equal(a, b)
+    assert first[1] == again[1] and first[1] is not None
+    # the cropped labelling against scipy's on the whole grid
+    F = {v: np.asarray(m) > 0 for v, m in enumerate(noisy)}
+    lo, hi = capture_volume(cams)
+    G, n, sizes, labels = H._blobs(F, cams, lo, hi, 0.08, 3, misses=0, cache=True)
+    keep = labels > 0
+    whole, _ = ndimage.label(keep.reshape(n), structure=np.ones((3, 3, 3), bool))
+    np.testing.assert_array_equal(labels, whole.ravel())
+    np.testing.assert_array_equal(sizes, np.bincount(whole.ravel())[1:])
+    assert sizes.size >= 1

@@ -148,10 +148,11 @@ def load_shape(path) -> dict:
     shape : dict
         ``{"name": str, "offsets": {joint: [x, y, z]}, "radii": {capsule: [r0, r1]}, "axis_offsets":
         {capsule: [[x, y, z], [x, y, z]]}}`` with right sides mirrored from left sides where missing;
-        validated. ``axis_offsets`` (optional, limb capsules only) moves each end of a capsule off its joint
-        centre, in the capsule's first joint's frame (x forward, y left, z up at rest), as fractions of the
-        capsule's rest length: a capsule then follows the limb's volume rather than its bone (a calf lies
-        behind the knee-ankle line). Absent = on the joint line.
+        validated. ``axis_offsets`` (optional, limb capsules and the pelvis only) moves each end of a capsule
+        off its joint centre, in the capsule's first joint's frame (the pelvis capsule: the root's; x forward,
+        y left, z up at rest), as fractions of the capsule's rest length: a capsule then follows the limb's
+        volume rather than its bone (a calf lies behind the knee-ankle line; a pelvis in front of the hip
+        joints). Absent = on the joint line.
     """
     path = Path(path)
     if not path.is_file():
@@ -230,6 +231,9 @@ def complete_shape(data, *, source: str) -> dict:
 #: capsules whose ends may leave the joint line (``axis_offsets``): one joint and its child, both ends rigid in
 #: the first joint's frame
 _LIMB_CAPSULES = tuple(n for n, a, b in _full_capsules() if n.startswith(("left_", "right_")))
+#: ... and the pelvis (hip to hip): two children of the root, both ends rigid in the root's frame (its volume
+#: placed apart from the hip joints, the thighs' pivots)
+_OFFSET_CAPSULES = _LIMB_CAPSULES + ("pelvis",)
 
 
 def _axis_offsets(data, *, source: str) -> dict:
@@ -241,9 +245,9 @@ def _axis_offsets(data, *, source: str) -> dict:
         raise BodyError(f"{source}: expected a mapping under 'axis_offsets', got {data!r}")
     out = {}
     for name, val in data.items():
-        if name not in _LIMB_CAPSULES:
+        if name not in _OFFSET_CAPSULES:
             raise BodyError(f"{source}: axis_offsets: unknown or non-limb capsule '{name}' "
-                            f"(expected one of {', '.join(_LIMB_CAPSULES)})")
+                            f"(expected one of {', '.join(_OFFSET_CAPSULES)})")
         arr = np.asarray(val, dtype=float)
         if arr.shape != (2, 3) or not np.all(np.isfinite(arr)) or np.any(np.abs(arr) > 0.5):
             raise BodyError(f"{source}: axis_offsets.{name}: expected two [x, y, z] fractions of the capsule's "
@@ -435,12 +439,19 @@ def make_model(dof: int = 39, *, shape=None) -> BodyModel:
     # a capsule off its joint line joins two fixed end sites of its first joint, appended after every real
     # joint (the real joints keep their indices); they scale with the segment's offset, so the calibration's
     # length factors move them too
+    # (the pelvis capsule joins two children of the root: its end sites are the root's, at the hips moved by
+    # the fractions of the hip width)
     ends = []
     for n, a, b in caps:
-        if n in shp["axis_offsets"]:
+        if n in shp["axis_offsets"] and parents[index[b]] == index[a]:
             length = float(np.linalg.norm(offsets[index[b]]))
             off = shp["axis_offsets"][n] * length
             ends.append((n, (f"{n}_end0", index[a], off[0]), (f"{n}_end1", index[a], offsets[index[b]] + off[1])))
+        elif n in shp["axis_offsets"]:
+            p = int(parents[index[a]])
+            length = float(np.linalg.norm(offsets[index[b]] - offsets[index[a]]))
+            off = shp["axis_offsets"][n] * length
+            ends.append((n, (f"{n}_end0", p, offsets[index[a]] + off[0]), (f"{n}_end1", p, offsets[index[b]] + off[1])))
     for _n, *pair in ends:
         for jn, parent, off in pair:
             index[jn] = len(joint_names)

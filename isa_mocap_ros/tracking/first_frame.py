@@ -5,6 +5,7 @@ heading-check rival (``init_confirm_frames``). The functions take the tracker an
 """
 from __future__ import annotations
 
+import dataclasses
 from typing import Sequence
 
 import numpy as np
@@ -87,7 +88,34 @@ def initial_grid(tr, ctx):
     cfg = tr.config
     return initial_pose(tr.model, tr.cameras, ctx.masks, init_energy_fn(tr, ctx), rng=ctx.rng(1),
                         n_yaw=cfg.first_frame.init_yaw_steps, refine_evals=cfg.first_frame.init_refine_evals,
-                        refine_optimizer=flat_algorithm(tr))
+                        refine_optimizer=flat_algorithm(tr),
+                        refine_search=root_search(tr, ctx) if tr.init_energy is None else None)
+
+
+def root_search(tr, ctx):
+    """The root refinements' search compiled whole (:func:`~isa_mocap_ros.optim.compiled_search.search` of a
+    one-partition h-isa over the 6 root coordinates on the frame's energy), or None where that path does not
+    cover the frame's objective: ``fn(base (D,), spread (6,), rng, evals) -> Result or None``."""
+    from isa_mocap_ros.optim import inner_optimizer, make_optimizer
+
+    if not tr.use_compiled_search or inner_optimizer(tr.config.search.optimizer) != "isa":
+        return None
+    params = {k: v for k, v in tr.config.search.params().items()
+              if k not in ("partitions", "optimizer", "initial_population", "evals_per_partition", "whole_generations")}
+    root = np.arange(6)
+
+    def fn(base, spread, rng, evals):
+        sp = np.ones(base.size)          # (the coordinates outside the partition are not searched)
+        sp[:6] = spread
+        lo, hi = tr.model.lower.copy(), tr.model.upper.copy()
+        opt = make_optimizer(tr.config.search.optimizer, base, sp, rng=rng, bounds=(lo, hi),
+                             rotation_blocks=((3, 4, 5),), partitions=[root], whole_generations=True, **params)
+        res = compiled_search.search(opt, tr.energy, evals, extra_terms=ctx.objective.extra_terms,
+                                     keypoints=ctx.objective.weighted_keypoints)
+        if res is None:
+            return None
+        return dataclasses.replace(res, x=np.asarray(res.x)[:6], best_x=np.asarray(res.best_x)[:6])
+    return fn
 
 
 def init_energy_fn(tr, ctx):

@@ -27,7 +27,8 @@ Automatic initialization, in three steps:
    (tilt), 0.2 rad (yaw); the lower final energy wins. The optimizer is ``refine_optimizer``: the library
    CMA-ES by default, the tracker's own flat algorithm from the tracker (for h-isa a compiled ISA,
    :func:`~isa_mocap_ros.optim.compiled_search.search`, in whole generations: ~half the CPU time of CMA-ES's
-   ~45 Python generations a run, the same accuracy on 5 sequences × 3 seeds, docs/history/issue35_speed.md).
+   ~45 Python generations a run, the same accuracy on 5 sequences × 3 seeds, docs/history/issue35_speed.md); the
+   tracker runs them whole in its compiled search, the energy inside (``refine_search``: the same numbers).
    Without refinement the four sector candidates are returned as scored. The joint angles are left to the
    tracker's first frame: a few hundred evaluations in all 39 DOF did not improve on the grid candidate
    (measured).
@@ -265,7 +266,7 @@ def wrap_angle(a):
 
 def initial_pose(model, cameras: Sequence, masks: Sequence, energy: Callable, *, rng: np.random.Generator | None = None,
                  n_yaw: int = 24, variants=None, refine_evals: int = 400,
-                 refine_optimizer: tuple = ("cmaes", {})) -> InitResult:
+                 refine_optimizer: tuple = ("cmaes", {}), refine_search: Callable | None = None) -> InitResult:
     """Automatic initial pose from foreground masks (see the module docstring).
 
     Parameters
@@ -289,6 +290,11 @@ def initial_pose(model, cameras: Sequence, masks: Sequence, energy: Callable, *,
     refine_optimizer : (str, mapping)
         The refinement's flat optimizer and its parameters (:func:`~isa_mocap_ros.optim.make_optimizer`;
         default the library CMA-ES).
+    refine_search : callable, optional
+        ``fn(start (D,), spread (6,), rng, evals) -> Result or None``: a refinement run of ``refine_optimizer``
+        (other than CMA-ES) over the root coordinates from ``start`` done by the caller, with the same numbers
+        (the tracker's compiled search with the energy inside, :func:`.first_frame.root_search`); ``best_x`` and
+        ``x`` of the 6 root coordinates. None from it, or no ``refine_search``: the run here.
 
     Returns
     -------
@@ -348,7 +354,11 @@ def initial_pose(model, cameras: Sequence, masks: Sequence, energy: Callable, *,
                 opt = make_optimizer(name, base[:6], spread, rng=rng, bounds=bounds, rotation_blocks=((3, 4, 5),),
                                      **dict(params))
                 evals = max(opt.generation_size, int(refine_evals) // opt.generation_size * opt.generation_size)
-                res = compiled_search.search(opt, root_energy, evals)
+                # the caller's compiled search first, then the generations compiled, the energy called from Python
+                # (the same numbers each way; None: the path does not cover it and has drawn nothing)
+                res = refine_search(base, spread, rng, evals) if refine_search is not None else None
+                if res is None:
+                    res = compiled_search.search(opt, root_energy, evals)
                 if res is None:           # not covered by the compiled path (the same numbers)
                     res = minimize(opt, root_energy, max_evals=evals)
             n_evals += res.n_evals

@@ -81,7 +81,7 @@ def person_masks(masks: Sequence, cameras: Sequence, *, voxel_m: float = 0.08, d
     F = {v: cv2.dilate((np.asarray(masks[v]) > 0).astype(np.uint8), kernel) > 0 for v in idx}
     lo, hi = capture_volume(cameras) if box is None else (np.asarray(box[0], float), np.asarray(box[1], float))
     # 1. where the person is: the largest blob of cubes every view that sees them confirms
-    G, n, sizes, labels = _blobs(F, cameras, lo, hi, voxel_m, min_views, misses=0)
+    G, n, sizes, labels = _blobs(F, cameras, lo, hi, voxel_m, min_views, misses=0, cache=True)
     if sizes.size == 0 or sizes.max() < MIN_CUBES:
         return list(masks), (f"first-frame hull: no blob of {MIN_CUBES} cubes is foreground in every view that sees "
                              "it; masks kept")
@@ -107,9 +107,8 @@ def person_masks(masks: Sequence, cameras: Sequence, *, voxel_m: float = 0.08, d
         r = np.ceil(max(cam.fx, cam.fy) * half / z[front]).astype(int) + margin_px
         ok = np.isfinite(uv).all(axis=1) & (np.abs(uv) < 1e5).all(axis=1)
         uv, r = uv[ok], r[ok]
-        # Python ints once (tolist): ~2352 discs a frame, each numpy scalar converted on its own cost ~2 ms more
-        for (u, w), rr in zip(np.rint(uv).astype(int).tolist(), r.tolist()):
-            cv2.circle(S, (u, w), rr, 1, -1)
+        # ~600 discs a view, compiled (cv2.circle's filled 8-connected discs pixel for pixel: _discs)
+        _discs(S, np.rint(uv).astype(np.int64), r.astype(np.int64))
         fg = m > 0
         cut = fg & (S == 0)
         out[v] = np.where(cut, np.zeros((), m.dtype), m)
@@ -128,48 +127,108 @@ def _depth(cam, P: np.ndarray) -> np.ndarray:
     return P[:, 0] * R[2, 0] + P[:, 1] * R[2, 1] + P[:, 2] * R[2, 2] + t[2]
 
 
+#: the capture volume's grids and their pixels in each camera, by (box, cube size) and camera geometry
+#: (:func:`_grid`): the first pass's grid depends on the cameras only
+_GRIDS: dict = {}
+#: grids kept (a rig's capture volume is one; the warm-up's and the rehearsal's rigs make two)
+_GRIDS_KEPT = 4
+
+
+def _grid(lo: np.ndarray, hi: np.ndarray, voxel_m: float, cams: Sequence, *, cache: bool
+          ) -> tuple[np.ndarray, np.ndarray, list]:
+    """Cube centres ``G (N, 3)`` of the box ``lo..hi``, the grid's shape ``(3,)`` and, per camera of ``cams``, each
+    cube's pixel as a flat index into the camera's image (``(N,)`` int64, -1 where the camera does not see the cube:
+    :func:`_pixels`). With ``cache`` the grid and each camera's pixels are kept for the next call with the same box
+    and camera geometry: the first pass's capture volume (123,008 cubes × 4 views on bags/demo) is the same every
+    initialization, and the start-up rehearsal (:func:`.realtime.rehearse`) builds it before the person comes."""
+    key = (np.asarray(lo, np.float64).tobytes(), np.asarray(hi, np.float64).tobytes(), float(voxel_m))
+    hit = _GRIDS.get(key) if cache else None
+    if hit is None:
+        n = np.maximum(np.ceil((hi - lo) / voxel_m).astype(int), 1)
+        axes = [lo[i] + voxel_m * (np.arange(n[i]) + 0.5) for i in range(3)]
+        G = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        hit = (G, n, {})
+        if cache:
+            if len(_GRIDS) >= _GRIDS_KEPT:
+                _GRIDS.clear()
+            _GRIDS[key] = hit
+    G, n, pixels = hit
+    todo = [c for c in cams if c.key() not in pixels]
+    if todo:
+        # compiled projection, no BLAS call per view; each camera's pixels are computed alone whatever the others in
+        # the call (the same numbers either way)
+        for c, uv in zip(todo, project_batch(todo, G[None])[:, 0]):
+            # a writable copy of the optical axis whatever the camera's R (a view of a read-only R, as the rigs'
+            # cameras have, is typed apart: numba then loaded a second compiled kernel on the first real frame)
+            pixels[c.key()] = _pixels(G, uv, np.array(c.R[2], dtype=np.float64), float(c.t[2]), c.width, c.height)
+    PIX = [pixels[c.key()] for c in cams]
+    if not cache:
+        pixels.clear()
+    return G, n, PIX
+
+
 def _blobs(F: dict, cameras: Sequence, lo: np.ndarray, hi: np.ndarray, voxel_m: float, min_views: int,
-           misses: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+           misses: int, *, cache: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Cube centres ``G (N, 3)`` of the box ``lo..hi``, the grid's shape, the 26-connected blobs' sizes and each
     cube's blob label (0: not kept). A cube is kept when at least ``min_views`` views see it and at most
-    ``misses`` of them (none with fewer than three seeing it) show no foreground there (``F``: dilated masks)."""
+    ``misses`` of them (none with fewer than three seeing it) show no foreground there (``F``: dilated masks).
+    ``cache``: the grid and its pixels kept for the next call (:func:`_grid`)."""
     from scipy import ndimage
 
-    n = np.maximum(np.ceil((hi - lo) / voxel_m).astype(int), 1)
-    axes = [lo[i] + voxel_m * (np.arange(n[i]) + 0.5) for i in range(3)]
-    G = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    views = list(F)
+    G, n, PIX = _grid(lo, hi, voxel_m, [cameras[v] for v in views], cache=cache)
     seen = np.zeros(len(G), np.int16)
     denied = np.zeros(len(G), np.int16)
-    views = list(F)
-    UV = project_batch([cameras[v] for v in views], G[None])[:, 0]       # compiled: no BLAS call per view
     for j, v in enumerate(views):
-        cam = cameras[v]
-        # a writable copy of the optical axis whatever the camera's R (a view of a read-only R, as the rigs' cameras
-        # have, is typed apart: numba then loaded a second compiled _carve on the first real frame after the warm-up)
-        _carve(G, UV[j], np.array(cam.R[2], dtype=np.float64), float(cam.t[2]), cam.width, cam.height,
-               np.ascontiguousarray(F[v]), seen, denied)
+        _vote(PIX[j], np.ascontiguousarray(F[v]).ravel(), seen, denied)
     allowed = np.where(seen >= 3, misses, 0)
     keep = (seen >= min_views) & (denied <= allowed)
-    labels, _ = ndimage.label(keep.reshape(n), structure=np.ones((3, 3, 3), bool))
-    labels = labels.ravel()
-    return G, n, np.bincount(labels)[1:], labels
+    labels = np.zeros(len(G), np.int32)
+    kept = np.flatnonzero(keep)
+    if kept.size == 0:
+        return G, n, np.zeros(0, np.int64), labels
+    # labelled within the kept cubes' bounding box: the same labels (numbered in the scan order, which the box keeps)
+    # for a fraction of the volume (the person's few hundred cubes of 123,008)
+    at = np.unravel_index(kept, tuple(n))
+    box = tuple(slice(int(a.min()), int(a.max()) + 1) for a in at)
+    sub, _ = ndimage.label(keep.reshape(n)[box], structure=np.ones((3, 3, 3), bool))
+    labels.reshape(n)[box] = sub
+    return G, n, np.bincount(sub.ravel())[1:], labels
 
 
 @numba.njit(cache=True)
-def _carve(G, uv, r2, t2, width, height, F, seen, denied):  # pragma: no cover - compiled
-    """One view's vote on the cubes ``G (N, 3)`` projected to ``uv (N, 2)`` (:func:`_carve_reference`, the same
-    counts: one pass instead of a dozen numpy temporaries of N): a cube in front of the camera (depth, as
-    :func:`_depth`, > 1e-6) whose pixel (rounded half to even) lies in the image adds 1 to ``seen``, and 1 to
-    ``denied`` when the dilated mask ``F (H, W)`` shows no foreground there."""
+def _pixels(G, uv, r2, t2, width, height):  # pragma: no cover - compiled
+    """Each cube's pixel in one view, a flat index ``row * width + column`` into its image (``(N,)`` int64), or -1: a
+    cube ``G (N, 3)`` in front of the camera (depth, as :func:`_depth`, > 1e-6) whose projection ``uv (N, 2)``
+    (rounded half to even) lies in the image has one; NaN (far off a distorted view) has none."""
+    out = np.full(G.shape[0], -1, np.int64)
     for i in range(G.shape[0]):
         z = G[i, 0] * r2[0] + G[i, 1] * r2[1] + G[i, 2] * r2[2] + t2
         if not z > 1e-6:
             continue
         u, v = uv[i, 0], uv[i, 1]
-        if u > -0.5 and u < width - 0.5 and v > -0.5 and v < height - 0.5:     # NaN (far off a distorted view): out
+        if u > -0.5 and u < width - 0.5 and v > -0.5 and v < height - 0.5:
+            out[i] = int(np.rint(v)) * width + int(np.rint(u))
+    return out
+
+
+@numba.njit(cache=True)
+def _vote(pix, F, seen, denied):  # pragma: no cover - compiled
+    """One view's vote on the cubes of pixels ``pix`` (:func:`_pixels`): a cube with a pixel adds 1 to ``seen``, and 1
+    to ``denied`` when the flat dilated mask ``F (H * W,)`` shows no foreground there."""
+    for i in range(pix.shape[0]):
+        p = pix[i]
+        if p >= 0:
             seen[i] += 1
-            if not F[int(np.rint(v)), int(np.rint(u))]:
+            if not F[p]:
                 denied[i] += 1
+
+
+def _carve(G, uv, r2, t2, width, height, F, seen, denied) -> None:
+    """One view's vote on the cubes ``G (N, 3)`` projected to ``uv (N, 2)`` (``r2``, ``t2``: the camera's optical axis
+    and depth offset; ``F (H, W)``: the dilated mask): :func:`_pixels` then :func:`_vote`, what :func:`_blobs` does
+    with the pixels kept (:func:`_carve_reference` counts the same; the tests compare them)."""
+    _vote(_pixels(G, uv, r2, t2, width, height), np.ascontiguousarray(F).ravel(), seen, denied)
 
 
 def _carve_reference(G: np.ndarray, uv: np.ndarray, cam, F: np.ndarray, seen: np.ndarray, denied: np.ndarray) -> None:
@@ -182,3 +241,45 @@ def _carve_reference(G: np.ndarray, uv: np.ndarray, cam, F: np.ndarray, seen: np
     ok = F[uv[:, 1], uv[:, 0]]
     seen[inside] += 1
     denied[inside[~ok]] += 1
+
+
+@numba.njit(cache=True)
+def _discs(S, uv, r):  # pragma: no cover - compiled
+    """Filled discs of centres ``uv (N, 2)`` (integer pixels, column and row) and radii ``r (N,)`` set to 1 in ``S (H, W)``
+    uint8, clipped to the image: ``cv2.circle(S, (u, v), r, 1, -1)`` for each, pixel for pixel (OpenCV's 8-connected
+    filled circle: the midpoint walk of ``drawing.cpp``'s ``Circle``, whose four spans per step are drawn here;
+    :func:`_discs_reference` is that call, and the tests compare them)."""
+    H, W = S.shape
+    for i in range(r.shape[0]):
+        cx, cy, radius = uv[i, 0], uv[i, 1], r[i]
+        if radius < 0:
+            continue
+        err, dx, dy, plus, minus = 0, radius, 0, 1, 2 * radius - 1
+        while dx >= dy:
+            y11, y12, y21, y22 = cy - dy, cy + dy, cy - dx, cy + dx
+            x11, x12, x21, x22 = cx - dx, cx + dx, cx - dy, cx + dy
+            if x11 < W and x12 >= 0 and y21 < H and y22 >= 0:
+                a, b = max(x11, 0), min(x12, W - 1)
+                if 0 <= y11 < H:
+                    S[y11, a:b + 1] = 1
+                if 0 <= y12 < H:
+                    S[y12, a:b + 1] = 1
+                if x21 < W and x22 >= 0:
+                    a, b = max(x21, 0), min(x22, W - 1)
+                    if 0 <= y21 < H:
+                        S[y21, a:b + 1] = 1
+                    if 0 <= y22 < H:
+                        S[y22, a:b + 1] = 1
+            dy += 1
+            err += plus
+            plus += 2
+            if err > 0:          # OpenCV's branch-free mask: -1 when err > 0
+                err -= minus
+                dx -= 1
+                minus -= 2
+
+
+def _discs_reference(S: np.ndarray, uv: np.ndarray, r: np.ndarray) -> None:
+    """:func:`_discs` with OpenCV (its reference)."""
+    for (u, w), rr in zip(np.asarray(uv).tolist(), np.asarray(r).tolist()):
+        cv2.circle(S, (u, w), rr, 1, -1)

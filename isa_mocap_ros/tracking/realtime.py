@@ -233,7 +233,8 @@ def rehearse(model, cameras) -> list:
     person is in view: the rest pose of ``model`` standing in the middle of the rig's capture volume
     (:func:`.init_hull.capture_volume`), rendered into every camera. :func:`warm_up` loads the kernels on 80×60 views;
     this call touches the hull's arrays at the cameras' size, so the first real initialization does not pay their
-    first-touch page faults (figures: docs/history/issue35_speed.md, session 30). The estimator node calls it on an
+    first-touch page faults (figures: docs/history/issue35_speed.md, session 30), and builds the capture volume's
+    grid and its pixels in every camera, which the hull keeps for the cameras' initializations. The estimator node calls it on an
     empty frame set (docs/nodes.md, "Start-up"); it changes no estimate (nothing it computes is kept but the process's
     memory). Returns the rendered masks cut to the hull's blob."""
     from isa_mocap_ros.body import capsule_endpoints
