@@ -143,19 +143,36 @@ def crop_box(mask: Any, *, crop: str = "mask", box_scale: float = 1.25, min_pixe
     fg = (m > 0).view(np.uint8)
     if crop == "mask" or cv2.countNonZero(fg) < min_pixels:
         return box_from_mask(m, scale=box_scale, min_pixels=min_pixels)
-    x, y, w, h = cv2.boundingRect(fg)               # the work on the foreground's bounding rectangle only
-    fg = person_pixels(fg[y:y + h, x:x + w])
+    x, y, fg = _person_in_rectangle(fg)
     if crop == "person":
-        box = box_from_mask(fg, scale=box_scale, min_pixels=min_pixels)
-        return None if box is None else box + np.array([x, y, 0.0, 0.0])
-    whole = np.zeros_like(m, np.uint8)      # moments over the whole image (over the rectangle: other last bits)
-    whole[y:y + h, x:x + w] = fg
-    angle = body_axis_angle(whole)
+        return _person_box(x, y, fg, box_scale=box_scale, min_pixels=min_pixels)
+    angle = body_axis_angle(_whole(m.shape, x, y, fg))  # moments over the whole image (the rectangle: other last bits)
     # a linear function's extremes over the pixels lie on their outer boundary: the turned box of the contours'
     # points (segment ends) is the box of every pixel
     contours, _ = cv2.findContours(fg, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     pts = np.concatenate([c.reshape(-1, 2) for c in contours]).astype(np.float64) + np.array([x, y], np.float64)
     return box_from_points(pts, scale=box_scale, angle_rad=angle)
+
+
+def _person_in_rectangle(fg: np.ndarray) -> tuple[int, int, np.ndarray]:
+    """:func:`person_pixels` of ``fg`` ((H, W) uint8 0/1) on its foreground's bounding rectangle only (the same
+    components: none reaches outside it), as the rectangle's corner ``x, y`` and its (h, w) uint8 0/1 image."""
+    x, y, w, h = cv2.boundingRect(fg)
+    return x, y, person_pixels(fg[y:y + h, x:x + w])
+
+
+def _person_box(x: int, y: int, fg: np.ndarray, *, box_scale: float, min_pixels: int) -> np.ndarray | None:
+    """:func:`crop_box`'s ``"person"`` square for :func:`_person_in_rectangle`'s ``x, y, fg``."""
+    box = box_from_mask(fg, scale=box_scale, min_pixels=min_pixels)
+    return None if box is None else box + np.array([x, y, 0.0, 0.0])
+
+
+def _whole(shape: tuple[int, ...], x: int, y: int, fg: np.ndarray) -> np.ndarray:
+    """:func:`_person_in_rectangle`'s ``fg`` placed at ``x, y`` in a zero image of ``shape[:2]``: :func:`person_pixels`
+    of the whole mask."""
+    whole = np.zeros(shape[:2], np.uint8)
+    whole[y:y + fg.shape[0], x:x + fg.shape[1]] = fg
+    return whole
 
 
 def segmentation_iou(probability: np.ndarray, person: np.ndarray) -> float:
@@ -208,11 +225,12 @@ def detect_in_mask(detector: PoseLandmarker, image: Any, mask: Any, *, box_scale
 def _detect_checked(detector: PoseLandmarker, img: np.ndarray, m: np.ndarray, box_mask: np.ndarray, *,
                     box_scale: float, bgr: bool, min_score: float) -> Landmarks2D:
     """``"person_checked"``'s detection (:func:`detect_in_mask`) for a mask with a ``"mask"`` square."""
-    box = crop_box(m, crop="person", box_scale=box_scale)
+    x, y, person = _person_in_rectangle((m > 0).view(np.uint8))    # once: for the square and the agreement
+    box = _person_box(x, y, person, box_scale=box_scale, min_pixels=20)
     if box is None or np.array_equal(box, box_mask) or not detector.has_segmentation:
         return detector.detect(img, box_mask, bgr=bgr)
     probability, lm = detector.person_probability(img, box, bgr=bgr)
-    if lm.score < min_score or segmentation_iou(probability, person_pixels(m)) < AGREE_IOU:
+    if lm.score < min_score or segmentation_iou(probability, _whole(m.shape, x, y, person)) < AGREE_IOU:
         return detector.detect(img, box_mask, bgr=bgr)
     uv = lm.uv
     turn = upright_angle(0.5 * (uv[_HIPS[0]] + uv[_HIPS[1]]), 0.5 * (uv[_SHOULDERS[0]] + uv[_SHOULDERS[1]]))
