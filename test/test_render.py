@@ -217,6 +217,7 @@ def test_nothing_to_draw():
     bg = make_background(96, 72, rng=np.random.default_rng(0))
     rgb, mask = render(CAM, np.zeros((0, 2, 3)), np.zeros((0, 2)), background=bg)
     np.testing.assert_array_equal(rgb, bg)
+    assert not np.shares_memory(rgb, bg)          # drawn on a copy: the caller's background is never written
     assert not mask.any()
     behind = CAM.center + 0.5 * (CAM.center - np.array([0, 0, 0.95]))  # behind the camera
     assert not render_mask(CAM, np.array([[behind, behind + [0, 0, 0.1]]]), np.array([[0.2, 0.2]])).any()

@@ -21,7 +21,7 @@ import numpy as np
 
 from .errors import VisionError
 
-__all__ = ["make_background", "clothing_colors", "PALETTE", "BACKGROUND_KINDS"]
+__all__ = ["make_background", "clothing_colors", "canvas", "PALETTE", "BACKGROUND_KINDS"]
 
 BACKGROUND_KINDS = ("textured", "noise")
 
@@ -156,3 +156,20 @@ def clothing_colors(n_capsules: int, *, rng: np.random.Generator | None = None) 
     _check_rng(rng)
     hsv = np.stack([rng.uniform(0, 180, n), rng.uniform(140, 230, n), rng.uniform(120, 230, n)], axis=-1)
     return cv2.cvtColor(hsv.astype(np.uint8)[None], cv2.COLOR_HSV2RGB)[0].reshape(n, 3)
+
+
+def canvas(background: Any, height: int, width: int, grey: int) -> np.ndarray:
+    """The ``(height, width, 3)`` uint8 image a renderer draws on: a copy of ``background`` (RGB, that size), or
+    ``grey`` everywhere when it is None.
+
+    Raises
+    ------
+    VisionError
+        ``background`` is not uint8 of shape ``(height, width, 3)``.
+    """
+    if background is None:
+        return np.full((height, width, 3), grey, np.uint8)
+    bg = np.asarray(background)
+    if bg.shape != (height, width, 3) or bg.dtype != np.uint8:
+        raise VisionError(f"background: expected uint8 of shape ({height}, {width}, 3), received {bg.dtype} {bg.shape}")
+    return bg.copy()

@@ -107,31 +107,38 @@ def _fill_hull(ax, ay, bx, by, ra, rb, out, value):  # pragma: no cover - compil
         for j in range(int(j0), int(j1) + 1):
             y = float(j)
             lo, hi = np.inf, -np.inf
-            h = ra * ra - (y - ay) * (y - ay)                     # disc a's chord
-            if h >= 0.0:
-                s = np.sqrt(h)
-                lo, hi = min(lo, ax - s), max(hi, ax + s)
-            h = rb * rb - (y - by) * (y - by)                     # disc b's chord
-            if h >= 0.0:
-                s = np.sqrt(h)
-                lo, hi = min(lo, bx - s), max(hi, bx + s)
+            lo, hi = _chord(y, ax, ay, ra, lo, hi)                # disc a's chord
+            lo, hi = _chord(y, bx, by, rb, lo, hi)                # disc b's chord
             if cone:                                              # the tangent segments' crossings of the row
-                d = q1y - p1y
-                if abs(d) > 1e-12:
-                    t = (y - p1y) / d
-                    if 0.0 <= t <= 1.0:
-                        x = p1x + t * (q1x - p1x)
-                        lo, hi = min(lo, x), max(hi, x)
-                d = q2y - p2y
-                if abs(d) > 1e-12:
-                    t = (y - p2y) / d
-                    if 0.0 <= t <= 1.0:
-                        x = p2x + t * (q2x - p2x)
-                        lo, hi = min(lo, x), max(hi, x)
+                lo, hi = _crossing(y, p1x, p1y, q1x, q1y, lo, hi)
+                lo, hi = _crossing(y, p2x, p2y, q2x, q2y, lo, hi)
             u0 = max(0.0, np.ceil(lo))
             u1 = min(W - 1.0, np.floor(hi))
             for u in range(int(u0), int(u1) + 1):
                 out[j, u] = value
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _chord(y, cx, cy, r, lo, hi):  # pragma: no cover - compiled
+    """``(lo, hi)`` widened to the chord of the disc ``((cx, cy), r)`` on the row ``y``, if it meets the row."""
+    h = r * r - (y - cy) * (y - cy)
+    if h >= 0.0:
+        s = np.sqrt(h)
+        lo, hi = min(lo, cx - s), max(hi, cx + s)
+    return lo, hi
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _crossing(y, px, py, qx, qy, lo, hi):  # pragma: no cover - compiled
+    """``(lo, hi)`` widened to where the segment ``(px, py)``-``(qx, qy)`` crosses the row ``y``, if it does (a
+    segment along the row adds nothing: its ends lie on the discs' chords)."""
+    d = qy - py
+    if abs(d) > 1e-12:
+        t = (y - py) / d
+        if 0.0 <= t <= 1.0:
+            x = px + t * (qx - px)
+            lo, hi = min(lo, x), max(hi, x)
+    return lo, hi
 
 
 def capsule_discs(camera, endpoints: np.ndarray, radii: np.ndarray, margin_px: float = 0.0):

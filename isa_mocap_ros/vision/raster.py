@@ -23,6 +23,7 @@ from typing import Any
 import numba
 import numpy as np
 
+from .background import canvas
 from .camera import Camera
 from .errors import VisionError
 
@@ -128,13 +129,7 @@ def render_mesh(camera: Camera, verts: Any, tris: Any, colors: Any, *, backgroun
     if col.shape != (len(T), 3):
         raise VisionError(f"colors: expected shape ({len(T)}, 3), received {col.shape}")
     H, W = camera.height, camera.width
-    if background is None:
-        rgb = np.full((H, W, 3), 48, np.uint8)
-    else:
-        bg = np.asarray(background)
-        if bg.shape != (H, W, 3) or bg.dtype != np.uint8:
-            raise VisionError(f"background: expected uint8 of shape ({H}, {W}, 3), received {bg.dtype} {bg.shape}")
-        rgb = bg.copy()
+    rgb = canvas(background, H, W, 48)
     light = np.asarray(light_dir, dtype=np.float64)
     light = light / np.linalg.norm(light)
     A, B, C = V[T[:, 0]], V[T[:, 1]], V[T[:, 2]]

@@ -39,7 +39,7 @@ from typing import Any
 import numba
 import numpy as np
 
-from .background import clothing_colors
+from .background import canvas, clothing_colors
 from .camera import Camera
 from .capsule_solid import capsule_contains, capsule_data
 from .errors import VisionError
@@ -452,13 +452,7 @@ def render(camera: Camera, endpoints: Any, radii: Any, colors: Any = None, *, ba
         if not np.issubdtype(col.dtype, np.integer) or col.min(initial=0) < 0 or col.max(initial=0) > 255:
             raise VisionError(f"colors: expected integers in [0, 255] (uint8), received dtype {col.dtype}")
         col = col.astype(np.float64)
-    if background is None:
-        rgb = np.full((H, W, 3), DEFAULT_GREY, np.uint8)
-    else:
-        bg = np.asarray(background)
-        if bg.shape != (H, W, 3) or bg.dtype != np.uint8:
-            raise VisionError(f"background: expected uint8 of shape ({H}, {W}, 3), received {bg.dtype} {bg.shape}")
-        rgb = bg.copy()
+    rgb = canvas(background, H, W, DEFAULT_GREY)
     light = np.asarray(light_dir, dtype=np.float64)
     if light.shape != (3,) or not np.all(np.isfinite(light)) or np.linalg.norm(light) == 0:
         raise VisionError(f"light_dir: expected a finite non-zero (3,) vector, received {light_dir!r}")
