@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 TIMING = {"fps", "seconds", "out", "frames_per_s", "wall_s", "elapsed_s", "evals_per_s", "time_s", "cache",
-          "frame_ms", "ms", "latency_ms"}
+          "frame_ms", "ms", "latency_ms", "keypoint_ms_per_frame_set"}
 
 
 def _strip(v):

@@ -24,6 +24,8 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
+from isa_mocap_ros.bench._common import comma_list
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_mutually_exclusive_group()
@@ -226,9 +228,8 @@ def run(args: argparse.Namespace) -> int:
     if getattr(args, "frames", None):
         design = replace(design, frames=int(args.frames))
     if args.algorithms:
-        want = [a.strip() for a in args.algorithms.split(",") if a.strip()]
         from dataclasses import replace
-        design = replace(design, algorithms=tuple(want))
+        design = replace(design, algorithms=comma_list(args.algorithms))
     for n in design.notes:
         print(f"bench compare: {n}", file=sys.stderr)
     out = Path(args.resume or args.out or tempfile.mkdtemp(prefix="isa_mocap_compare_"))

@@ -42,6 +42,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from isa_mocap_ros.bench._common import comma_list
 from isa_mocap_ros.bench.keypoints_tracking import (bench_init, bench_peer, bench_track, print_init,
                                                    print_track)
 from isa_mocap_ros.resources import cmu_walk_bvh, shared_data_dir
@@ -365,7 +366,7 @@ def _print(kind: str, res: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
+    kinds = list(comma_list(args.kinds))
     bad = [k for k in kinds if k not in ("real", "synth", "mesh", "track", "init", "cost", "peer")]
     if bad or args.step < 1:
         print(f"isa-mocap bench keypoints: error: --kinds {bad} / --step {args.step}: expected real, synth and "
@@ -393,7 +394,7 @@ def run(args: argparse.Namespace) -> int:
         results["synth"] = bench_synth(det, args.width, args.height, args.step, args.synth_s)
     if "mesh" in kinds:
         results["mesh renders"] = bench_synth_mesh(det, args.width, args.height, args.step, args.synth_s,
-                                                   [x.strip() for x in args.subjects.split(",") if x.strip()])
+                                                   list(comma_list(args.subjects)))
     if args.json:
         print(json.dumps(results, indent=1))
     else:

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from isa_mocap_ros.bench._common import comma_list
 from isa_mocap_ros.resources import cmu_walk_bvh
 from isa_mocap_ros.vision.landmarks import PoseLandmarker, box_from_mask
 
@@ -151,10 +152,10 @@ def bench_track(args) -> dict:
     cache = Path(args.cache)
     cache.mkdir(parents=True, exist_ok=True)
     bvh = cmu_walk_bvh()
-    motions = [m.strip() for m in args.motions.split(",") if m.strip()]
-    seeds = [int(v) for v in args.seeds.split(",") if v.strip()]
+    motions = list(comma_list(args.motions))
+    seeds = [int(v) for v in comma_list(args.seeds)]
     configs = {"off": (0.0, 0), "start": (args.weight, 0), f"every {args.every}": (args.weight, args.every)}
-    wanted = [c.strip() for c in getattr(args, "configs", "off,start,every").split(",") if c.strip()]
+    wanted = comma_list(getattr(args, "configs", "off,start,every"))
     configs = {k: v for k, v in configs.items() if k.split()[0] in wanted}
     if args.weight != 1.0:
         configs = {(f"{k} w{args.weight:g}" if v[0] > 0 else k): v for k, v in configs.items()}
@@ -167,7 +168,7 @@ def bench_track(args) -> dict:
         given = Path(motion)
         mname = given.stem if motion.endswith(".bvh") else motion      # a BVH file's name labels its runs
         body = getattr(args, "body", "capsules")
-        subjects = ([x.strip() for x in args.subjects.split(",") if x.strip()] if body == "mesh"
+        subjects = (list(comma_list(args.subjects)) if body == "mesh"
                     and not (given / "metadata.yaml").is_file() else [None])
         for subject, seed in [(su, se) for su in subjects
                               for se in ([0] if (given / "metadata.yaml").is_file() else seeds)]:
@@ -202,8 +203,8 @@ def bench_init(args) -> dict:
 
     det = PoseLandmarker()
     rig = default_rig()
-    motions = [m.strip() for m in args.motions.split(",") if m.strip() and not Path(m.strip()).is_dir()]
-    seeds = [int(v) for v in args.seeds.split(",") if v.strip()]
+    motions = [m for m in comma_list(args.motions) if not Path(m).is_dir()]
+    seeds = [int(v) for v in comma_list(args.seeds)]
     rows = []
     for motion in motions:
         src = cmu_walk_bvh() if motion == "cmu" else motion

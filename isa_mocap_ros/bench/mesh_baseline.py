@@ -27,7 +27,7 @@ import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
-from isa_mocap_ros.bench._common import write_result
+from isa_mocap_ros.bench._common import comma_list, write_result
 
 BODIES = ("mesh", "capsules")
 COMPARE_ALGORITHMS = ("h-isa", "isa", "cmaes", "pycma")
@@ -109,7 +109,7 @@ def render_markdown(res: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    seeds = tuple(int(x) for x in str(args.seeds).split(",") if x.strip())
+    seeds = tuple(int(x) for x in comma_list(args.seeds))
     if args.frames < 2 or args.compare_frames < 2 or not seeds or args.jobs < 1:
         print("isa-mocap bench mesh_baseline: error: expected --frames, --compare-frames >= 2, seeds, --jobs >= 1",
               file=sys.stderr)

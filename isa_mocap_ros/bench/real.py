@@ -36,7 +36,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from isa_mocap_ros.bench._common import write_result
+from isa_mocap_ros.bench._common import comma_list, write_result
 
 __all__ = ["CONFIGS", "DEFAULT_CONFIGS", "collect", "mask_figures", "render_markdown", "add_arguments", "run"]
 
@@ -461,11 +461,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    configs = tuple(c.strip() for c in args.configs.split(",") if c.strip())
+    configs = comma_list(args.configs)
     bad = [c for c in configs if c not in CONFIGS]
     lockstep = None if args.lockstep == "none" else (args.lockstep or "default_choice")
     try:
-        seeds = tuple(int(x) for x in args.seeds.split(",") if x.strip())
+        seeds = tuple(int(x) for x in comma_list(args.seeds))
     except ValueError:
         seeds = ()
     if not seeds:

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from isa_mocap_ros.bench._common import energy_sizes, json_of
+from isa_mocap_ros.bench._common import comma_list, energy_sizes, json_of
 
 #: Run order of ``bench all``: the timed benches first, on a rested machine. After the 20 minutes of
 #: both cores at full load that ackley, compare and robustness take, the node network's real-time run
@@ -532,7 +532,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     only = ORDER
     if args.only:
-        only = tuple(x.strip() for x in args.only.split(",") if x.strip())
+        only = comma_list(args.only)
         bad = [x for x in only if x not in ORDER]
         if bad:
             print(f"isa-mocap bench all: error: --only: expected names of {', '.join(ORDER)}, received {bad}",

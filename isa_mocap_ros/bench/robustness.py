@@ -55,6 +55,7 @@ from pathlib import Path
 
 import numpy as np
 
+from isa_mocap_ros.bench._common import comma_list
 from isa_mocap_ros.eval.compare import SequenceSpec
 from isa_mocap_ros.resources import cmu_walk_bvh
 
@@ -525,7 +526,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def collect_from_args(args: argparse.Namespace) -> dict:
-    seeds = None if args.seeds is None else tuple(int(x) for x in str(args.seeds).split(",") if x.strip())
+    seeds = None if args.seeds is None else tuple(int(x) for x in comma_list(args.seeds))
     design = make_design("quick" if args.quick else "default", init=args.init, optimizer=args.optimizer,
                          evals=args.evals, seeds=seeds, gate_margin_px=args.gate_margin_px,
                          body=getattr(args, "body", "mesh"), frames=getattr(args, "frames", None),

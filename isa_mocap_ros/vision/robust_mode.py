@@ -186,6 +186,15 @@ def _masked_mode_numpy(stack, valid, radius):
     return mu.astype(np.float32), count.astype(np.int32), valid.sum(axis=0).astype(np.int32)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _sample_distance(stack, i, j, y, x):  # pragma: no cover
+    """``max_c |stack[i, y, x, c] - stack[j, y, x, c]|``: how far samples ``i`` and ``j`` of pixel ``(y, x)`` differ."""
+    dd = 0
+    for c in range(stack.shape[3]):
+        dd = max(dd, abs(np.int32(stack[i, y, x, c]) - np.int32(stack[j, y, x, c])))
+    return dd
+
+
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _masked_mode_numba(stack, valid, radius):  # pragma: no cover
     # _masked_mode_numpy, pixels of a row in turn, rows in parallel
@@ -210,9 +219,7 @@ def _masked_mode_numba(stack, valid, radius):  # pragma: no cover
                 c, sp = 0, 0
                 for bb in range(n):
                     j = idx[bb]
-                    dd = 0
-                    for ch in range(C):
-                        dd = max(dd, abs(np.int32(stack[i, y, x, ch]) - np.int32(stack[j, y, x, ch])))
+                    dd = _sample_distance(stack, i, j, y, x)
                     if dd <= radius:
                         c += 1
                         sp += dd
@@ -223,10 +230,7 @@ def _masked_mode_numba(stack, valid, radius):  # pragma: no cover
                 s = 0.0
                 for bb in range(n):
                     j = idx[bb]
-                    dd = 0
-                    for c2 in range(C):
-                        dd = max(dd, abs(np.int32(stack[b, y, x, c2]) - np.int32(stack[j, y, x, c2])))
-                    if dd <= radius:
+                    if _sample_distance(stack, b, j, y, x) <= radius:
                         s += np.float64(stack[j, y, x, ch])
                 mu[y, x, ch] = s / best
     return mu, count, n_valid
