@@ -164,9 +164,11 @@ def _share_canvas(cam, scale: float):
     return big
 
 
-def view_masks(masks: Sequence, cameras: Sequence, name: str = "masks") -> list:
+def view_masks(masks: Sequence, cameras: Sequence, name: str = "masks", *, uint8: bool = False) -> list:
     """Each view's mask as a contiguous bool array (None stays None), its shape checked against its
-    camera (GateError naming ``name[v]``)."""
+    camera (GateError naming ``name[v]``). ``uint8``: as a C-contiguous writable uint8 array instead, nonzero =
+    foreground: a uint8 mask as it is (no copy; 0/255 and 0/1 read alike), anything else the bool array viewed
+    as uint8."""
     out = []
     for v, (cam, m) in enumerate(zip(cameras, masks)):
         if m is None:
@@ -175,7 +177,11 @@ def view_masks(masks: Sequence, cameras: Sequence, name: str = "masks") -> list:
         a = np.asarray(m)
         if a.shape != (cam.height, cam.width):
             raise GateError(f"{name}[{v}]: expected shape ({cam.height}, {cam.width}), received {a.shape}")
-        out.append(np.ascontiguousarray(a > 0 if a.dtype != bool else a))
+        if uint8 and a.dtype == np.uint8 and a.flags.c_contiguous and a.flags.writeable:
+            out.append(a)
+            continue
+        b = np.ascontiguousarray(a > 0 if a.dtype != bool else a)
+        out.append(b.view(np.uint8) if uint8 else b)
     return out
 
 

@@ -74,37 +74,19 @@ def _check(masks, cameras, box, dilate_px, step_m, misses, copy: bool = True):
     if np.any(hi < lo):
         raise GateError(f"box: expected lo <= hi, received lo {lo.tolist()} and hi {hi.tolist()}")
     fg = [None if f is None else f.view(np.uint8) for f in view_masks(masks, cameras)] if copy \
-        else _uint8_views(masks, cameras)
+        else view_masks(masks, cameras, uint8=True)
     return fg, cameras, lo, hi
 
 
 def _check_keep(keep, fg, cameras, copy: bool = True):
     """``keep`` as a list of bool arrays (or None per view), checked against the masks (``copy=False``: uint8
-    masks as they are, nonzero = kept, :func:`_uint8_views`)."""
+    masks as they are, nonzero = kept, :func:`.gate.view_masks` with ``uint8``)."""
     if keep is None:
         return [None] * len(fg)
     keep = list(keep)
     if len(keep) != len(fg):
         raise GateError(f"keep: expected {len(fg)} masks or None (one per camera), received {len(keep)}")
-    return view_masks(keep, cameras, "keep") if copy else _uint8_views(keep, cameras, "keep")
-
-
-def _uint8_views(masks, cameras, name: str = "masks") -> list:
-    """Each view's mask as a C-contiguous writable uint8 array, nonzero = foreground: a uint8 mask as it is (the
-    kernel and the support read nonzero, so 0/255 and 0/1 give the same pixels), anything else through
-    :func:`.gate.view_masks` (bool) viewed as uint8 (None stays None; shapes checked there)."""
-    out = []
-    for v, (cam, m) in enumerate(zip(cameras, masks)):
-        if m is None:
-            out.append(None)
-            continue
-        a = np.asarray(m)
-        if a.shape != (cam.height, cam.width):
-            raise GateError(f"{name}[{v}]: expected shape ({cam.height}, {cam.width}), received {a.shape}")
-        if not (a.dtype == np.uint8 and a.flags.c_contiguous and a.flags.writeable):
-            a = np.ascontiguousarray(a > 0 if a.dtype != bool else a).view(np.uint8)     # view_masks' conversion
-        out.append(a)
-    return out
+    return view_masks(keep, cameras, "keep") if copy else view_masks(keep, cameras, "keep", uint8=True)
 
 
 def _as255(f: np.ndarray) -> np.ndarray:
