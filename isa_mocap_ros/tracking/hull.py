@@ -86,7 +86,7 @@ def _check_keep(keep, fg, cameras, copy: bool = True):
     keep = list(keep)
     if len(keep) != len(fg):
         raise GateError(f"keep: expected {len(fg)} masks or None (one per camera), received {len(keep)}")
-    return view_masks(keep, cameras, "keep") if copy else view_masks(keep, cameras, "keep", uint8=True)
+    return view_masks(keep, cameras, "keep", uint8=not copy)
 
 
 def _as255(f: np.ndarray) -> np.ndarray:

@@ -13,8 +13,9 @@ a cube is kept when every usable view that sees its centre sees foreground there
 person, seen by all, is one connected blob. :func:`person_masks` takes the largest 26-connected blob, grows it
 by the cubes within ``pad_m`` that two views confirm and none denies (a limb a third view does not see) connected to
 it, and keeps per view the foreground within its projection (each cube drawn as a disc of its projected
-half-diagonal plus ``margin_px``). Cost: one compiled pass over the volume's cubes per view (:func:`_carve`; the frame is
-the first one, once).
+half-diagonal plus ``margin_px``). Cost: one compiled vote over the volume's cubes per view (:func:`_vote`; each
+cube's pixel per camera, :func:`_pixels`, is kept per rig and capture volume, :func:`_grid`); the frame is the first
+one, once.
 """
 from __future__ import annotations
 

@@ -132,7 +132,12 @@ def body_axis_angle(fg: np.ndarray, *, max_turn_rad: float = MAX_TURN_RAD) -> fl
     return angle if abs(angle) <= max_turn_rad else 0.0
 
 
-def crop_box(mask: Any, *, crop: str = "mask", box_scale: float = 1.25, min_pixels: int = 20) -> np.ndarray | None:
+#: fewest foreground pixels a crop square is made of (:func:`crop_box`'s default)
+MIN_CROP_PIXELS = 20
+
+
+def crop_box(mask: Any, *, crop: str = "mask", box_scale: float = 1.25,
+             min_pixels: int = MIN_CROP_PIXELS) -> np.ndarray | None:
     """The detector's region ``(cu, cv, side, angle_rad)`` for a view's ``mask`` (:data:`CROPS`), or None when the
     mask has fewer than ``min_pixels`` foreground pixels."""
     if crop not in CROPS:
@@ -226,7 +231,7 @@ def _detect_checked(detector: PoseLandmarker, img: np.ndarray, m: np.ndarray, bo
                     box_scale: float, bgr: bool, min_score: float) -> Landmarks2D:
     """``"person_checked"``'s detection (:func:`detect_in_mask`) for a mask with a ``"mask"`` square."""
     x, y, person = _person_in_rectangle((m > 0).view(np.uint8))    # once: for the square and the agreement
-    box = _person_box(x, y, person, box_scale=box_scale, min_pixels=20)
+    box = _person_box(x, y, person, box_scale=box_scale, min_pixels=MIN_CROP_PIXELS)
     if box is None or np.array_equal(box, box_mask) or not detector.has_segmentation:
         return detector.detect(img, box_mask, bgr=bgr)
     probability, lm = detector.person_probability(img, box, bgr=bgr)
