@@ -12,18 +12,56 @@ vector keeps the rotation *vector* internally; :func:`root_rotvec_to_euler` give
 a revolute joint named like the DOF, in the joint's chain order (``R = R_a1 R_a2 R_a3``), between
 helper links ``<dof>_link``; each body joint ends in a link named like the joint, which carries
 the capsule visuals (a cylinder plus a sphere per end; the cylinder uses the mean radius).
+
+The two conversions are compiled (``_rotvec_to_rpy``, ``_rpy_to_rotvec``: every published estimate and prediction
+goes through them twice, a few µs per numpy call on 3-vectors), in :mod:`isa_mocap_ros.geometry.se3_kernel`'s
+arithmetic, the definition (there equal to numpy's ``exp_so3``/``log_so3`` bit for bit).
 """
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 
+import numba
 import numpy as np
 
-from ..geometry import exp_so3, log_so3
+from isa_mocap_ros.numba_cache import register_dependent_cache
+
+from ..geometry import exp_so3, se3_kernel, so3_kernel
+from ..geometry.se3_kernel import log_so3_into
+from ..geometry.so3_kernel import exp_into, matmul3
 from .model import BodyError, BodyModel
 
 __all__ = ["to_urdf", "root_rotvec_to_euler", "euler_to_root_rotvec", "pose_to_joint_state",
            "joint_state_to_pose"]
+
+register_dependent_cache(__file__, (so3_kernel, se3_kernel))
+
+
+@numba.njit(cache=True)
+def _rotvec_to_rpy(W, out):  # pragma: no cover - compiled
+    """``out (n, 3)``: roll, pitch, yaw of the rotation vectors ``W (n, 3)`` (:func:`root_rotvec_to_euler`)."""
+    R = np.empty((3, 3))
+    for k in range(W.shape[0]):
+        exp_into(W[k, 0], W[k, 1], W[k, 2], R)
+        pitch = np.arcsin(min(max(-R[2, 0], -1.0), 1.0))
+        if np.cos(pitch) < 1e-9:                 # gimbal lock: roll 0
+            out[k, 0], out[k, 2] = 0.0, np.arctan2(-R[0, 1], R[1, 1])
+        else:
+            out[k, 0], out[k, 2] = np.arctan2(R[2, 1], R[2, 2]), np.arctan2(R[1, 0], R[0, 0])
+        out[k, 1] = pitch
+
+
+@numba.njit(cache=True)
+def _rpy_to_rotvec(Q, out):  # pragma: no cover - compiled
+    """``out (n, 3)``: the rotation vectors ``log(Rz(yaw) Ry(pitch) Rx(roll))`` of ``Q (n, 3)`` (:func:`euler_to_root_rotvec`)."""
+    Rx, Ry, Rz, A, B = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
+    for k in range(Q.shape[0]):
+        exp_into(Q[k, 0], 0.0, 0.0, Rx)
+        exp_into(0.0, Q[k, 1], 0.0, Ry)
+        exp_into(0.0, 0.0, Q[k, 2], Rz)
+        matmul3(Rz, Ry, A)
+        matmul3(A, Rx, B)
+        log_so3_into(B, out[k])
 
 
 def root_rotvec_to_euler(rotvec) -> np.ndarray:
@@ -38,13 +76,12 @@ def root_rotvec_to_euler(rotvec) -> np.ndarray:
     rpy : (..., 3) ndarray
         ``pitch ∈ [-π/2, π/2]``; at ``|pitch| = π/2`` (gimbal lock) roll is set to 0.
     """
-    R = exp_so3(rotvec)
-    pitch = np.arcsin(np.clip(-R[..., 2, 0], -1.0, 1.0))
-    cp = np.cos(pitch)
-    lock = cp < 1e-9
-    roll = np.where(lock, 0.0, np.arctan2(R[..., 2, 1], R[..., 2, 2]))
-    yaw = np.where(lock, np.arctan2(-R[..., 0, 1], R[..., 1, 1]), np.arctan2(R[..., 1, 0], R[..., 0, 0]))
-    return np.stack([roll, pitch, yaw], axis=-1)
+    w = np.asarray(rotvec, dtype=float)
+    if w.ndim < 1 or w.shape[-1] != 3:
+        raise BodyError(f"rotvec: expected shape (..., 3), got {w.shape}")
+    out = np.empty(w.shape)
+    _rotvec_to_rpy(np.ascontiguousarray(w.reshape(-1, 3)), out.reshape(-1, 3))
+    return out
 
 
 def euler_to_root_rotvec(rpy) -> np.ndarray:
@@ -52,11 +89,9 @@ def euler_to_root_rotvec(rpy) -> np.ndarray:
     rpy = np.asarray(rpy, dtype=float)
     if rpy.ndim < 1 or rpy.shape[-1] != 3:
         raise BodyError(f"rpy: expected shape (..., 3), got {rpy.shape}")
-    z = np.zeros(rpy.shape[:-1])
-    Rx = exp_so3(np.stack([rpy[..., 0], z, z], axis=-1))
-    Ry = exp_so3(np.stack([z, rpy[..., 1], z], axis=-1))
-    Rz = exp_so3(np.stack([z, z, rpy[..., 2]], axis=-1))
-    return log_so3(Rz @ Ry @ Rx)
+    out = np.empty(rpy.shape)
+    _rpy_to_rotvec(np.ascontiguousarray(rpy.reshape(-1, 3)), out.reshape(-1, 3))
+    return out
 
 
 def pose_to_joint_state(model: BodyModel, X) -> np.ndarray:

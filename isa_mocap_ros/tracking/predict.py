@@ -37,6 +37,10 @@ formulas (root: ``exp(λ_i (h / g_i) ζ_i)``; joints: ``Σ_i λ_i (h / g_i) (q_i
 constant-twist motion sampled at any gaps is still extrapolated exactly. With every gap 1 (the
 default) the arithmetic is the plain formula's, bit for bit (the factors are exactly 1.0).
 
+The root's motions are computed in one compiled call (``_ar_root``, in
+:mod:`isa_mocap_ros.geometry.se3_kernel`'s arithmetic: the definition; it was ~2 ms of numpy calls on 3-vectors and 4x4
+matrices a frame under load), the joints' sum in numpy.
+
 Baselines: :class:`ConstantPosePredictor` (the last estimate) and
 :class:`ConstantVelocityPredictor` (``2 x_k - x_{k-1}`` in pose-vector space; ``ArPredictor``
 with ``order=1`` is the constant velocity on SE(3)).
@@ -46,12 +50,19 @@ from __future__ import annotations
 from collections import deque
 from typing import Sequence
 
+import numba
 import numpy as np
 
-from isa_mocap_ros.geometry import adjoint, exp_se3, log_se3, matrix_to_pose, nearest_rotvec, pose_to_matrix
+from isa_mocap_ros.geometry import se3_kernel
+from isa_mocap_ros.geometry.se3_kernel import (adjoint_into, exp_se3_into, gemv6, inverse_into, log_se3_into,
+                                               log_so3_into, matmul4, nearest_rotvec_into, pose_to_matrix_into)
+from isa_mocap_ros.numba_cache import register_dependent_cache
 
 __all__ = ["PredictionError", "ArPredictor", "ConstantPosePredictor", "ConstantVelocityPredictor", "frames_kwargs",
            "frame_periods", "periods_between"]
+
+
+register_dependent_cache(__file__, (se3_kernel,))
 
 
 class PredictionError(ValueError):
@@ -81,12 +92,37 @@ def frames_kwargs(frames) -> dict:
     return {} if (not isinstance(frames, bool) and frames == 1) else {"frames": frames}
 
 
-def _se3_inverse(T: np.ndarray) -> np.ndarray:
-    """``[R t; 0 1]^{-1} = [Rᵀ -Rᵀt; 0 1]``."""
-    Ti = np.eye(4)
-    Ti[:3, :3] = T[:3, :3].T
-    Ti[:3, 3] = -T[:3, :3].T @ T[:3, 3]
-    return Ti
+@numba.njit(cache=True)
+def _ar_root(X, lam, out):  # pragma: no cover - compiled
+    """``out`` (6,): the root of 13.28, ``P_pred = exp(ξ'_K) ... exp(ξ'_1) M``, from the root poses ``X (K+1, 6)``
+    (``(t, w)``, oldest first) and the weights ``lam (K,)``: ``P_j = [exp(ŵ_j) t_j; 0 1]``, ``M = P_K``,
+    ``ξ_i = log(P_i P_{i-1}⁻¹)``, ``G_i = M P_{i-1}⁻¹``, ``ξ'_i = Ad_{G_i} (λ_i ξ_i)``; the rotation vector nearest
+    the last one's (:mod:`isa_mocap_ros.geometry.se3_kernel`'s arithmetic, the definition)."""
+    K = X.shape[0] - 1
+    P = np.empty((K + 1, 4, 4))
+    for j in range(K + 1):
+        pose_to_matrix_into(X[j], P[j])
+    M = P[K]
+    T, T2, E = M.copy(), np.empty((4, 4)), np.empty((4, 4))
+    Pinv, Q, G, Ad = np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4)), np.empty((6, 6))
+    xi, y, xc = np.empty(6), np.empty(6), np.empty(6)
+    for i in range(1, K + 1):                    # oldest motion first (rightmost)
+        inverse_into(P[i - 1], Pinv)
+        matmul4(P[i], Pinv, Q)
+        log_se3_into(Q, xi)                      # ξ_i = log(P_i P_{i-1}^{-1})
+        matmul4(M, Pinv, G)                      # G_i = M P_{i-1}^{-1}
+        adjoint_into(G, Ad)
+        for d in range(6):
+            y[d] = lam[i - 1] * xi[d]
+        gemv6(Ad, y, xc)                         # ξ'_i = Ad_G λ_i ξ_i
+        exp_se3_into(xc, E)
+        matmul4(E, T, T2)                        # exp(ξ'_i) ... exp(ξ'_1) M
+        T[:] = T2
+    w = np.empty(3)
+    log_so3_into(T[:3, :3], w)
+    for d in range(3):
+        out[d] = T[d, 3]
+    nearest_rotvec_into(w, X[K, 3:], out[3:])
 
 
 class _HistoryPredictor:
@@ -290,17 +326,8 @@ class ArPredictor(_HistoryPredictor):
         joint = np.ones(last.size, bool)
         if self.root_slice is not None:
             joint[self.root_slice] = False
-            P = pose_to_matrix(X[:, self.root_slice])         # (K+1, 4, 4)
-            M = P[-1]
-            T = M
-            for i in range(1, K + 1):                        # oldest motion first (rightmost)
-                P_prev_inv = _se3_inverse(P[i - 1])
-                xi = log_se3(P[i] @ P_prev_inv)              # ξ_i = log(P_i P_{i-1}^{-1})
-                G = M @ P_prev_inv                           # G_i = M P_{i-1}^{-1}
-                xi_cur = adjoint(G) @ (lam[i - 1] * xi)      # ξ'_i = Ad_G λ_i ξ_i
-                T = exp_se3(xi_cur) @ T                      # exp(ξ'_i) ... exp(ξ'_1) M
-            root = matrix_to_pose(T)
-            root[3:] = nearest_rotvec(root[3:], X[-1, self.root_slice][3:])
+            root = np.empty(6)
+            _ar_root(np.ascontiguousarray(X[:, self.root_slice]), lam, root)     # 13.28, compiled
             out[self.root_slice] = root
         # q_pred = q_k + Σ λ_i (q_i - q_{i-1})
         out[joint] = X[-1, joint] + lam @ np.diff(X[:, joint], axis=0)
