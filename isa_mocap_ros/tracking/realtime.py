@@ -74,6 +74,7 @@ class RealTimeSchedule:
         self.governor = None if self.lockstep else governor
         self.frames_caught_up = 0          # sets tracked without the contour stage because they were late
         self.last_decision: Decision | None = None   # the governor's last change of budget
+        self.last_account: dict | None = None        # the governor's account of the last step (None: not counted)
         self._dropped_seen = 0
         self._checking = False             # the set taken last is a heading check's frame
         self._took_held = False            # the set taken last was a held one (in sequence with the one before)
@@ -122,15 +123,18 @@ class RealTimeSchedule:
             return None
         if budget.late and result.x is not None and not result.fell_back and not result.initialized:
             self.frames_caught_up += 1
-        changed = None
+        changed = self.last_account = None
         if self.governor is not None and result.x is not None and not result.initialized and not self._checking:
             # the start-up's frames are not load: the initialization and the heading check's frames (the rival's
             # step beside the track's) take several periods by design, and the sets dropped meanwhile or when the
             # check ends are theirs; counted as overload they lowered the budget right after every start-up
             dropped = self.slot.dropped - self._dropped_seen
             self._dropped_seen = self.slot.dropped
+            reference = self.governor.reference_energy
             d = self.governor.observe(step_s=result.time_s if step_s is None else step_s, energy=result.energy,
                                       fell_back=result.fell_back, dropped=dropped)
+            self.last_account = dict(energy=float(result.energy), reference=reference, lost=self.governor.lost_sets,
+                                     level=d.level, dropped=dropped, reset=d.reset, reason=d.reason)
             if d.reason:
                 changed = self.last_decision = d
             if d.reset:
