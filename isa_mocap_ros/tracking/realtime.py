@@ -213,12 +213,13 @@ def governor_for(evals: int, period_s: float, **settings) -> LoadGovernor:
 
 def warm_up(model, config) -> list:
     """Load (or compile) the kernels of the estimator's first frames ahead, on a tiny synthetic frame: the rest pose
-    of ``model`` rendered into 4 views of 80×60, stepped twice by a :class:`~.tracker.Tracker` with ``config`` (its
-    budget and stages): the automatic initialization (first-frame hull, grid, root refinements, candidate runs,
-    polish, the heading check's rival) and a tracked frame with every stage. numba loads a kernel's machine code
+    of ``model`` rendered into 4 views of 80×60, stepped three times by a :class:`~.tracker.Tracker` with ``config``
+    (its budget and stages): the automatic initialization (first-frame hull, grid, root refinements, candidate runs,
+    polish, the heading check's rival), a tracked frame with every stage, and one predicted from two past poses (the
+    autoregression's compiled root, :func:`.predict._ar_root`). numba loads a kernel's machine code
     from its cache on the first call in a process (~5-30 ms each): a warm-up from a given pose left the automatic
     initialization's kernels to the first real frame, ~50 CPU ms more there (docs/history/issue35_speed.md,
-    session 27). Returns the two steps' :class:`~.result.FrameResult`."""
+    session 27). Returns the three steps' :class:`~.result.FrameResult`."""
     from isa_mocap_ros.body import capsule_endpoints
     from isa_mocap_ros.vision import default_rig, render_mask
 
@@ -229,7 +230,7 @@ def warm_up(model, config) -> list:
     ends = capsule_endpoints(model, x[None])[0]
     masks = [render_mask(c, ends, model.capsule_radii) for c in rig.cameras]
     tracker = Tracker(model, rig.cameras, config)
-    return [tracker.step(masks, 0), tracker.step(masks, 1)]
+    return [tracker.step(masks, k) for k in range(3)]
 
 
 def rehearse(model, cameras) -> list:
