@@ -146,6 +146,18 @@ def test_lost_track_returns_to_full_budget_then_resets():
     assert all(not g.observe(step_s=0.02, energy=0.5).reset for _ in range(10))
 
 
+def test_reference_energy_and_lost_count_are_readable():
+    """What a trace reports: the running median the lost test compares with (nan before 5 sets) and the lost count."""
+    g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD, reset_after=3))
+    for e in (0.1, 0.3, 0.2, 0.1):
+        g.observe(step_s=0.02, energy=e)
+    assert np.isnan(g.reference_energy) and g.lost_sets == 0
+    g.observe(step_s=0.02, energy=0.1)
+    assert g.reference_energy == 0.1
+    g.observe(step_s=0.02, energy=0.5)                          # 5 × the median: lost, not in the median
+    assert g.lost_sets == 1 and g.reference_energy == 0.1
+
+
 def test_fell_back_and_non_finite_energy_count_as_lost():
     g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD, reset_after=2))
     assert not g.observe(step_s=0.02, energy=0.1, fell_back=True).reset

@@ -237,17 +237,23 @@ def test_the_start_up_is_not_load_for_the_governor():
     sch = RT.RealTimeSchedule(evals=1500, heading_sets=3, governor=RT.governor_for(1500, PERIOD))
     arrive(1)
     step(0.15, initialized=True)                   # the initialization: 4-5 periods, sets held for the check
+    assert sch.last_account is None                # (not counted: nothing for a trace either)
     tr.initialized = tr.checking_heading = True
     step(0.07)                                     # the check's frames: twice a tracked one
+    assert sch.last_account is None
     sch.take(tr)
     b = sch.budget(tr, 0.0)
     arrive(2)
     tr.checking_heading = False                    # decided on this frame: the held sets still waiting are dropped
     sch.after(tr, result(0.07), budget=b, waited_ms=70.0)
     assert sch.slot.dropped > 0
-    for _ in range(20):
+    for i in range(20):
         b, d = step(0.025)                         # then tracked sets within the period
         assert d is None and b.evals is None and b.contour_stage
+        # the governor's account of each (a trace's line): the reference energy once 5 sets are in
+        acc = sch.last_account
+        assert acc["energy"] == 0.1 and acc["level"] == 0 and acc["lost"] == 0 and not acc["reset"]
+        assert (acc["reference"] == 0.1) if i >= 5 else np.isnan(acc["reference"])
     assert sch.governor.lowered == 0 and sch.governor.level == 0
     step(0.05)
     step(0.05)                                     # real overload: two sets over the period

@@ -53,6 +53,46 @@ def cost_model(fixed_s: float, per_eval_s: float, contour_s: float, init_s: floa
     return step_s
 
 
+def governor_trace(schedule) -> list:
+    """Per step of ``schedule`` (in order): the governor's account (:attr:`RealTimeSchedule.last_account`: the
+    reference energy before the step, the lost count, level and reason after it; None where it did not count the step)
+    (a list the schedule's ``after`` appends to)."""
+    rows, after = [], schedule.after
+
+    def traced(tracker, result, **kw):
+        d = after(tracker, result, **kw)
+        rows.append(dict(schedule.last_account or dict(reference=float("nan"), lost=0, level=None, reason="not counted"),
+                         resets=schedule.governor.resets))
+        return d
+    schedule.after = traced
+    return rows
+
+
+def heading_errors(model, seq, scored, steps, stamps) -> list:
+    """The heading error (degrees) of the estimates at the ``scored`` stamps (none without marker truth)."""
+    from isa_mocap_ros.eval.metrics import score_markers
+    from isa_mocap_ros.eval.report import rig_joint_map
+
+    if not scored or not seq.has_marker_truth:
+        return [None] * len(scored)
+    x_of = {stamps[s["k"]]: s["x"] for s in steps if s["x"] is not None}
+    truth = {f.stamp_ns: f.truth_markers for f in seq.frames}
+    sc = score_markers(model, np.array([x_of[t] for t in scored]), seq.truth_marker_names,
+                       np.array([truth[t] for t in scored]), joint_map=rig_joint_map(seq))
+    return [float(h) for h in sc.get("heading_errors_deg", [None] * len(scored))]
+
+
+def print_trace(steps) -> None:
+    """One line per tracked set: frame, gap, budget, energy against the governor's reference, lost count, error."""
+    for s in steps:
+        ratio = s["energy"] / s["reference"] if s["reference"] == s["reference"] and s["reference"] else float("nan")
+        err = "-" if s["error_mm"] is None else f"{s['error_mm']:.0f}"
+        head = "-" if s["heading_deg"] is None else f"{s['heading_deg']:.0f}"
+        print(f"  k {s['k']:3d} gap {s['gap']:2d} {'I' if s['initialized'] else ' '} evals {s['evals']:5d} "
+              f"E {s['energy']:.4f} ref {s['reference']:.4f} ({ratio:.2f}x) lost {s['lost']:2d} level {s['level']} "
+              f"err {err} mm heading {head} deg {s['reason']}")
+
+
 def main(argv=None) -> int:
     from isa_mocap_ros.body import make_model
     from isa_mocap_ros.cli.track_io import read_sequence
@@ -77,6 +117,7 @@ def main(argv=None) -> int:
     p.add_argument("--load", type=float, default=1.0, help="step times × this (2: one core busy)")
     p.add_argument("--cost", default="0.010,9e-6,0.005,0.060",
                    help="fixed_s,per_eval_s,contour_s,init_s of the step cost (default: fitted to the idle bench)")
+    p.add_argument("--trace", action="store_true", help="print every tracked set: energy, the governor's state, error")
     p.add_argument("--out", required=True, help="JSON of every run (its steps included)")
     a = p.parse_args(argv)
     bag, out = Path(a.bag), Path(a.out)
@@ -97,12 +138,20 @@ def main(argv=None) -> int:
                                        stale_ms=a.catch_up_stale_ms),
                 governor=LoadGovernor(LoadSettings(evals=cfg.search.evals, period_s=PERIOD,
                                                    min_evals=a.min_evals)))
+            governed = governor_trace(schedule)
             done_steps, dropped = emulate(tracker, masks, schedule, period_s=PERIOD, step_s=step_s,
                                           frame_key=lambda k: stamps[k])
             steps = [dict(k=s.k, x=s.result.x, initialized=s.result.initialized, evals=s.result.n_evals,
                           budget=s.budget.evals, contour=s.budget.contour_stage, latency_ms=s.latency_s * 1e3,
-                          gap=s.gap) for s in done_steps]
+                          gap=s.gap, **{**g, "energy": float(s.result.energy)}) for s, g in zip(done_steps, governed)]
             acc = score(model, seq, {stamps[s["k"]]: s["x"] for s in steps if s["x"] is not None}) or {}
+            per_stamp = dict(zip(acc.get("stamps", ()), zip(acc.get("frame_errors_mm", ()),
+                                                            heading_errors(model, seq, acc.get("stamps", ()), steps,
+                                                                           stamps))))
+            for s in steps:
+                s["error_mm"], s["heading_deg"] = per_stamp.get(stamps[s["k"]], (None, None))
+            if a.trace:
+                print_trace(steps)
             lat = [s["latency_ms"] for s in steps if s["x"] is not None]
             k_init = next((s["k"] for s in steps if s["initialized"]), None)
             done = {s["k"] for s in steps}

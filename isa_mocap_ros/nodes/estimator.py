@@ -152,6 +152,9 @@ class EstimatorNode(EstimatorIntake, Node):
             "the first real initialization does not pay its one-time costs (~15-20 CPU ms on bags/demo); the estimates "
             "do not depend on it (docs/nodes.md)")
         self.use_prediction = declare(self, "use_prediction", True, "use prediction/joint_states when it arrives")
+        trace = declare(self, "trace_file", "", "append one JSON line per frame set tracked (stamp, gap, budget, step "
+                        "and wait ms, the governor's account: energy, reference, lost count) to this file ('' = off)")
+        self.trace = open(trace, "a", encoding="utf-8", buffering=1) if trace else None  # noqa: SIM115 (close())
         self.keypoint_wait_s = declare(self, "keypoint_wait_s", 10.0, "lockstep, keypoint_weight > 0: longest wait "
                                        "for a view's keypoints (or skip notice) of a frame set while no keypoint node "
                                        "is in the graph (with one there, the wait has no time limit)",
@@ -461,6 +464,12 @@ class EstimatorNode(EstimatorIntake, Node):
         with self._cv:
             # the governor's account (a track lost for long re-initializes the tracker), the catch-up's
             d = self.schedule.after(self.tracker, result, budget=budget, waited_ms=(time.monotonic() - t_ready) * 1e3)
+        if self.trace is not None:
+            self.trace.write(json.dumps({
+                "stamp": frame_set.stamp_ns, "gap": gap, "evals": result.n_evals, "init": result.initialized,
+                "contour": budget.contour_stage, "step_ms": 1e3 * result.time_s, "energy": result.energy,
+                "waited_ms": 1e3 * (time.monotonic() - t_ready), **(self.schedule.last_account or {})},
+                default=float) + "\n")
         if d is not None:
             self.budget_reason = d.reason
             self.problems.event("budget", f"frame {frame_set.stamp_ns}: budget level {d.level}: {d.reason}")
@@ -575,6 +584,8 @@ class EstimatorNode(EstimatorIntake, Node):
         with self._cv:
             self._cv.notify_all()
         self._worker.join(timeout=5.0)
+        if self.trace is not None:
+            self.trace.close()
 
 
 def main(args: list[str] | None = None) -> None:

@@ -103,6 +103,16 @@ class LoadGovernor:
         self._since_up = None           # sets since the last step up (None: none pending)
         self.resets = 0                 # re-initializations asked for
 
+    @property
+    def reference_energy(self) -> float:
+        """The energy a lost set is judged against (nan until ``5`` sets are accounted for)."""
+        return float(np.median(self._energies)) if len(self._energies) >= 5 else float("nan")
+
+    @property
+    def lost_sets(self) -> int:
+        """Sets lost in a row so far."""
+        return self._lost
+
     def budget(self, level: int) -> tuple[int, bool]:
         """``(evaluations, contour stage)`` of ladder level ``level``."""
         share, contour = LEVELS[level]

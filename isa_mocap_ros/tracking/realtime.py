@@ -74,6 +74,7 @@ class RealTimeSchedule:
         self.governor = None if self.lockstep else governor
         self.frames_caught_up = 0          # sets tracked without the contour stage because they were late
         self.last_decision: Decision | None = None   # the governor's last change of budget
+        self.last_account: dict | None = None        # the governor's account of the last step (None: not counted)
         self._dropped_seen = 0
         self._checking = False             # the set taken last is a heading check's frame
         self._took_held = False            # the set taken last was a held one (in sequence with the one before)
@@ -122,15 +123,18 @@ class RealTimeSchedule:
             return None
         if budget.late and result.x is not None and not result.fell_back and not result.initialized:
             self.frames_caught_up += 1
-        changed = None
+        changed = self.last_account = None
         if self.governor is not None and result.x is not None and not result.initialized and not self._checking:
             # the start-up's frames are not load: the initialization and the heading check's frames (the rival's
             # step beside the track's) take several periods by design, and the sets dropped meanwhile or when the
             # check ends are theirs; counted as overload they lowered the budget right after every start-up
             dropped = self.slot.dropped - self._dropped_seen
             self._dropped_seen = self.slot.dropped
+            reference = self.governor.reference_energy
             d = self.governor.observe(step_s=result.time_s if step_s is None else step_s, energy=result.energy,
                                       fell_back=result.fell_back, dropped=dropped)
+            self.last_account = dict(energy=float(result.energy), reference=reference, lost=self.governor.lost_sets,
+                                     level=d.level, dropped=dropped, reset=d.reset, reason=d.reason)
             if d.reason:
                 changed = self.last_decision = d
             if d.reset:
@@ -209,12 +213,13 @@ def governor_for(evals: int, period_s: float, **settings) -> LoadGovernor:
 
 def warm_up(model, config) -> list:
     """Load (or compile) the kernels of the estimator's first frames ahead, on a tiny synthetic frame: the rest pose
-    of ``model`` rendered into 4 views of 80×60, stepped twice by a :class:`~.tracker.Tracker` with ``config`` (its
-    budget and stages): the automatic initialization (first-frame hull, grid, root refinements, candidate runs,
-    polish, the heading check's rival) and a tracked frame with every stage. numba loads a kernel's machine code
+    of ``model`` rendered into 4 views of 80×60, stepped three times by a :class:`~.tracker.Tracker` with ``config``
+    (its budget and stages): the automatic initialization (first-frame hull, grid, root refinements, candidate runs,
+    polish, the heading check's rival), a tracked frame with every stage, and one predicted from two past poses (the
+    autoregression's compiled root, :func:`.predict._ar_root`). numba loads a kernel's machine code
     from its cache on the first call in a process (~5-30 ms each): a warm-up from a given pose left the automatic
     initialization's kernels to the first real frame, ~50 CPU ms more there (docs/history/issue35_speed.md,
-    session 27). Returns the two steps' :class:`~.result.FrameResult`."""
+    session 27). Returns the three steps' :class:`~.result.FrameResult`."""
     from isa_mocap_ros.body import capsule_endpoints
     from isa_mocap_ros.vision import default_rig, render_mask
 
@@ -225,7 +230,7 @@ def warm_up(model, config) -> list:
     ends = capsule_endpoints(model, x[None])[0]
     masks = [render_mask(c, ends, model.capsule_radii) for c in rig.cameras]
     tracker = Tracker(model, rig.cameras, config)
-    return [tracker.step(masks, 0), tracker.step(masks, 1)]
+    return [tracker.step(masks, k) for k in range(3)]
 
 
 def rehearse(model, cameras) -> list:
