@@ -174,6 +174,8 @@ def spy(self, *a, **k):
     return first(self, *a, **k)
 dispatcher.Dispatcher._compile_for_args = spy
 tracker = Tracker(model, cams, cfg)
+from isa_mocap_ros.tracking.published import PublishedPredictor
+tracker.predictor = PublishedPredictor(model, tracker.predictor)     # as the estimator node's
 results = [tracker.step(masks[k], k) for k in range(3)]
 assert results[0].initialized and any(n.startswith("heading check") for n in results[0].notes)
 print("LOADS", loads)

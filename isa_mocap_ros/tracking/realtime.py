@@ -216,13 +216,15 @@ def warm_up(model, config) -> list:
     of ``model`` rendered into 4 views of 80×60, stepped three times by a :class:`~.tracker.Tracker` with ``config``
     (its budget and stages): the automatic initialization (first-frame hull, grid, root refinements, candidate runs,
     polish, the heading check's rival), a tracked frame with every stage, and one predicted from two past poses (the
-    autoregression's compiled root, :func:`.predict._ar_root`). numba loads a kernel's machine code
+    autoregression's compiled root, :func:`.predict._ar_root`), the predictor fed and read through the JointState
+    conversions as the node's (:class:`.published.PublishedPredictor`; compiled too). numba loads a kernel's machine code
     from its cache on the first call in a process (~5-30 ms each): a warm-up from a given pose left the automatic
     initialization's kernels to the first real frame, ~50 CPU ms more there (docs/history/issue35_speed.md,
     session 27). Returns the three steps' :class:`~.result.FrameResult`."""
     from isa_mocap_ros.body import capsule_endpoints
     from isa_mocap_ros.vision import default_rig, render_mask
 
+    from .published import PublishedPredictor
     from .tracker import Tracker
 
     rig = default_rig(n_views=4, width=80, height=60)
@@ -230,6 +232,8 @@ def warm_up(model, config) -> list:
     ends = capsule_endpoints(model, x[None])[0]
     masks = [render_mask(c, ends, model.capsule_radii) for c in rig.cameras]
     tracker = Tracker(model, rig.cameras, config)
+    # the estimator node's predictor goes through the JointState conversions (compiled: body/urdf.py) as here
+    tracker.predictor = PublishedPredictor(model, tracker.predictor)
     return [tracker.step(masks, k) for k in range(3)]
 
 
