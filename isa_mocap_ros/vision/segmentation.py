@@ -78,8 +78,8 @@ from .robust_mode import (_robust_background_numba, _robust_background_numpy, _r
                           _robust_finish_numpy, _robust_pairs_numba, _robust_pairs_numpy)
 # the per-pixel kernels (numpy reference and numba) live in ._segmentation_kernels; the names tests use
 # are re-exported here
-from ._segmentation_kernels import (_KERNELS, _agree_numba, _agree_numpy, _fill_from_reliable,  # noqa: F401
-                                    _fill_numpy, _window_sum)
+from ._segmentation_kernels import (_KERNELS, _LEARN_KERNELS, _agree_numba, _agree_numpy,  # noqa: F401
+                                    _fill_from_reliable, _fill_numpy, _window_sum)
 
 __all__ = ["SegmentationError", "SegmentationConfig", "BackgroundSegmenter", "clean_mask"]
 
@@ -377,14 +377,12 @@ class BackgroundSegmenter:
     def _learn_sample(self, img: np.ndarray) -> None:
         """Add one background sample (mean / variance sums, robust samples); finish at the last one."""
         c = self.config
-        if self._sum is None:
-            self._sum = np.zeros(img.shape, np.float64)
-            self._sumsq = np.zeros(img.shape, np.float64)
+        if self._sum is None:    # exact integer sums (what float64 sums of the uint8 values held, cheaper)
+            self._sum = np.zeros(img.shape, np.int64)
+            self._sumsq = np.zeros(img.shape, np.int64)
         if c.robust != "off" and self._n_learnt in _sample_indices(c.learn_frames):
             self._add_sample(img)
-        imgf = img.astype(np.float32)
-        self._sum += imgf
-        self._sumsq += np.square(imgf, dtype=np.float64)
+        _LEARN_KERNELS[c.kernel][0](img, self._sum, self._sumsq)
         self._n_learnt += 1
         if not self.learning:  # last learning image: mean and variance over the K images
             self._finish_learning()
@@ -445,10 +443,10 @@ class BackgroundSegmenter:
         reliable = (count >= min(2, len(samples))).astype(np.uint8)
         if not reliable.any():
             reliable[:] = 1
-        # unreliable pixels (no two samples agree) take the mean of their reliable neighbours;
+        # unreliable pixels (no two samples agree) take the mean of their reliable neighbours (once the robust
+        # mode is chosen: the share below counts reliable pixels only, where the fill keeps rmu);
         # the variance is smoothed over reliable pixels only
         side = max(5, c.std_smoothing_px)
-        rmu = _fill_from_reliable(rmu, reliable, 5)
         rvar = _fill_from_reliable(rvar, reliable, side, smooth=c.std_smoothing_px > 1)
         keep = (self._mu, self._var)
         self._mu, self._var = rmu, rvar
@@ -456,6 +454,7 @@ class BackgroundSegmenter:
         self._outlier_fraction = hits / (len(samples) * int(np.count_nonzero(reliable)))
         if c.robust == "on" or self._outlier_fraction > c.robust_detect_fraction:
             self._reliable = reliable
+            self._mu = _fill_from_reliable(rmu, reliable, 5)
         else:
             self._mu, self._var = keep
 
