@@ -284,6 +284,14 @@ def test_the_colour_kernels_three_channel_paths_give_the_channel_loops_bits():
     assert np.array_equal(m1.view(np.uint32), m2.view(np.uint32)) and np.array_equal(v1.view(np.uint32), v2.view(np.uint32))
 
 
+def test_the_compiled_label_count_is_bincount():
+    from isa_mocap_ros.vision._segmentation_kernels import _label_counts
+    rng = np.random.default_rng(4)
+    m = cv2.dilate(((rng.random((60, 80)) < 0.03) * 255).astype(np.uint8), np.ones((3, 3), np.uint8))
+    n, labels = cv2.connectedComponents(m, connectivity=8)
+    assert n > 5 and np.array_equal(_label_counts(labels, n), np.bincount(labels.ravel(), minlength=n))
+
+
 @pytest.mark.parametrize("kernel", ["numba", "numpy"])
 def test_the_learning_sums_are_exact(scene, kernel):
     """The learning images' sums (integers) give the mean and variance that float64 sums of the images give."""

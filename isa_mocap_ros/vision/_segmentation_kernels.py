@@ -142,6 +142,18 @@ def _accumulate_numba(img, total, total_sq):  # pragma: no cover - compiled
                 total_sq[y, x, c] += v * v
 
 
+@numba.njit(cache=True, nogil=True)
+def _label_counts(labels, n):  # pragma: no cover - compiled
+    """``np.bincount(labels.ravel(), minlength=n)`` for the (H, W) int32 labels of ``cv2.connectedComponents``
+    (its pixel count per label; ~4x less time than bincount, which first converts the labels to intp)."""
+    counts = np.zeros(n, np.int64)
+    H, W = labels.shape
+    for y in range(H):
+        for x in range(W):
+            counts[labels[y, x]] += 1
+    return counts
+
+
 def _agree_numpy(img, fg, radius):
     """``(H, W)`` uint8: 1 where ``fg`` is set and one of the 8 neighbours is set too with every
     colour channel within ``radius`` levels (two random colours rarely agree: ~0.4 % at 20 levels)."""
