@@ -262,6 +262,50 @@ def test_numba_kernel_agrees_with_numpy_reference(scene, shadow):
     np.testing.assert_allclose(v1, v2, rtol=1e-3, atol=1e-2)
 
 
+def test_the_colour_kernels_three_channel_paths_give_the_channel_loops_bits():
+    """The compiled foreground test and update for colour images without shadows (the channels written out) give
+    bit for bit what the channel loop gives: the foreground against the loop's shadow branch with an empty
+    brightness range (it suppresses nothing), the update against the loop run on each channel as a pixel."""
+    from isa_mocap_ros.vision._segmentation_kernels import _foreground_numba, _update_numba
+    rng = np.random.default_rng(5)
+    img = rng.integers(0, 256, (37, 53, 3), dtype=np.uint8)
+    mu = (img + rng.normal(0, 12, img.shape)).astype(np.float32)
+    var = rng.uniform(0.5, 80, img.shape).astype(np.float32)
+    args = (np.float32(4.0), np.float32(16.0))
+    fast = _foreground_numba(img, mu, var, *args, False, np.float32(0.4), np.float32(1.0), np.float32(9.0))
+    loop = _foreground_numba(img, mu, var, *args, True, np.float32(2.0), np.float32(1.0), np.float32(9.0))
+    assert 0.1 < fast.mean() < 0.9 and np.array_equal(fast, loop)
+    frozen = (rng.random((37, 53)) < 0.3).astype(np.uint8)
+    m1, v1, m2, v2 = mu.copy(), var.copy(), mu.copy(), var.copy()
+    _update_numba(img, m1, v1, frozen, np.float32(0.02))
+    _update_numba(img.reshape(37, 159, 1), m2.reshape(37, 159, 1), v2.reshape(37, 159, 1),
+                  np.repeat(frozen, 3, axis=1), np.float32(0.02))
+    assert not np.array_equal(m1, mu)
+    assert np.array_equal(m1.view(np.uint32), m2.view(np.uint32)) and np.array_equal(v1.view(np.uint32), v2.view(np.uint32))
+
+
+def test_the_compiled_label_count_is_bincount():
+    from isa_mocap_ros.vision._segmentation_kernels import _label_counts
+    rng = np.random.default_rng(4)
+    m = cv2.dilate(((rng.random((60, 80)) < 0.03) * 255).astype(np.uint8), np.ones((3, 3), np.uint8))
+    n, labels = cv2.connectedComponents(m, connectivity=8)
+    assert n > 5 and np.array_equal(_label_counts(labels, n), np.bincount(labels.ravel(), minlength=n))
+
+
+@pytest.mark.parametrize("kernel", ["numba", "numpy"])
+def test_the_learning_sums_are_exact(scene, kernel):
+    """The learning images' sums (integers) give the mean and variance that float64 sums of the images give."""
+    rng = np.random.default_rng(3)
+    imgs = [noisy(scene, rng) for _ in range(6)]
+    seg = BackgroundSegmenter(SegmentationConfig(kernel=kernel, learn_frames=6, std_smoothing_px=0, robust="off"))
+    for im in imgs:
+        seg.apply(im)
+    x = np.stack(imgs).astype(np.float64)
+    mu = x.sum(axis=0) / 6
+    var = np.maximum((x * x).sum(axis=0) / 6 - mu * mu, 0.0) * (6 / 5)
+    assert np.array_equal(seg._mu, mu.astype(np.float32)) and np.array_equal(seg._var, var.astype(np.float32))
+
+
 def test_rendered_body_over_synthetic_room():
     """The project's renderer and backgrounds: a 39-DOF body in each of the 4 default views."""
     from isa_mocap_ros.body import capsule_endpoints, make_model

@@ -42,9 +42,32 @@ def _update_numpy(img, mu, var, frozen, rho):
     np.add(var, rho * (diff * diff - var), out=var, where=where)
 
 
+@numba.njit(cache=True, nogil=True, boundscheck=False)
+def _foreground3_numba(img, mu, var, min_var, thr2):  # pragma: no cover - compiled
+    # _foreground_numba for colour images without shadow suppression: the three channels written out (the same
+    # operations in the same order, so the same bits), a row at a time; ~25 % less time than the channel loop
+    H, W, _ = img.shape
+    out = np.empty((H, W), np.uint8)
+    one = np.float32(1.0)
+    for y in range(H):
+        im, m, v, o = img[y], mu[y], var[y], out[y]
+        for x in range(W):
+            e0 = np.float32(im[x, 0]) - m[x, 0]
+            e1 = np.float32(im[x, 1]) - m[x, 1]
+            e2 = np.float32(im[x, 2]) - m[x, 2]
+            d2 = np.float32(0.0)
+            d2 += e0 * e0 * (one / max(v[x, 0], min_var))
+            d2 += e1 * e1 * (one / max(v[x, 1], min_var))
+            d2 += e2 * e2 * (one / max(v[x, 2], min_var))
+            o[x] = d2 > thr2
+    return out
+
+
 @numba.njit(cache=True, nogil=True)
 def _foreground_numba(img, mu, var, min_var, thr2, shadow, a_lo, a_hi, cd2_max):  # pragma: no cover
     H, W, C = img.shape
+    if C == 3 and not shadow:
+        return _foreground3_numba(img, mu, var, min_var, thr2)
     out = np.zeros((H, W), np.uint8)
     for y in range(H):
         for x in range(W):
@@ -73,9 +96,26 @@ def _foreground_numba(img, mu, var, min_var, thr2, shadow, a_lo, a_hi, cd2_max):
     return out
 
 
+@numba.njit(cache=True, nogil=True, boundscheck=False)
+def _update3_numba(img, mu, var, frozen, rho):  # pragma: no cover - compiled
+    # _update_numba for colour images, the three channels written out (the same operations: the same bits)
+    H, W, _ = img.shape
+    for y in range(H):
+        im, m, v, f = img[y], mu[y], var[y], frozen[y]
+        for x in range(W):
+            if f[x] == 0:
+                for c in range(3):
+                    d = np.float32(im[x, c]) - m[x, c]
+                    m[x, c] += rho * d
+                    v[x, c] += rho * (d * d - v[x, c])
+
+
 @numba.njit(cache=True, nogil=True)
 def _update_numba(img, mu, var, frozen, rho):  # pragma: no cover
     H, W, C = img.shape
+    if C == 3:
+        _update3_numba(img, mu, var, frozen, rho)
+        return
     for y in range(H):
         for x in range(W):
             if frozen[y, x] == 0:
@@ -83,6 +123,35 @@ def _update_numba(img, mu, var, frozen, rho):  # pragma: no cover
                     d = np.float32(img[y, x, c]) - mu[y, x, c]
                     mu[y, x, c] += rho * d
                     var[y, x, c] += rho * (d * d - var[y, x, c])
+
+
+def _accumulate_numpy(img, total, total_sq):
+    """In place: ``total += img``, ``total_sq += img**2`` (int64, exact: the learning images' sums)."""
+    np.add(total, img, out=total, casting="unsafe")
+    total_sq += np.square(img, dtype=np.int64)
+
+
+@numba.njit(cache=True, nogil=True)
+def _accumulate_numba(img, total, total_sq):  # pragma: no cover - compiled
+    H, W, C = img.shape
+    for y in range(H):
+        for x in range(W):
+            for c in range(C):
+                v = np.int64(img[y, x, c])
+                total[y, x, c] += v
+                total_sq[y, x, c] += v * v
+
+
+@numba.njit(cache=True, nogil=True)
+def _label_counts(labels, n):  # pragma: no cover - compiled
+    """``np.bincount(labels.ravel(), minlength=n)`` for the (H, W) int32 labels of ``cv2.connectedComponents``
+    (its pixel count per label; ~4x less time than bincount, which first converts the labels to intp)."""
+    counts = np.zeros(n, np.int64)
+    H, W = labels.shape
+    for y in range(H):
+        for x in range(W):
+            counts[labels[y, x]] += 1
+    return counts
 
 
 def _agree_numpy(img, fg, radius):
@@ -135,6 +204,8 @@ def _agree_numba(img, fg, radius):  # pragma: no cover - compiled
 #: per kernel: foreground, model update, robust pairs (one new sample), robust finish, colour agreement
 _KERNELS = {"numpy": (_foreground_numpy, _update_numpy, _robust_pairs_numpy, _robust_finish_numpy, _agree_numpy),
             "numba": (_foreground_numba, _update_numba, _robust_pairs_numba, _robust_finish_numba, _agree_numba)}
+#: per kernel: the learning images' exact sums (one image)
+_LEARN_KERNELS = {"numpy": (_accumulate_numpy,), "numba": (_accumulate_numba,)}
 
 
 def _window_sum(a: np.ndarray, sigma: float) -> np.ndarray:

@@ -78,8 +78,8 @@ from .robust_mode import (_robust_background_numba, _robust_background_numpy, _r
                           _robust_finish_numpy, _robust_pairs_numba, _robust_pairs_numpy)
 # the per-pixel kernels (numpy reference and numba) live in ._segmentation_kernels; the names tests use
 # are re-exported here
-from ._segmentation_kernels import (_KERNELS, _agree_numba, _agree_numpy, _fill_from_reliable,  # noqa: F401
-                                    _fill_numpy, _window_sum)
+from ._segmentation_kernels import (_KERNELS, _LEARN_KERNELS, _agree_numba, _agree_numpy,  # noqa: F401
+                                    _fill_from_reliable, _fill_numpy, _label_counts, _window_sum)
 
 __all__ = ["SegmentationError", "SegmentationConfig", "BackgroundSegmenter", "clean_mask"]
 
@@ -128,10 +128,10 @@ def clean_mask(mask: np.ndarray, *, open_kernel: int = 3, close_kernel: int = 3,
     if close_kernel > 1:
         out = cv2.morphologyEx(out, cv2.MORPH_CLOSE, _ellipse(close_kernel))
     if min_blob_area_px > 0:
-        # (connectedComponentsWithStats takes ~0.6 ms at 320x240, labels + bincount ~0.2 ms)
+        # (connectedComponentsWithStats takes ~0.6 ms at 320x240, labels + their compiled count less)
         n, labels = cv2.connectedComponents(out, connectivity=8)
         if n > 1:
-            keep = np.bincount(labels.ravel(), minlength=n) >= min_blob_area_px
+            keep = _label_counts(labels, n) >= min_blob_area_px
             keep[0] = False  # label 0 is the background
             if not keep[1:].all():  # else nothing to remove: out is already 255 exactly on the labels > 0
                 out = np.take(np.where(keep, np.uint8(255), np.uint8(0)), labels)
@@ -377,14 +377,12 @@ class BackgroundSegmenter:
     def _learn_sample(self, img: np.ndarray) -> None:
         """Add one background sample (mean / variance sums, robust samples); finish at the last one."""
         c = self.config
-        if self._sum is None:
-            self._sum = np.zeros(img.shape, np.float64)
-            self._sumsq = np.zeros(img.shape, np.float64)
+        if self._sum is None:    # exact integer sums (what float64 sums of the uint8 values held, cheaper)
+            self._sum = np.zeros(img.shape, np.int64)
+            self._sumsq = np.zeros(img.shape, np.int64)
         if c.robust != "off" and self._n_learnt in _sample_indices(c.learn_frames):
             self._add_sample(img)
-        imgf = img.astype(np.float32)
-        self._sum += imgf
-        self._sumsq += np.square(imgf, dtype=np.float64)
+        _LEARN_KERNELS[c.kernel][0](img, self._sum, self._sumsq)
         self._n_learnt += 1
         if not self.learning:  # last learning image: mean and variance over the K images
             self._finish_learning()
@@ -445,10 +443,10 @@ class BackgroundSegmenter:
         reliable = (count >= min(2, len(samples))).astype(np.uint8)
         if not reliable.any():
             reliable[:] = 1
-        # unreliable pixels (no two samples agree) take the mean of their reliable neighbours;
+        # unreliable pixels (no two samples agree) take the mean of their reliable neighbours (once the robust
+        # mode is chosen: the share below counts reliable pixels only, where the fill keeps rmu);
         # the variance is smoothed over reliable pixels only
         side = max(5, c.std_smoothing_px)
-        rmu = _fill_from_reliable(rmu, reliable, 5)
         rvar = _fill_from_reliable(rvar, reliable, side, smooth=c.std_smoothing_px > 1)
         keep = (self._mu, self._var)
         self._mu, self._var = rmu, rvar
@@ -456,6 +454,7 @@ class BackgroundSegmenter:
         self._outlier_fraction = hits / (len(samples) * int(np.count_nonzero(reliable)))
         if c.robust == "on" or self._outlier_fraction > c.robust_detect_fraction:
             self._reliable = reliable
+            self._mu = _fill_from_reliable(rmu, reliable, 5)
         else:
             self._mu, self._var = keep
 
