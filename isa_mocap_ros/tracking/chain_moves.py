@@ -169,3 +169,29 @@ def untwist_legs(tr, ctx, x, *, energy: float | None = None, tolerance: float = 
         energy = float(ctx.objective(out[None, :])[0])
         used += 1
     return out, float(energy), used, changed
+
+
+def chain_share(tr, notes, budget) -> int | None:
+    """Evaluations of the chain stage (:func:`refit_chain`), or None (off, no re-aimed root move, or below one
+    generation + 2)."""
+    cfg = tr.config
+    if cfg.stages.chain_fraction <= 0 or tr.pelvis_reaim is None or not tr.pelvis_reaim.ops:
+        return None
+    share = int(budget.evals * cfg.stages.chain_fraction)
+    n = plan.flat_generation(tr, ChainMove(tr.model, tr.pelvis_reaim).coords.size)
+    if share - 2 < n:       # the energies of the search's estimate and of its best particle
+        if notes is not None:
+            notes.append(f"chain stage skipped: its share ({share} evaluations) is below one generation "
+                         f"of {plan.flat_algorithm(tr)[0]} ({n}) + 2")
+        return None
+    return share
+
+
+def untwist_share(tr) -> int:
+    """Evaluations of the untwist stage (``chain_moves.untwist_legs``): ``1 + len(UNTWIST_SCALES)`` per leg with
+    a hip and an ankle twist, + 1; 0 when off."""
+    if not tr.config.stages.leg_untwist:
+        return 0
+    names = set(tr.model.dof_names)
+    legs = sum(f"{s}_hip_z" in names and f"{s}_ankle_z" in names for s in ("left", "right"))
+    return (1 + len(UNTWIST_SCALES)) * legs + 1 if legs else 0

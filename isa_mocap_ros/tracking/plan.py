@@ -157,32 +157,3 @@ def contour_share(tr, notes, budget: FrameBudget) -> int | None:
         return None
     return share
 
-
-def chain_share(tr, notes, budget: FrameBudget) -> int | None:
-    """Evaluations of the chain stage (``chain_moves.py``), or None (off, no re-aimed root move, or below one
-    generation + 2)."""
-    cfg = tr.config
-    if cfg.stages.chain_fraction <= 0 or tr.pelvis_reaim is None or not tr.pelvis_reaim.ops:
-        return None
-    from .chain_moves import ChainMove
-
-    share = int(budget.evals * cfg.stages.chain_fraction)
-    n = flat_generation(tr, ChainMove(tr.model, tr.pelvis_reaim).coords.size)
-    if share - 2 < n:       # the energies of the search's estimate and of its best particle
-        if notes is not None:
-            notes.append(f"chain stage skipped: its share ({share} evaluations) is below one generation "
-                         f"of {flat_algorithm(tr)[0]} ({n}) + 2")
-        return None
-    return share
-
-
-def untwist_share(tr) -> int:
-    """Evaluations of the untwist stage (``chain_moves.untwist_legs``): ``1 + len(UNTWIST_SCALES)`` per leg with
-    a hip and an ankle twist, + 1; 0 when off."""
-    if not tr.config.stages.leg_untwist:
-        return 0
-    from .chain_moves import UNTWIST_SCALES
-
-    names = set(tr.model.dof_names)
-    legs = sum(f"{s}_hip_z" in names and f"{s}_ankle_z" in names for s in ("left", "right"))
-    return (1 + len(UNTWIST_SCALES)) * legs + 1 if legs else 0

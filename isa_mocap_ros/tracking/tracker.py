@@ -281,9 +281,9 @@ class Tracker:
         torso = plan.torso_share(self, notes, budget) if stages else None
         limbs = plan.limb_stage(self, notes, x0, budget) if stages else ([], [], 0)
         contour = plan.contour_share(self, notes, budget) if stages else None
-        chain = plan.chain_share(self, notes, budget) if stages else None
+        chain = chain_moves.chain_share(self, notes, budget) if stages else None
         budget = budget.evals - (share or 0) - (torso or 0) - plan.limb_share(self, len(limbs[0]), limbs[2]) \
-            - (contour or 0) - (chain or 0) - (plan.untwist_share(self) if stages else 0)
+            - (contour or 0) - (chain or 0) - (chain_moves.untwist_share(self) if stages else 0)
         if torso is not None:
             # the torso stage never starves the main search: two generations per partition stay
             need = 2 * (sum(plan.flat_generation(self, len(p)) for p in self.partitions)
