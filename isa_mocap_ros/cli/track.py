@@ -51,6 +51,14 @@ _TRACKER_OPTIONS = (
     ("--coarse-fraction", float, None, "F",
      "share of each partition's generations of the main search evaluated on the energy's coarse level (--energy "
      "fast: two views; raster: every second pixel row; docs/energy.md); 0 = off (default: the tracker's default)"),
+    ("--chain-fraction", float, None, "F",
+     "budget share of the chain stage: root, lower spine, hips and knees searched together (docs/tracking.md; "
+     "0 = off; default: the tracker's default)"),
+    ("--leg-untwist", float, None, "TOL",
+     "the untwist stage on (docs/tracking.md): each thigh's twist halved or undone, the ankle turned back, taken "
+     "when its energy is below the pose's times 1 + TOL (0: strictly lower; default: the tracker's, off)"),
+    ("--pelvis-fraction", float, None, "F",
+     "budget share of the pelvis stage (0 = off; default: the tracker's default)"),
     ("--keypoint-weight", float, None, "W",
      "weight of the learned-keypoint term (BlazePose landmarks on the images, cropped around the mask; "
      f"docs/keypoints.md); 0 = off; default {DEFAULT_KEYPOINT_WEIGHT:g} when the landmark model is installed "
@@ -279,6 +287,11 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         cfg_kw["view_weights"] = False
     if getattr(args, "init_confirm_frames", None) is not None:
         cfg_kw["init_confirm_frames"] = args.init_confirm_frames
+    for name in ("chain_fraction", "pelvis_fraction"):
+        if getattr(args, name, None) is not None:
+            cfg_kw[name] = getattr(args, name)
+    if getattr(args, "leg_untwist", None) is not None:
+        cfg_kw.update(leg_untwist=True, leg_untwist_tolerance=args.leg_untwist)
     if getattr(args, "coarse_fraction", None) is not None:
         cfg_kw["coarse_fraction"] = args.coarse_fraction
     if getattr(args, "partition_order", None) is not None:

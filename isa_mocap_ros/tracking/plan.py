@@ -156,3 +156,4 @@ def contour_share(tr, notes, budget: FrameBudget) -> int | None:
                          f"frame budget ({budget.evals})")
         return None
     return share
+

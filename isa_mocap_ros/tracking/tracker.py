@@ -23,7 +23,7 @@ from isa_mocap_ros.geometry import nearest_rotvec
 
 from isa_mocap_ros.optim import compiled_search
 
-from . import first_frame, frame_masks, frame_prediction, heading, keypoint_screen, objective, plan
+from . import chain_moves, first_frame, frame_masks, frame_prediction, heading, keypoint_screen, objective, plan
 from . import stages as frame_stages
 from .camera_data import prepare_cameras
 from .config import (DEFAULT_PARAMS, JOINT_SPREAD_RAD, ROOT_ROTATION_RADIUS_RAD, ROOT_ROTATION_SPREAD_RAD,
@@ -281,8 +281,9 @@ class Tracker:
         torso = plan.torso_share(self, notes, budget) if stages else None
         limbs = plan.limb_stage(self, notes, x0, budget) if stages else ([], [], 0)
         contour = plan.contour_share(self, notes, budget) if stages else None
+        chain = chain_moves.chain_share(self, notes, budget) if stages else None
         budget = budget.evals - (share or 0) - (torso or 0) - plan.limb_share(self, len(limbs[0]), limbs[2]) \
-            - (contour or 0)
+            - (contour or 0) - (chain or 0) - (chain_moves.untwist_share(self) if stages else 0)
         if torso is not None:
             # the torso stage never starves the main search: two generations per partition stay
             need = 2 * (sum(plan.flat_generation(self, len(p)) for p in self.partitions)
@@ -295,7 +296,7 @@ class Tracker:
                 torso = None
         if inner_optimizer(cfg.search.optimizer) is None:
             budget = whole_generations(budget, opt.generation_size)     # (hierarchical: its split does this)
-        return opt, budget, (share, torso, limbs, contour), (lo, hi, spread, base)
+        return opt, budget, (share, torso, limbs, contour, chain), (lo, hi, spread, base)
 
     def optimize(self, ctx: FrameContext, pred: np.ndarray, rng: np.random.Generator, *, spread_scale: float = 1.0,
                  notes=None, stages: bool = True, budget: FrameBudget | None = None):
@@ -315,7 +316,7 @@ class Tracker:
 
         opt, budget, stage_shares, (lo, hi, spread, base) = self.plan_search(
             pred, rng, ctx.budget if budget is None else budget, spread_scale, notes, stages)
-        share, torso, limbs, contour = stage_shares
+        share, torso, limbs, contour, chain = stage_shares
         res = compiled_search.search(opt, self.energy, budget, extra_terms=ctx.objective.extra_terms,
                                      keypoints=ctx.objective.weighted_keypoints,
                                      coarse_fraction=self.config.search.coarse_fraction) \
@@ -338,12 +339,23 @@ class Tracker:
             spare += torso - n
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
             exact = True
+        if chain is not None:           # chain_moves.py: root, lower spine, hips and knees together
+            x, e, n, _ = chain_moves.refit_chain(self, ctx, res.x, evals=chain + spare, rng=rng,
+                                                 energy=res.energy if exact else None, bounds=(lo, hi))
+            spare += chain - n
+            res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
+            exact = True
         limbs, hinge, n_limb = limbs
         if limbs:
             extra = spare // len(limbs)       # more proposals with the rest
             x, e, n, _ = frame_stages.propose_limbs(self, ctx, res.x, n=n_limb + extra, rng=rng, limbs=limbs,
                                                     hinge_only=hinge, last=self.track.last)
             spare -= extra * len(limbs)
+            res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
+            exact = True
+        if stages and self.config.stages.leg_untwist:      # chain_moves.py: the thighs' twist halved or undone
+            x, e, n, _ = chain_moves.untwist_legs(self, ctx, res.x, energy=res.energy if exact else None,
+                                                  tolerance=self.config.stages.leg_untwist_tolerance)
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
             exact = True
         if contour is not None:
