@@ -111,15 +111,16 @@ def forearms_over_trunk(cameras: Any, points: Any) -> np.ndarray:
     if P.shape != (len(ARM_TRUNK_JOINTS), 3):
         raise VisionError(f"points: expected shape ({len(ARM_TRUNK_JOINTS)}, 3), received {P.shape}")
     arm = np.concatenate([0.5 * (P[4] + P[5])[None], P[5:7], 0.5 * (P[7] + P[8])[None], P[8:10]])
+    pts = np.concatenate([P[:4], arm])                                  # the trunk's 4 corners, the arms' 6 points
     out = np.zeros(len(cameras), dtype=bool)
     for v, cam in enumerate(cameras):
-        if np.any(cam.depth(P[:4]) <= 0):
+        Xc = cam.to_camera(pts)
+        if np.any(Xc[:4, 2] <= 0):
             continue
-        quad = cv2.convexHull(cam.project(P[:4]).astype(np.float32).reshape(-1, 1, 2))
-        front = cam.depth(arm) > 0
-        uv = cam.project(arm)
-        out[v] = any(cv2.pointPolygonTest(quad, (float(u), float(w)), False) > 0
-                     for (u, w), f in zip(uv, front) if f)
+        uv = cam.project(pts)
+        quad = cv2.convexHull(uv[:4].astype(np.float32).reshape(-1, 1, 2))
+        out[v] = any(cv2.pointPolygonTest(quad, (float(p[0]), float(p[1])), False) > 0
+                     for p, z in zip(uv[4:], Xc[4:, 2]) if z > 0)
     return out
 
 
