@@ -79,8 +79,8 @@ def test_forearm_over_the_trunk_in_the_views_that_see_it_there():
         forearms_over_trunk(cams, np.zeros((4, 3)))
 
 
-@pytest.mark.parametrize("kw", [dict(every_k=-1), dict(every_k=1.5), dict(every_k=True), dict(every_k=2, dense_frames=-1),
-                                dict(every_k=2, extra_gap=-1)])
+@pytest.mark.parametrize("kw", [dict(every_k=-1), dict(every_k=1.5), dict(every_k=True),
+                                dict(every_k=2, dense_frames=-1), dict(every_k=2, extra_gap=-1)])
 def test_bad_settings_raise(kw):
     every_k = kw.pop("every_k")
     with pytest.raises(VisionError, match="expected an integer"):

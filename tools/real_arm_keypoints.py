@@ -28,7 +28,9 @@ def main(argv=None) -> int:
     p.add_argument("track", type=Path)
     p.add_argument("--every", type=int, default=1)
     a = p.parse_args(argv)
-    from isa_mocap_ros.body import joint_positions, make_model
+    import msg_adapters as ma
+    from isa_mocap_ros.bag import BagReader
+    from isa_mocap_ros.body import joint_positions, joint_state_to_pose, make_model
     from isa_mocap_ros.cli.track_io import read_sequence
     from isa_mocap_ros.vision.keypoint_schedule import ARM_TRUNK_JOINTS, detect_in_mask, forearms_over_trunk
     from isa_mocap_ros.vision.landmarks import LANDMARK_NAMES, PoseLandmarker
@@ -37,9 +39,6 @@ def main(argv=None) -> int:
     seq = read_sequence(a.bag, want_images=True, want_masks=False)
     names = list(seq.truth_marker_names)
     model = make_model(39, shape=a.track / "body.yaml")
-    from isa_mocap_ros.bag import BagReader
-    import msg_adapters as ma
-    from isa_mocap_ros.body import joint_state_to_pose
     est = {}
     with BagReader(a.track / "estimates") as bag:
         for m in bag.messages():

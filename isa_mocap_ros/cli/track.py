@@ -201,8 +201,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
             print(f"track: {kp_note}", file=sys.stderr)
     kp_weight = float(kp_weight)
     kp_every = int(getattr(args, "keypoint_every", EVERY_K))
-    from isa_mocap_ros.vision.keypoint_schedule import (ARM_TRUNK_JOINTS, DENSE_FRAMES, KeypointSchedule, detect_in_mask,
-                                                        forearms_over_trunk)
+    from isa_mocap_ros.vision.keypoint_schedule import (ARM_TRUNK_JOINTS, DENSE_FRAMES, KeypointSchedule,
+                                                        detect_in_mask, forearms_over_trunk)
     kp_dense = getattr(args, "keypoint_dense", None)
     kp_dense = DENSE_FRAMES if kp_dense is None else int(kp_dense)
     if not np.isfinite(kp_weight) or kp_weight < 0 or kp_every < 0 or kp_dense < 0:

@@ -32,7 +32,8 @@ from .errors import VisionError
 from .landmarks import LANDMARK_NAMES, Landmarks2D, PoseLandmarker, box_from_mask, box_from_points, upright_angle
 
 __all__ = ["KeypointSchedule", "forearms_over_trunk", "ARM_TRUNK_JOINTS", "detect_in_mask", "crop_box", "person_pixels",
-           "body_axis_angle", "segmentation_iou", "CROP", "CROPS", "DETECT_CROPS", "AGREE_IOU", "DENSE_FRAMES", "EVERY_K"]
+           "body_axis_angle", "segmentation_iou", "CROP", "CROPS", "DETECT_CROPS", "AGREE_IOU", "DENSE_FRAMES",
+           "EVERY_K"]
 
 #: frames with a person detected on at the start of a view: the initialization's frame and the heading
 #: check's 3 frames after it (TrackerConfig.init_confirm_frames' default)
