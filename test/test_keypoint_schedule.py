@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 
 from isa_mocap_ros.vision.errors import VisionError
-from isa_mocap_ros.vision.keypoint_schedule import (AGREE_IOU, CROP, DENSE_FRAMES, KeypointSchedule, body_axis_angle,
-                                                     crop_box, detect_in_mask, person_pixels, segmentation_iou)
+from isa_mocap_ros.vision.camera import look_at
+from isa_mocap_ros.vision.keypoint_schedule import (AGREE_IOU, ARM_TRUNK_JOINTS, CROP, DENSE_FRAMES, KeypointSchedule,
+                                                     body_axis_angle, crop_box, detect_in_mask, forearms_over_trunk,
+                                                     person_pixels, segmentation_iou)
 
 
 def _due(schedule, persons):
@@ -36,7 +38,49 @@ def test_two_schedules_fed_the_same_frames_agree():
     assert _due(KeypointSchedule(3), persons) == _due(KeypointSchedule(3), persons)
 
 
-@pytest.mark.parametrize("kw", [dict(every_k=-1), dict(every_k=1.5), dict(every_k=True), dict(every_k=2, dense_frames=-1)])
+def test_wanted_frames_are_added_at_most_every_gap_and_leave_the_regular_ones():
+    persons = [True] * 20
+    wanted = [False] * 6 + [True] * 9 + [False] * 5
+    regular = _due(KeypointSchedule(8, dense_frames=2), persons)
+    s = KeypointSchedule(8, dense_frames=2, extra_gap=3)
+    due = [i for i, (p, w) in enumerate(zip(persons, wanted)) if s.due(p, wanted=w)]
+    assert regular == [0, 1, 8, 16]
+    # wanted from 6: 6 (5 after the last, 1), then 8 is regular, 11, 14; nothing wanted after 14
+    assert due == [0, 1, 6, 8, 11, 14, 16] and s.extra == 3
+    # off (the default), a wanted frame changes nothing
+    s = KeypointSchedule(8, dense_frames=2)
+    assert [i for i, (p, w) in enumerate(zip(persons, wanted)) if s.due(p, wanted=w)] == regular and s.extra == 0
+    # a frame without a person is never due
+    assert not KeypointSchedule(8, extra_gap=1).due(False, wanted=True)
+
+
+def _standing(hand_forward_m: float) -> np.ndarray:
+    """:data:`ARM_TRUNK_JOINTS` of a person facing +x at the origin: the left arm down at the side, the right
+    forearm held ``hand_forward_m`` in front of the belly."""
+    P = {"left_shoulder": (0, 0.2, 1.45), "right_shoulder": (0, -0.2, 1.45), "right_hip": (0, -0.1, 0.95),
+         "left_hip": (0, 0.1, 0.95), "left_elbow": (0, 0.3, 1.15), "left_wrist": (0, 0.32, 0.9),
+         "left_hand": (0, 0.33, 0.82), "right_elbow": (0.05, -0.25, 1.15),
+         "right_wrist": (hand_forward_m, -0.05, 1.1), "right_hand": (hand_forward_m + 0.05, 0.02, 1.1)}
+    return np.array([P[n] for n in ARM_TRUNK_JOINTS], float)
+
+
+def test_forearm_over_the_trunk_in_the_views_that_see_it_there():
+    front = look_at((4, 0, 1.2), (0, 0, 1.1), width=320, height=240, fov_deg=50)
+    side = look_at((0, 4, 1.2), (0, 0, 1.1), width=320, height=240, fov_deg=50)
+    back = look_at((-4, 0.3, 1.2), (0, 0, 1.1), width=320, height=240, fov_deg=50)
+    cams = [front, side, back]
+    assert forearms_over_trunk(cams, _standing(0.25)).tolist() == [True, False, True]
+    hanging = _standing(0.25)
+    hanging[list(ARM_TRUNK_JOINTS).index("right_wrist")] = (0, -0.32, 0.9)
+    hanging[list(ARM_TRUNK_JOINTS).index("right_hand")] = (0, -0.33, 0.82)
+    hanging[list(ARM_TRUNK_JOINTS).index("right_elbow")] = (0, -0.3, 1.15)
+    assert not forearms_over_trunk(cams, hanging).any()
+    with pytest.raises(VisionError, match="points: expected shape"):
+        forearms_over_trunk(cams, np.zeros((4, 3)))
+
+
+@pytest.mark.parametrize("kw", [dict(every_k=-1), dict(every_k=1.5), dict(every_k=True),
+                                dict(every_k=2, dense_frames=-1), dict(every_k=2, extra_gap=-1)])
 def test_bad_settings_raise(kw):
     every_k = kw.pop("every_k")
     with pytest.raises(VisionError, match="expected an integer"):

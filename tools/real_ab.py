@@ -18,6 +18,8 @@ per 10-frame block, from the JSON files.
 from __future__ import annotations
 
 import argparse
+import ast
+import importlib
 import json
 import shlex
 import sys
@@ -50,17 +52,28 @@ def _run(bag: Path, out: Path, name: str, extra: str, seed: int, evals: int) -> 
         stash["joint_frame_errors_mm"] = _joint_frame_errors(collect)
         return thirds(collect, parts)
 
+    words = shlex.split(extra.replace("{seed}", str(seed)))
+    sets = [w[len("{set:"):-1] for w in words if w.startswith("{set:")]
     args = [str(out / f"{a[len('{shape_of:'):-1]}_s{seed}" / "body.yaml") if a.startswith("{shape_of:") else a
-            for a in shlex.split(extra.replace("{seed}", str(seed)))]
+            for a in words if not a.startswith("{set:")]
+    saved = []
+    for item in sets:
+        target, value = item.split("=", 1)
+        module, attr = target.rsplit(".", 1)
+        mod = importlib.import_module(module)
+        saved.append((mod, attr, getattr(mod, attr)))
+        setattr(mod, attr, ast.literal_eval(value))
     t0 = time.process_time()
     real.joint_thirds = joint_thirds
     try:
         r = real._track(bag, out / f"{name}_s{seed}", args + ["--seed", str(seed), "--evals", str(evals)])
     finally:
         real.joint_thirds = thirds
+        for mod, attr, value in reversed(saved):
+            setattr(mod, attr, value)
     r.update(stash)
     r["cpu_seconds"] = round(time.process_time() - t0, 1)
-    r["seed"], r["arm"], r["args"] = seed, name, args
+    r["seed"], r["arm"], r["args"] = seed, name, args + [f"{{set:{x}}}" for x in sets]
     return r
 
 

@@ -69,6 +69,9 @@ _TRACKER_OPTIONS = (
     ("--keypoint-dense", int, None, "N",
      "with --keypoint-weight: detect on each view's first N frames with a person (the initialization and its "
      "heading check; default 4, the keypoint node's dense_frames)"),
+    ("--keypoint-extra-gap", int, 0, "G",
+     "with --keypoint-weight: also detect on every view of a frame where a forearm of the previous estimate lies "
+     "over its trunk in some view, at most every G-th frame (an option, issue 34; 0 = off, the default)"),
 )
 
 
@@ -206,7 +209,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
             print(f"track: {kp_note}", file=sys.stderr)
     kp_weight = float(kp_weight)
     kp_every = int(getattr(args, "keypoint_every", EVERY_K))
-    from isa_mocap_ros.vision.keypoint_schedule import DENSE_FRAMES, KeypointSchedule, detect_in_mask
+    from isa_mocap_ros.vision.keypoint_schedule import (ARM_TRUNK_JOINTS, DENSE_FRAMES, KeypointSchedule,
+                                                        detect_in_mask, forearms_over_trunk)
     kp_dense = getattr(args, "keypoint_dense", None)
     kp_dense = DENSE_FRAMES if kp_dense is None else int(kp_dense)
     if not np.isfinite(kp_weight) or kp_weight < 0 or kp_every < 0 or kp_dense < 0:
@@ -342,8 +346,20 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
     t_track = 0.0
     kp_seconds: list[float] = []        # detection time per frame set with keypoints
 
-    schedules = [KeypointSchedule(kp_every, dense_frames=kp_dense) for _ in seq.cameras]
+    kp_gap = int(getattr(args, "keypoint_extra_gap", 0) or 0)
+    schedules = [KeypointSchedule(kp_every, dense_frames=kp_dense, extra_gap=kp_gap) for _ in seq.cameras]
     kp_views = [0]                      # detections run
+    if kp_gap > 0 and not set(ARM_TRUNK_JOINTS) <= set(model.joint_names):
+        raise ValueError(f"--keypoint-extra-gap: expected a model with arms, received {model.dof} DOF")
+    arm_idx = [model.joint_names.index(n) for n in ARM_TRUNK_JOINTS] if kp_gap > 0 else []
+
+    def arm_over_trunk() -> bool:
+        """--keypoint-extra-gap's want: a forearm of the previous estimate over its trunk in some view."""
+        if kp_gap <= 0 or tracker.last_estimate is None:
+            return False
+        from isa_mocap_ros.body import joint_positions
+        P = joint_positions(model, tracker.last_estimate[None])[0, arm_idx]
+        return bool(forearms_over_trunk(seq.cameras, P).any())
 
     def keypoints_of(fr, masks):
         """The keypoint node's output for this frame (the same schedule and detection, through its message:
@@ -351,8 +367,9 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         import msg_adapters as ma
         t0 = time.perf_counter()
         out, looked = [], False
+        wanted = arm_over_trunk()
         for v, (img, m) in enumerate(zip(fr.images, masks)):
-            if img is None or m is None or not schedules[v].due(bool(np.any(m))):
+            if img is None or m is None or not schedules[v].due(bool(np.any(m)), wanted=wanted):
                 out.append(None)
                 continue
             looked = True
@@ -443,6 +460,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
                      "partition_order": list(cfg.search.partition_order),
                      "coarse_fraction": cfg.search.coarse_fraction,
                      "keypoint_weight": kp_weight, "keypoint_every": kp_every, "keypoint_dense": kp_dense,
+                     "keypoint_extra_gap": kp_gap, "keypoint_extra_detections": sum(s.extra for s in schedules),
                      "keypoint_frames": len(kp_seconds), "keypoint_detections": kp_views[0],
                      "keypoint_ms_per_frame_set": float(np.mean(kp_seconds) * 1e3) if kp_seconds else None,
                      "masks": "recorded" if use_masks else f"segmented (learned from {learn} frames)",

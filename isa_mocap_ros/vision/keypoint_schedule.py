@@ -8,6 +8,9 @@ network gives the offline tracker's estimates bit for bit (docs/keypoints.md):
   initialization and the heading check that follows it (``TrackerConfig.init_confirm_frames`` frames) are
   where the keypoints tell front from back;
 * after those, every ``every_k``-th frame with a person (counted from the view's first one);
+* an option (``KeypointSchedule(extra_gap=G)``): a frame the caller wants (``due(..., wanted=True)``, e.g. where
+  :func:`forearms_over_trunk` says a forearm of the previous estimate lies over its trunk in some view, which the
+  silhouettes cannot place) is detected on too, at most every ``G``-th frame with a person;
 * the detector's square is placed around the mask's foreground (:func:`crop_box`, :data:`CROP`); the crop around
   the person's components only (``"person"``) is an option, and ``"person_checked"`` takes it only where the
   model finds a person there whose segmentation agrees with those components, then detects again in a square
@@ -28,8 +31,9 @@ import numpy as np
 from .errors import VisionError
 from .landmarks import LANDMARK_NAMES, Landmarks2D, PoseLandmarker, box_from_mask, box_from_points, upright_angle
 
-__all__ = ["KeypointSchedule", "detect_in_mask", "crop_box", "person_pixels", "body_axis_angle", "segmentation_iou",
-           "CROP", "CROPS", "DETECT_CROPS", "AGREE_IOU", "DENSE_FRAMES", "EVERY_K"]
+__all__ = ["KeypointSchedule", "forearms_over_trunk", "ARM_TRUNK_JOINTS", "detect_in_mask", "crop_box", "person_pixels",
+           "body_axis_angle", "segmentation_iou", "CROP", "CROPS", "DETECT_CROPS", "AGREE_IOU", "DENSE_FRAMES",
+           "EVERY_K"]
 
 #: frames with a person detected on at the start of a view: the initialization's frame and the heading
 #: check's 3 frames after it (TrackerConfig.init_confirm_frames' default)
@@ -49,29 +53,76 @@ class KeypointSchedule:
         the dense start).
     dense_frames : int
         Frames with a person detected on at the start (>= 0).
+    extra_gap : int
+        0 (the default): the frames above only. ``G`` > 0: a frame with a person that the caller wants
+        (``due(..., wanted=True)``) is detected on as well when the view's last detection is ``G`` or more
+        frames with a person back; the frames above stay as they are.
 
     Examples
     --------
     >>> s = KeypointSchedule(every_k=4, dense_frames=2)
     >>> [s.due(m) for m in (False, True, True, True, True, True, True, False, True)]
     [False, True, True, False, False, True, False, False, False]
+    >>> s = KeypointSchedule(every_k=8, dense_frames=1, extra_gap=2)
+    >>> [s.due(True, wanted=w) for w in (False, True, True, True, False, True)]
+    [True, False, True, False, False, True]
     """
 
-    def __init__(self, every_k: int, *, dense_frames: int = DENSE_FRAMES) -> None:
-        for name, value, lo in (("every_k", every_k, 0), ("dense_frames", dense_frames, 0)):
+    def __init__(self, every_k: int, *, dense_frames: int = DENSE_FRAMES, extra_gap: int = 0) -> None:
+        for name, value, lo in (("every_k", every_k, 0), ("dense_frames", dense_frames, 0),
+                                ("extra_gap", extra_gap, 0)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo:
                 raise VisionError(f"{name}: expected an integer >= {lo}, received {value!r}")
         self.every_k = int(every_k)
         self.dense_frames = int(dense_frames)
+        self.extra_gap = int(extra_gap)
         self.person_frames = 0          # frames with a person seen so far
+        self.last_detected = None       # the person frame count of the last detection
+        self.extra = 0                  # detections made because the caller wanted them
 
-    def due(self, has_person: bool) -> bool:
-        """Whether to detect on this frame (call once per frame, in order)."""
+    def due(self, has_person: bool, *, wanted: bool = False) -> bool:
+        """Whether to detect on this frame (call once per frame, in order; ``wanted``: see ``extra_gap``)."""
         if not has_person:
             return False
         c = self.person_frames
         self.person_frames += 1
-        return c < self.dense_frames or (self.every_k > 0 and c % self.every_k == 0)
+        due = c < self.dense_frames or (self.every_k > 0 and c % self.every_k == 0)
+        if not due and wanted and self.extra_gap > 0 and (self.last_detected is None
+                                                          or c - self.last_detected >= self.extra_gap):
+            due = True
+            self.extra += 1
+        if due:
+            self.last_detected = c
+        return due
+
+
+#: :func:`forearms_over_trunk`'s points, in this order (the model's joint names)
+ARM_TRUNK_JOINTS = ("left_shoulder", "right_shoulder", "right_hip", "left_hip",
+                    "left_elbow", "left_wrist", "left_hand", "right_elbow", "right_wrist", "right_hand")
+
+
+def forearms_over_trunk(cameras: Any, points: Any) -> np.ndarray:
+    """``(V,)`` bool: the views in which a forearm or hand lies over the trunk, where a silhouette cannot tell
+    where it is (issue 34: a forearm in front of the trunk drifts between keypoint frames).
+
+    ``points`` ``(10, 3)`` (m, world) are the joints :data:`ARM_TRUNK_JOINTS` of a pose (the previous estimate or
+    the prediction). In each camera the trunk is the convex hull of the projected shoulders and hips; a forearm
+    is over it when its middle, its wrist or its hand projects strictly inside (points behind a camera count as not)."""
+    P = np.asarray(points, dtype=np.float64)
+    if P.shape != (len(ARM_TRUNK_JOINTS), 3):
+        raise VisionError(f"points: expected shape ({len(ARM_TRUNK_JOINTS)}, 3), received {P.shape}")
+    arm = np.concatenate([0.5 * (P[4] + P[5])[None], P[5:7], 0.5 * (P[7] + P[8])[None], P[8:10]])
+    pts = np.concatenate([P[:4], arm])                                  # the trunk's 4 corners, the arms' 6 points
+    out = np.zeros(len(cameras), dtype=bool)
+    for v, cam in enumerate(cameras):
+        Xc = cam.to_camera(pts)
+        if np.any(Xc[:4, 2] <= 0):
+            continue
+        uv = cam.project(pts)
+        quad = cv2.convexHull(uv[:4].astype(np.float32).reshape(-1, 1, 2))
+        out[v] = any(cv2.pointPolygonTest(quad, (float(p[0]), float(p[1])), False) > 0
+                     for p, z in zip(uv[4:], Xc[4:, 2]) if z > 0)
+    return out
 
 
 #: ``detect_in_mask``'s crops: the square around every foreground pixel (``"mask"``, the default), around the
