@@ -34,9 +34,7 @@ from numba.extending import intrinsic
 
 from ..numba_cache import register_dependent_cache
 from . import silhouette_kernel
-from .silhouette_kernel import (DETERMINISTIC_FASTMATH, G_AX, G_AY, G_CA, G_COLS, G_CONE, G_LEN, G_RA, G_RB, G_SB,
-                                G_UX, G_UY, G_VALID, SERIAL_PIPELINE, _fk_joint, _fk_one, _project_cap, _project_caps,
-                                _to_camera, _to_camera_joint)
+from .silhouette_kernel import DETERMINISTIC_FASTMATH, SERIAL_PIPELINE, _fk_joint, _fk_one, _to_camera, _to_camera_joint
 
 __all__ = ["Raster", "RasterStage", "raster_batch", "raster_batch_serial", "raster_restrict_prepare", "raster_restricted",
            "foreground_bits", "raster_static"]
@@ -55,10 +53,9 @@ warnings.filterwarnings("ignore", message=r"(?s).*no transformation for parallel
 Raster = namedtuple("Raster", "fbits nfg nw stride")
 
 #: What the poses of a restriction share (:func:`raster_restrict_prepare`): forward kinematics of the base pose
-#: ``R0 (J, 3, 3), P0 (J, 3)``, per view the joints in camera coordinates ``CP0 (V, J, 4)`` and the capsules'
-#: hulls ``G0 (V, C, G_COLS)``, the fixed capsules' union bitmap ``Ufix`` (as ``fbits``) and its counts ``cnt (V,
-#: 2)``: ``|M|``, ``|M and F|``.
-RasterStage = namedtuple("RasterStage", "R0 P0 CP0 G0 Ufix cnt")
+#: ``R0 (J, 3, 3), P0 (J, 3)``, per view the joints in camera coordinates ``CP0 (V, J, 4)``, the fixed capsules'
+#: union bitmap ``Ufix`` (as ``fbits``) and its counts ``cnt (V, 2)``: ``|M|``, ``|M and F|``.
+RasterStage = namedtuple("RasterStage", "R0 P0 CP0 Ufix cnt")
 
 
 @intrinsic
@@ -71,44 +68,142 @@ def _popcount(typingctx, x):
     return sig, codegen
 
 
-@numba.njit(cache=True, inline="always", fastmath=DETERMINISTIC_FASTMATH)
-def _spans(G, c, j0, nrow, stride, fx, cx, fy, cy, W, I0, I1):  # pragma: no cover - compiled
-    """Pixel columns ``I0[r] .. I1[r]`` (inclusive; ``1, 0`` when empty) whose centres lie in capsule ``c``'s
-    2-D hull (``G``, :func:`.silhouette_kernel._project_cap`) on pixel rows ``j0 + r stride``, ``r < nrow``
-    (computed for whole 8-row vectors: ``I0``, ``I1`` have room). Float32 over the rows (vectorized)."""
+# A view's capsule set-up as a struct-of-arrays table over a block of at most ``NC`` capsules (row ``i`` of the
+# table at ``S[i NC:]``, column ``k`` for capsule ``cl[k0 + k]``), so that one loop runs several capsules' dependent
+# chains (square roots, divisions) side by side in vector lanes: IEEE division and square root round the same in a
+# lane as in scalar code. One array with rows a compile-time distance apart, so that LLVM sees that the loop's reads
+# and writes never meet within a vector (separate arrays would need a run-time overlap check per pair of rows, too
+# many: the loop stayed scalar). Rows: the gathered inputs (the end points' normalized image coordinates, depths and
+# radius factors of :func:`.silhouette_kernel._to_camera`, the ball radii); the pixel box (1.0 when the capsule has
+# rows and columns in the image, its first pixel row, a multiple of the row stride, last row, first and last column);
+# the span loop's constants (:func:`_spans`; float32 values): the tangent segments' row parameters (a segment switched
+# off starts at t = 2 and stays there: never in [0, 1]), the discs' row offsets, squared radii and centres in pixels.
+NC = 32
+S_AX, S_AY, S_BX, S_BY, S_ZA, S_ZB, S_KA, S_KB, S_R0, S_R1 = range(10)
+S_OK, S_J0, S_J1, S_U0, S_U1 = range(10, 15)
+S_T10, S_T1R, S_X10, S_X1D, S_T20, S_T2R, S_X20, S_X2D, S_DA0, S_DB0, S_RA2, S_RB2, S_AXP, S_BXP = range(15, 29)
+S_ROWS = 29
+
+# The set-up loop without ``arcp`` (a division stays a division: with it LLVM may turn the divisions by one value into
+# a reciprocal and products, which round differently) and without ``afn``; its own function so that its divisions
+# need no zero checks (``error_model="numpy"``: every division here has a nonzero divisor, as in the scalar code it
+# replaces), which would keep the loop scalar.
+SETUP_FASTMATH = {"contract", "nnan", "ninf", "nsz"}
+
+
+@numba.njit(cache=True, fastmath=SETUP_FASTMATH, error_model="numpy")
+def _setup_caps(CP, caps, radii, cl, k0, nb, fx, cx, fy, cy, W, H, stride, S):  # pragma: no cover - compiled
+    """The capsules ``cl[k0:k0 + nb]`` (``nb <= NC``) of one view into the table ``S`` (module constants ``S_*``):
+    per capsule the 2-D hull of :func:`.silhouette_kernel._project_cap`, its pixel box and the span loop's constants,
+    op for op the arithmetic of the scalar code this replaced (the same bits), without branches (a capsule with
+    ``S_OK`` 0 may hold anything else)."""
+    nc = numba.uint64(NC)
+    for k in range(nb):      # gather (scalar): the end joints' projections
+        c = cl[k0 + k]
+        ja = caps[c, 0]
+        jb = caps[c, 1]
+        kk = numba.uint64(k)
+        S[S_AX * nc + kk] = CP[ja, 0]
+        S[S_AY * nc + kk] = CP[ja, 1]
+        S[S_BX * nc + kk] = CP[jb, 0]
+        S[S_BY * nc + kk] = CP[jb, 1]
+        S[S_ZA * nc + kk] = CP[ja, 2]
+        S[S_ZB * nc + kk] = CP[jb, 2]
+        S[S_KA * nc + kk] = CP[ja, 3]
+        S[S_KB * nc + kk] = CP[jb, 3]
+        S[S_R0 * nc + kk] = radii[c, 0]
+        S[S_R1 * nc + kk] = radii[c, 1]
     f32 = np.float32
-    ax, ay, ux, uy, L, ra, rb = G[c, G_AX], G[c, G_AY], G[c, G_UX], G[c, G_UY], G[c, G_LEN], G[c, G_RA], G[c, G_RB]
-    bx = ax + L * ux
-    by = ay + L * uy
-    sb, ca = G[c, G_SB], G[c, G_CA]
-    cone = G[c, G_CONE] != 0.0
-    nx, ny = -uy, ux
-    # the tangent segments p1 -> q1 and p2 -> q2 (tangent points at along r sb, across +-r ca)
-    p1x = ax + ra * (sb * ux + ca * nx)
-    p1y = ay + ra * (sb * uy + ca * ny)
-    q1x = bx + rb * (sb * ux + ca * nx)
-    q1y = by + rb * (sb * uy + ca * ny)
-    p2x = ax + ra * (sb * ux - ca * nx)
-    p2y = ay + ra * (sb * uy - ca * ny)
-    q2x = bx + rb * (sb * ux - ca * nx)
-    q2y = by + rb * (sb * uy - ca * ny)
-    d1 = q1y - p1y
-    d2 = q2y - p2y
-    y0 = (j0 - cy) / fy         # the first row's centre, normalized
-    dyr = stride / fy           # row step, normalized
-    i1 = 1.0 / d1 if cone and abs(d1) > 1e-12 else 0.0    # a level segment: its ends lie on the discs
-    i2 = 1.0 / d2 if cone and abs(d2) > 1e-12 else 0.0
-    # segment k at row r: t = t0 + r tr along it, x = x0 + t xd pixels; t1lo 2 switches a segment off
-    t10, t1r = f32((y0 - p1y) * i1), f32(dyr * i1)
-    t20, t2r = f32((y0 - p2y) * i2), f32(dyr * i2)
-    x10, x1d = f32(fx * p1x + cx), f32(fx * (q1x - p1x))
-    x20, x2d = f32(fx * p2x + cx), f32(fx * (q2x - p2x))
-    t1lo = f32(0.0) if i1 != 0.0 else f32(2.0)
-    t2lo = f32(0.0) if i2 != 0.0 else f32(2.0)
-    da0, db0, dr = f32(y0 - ay), f32(y0 - by), f32(dyr)     # row minus disc centre, normalized
-    ra2, rb2, fx32 = f32(ra * ra), f32(rb * rb), f32(fx)
-    axp, bxp = f32(fx * ax + cx), f32(fx * bx + cx)
-    Wm = f32(W - 1.0)
+    sf = float(stride)
+    y_step = stride / fy        # the row step, normalized
+    Hm = H - 1.0
+    Wm = W - 1.0
+    for k in range(nb):      # vectorized over the capsules
+        kk = numba.uint64(k)
+        ax = S[S_AX * nc + kk]
+        ay = S[S_AY * nc + kk]
+        bx0 = S[S_BX * nc + kk]
+        by0 = S[S_BY * nc + kk]
+        r0 = S[S_R0 * nc + kk]
+        r1 = S[S_R1 * nc + kk]
+        valid = (S[S_ZA * nc + kk] > 1.001 * r0) & (S[S_ZB * nc + kk] > 1.001 * r1)
+        # the 2-D hull (_project_cap)
+        ra = r0 * S[S_KA * nc + kk]
+        rb = r1 * S[S_KB * nc + kk]
+        dx = bx0 - ax
+        dy = by0 - ay
+        L = np.sqrt(dx * dx + dy * dy)
+        long = L > 1e-12
+        Ls = L if long else 1.0
+        ux = dx / Ls if long else 1.0
+        uy = dy / Ls if long else 0.0
+        cone = L > abs(ra - rb) * (1.0 + 1e-9) + 1e-15
+        sb = (ra - rb) / Ls if cone else 0.0
+        ca = np.sqrt(1.0 - sb * sb)     # 1 where there is no cone (sb 0)
+        # the pixel box
+        bx = ax + L * ux
+        by = ay + L * uy
+        j0 = max(0.0, np.ceil(fy * min(ay - ra, by - rb) + cy))
+        j1 = min(Hm, np.floor(fy * max(ay + ra, by + rb) + cy))
+        q = np.ceil(j0 / sf)        # the first row on the stride: the least multiple q s >= j0 (small integers)
+        q = q - 1.0 if (q - 1.0) * sf >= j0 else q
+        q = q + 1.0 if q * sf < j0 else q
+        j0 = q * sf
+        u0 = max(0.0, np.floor(fx * min(ax - ra, bx - rb) + cx))
+        u1 = min(Wm, np.ceil(fx * max(ax + ra, bx + rb) + cx))
+        S[S_OK * nc + kk] = 1.0 if valid & (j1 >= j0) & (u1 >= u0) else 0.0
+        S[S_J0 * nc + kk] = j0
+        S[S_J1 * nc + kk] = j1
+        S[S_U0 * nc + kk] = u0
+        S[S_U1 * nc + kk] = u1
+        # the span loop's constants: the tangent segments p1 -> q1, p2 -> q2 (tangent points at along r sb,
+        # across +-r ca), a segment's row parameter t = t0 + r tr, its x = x0 + t xd pixels
+        nx, ny = -uy, ux
+        p1x = ax + ra * (sb * ux + ca * nx)
+        p1y = ay + ra * (sb * uy + ca * ny)
+        q1x = bx + rb * (sb * ux + ca * nx)
+        q1y = by + rb * (sb * uy + ca * ny)
+        p2x = ax + ra * (sb * ux - ca * nx)
+        p2y = ay + ra * (sb * uy - ca * ny)
+        q2x = bx + rb * (sb * ux - ca * nx)
+        q2y = by + rb * (sb * uy - ca * ny)
+        d1 = q1y - p1y
+        d2 = q2y - p2y
+        y0 = (j0 - cy) / fy         # the first row's centre, normalized
+        e1 = cone & (abs(d1) > 1e-12)   # a level segment: its ends lie on the discs
+        e2 = cone & (abs(d2) > 1e-12)
+        i1 = 1.0 / (d1 if e1 else 1.0) if e1 else 0.0
+        i2 = 1.0 / (d2 if e2 else 1.0) if e2 else 0.0
+        S[S_T10 * nc + kk] = f32((y0 - p1y) * i1) if e1 else f32(2.0)      # off: t = 2 + r 0 on every row
+        S[S_T1R * nc + kk] = f32(y_step * i1)
+        S[S_T20 * nc + kk] = f32((y0 - p2y) * i2) if e2 else f32(2.0)
+        S[S_T2R * nc + kk] = f32(y_step * i2)
+        S[S_X10 * nc + kk] = f32(fx * p1x + cx)
+        S[S_X1D * nc + kk] = f32(fx * (q1x - p1x))
+        S[S_X20 * nc + kk] = f32(fx * p2x + cx)
+        S[S_X2D * nc + kk] = f32(fx * (q2x - p2x))
+        S[S_DA0 * nc + kk] = f32(y0 - ay)     # row minus disc centre, normalized
+        S[S_DB0 * nc + kk] = f32(y0 - by)
+        S[S_RA2 * nc + kk] = f32(ra * ra)
+        S[S_RB2 * nc + kk] = f32(rb * rb)
+        S[S_AXP * nc + kk] = f32(fx * ax + cx)
+        S[S_BXP * nc + kk] = f32(fx * bx + cx)
+
+
+@numba.njit(cache=True, inline="always", fastmath=DETERMINISTIC_FASTMATH)
+def _spans(S, k, nrow, dr, fx32, Wm, I0, I1):  # pragma: no cover - compiled
+    """Pixel columns ``I0[r] .. I1[r]`` (inclusive; ``1, 0`` when empty) whose centres lie in the 2-D hull of
+    capsule ``k`` of the set-up table (:func:`_setup_caps`) on its ``r``-th counted pixel row, ``r < nrow``
+    (computed for whole 8-row vectors: ``I0``, ``I1`` have room); ``dr`` the row step, ``fx32`` the focal length,
+    ``Wm`` the last column. The hull is the union of the two discs' chords and the two tangent segments' crossings
+    of the row. Float32 over the rows (vectorized)."""
+    f32 = np.float32
+    nc = numba.uint64(NC)
+    kk = numba.uint64(k)
+    t10, t1r, x10, x1d = f32(S[S_T10 * nc + kk]), f32(S[S_T1R * nc + kk]), f32(S[S_X10 * nc + kk]), f32(S[S_X1D * nc + kk])
+    t20, t2r, x20, x2d = f32(S[S_T20 * nc + kk]), f32(S[S_T2R * nc + kk]), f32(S[S_X20 * nc + kk]), f32(S[S_X2D * nc + kk])
+    da0, db0 = f32(S[S_DA0 * nc + kk]), f32(S[S_DB0 * nc + kk])
+    ra2, rb2, axp, bxp = f32(S[S_RA2 * nc + kk]), f32(S[S_RB2 * nc + kk]), f32(S[S_AXP * nc + kk]), f32(S[S_BXP * nc + kk])
     zero, one, big = f32(0.0), f32(1.0), f32(1e9)
     for r in range((nrow + 7) & ~7):
         rf = f32(np.int32(r))       # the same value; int32 -> float32 is one vector instruction, int64 is not (AVX2)
@@ -126,44 +221,38 @@ def _spans(G, c, j0, nrow, stride, fx, cx, fy, cy, W, I0, I1):  # pragma: no cov
         hi = max(hi, bxp + sq) if hb >= zero else hi
         t = t10 + rf * t1r                          # the tangent segments' crossings
         x = x10 + t * x1d
-        ok = (t >= t1lo) & (t <= one)
+        ok = (t >= zero) & (t <= one)
         lo = min(lo, x) if ok else lo
         hi = max(hi, x) if ok else hi
         t = t20 + rf * t2r
         x = x20 + t * x2d
-        ok = (t >= t2lo) & (t <= one)
+        ok = (t >= zero) & (t <= one)
         lo = min(lo, x) if ok else lo
         hi = max(hi, x) if ok else hi
         u0 = max(np.ceil(lo), zero)                 # pixel centres u with lo <= u <= hi, in the image
         u1 = min(np.floor(hi), Wm)
         e = u0 <= u1
-        k = numba.uint64(r)
-        I0[k] = np.int32(u0) if e else np.int32(1)
-        I1[k] = np.int32(u1) if e else np.int32(0)
+        k8 = numba.uint64(r)
+        I0[k8] = np.int32(u0) if e else np.int32(1)
+        I1[k8] = np.int32(u1) if e else np.int32(0)
 
 
 @numba.njit(cache=True, inline="always", fastmath=DETERMINISTIC_FASTMATH)
-def _raster_cap(G, c, U, u_off, stride, Hs, fx, cx, fy, cy, W, H, I0, I1):  # pragma: no cover - compiled
-    """OR capsule ``c``'s pixels (every ``stride``-th row) into the bitmap ``U[u_off:]`` (``Hs`` sampled rows per
-    word column); returns ``(ok, jj0, jj1, w0, w1)``: whether it has rows and columns in the image, its sampled
-    rows and word columns (inclusive)."""
-    if G[c, G_VALID] == 0.0:
+def _raster_cap(S, k, U, u_off, stride, Hs, dr, fx32, Wm, I0, I1):  # pragma: no cover - compiled
+    """OR capsule ``k``'s pixels of the set-up table (:func:`_setup_caps`; every ``stride``-th row) into the bitmap
+    ``U[u_off:]`` (``Hs`` sampled rows per word column); returns ``(ok, jj0, jj1, w0, w1)``: whether it has rows
+    and columns in the image, its sampled rows and word columns (inclusive)."""
+    nc = numba.uint64(NC)
+    kk = numba.uint64(k)
+    if S[S_OK * nc + kk] == 0.0:
         return False, 0, 0, 0, 0
-    ax, ay, L, ra, rb = G[c, G_AX], G[c, G_AY], G[c, G_LEN], G[c, G_RA], G[c, G_RB]
-    bx = ax + L * G[c, G_UX]
-    by = ay + L * G[c, G_UY]
-    j0 = max(0, int(np.ceil(fy * min(ay - ra, by - rb) + cy)))
-    j1 = min(H - 1, int(np.floor(fy * max(ay + ra, by + rb) + cy)))
-    j0 = (j0 + stride - 1) // stride * stride
-    if j1 < j0:
-        return False, 0, 0, 0, 0
-    u0 = max(0, int(np.floor(fx * min(ax - ra, bx - rb) + cx)))
-    u1 = min(W - 1, int(np.ceil(fx * max(ax + ra, bx + rb) + cx)))
-    if u1 < u0:
-        return False, 0, 0, 0, 0
+    j0 = int(S[S_J0 * nc + kk])
+    j1 = int(S[S_J1 * nc + kk])
+    u0 = int(S[S_U0 * nc + kk])
+    u1 = int(S[S_U1 * nc + kk])
     nrow = (j1 - j0) // stride + 1
     jj0 = j0 // stride
-    _spans(G, c, j0, nrow, stride, fx, cx, fy, cy, float(W), I0, I1)
+    _spans(S, k, nrow, dr, fx32, Wm, I0, I1)
     w0 = u0 >> 6
     w1 = u1 >> 6
     ones = numba.uint64(0xFFFFFFFFFFFFFFFF)
@@ -172,12 +261,32 @@ def _raster_cap(G, c, U, u_off, stride, Hs, fx, cx, fy, cy, W, H, I0, I1):  # pr
         o = u_off + w * Hs + jj0
         b64 = np.int64(64 * w)
         for r in range(nrow):
-            k = numba.uint64(r)
-            a = min(max(np.int64(I0[k]) - b64, np.int64(0)), np.int64(64))
-            b = min(max(np.int64(I1[k]) - b64 + 1, np.int64(0)), np.int64(64))
+            k8 = numba.uint64(r)
+            a = min(max(np.int64(I0[k8]) - b64, np.int64(0)), np.int64(64))
+            b = min(max(np.int64(I1[k8]) - b64 + 1, np.int64(0)), np.int64(64))
             m = (ones << numba.uint64(a)) & (ones if b == 64 else ~(ones << numba.uint64(b)))
             U[numba.uint64(o + r)] |= m if b > a else z64
     return True, jj0, jj0 + nrow - 1, w0, w1
+
+
+@numba.njit(cache=True, inline="always", fastmath=DETERMINISTIC_FASTMATH)
+def _raster_caps(CP, caps, radii, cl, n, cam_K, cov_wh, v, stride, S, U, u_off, Hs, nw, I0, I1):  # pragma: no cover
+    """OR the capsules ``cl[:n]`` of view ``v`` into ``U[u_off:]`` (blocks of ``NC``: :func:`_setup_caps`, then
+    :func:`_raster_cap` each); returns the sampled rows and word columns they touched ``(jlo, jhi, wlo, whi)``
+    (``Hs, -1, nw, -1`` for none)."""
+    fx, fy, cx, cy = cam_K[v, 0], cam_K[v, 1], cam_K[v, 2], cam_K[v, 3]
+    W = float(cov_wh[v, 0])
+    H = float(cov_wh[v, 1])
+    dr, fx32, Wm = np.float32(stride / fy), np.float32(fx), np.float32(W - 1.0)
+    jlo, jhi, wlo, whi = Hs, -1, nw, -1
+    for k0 in range(0, n, NC):
+        nb = min(NC, n - k0)
+        _setup_caps(CP, caps, radii, cl, k0, nb, fx, cx, fy, cy, W, H, stride, S)
+        for k in range(nb):
+            ok, jj0, jj1, w0, w1 = _raster_cap(S, k, U, u_off, stride, Hs, dr, fx32, Wm, I0, I1)
+            if ok:
+                jlo, jhi, wlo, whi = min(jlo, jj0), max(jhi, jj1), min(wlo, w0), max(whi, w1)
+    return jlo, jhi, wlo, whi
 
 
 @numba.njit(cache=True, inline="always", fastmath=DETERMINISTIC_FASTMATH)
@@ -196,7 +305,8 @@ def _raster_rows(X, lo, hi, body, views, raster, out):  # pragma: no cover - com
     R = np.empty((J, 3, 3))
     P = np.empty((J, 3))
     CP = np.empty((J, 4))
-    G = np.empty((C, G_COLS))
+    cl = np.arange(C)
+    S = np.empty(S_ROWS * NC)               # the capsules' set-up table (_setup_caps)
     U = np.zeros(Hs * nw + 8, np.uint64)    # the union bitmap, cleared while counted
     I0 = np.zeros(Hs + 8, np.int32)
     I1 = np.zeros(Hs + 8, np.int32)
@@ -206,15 +316,8 @@ def _raster_rows(X, lo, hi, body, views, raster, out):  # pragma: no cover - com
         total = 0.0
         for v in range(V):
             _to_camera(P, cam_R, cam_t, v, CP)
-            _project_caps(CP, caps, radii, G)
-            fx, fy, cx, cy = cam_K[v, 0], cam_K[v, 1], cam_K[v, 2], cam_K[v, 3]
-            W = cov_wh[v, 0]
-            H = cov_wh[v, 1]
-            jlo, jhi, wlo, whi = Hs, -1, nw, -1     # the union's sampled rows and words
-            for c in range(C):
-                ok, jj0, jj1, w0, w1 = _raster_cap(G, c, U, 0, stride, Hs, fx, cx, fy, cy, W, H, I0, I1)
-                if ok:
-                    jlo, jhi, wlo, whi = min(jlo, jj0), max(jhi, jj1), min(wlo, w0), max(whi, w1)
+            # the union's sampled rows and words
+            jlo, jhi, wlo, whi = _raster_caps(CP, caps, radii, cl, C, cam_K, cov_wh, v, stride, S, U, 0, Hs, nw, I0, I1)
             cm = 0      # |M| and |M and F| on the sampled rows
             cmf = 0
             fv = fbits[v]
@@ -262,27 +365,22 @@ def raster_restrict_prepare(x, body, views, raster, moving):  # pragma: no cover
     P = np.empty((J, 3))
     _fk_one(x, parents, offsets, ptr, dofs, axes, R, P)
     CP = np.zeros((V, J, 4))
-    G = np.zeros((V, C, G_COLS))
     Ufix = np.zeros(fbits.shape, np.uint64)
     cnt = np.zeros((V, 2), np.int64)
     I0 = np.zeros(Hs + 8, np.int32)
     I1 = np.zeros(Hs + 8, np.int32)
+    cl = np.flatnonzero(~moving)            # the fixed capsules
+    S = np.empty(S_ROWS * NC)
     for v in range(V):
         _to_camera(P, cam_R, cam_t, v, CP[v])
-        _project_caps(CP[v], caps, radii, G[v])
-        jlo, jhi, wlo, whi = Hs, -1, nw, -1
-        for c in range(C):
-            if not moving[c]:
-                ok, jj0, jj1, w0, w1 = _raster_cap(G[v], c, Ufix[v], 0, stride, Hs, cam_K[v, 0], cam_K[v, 2],
-                                                   cam_K[v, 1], cam_K[v, 3], cov_wh[v, 0], cov_wh[v, 1], I0, I1)
-                if ok:
-                    jlo, jhi, wlo, whi = min(jlo, jj0), max(jhi, jj1), min(wlo, w0), max(whi, w1)
+        jlo, jhi, wlo, whi = _raster_caps(CP[v], caps, radii, cl, cl.shape[0], cam_K, cov_wh, v, stride, S, Ufix[v], 0,
+                                          Hs, nw, I0, I1)
         for w in range(wlo, whi + 1):
             for j in range(jlo, jhi + 1):
                 u = Ufix[v, w * Hs + j]
                 cnt[v, 0] += _popcount(u)
                 cnt[v, 1] += _popcount(u & fbits[v, w * Hs + j])
-    return R, P, CP, G, Ufix, cnt
+    return R, P, CP, Ufix, cnt
 
 
 @numba.njit(parallel=True, cache=True, fastmath=DETERMINISTIC_FASTMATH)
@@ -297,13 +395,12 @@ def raster_restricted(X, restriction, body, views, raster, stage, n_chunks, out)
     parents, offsets, ptr, dofs, axes, caps, radii = body
     cam_R, cam_t, cam_K, cam_D, cam_hasd, cov, cov_wh, view_w = views
     fbits, nfg, nw, stride = raster
-    R0, P0, CP0, G0, Ufix, cnt = stage
+    R0, P0, CP0, Ufix, cnt = stage
     n = X.shape[0]
     V = cam_R.shape[0]
     Hs = (fbits.shape[1] - 8) // nw
     Lv = fbits.shape[1]
     nm = mov_caps.shape[0]
-    z64 = numba.uint64(0)
     wsum = 0.0
     for v in range(V):
         wsum += view_w[v]
@@ -313,7 +410,7 @@ def raster_restricted(X, restriction, body, views, raster, stage, n_chunks, out)
         R = R0.copy()
         P = P0.copy()
         CP = CP0.copy()
-        G = G0.copy()
+        S = np.empty(S_ROWS * NC)           # the moving capsules' set-up table (_setup_caps)
         U = Ufix.copy().reshape(-1)         # view v at v * Lv
         I0 = np.zeros(Hs + 8, np.int32)
         I1 = np.zeros(Hs + 8, np.int32)
@@ -329,30 +426,24 @@ def raster_restricted(X, restriction, body, views, raster, stage, n_chunks, out)
             total = 0.0
             for v in range(V):
                 CPv = CP[v]
-                Gv = G[v]
                 for j in cam_joints:
                     _to_camera_joint(P, cam_R, cam_t, v, CPv, j)
-                fx, fy, cx, cy = cam_K[v, 0], cam_K[v, 1], cam_K[v, 2], cam_K[v, 3]
-                jlo, jhi, wlo, whi = Hs, -1, nw, -1     # the words the moving capsules touched
-                for m in range(nm):
-                    c = mov_caps[m]
-                    _project_cap(CPv, caps, radii, Gv, c)
-                    ok, jj0, jj1, w0, w1 = _raster_cap(Gv, c, U, v * Lv, stride, Hs, fx, cx, fy, cy, cov_wh[v, 0],
-                                                       cov_wh[v, 1], I0, I1)
-                    if ok:
-                        jlo, jhi, wlo, whi = min(jlo, jj0), max(jhi, jj1), min(wlo, w0), max(whi, w1)
+                # the words the moving capsules touched
+                jlo, jhi, wlo, whi = _raster_caps(CPv, caps, radii, mov_caps, nm, cam_K, cov_wh, v, stride, S, U,
+                                                  v * Lv, Hs, nw, I0, I1)
                 cm = cnt[v, 0]
                 cmf = cnt[v, 1]
+                fv = fbits[v]
+                Uf = Ufix[v]
                 for w in range(wlo, whi + 1):
-                    for j in range(jlo, jhi + 1):
-                        k = w * Hs + j
-                        u = U[v * Lv + k]
-                        f = Ufix[v, k]
-                        d = u ^ f   # the moving capsules' new pixels (u holds f): |u| - |f| = |d|
-                        if d != z64:    # a word they left alone changes neither count and needs no restoring
-                            cm += _popcount(d)
-                            cmf += _popcount(d & fbits[v, k])
-                            U[v * Lv + k] = f
+                    for j in range(jlo, jhi + 1):   # branch-free: a word they left alone adds 0 (vectorizes)
+                        k = numba.uint64(w * Hs + j)
+                        kv = numba.uint64(v * Lv) + k
+                        f = Uf[k]
+                        d = U[kv] ^ f   # the moving capsules' new pixels (u holds f): |u| - |f| = |d|
+                        cm += _popcount(d)
+                        cmf += _popcount(d & fv[k])
+                        U[kv] = f
                 t1 = (cm - cmf) / cm if cm > 0 else 1.0
                 t2 = (nfg[v] - cmf) / nfg[v] if nfg[v] > 0 else 1.0
                 total += view_w[v] * (0.5 * t1 + 0.5 * t2)
