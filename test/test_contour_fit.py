@@ -254,3 +254,62 @@ def test_model_contour_from_the_scanline_outline(scene):
         assert cKDTree(exact).query(pix)[0].max() <= 1.0 and cKDTree(pix).query(exact)[0].max() <= 1.0
         total += len(pix)
     assert sum(len(f) for _, f, _ in fit._points(R, P)) == total
+
+
+def test_outer_contour_in_the_foreground_box_is_the_whole_images():
+    """The model silhouette's contour taken by OpenCV in the box of its pixels (tracking/contour.py) is the whole
+    image's, point for point and in the same order: blobs inside, several blobs, blobs cut by each image border,
+    an empty image; and the compiled box is numpy's."""
+    import cv2
+
+    from isa_mocap_ros.tracking import contour_kernel
+    from isa_mocap_ros.tracking.contour import _outer_contour
+
+    rng = np.random.default_rng(5)
+    for trial in range(60):
+        img = np.zeros((48, 64), np.uint8)
+        for _ in range(trial % 4):
+            c = (int(rng.integers(-6, 70)), int(rng.integers(-6, 54)))
+            cv2.ellipse(img, c, (int(rng.integers(1, 15)), int(rng.integers(1, 15))), float(rng.uniform(0, 180)),
+                        0, 360, 255, -1)
+        whole, _ = cv2.findContours(img, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+        want = np.concatenate(whole).reshape(-1, 2) if whole else np.zeros((0, 2), np.int32)
+        got = _outer_contour(img)
+        assert got.dtype == want.dtype and np.array_equal(got, want)
+        ys, xs = np.nonzero(img)
+        box = contour_kernel.foreground_box(img, 1)
+        if len(ys):
+            assert box == (max(0, ys.min() - 1), min(48, ys.max() + 2), max(0, xs.min() - 1), min(64, xs.max() + 2))
+        else:
+            assert box[1] <= box[0]
+
+
+def test_outline_box_holds_the_drawn_silhouette(scene):
+    """The box the fit takes OpenCV's contour in (contour_kernel.outline_box, from the capsules' end discs) holds every
+    pixel fill_capsules draws with a margin: the contour in it is the whole image's, for poses moved far off the
+    scene's, parts of the body out of the image included."""
+    import cv2
+
+    from isa_mocap_ros.body.kinematics import frames_and_axes
+    from isa_mocap_ros.tracking import contour_kernel
+    from isa_mocap_ros.tracking.contour import _outer_contour
+    from isa_mocap_ros.vision.outline import camera_arrays, fill_capsules
+
+    model, rig, x0, _ = scene
+    rng = np.random.default_rng(7)
+    cut = 0
+    for trial in range(40):
+        x = x0 + rng.normal(0, 0.15, model.dof)
+        x[:3] += rng.normal(0, 0.6, 3)
+        _, P, _ = frames_and_axes(model, x)
+        E = np.ascontiguousarray(P[np.asarray(model.capsules)])
+        for cam in rig:
+            sil = np.zeros((cam.height, cam.width), np.uint8)
+            fill_capsules(E, np.asarray(model.capsule_radii, np.float64), *camera_arrays(cam), 0.0, sil, np.uint8(255))
+            whole, _ = cv2.findContours(sil, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+            want = np.concatenate(whole).reshape(-1, 2) if whole else np.zeros((0, 2), np.int32)
+            box = contour_kernel.outline_box(E, np.asarray(model.capsule_radii, np.float64), *camera_arrays(cam),
+                                             cam.height, cam.width)
+            assert np.array_equal(_outer_contour(sil, box), want)
+            cut += bool(sil[0].any() or sil[-1].any() or sil[:, 0].any() or sil[:, -1].any())
+    assert cut > 0            # some silhouettes reach the image border

@@ -30,7 +30,7 @@ from ..numba_cache import register_dependent_cache
 from ..vision.outline import project_point
 from ..vision.render import raycast_at
 
-__all__ = ["back_project", "contour_points", "match", "mark_pixels", "compose_root", "finish_step"]
+__all__ = ["back_project", "contour_points", "match", "mark_pixels", "foreground_box", "outline_box", "compose_root", "finish_step"]
 
 # numba keys a cached function on its own file only: the functions here compile the rotations, the projection and the
 # ray cast of these modules into their machine code, so an edit there must also miss this module's cache
@@ -163,3 +163,68 @@ def finish_step(out, x, Rc, theta, lower, upper):  # pragma: no cover - compiled
     out[3], out[4], out[5] = r[0], r[1], r[2]
     for i in range(out.size):
         out[i] = min(max(out[i], lower[i]), upper[i])
+
+
+@numba.njit(cache=True)
+def foreground_box(img, pad):  # pragma: no cover - compiled
+    """``(y0, y1, x0, x1)``: the rows ``y0:y1`` and columns ``x0:x1`` of the smallest box holding every nonzero pixel of
+    ``img (H, W)``, grown by ``pad`` on each side within the image (``y1 <= y0`` when there is none)."""
+    H, W = img.shape
+    y0, y1, x0, x1 = H, 0, W, 0
+    for y in range(H):
+        acc = 0
+        for x in range(W):
+            acc |= img[y, x]
+        if acc == 0:
+            continue
+        if y0 == H:
+            y0 = y
+        y1 = y + 1
+        a = 0
+        while img[y, a] == 0:
+            a += 1
+        b = W
+        while img[y, b - 1] == 0:
+            b -= 1
+        x0, x1 = min(x0, a), max(x1, b)
+    if y1 <= y0:
+        return 0, 0, 0, 0
+    return max(0, y0 - pad), min(H, y1 + pad), max(0, x0 - pad), min(W, x1 + pad)
+
+
+@numba.njit(cache=True)
+def outline_box(E, radii, cam_R, cam_t, K4, D8, hasd, H, W):  # pragma: no cover - compiled
+    """``(y0, y1, x0, x1)``: rows ``y0:y1`` and columns ``x0:x1`` of an ``(H, W)`` image holding every pixel that
+    :func:`~isa_mocap_ros.vision.outline.fill_capsules` (margin 0) draws for the capsules ``E``, ``radii`` in this camera,
+    with at least one row and column of undrawn pixels around them or the image's border (``y1 <= y0``: none drawn):
+    the union of the boxes of the end discs it fills the hulls of (the same projection and the same capsules left
+    out), grown by a pixel."""
+    y0, y1, x0, x1 = H, 0, W, 0
+    for c in range(E.shape[0]):
+        ok = True
+        lo_u, hi_u, lo_v, hi_v = np.inf, -np.inf, np.inf, -np.inf
+        for e in range(2):
+            u, v, zc = project_point(E[c, e, 0], E[c, e, 1], E[c, e, 2], cam_R, cam_t, K4, D8, hasd)
+            if not zc > 1e-3:
+                ok = False
+                break
+            r = K4[0] * radii[c, e] / zc
+            if not (np.isfinite(u) and np.isfinite(v) and np.isfinite(r)):
+                ok = False
+                break
+            u = min(max(u, -1e6), 1e6)
+            v = min(max(v, -1e6), 1e6)
+            r = min(max(r, 0.0), 1e6)
+            lo_u, hi_u = min(lo_u, u - r), max(hi_u, u + r)
+            lo_v, hi_v = min(lo_v, v - r), max(hi_v, v + r)
+        if not ok:
+            continue
+        a, b = max(0, int(np.floor(lo_v)) - 1), min(H, int(np.floor(hi_v)) + 2)
+        if b > a:
+            y0, y1 = min(y0, a), max(y1, b)
+        a, b = max(0, int(np.floor(lo_u)) - 1), min(W, int(np.floor(hi_u)) + 2)
+        if b > a:
+            x0, x1 = min(x0, a), max(x1, b)
+    if y1 <= y0 or x1 <= x0:
+        return 0, 0, 0, 0
+    return y0, y1, x0, x1
