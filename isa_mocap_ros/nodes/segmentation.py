@@ -161,6 +161,8 @@ class SegmentationNode(Node):
         self.streams = [StreamForks(lambda v=v: self._new_segmenter(v), back_ns=gap_ns, ahead_ns=gap_ns)
                         for v in range(self.n_views)]
         self.shedder = LateSetShedder(int(late_s * 1e9), reset_ns=gap_ns)
+        self._pending_bursts: list[int] | None = None      # bursts not logged yet: [bursts, sets, first, last, age]
+        self._burst_logged_at = -float("inf")
         self.restarts = [0] * self.n_views
         self.stream_restarts = [0] * self.n_views
         self._warm_up()
@@ -274,11 +276,18 @@ class SegmentationNode(Node):
         self._log_burst(self.shedder.pop_burst())
         return late
 
-    def _log_burst(self, burst) -> None:
+    def _log_burst(self, burst, *, final: bool = False) -> None:
+        """One log line per burst of skipped sets, at most one every 5 s (bursts in between are summed into it)."""
         if burst is not None:
+            p = self._pending_bursts
+            self._pending_bursts = [1, burst.sets, burst.first_stamp_ns, burst.last_stamp_ns, burst.max_age_ns] \
+                if p is None else [p[0] + 1, p[1] + burst.sets, p[2], burst.last_stamp_ns, max(p[4], burst.max_age_ns)]
+        p, now = self._pending_bursts, time.monotonic()
+        if p is not None and (final or now - self._burst_logged_at >= 5.0):
+            self._pending_bursts, self._burst_logged_at = None, now
             self.get_logger().info(
-                f"segmentation: {burst.sets} late frame set{'s' if burst.sets > 1 else ''} skipped in every view "
-                f"(stamps {burst.first_stamp_ns}..{burst.last_stamp_ns}, up to {burst.max_age_ns / 1e6:.0f} ms late; "
+                f"segmentation: {p[1]} late frame set{'s' if p[1] > 1 else ''} skipped in every view "
+                f"({p[0]} burst{'s' if p[0] > 1 else ''}, stamps {p[2]}..{p[3]}, up to {p[4] / 1e6:.0f} ms late; "
                 f"late_set_s {self.shedder.max_age_ns / 1e9:g}; {self.shedder.shed_sets} in all)")
 
     def _segment(self, v: int, seg: BackgroundSegmenter, msg: Image, img: np.ndarray, *, t0: float | None) -> None:
@@ -322,7 +331,7 @@ class SegmentationNode(Node):
     def close(self) -> None:
         """Log the masks published and the per-image processing time."""
         lat = np.array(self.latency_s) * 1e3
-        self._log_burst(self.shedder.pop_burst(flush=True))
+        self._log_burst(self.shedder.pop_burst(flush=True), final=True)
         text = (f"segmentation: {sum(self.masks_published)} masks published {self.masks_published}, "
                 f"{sum(n for k, n in self.problems.counts.items() if k.startswith('image'))} images dropped"
                 + (f", {infos} camera infos dropped" if (infos := sum(n for k, n in self.problems.counts.items()
