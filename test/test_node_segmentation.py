@@ -337,3 +337,46 @@ def test_a_lone_pair_far_from_the_stream_changes_no_mask_and_a_real_restart_rele
     out = seg.output()
     assert "segmented on a background model of its own" in out, out
     assert "the stream restarted" in out and "streams restarted [2, 1]" in out, out
+
+
+@pytest.mark.parametrize("late_set_s", [0.2, 0.0])
+def test_a_late_frame_set_is_skipped_in_every_view_and_segmented_with_the_shedding_off(spawn, rosenv, tmp_path,
+                                                                                      late_set_s):
+    """Stamps are the wall clock's (a live camera). After the learning and two sets on time, a set stamped 33 ms after
+    the last but sent 0.6 s later (its images waited that long) is skipped in both views with ``late_set_s`` 0.2 (one
+    log line for the burst, counted at close), and segmented in both with it 0 (off: what ``run --lockstep`` sets);
+    the next set, on time, is segmented either way."""
+    import time
+
+    seg = _start(spawn, tmp_path, late_set_s=late_set_s)
+    src = _source(0.6)
+    with ros_node(rosenv, "seg_test") as (node, ex):
+        h = Harness(node, ex, 2)
+        assert spin_until(ex, h.connected, 20)
+
+        def send_set(stamp, *, wait):
+            for v, img in enumerate(src.read()):
+                msg = ma.array_to_image(img, "rgb8", stamp_ns=stamp, frame_id=f"cam{v}_optical_frame")
+                ok = h.send(v, msg, wait_for=stamp if wait else None)
+                assert ok or not wait, (stamp, v, seg.output())
+
+        on_time = []
+        for _ in range(LEARN + 2):
+            on_time.append(time.time_ns())
+            send_set(on_time[-1], wait=True)
+        late = on_time[-1] + 33_333_333
+        time.sleep(0.6)
+        send_set(late, wait=late_set_s == 0.0)
+        on_time.append(time.time_ns())
+        send_set(on_time[-1], wait=True)
+        spin_until(ex, lambda: False, 0.3)
+    for v in range(2):
+        assert all(t in h.masks[v] for t in on_time), v
+        assert (late in h.masks[v]) == (late_set_s == 0.0), (v, seg.output())
+    assert h.masks[0][on_time[-1]].data != h.masks[0][on_time[0]].data     # the person, not a learning mask
+    assert seg.stop() == 0
+    out = seg.output()
+    if late_set_s:
+        assert "1 late frame set skipped in every view" in out and "1 late frame sets skipped" in out, out
+    else:
+        assert "late frame set" not in out, out

@@ -108,6 +108,10 @@ def _network(args: argparse.Namespace, params: str, out: Path, n_views: int,
         if val is not None:
             est.append((key, str(val)))
     seg = [("views", str(n_views))] + ([("learn_frames", str(learn_frames))] if learn_frames else [])
+    if args.lockstep or getattr(args, "rate", 1.0) != 1.0:
+        # late sets are shed by their stamps' age (nodes/segmentation.py late_set_s): never in lockstep (bit for
+        # bit the offline tracker), and not at another rate, where the stamps do not advance at wall speed
+        seg.append(("late_set_s", "0.0"))
     if args.lockstep:
         # Deterministic runs must not lose a frame: make the image and mask subscriptions reliable
         # (they are best effort, qos_profile_sensor_data, by default).

@@ -42,6 +42,12 @@ image of the same stamp agree on (frame id and size; the image's encoding with i
 Every dropped message is counted (``close()`` prints the total) and logged, one rate-limited line
 per view and kind, and reported on ``/diagnostics`` at 1 Hz. ``use_camera_info: false`` is for a camera without camera_info: then the first
 image fixes the view's size and encoding, and a later change needs a restart of the node.
+
+In real time under load, ``late_set_s`` > 0 skips a frame set in every view when its first image here is older than
+that (:class:`~isa_mocap_ros.late_sets.LateSetShedder`: the header stamp against the stream's offset), so the node
+drops whole sets instead of losing single views in its queues; counted on ``/diagnostics``
+(``late_sets_skipped``), one log line per burst. Off by default and in lockstep
+(docs/segmentation_prior_prediction.md "Late frame sets, shed whole").
 """
 from __future__ import annotations
 
@@ -60,6 +66,7 @@ from sensor_msgs.msg import CameraInfo, Image
 import msg_adapters as ma
 from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.intake import Setting, StreamForks, ViewGate
+from isa_mocap_ros.late_sets import LateSetShedder
 from isa_mocap_ros.nodes.common import (QOS_OVERRIDES, ProblemLog, camera_info_callback, declare, log_closing,
                                         run_node)
 from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig, SegmentationError
@@ -137,6 +144,11 @@ class SegmentationNode(Node):
                         "model of its own that the view keeps only if the next image follows it (0 = no check)", lo=0.0, hi=1e9)
         depth = declare(self, "input_queue", 10, "images waiting for the camera_info of their stamp (and camera "
                         "infos for their image), per view", lo=1, hi=1000)
+        late_s = declare(self, "late_set_s", 0.0, "real time: a frame set whose first image here is older than "
+                         "this (its stamp against the stream's offset, the smallest arrival - stamp seen) is skipped "
+                         "in every view, so a node under load drops whole sets, not single views (0 = off; stamps "
+                         "must advance at wall speed: a live camera, a replay at rate 1.0; never in lockstep)",
+                         lo=0.0, hi=1e3)
         self.config = SegmentationConfig(**values)
         if plates and len(plates) != self.n_views:
             raise ValueError(f"clean_plates: expected one entry per view ({self.n_views}), received {len(plates)}")
@@ -148,6 +160,9 @@ class SegmentationNode(Node):
         gap_ns = int(gap_s * 1e9) if gap_s > 0 else 2**62
         self.streams = [StreamForks(lambda v=v: self._new_segmenter(v), back_ns=gap_ns, ahead_ns=gap_ns)
                         for v in range(self.n_views)]
+        self.shedder = LateSetShedder(int(late_s * 1e9), reset_ns=gap_ns)
+        self._pending_bursts: list[int] | None = None      # bursts not logged yet: [bursts, sets, first, last, age]
+        self._burst_logged_at = -float("inf")
         self.restarts = [0] * self.n_views
         self.stream_restarts = [0] * self.n_views
         self._warm_up()
@@ -244,7 +259,36 @@ class SegmentationNode(Node):
                 self.stream_restarts[v] += 1
                 self._reported[v] = False
                 self.get_logger().warn(f"cam{v}: {why}: the background model begun at its first image is the view's")
+            elif self._late(a.stamp_ns, learning=seg.learning):
+                continue
             self._segment(v, seg, *a.payload, t0=t0)
+
+    def _late(self, stamp_ns: int, *, learning: bool) -> bool:
+        """Whether the set of ``stamp_ns`` is shed (:class:`LateSetShedder`; never while learning, where its images
+        only teach the stream's offset, never at a far or restarting stamp); one log line per burst of shed sets,
+        when it ends."""
+        if not self.shedder.enabled:
+            return False
+        if learning:
+            self.shedder.age_ns(stamp_ns, time.time_ns())
+            return False
+        late = self.shedder.shed(stamp_ns, arrival_ns=time.time_ns())
+        self._log_burst(self.shedder.pop_burst())
+        return late
+
+    def _log_burst(self, burst, *, final: bool = False) -> None:
+        """One log line per burst of skipped sets, at most one every 5 s (bursts in between are summed into it)."""
+        if burst is not None:
+            p = self._pending_bursts
+            self._pending_bursts = [1, burst.sets, burst.first_stamp_ns, burst.last_stamp_ns, burst.max_age_ns] \
+                if p is None else [p[0] + 1, p[1] + burst.sets, p[2], burst.last_stamp_ns, max(p[4], burst.max_age_ns)]
+        p, now = self._pending_bursts, time.monotonic()
+        if p is not None and (final or now - self._burst_logged_at >= 5.0):
+            self._pending_bursts, self._burst_logged_at = None, now
+            self.get_logger().info(
+                f"segmentation: {p[1]} late frame set{'s' if p[1] > 1 else ''} skipped in every view "
+                f"({p[0]} burst{'s' if p[0] > 1 else ''}, stamps {p[2]}..{p[3]}, up to {p[4] / 1e6:.0f} ms late; "
+                f"late_set_s {self.shedder.max_age_ns / 1e9:g}; {self.shedder.shed_sets} in all)")
 
     def _segment(self, v: int, seg: BackgroundSegmenter, msg: Image, img: np.ndarray, *, t0: float | None) -> None:
         t0 = time.perf_counter() if t0 is None else t0
@@ -275,7 +319,7 @@ class SegmentationNode(Node):
         st = DiagnosticStatus(name="isa_mocap_ros: segmentation", hardware_id="segmentation")
         values = {"masks_published": self.masks_published, "bad_inputs": self.problems.total,
                   "problems": json.dumps(self.problems.counts), "learning_restarts": self.restarts,
-                  "stream_restarts": self.stream_restarts,
+                  "stream_restarts": self.stream_restarts, "late_sets_skipped": self.shedder.shed_sets,
                   "views_learning": [v for v, seg in enumerate(self.segmenters) if seg.learning],
                   "images_waiting_for_camera_info": [g.waiting() for g in self.gates]}
         st.level = DiagnosticStatus.OK if self.problems.total == 0 else DiagnosticStatus.WARN
@@ -287,12 +331,14 @@ class SegmentationNode(Node):
     def close(self) -> None:
         """Log the masks published and the per-image processing time."""
         lat = np.array(self.latency_s) * 1e3
+        self._log_burst(self.shedder.pop_burst(flush=True), final=True)
         text = (f"segmentation: {sum(self.masks_published)} masks published {self.masks_published}, "
                 f"{sum(n for k, n in self.problems.counts.items() if k.startswith('image'))} images dropped"
                 + (f", {infos} camera infos dropped" if (infos := sum(n for k, n in self.problems.counts.items()
                                                                       if k.startswith('info'))) else "")
                 + (f", learning restarted {self.restarts} (camera changes)" if any(self.restarts) else "")
                 + (f", streams restarted {self.stream_restarts}" if any(self.stream_restarts) else "")
+                + (f", {self.shedder.shed_sets} late frame sets skipped" if self.shedder.shed_sets else "")
                 + (f", per image {np.median(lat):.2f} ms median / {np.percentile(lat, 95):.2f} ms p95 / "
                    f"{lat.max():.1f} ms max" if lat.size else ""))
         log_closing(self, text)
