@@ -135,28 +135,3 @@ def test_bad_input_is_named(scene):
         KeypointEnergy(model, rig, kp, min_confidence=2)
     with pytest.raises(EnergyError, match="X"):
         KeypointEnergy(model, rig, kp)(np.zeros((2, 5)))
-
-
-def test_ears_midpoint_as_the_head_is_an_option(scene, monkeypatch):
-    """``HEAD_FROM_EARS``: the two ears' midpoint pairs the head joint (zero at the truth), off by default."""
-    from isa_mocap_ros.energy import keypoints as kpmod
-
-    model, rig, x0, kp = scene
-    head = joint_positions(model, x0)[0][model.joint_names.index("head")]
-    with_ears = []
-    for cam, (uv, c) in zip(rig, kp):
-        uv, c = uv.copy(), c.copy()
-        h = cam.project(head[None])[0]
-        for name, du in (("left_ear", 4.0), ("right_ear", -4.0)):     # either side of the head's projection
-            uv[LANDMARK_NAMES.index(name)] = h + [du, 0.0]
-            c[LANDMARK_NAMES.index(name)] = 0.9 if name == "left_ear" else 0.7
-        with_ears.append((uv, c))
-    assert not kpmod.HEAD_FROM_EARS and KeypointEnergy(model, rig, with_ears).n_correspondences == 4 * 14
-    monkeypatch.setattr(kpmod, "HEAD_FROM_EARS", True)
-    f = KeypointEnergy(model, rig, with_ears)
-    assert f.n_correspondences == 4 * 15
-    is_head = f.joints == model.joint_names.index("head")
-    assert is_head.sum() == 4 and np.allclose(f.confidences[is_head], 0.7)
-    d = f.distances(x0[None])[0]
-    np.testing.assert_allclose(d[~is_head], 0.0, atol=1e-9)
-    np.testing.assert_allclose(d[is_head], 0.0, atol=1e-6)

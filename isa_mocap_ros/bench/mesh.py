@@ -265,8 +265,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="keypoints on the first frames and every K-th frame after (default: track's, 8)")
     p.add_argument("--silhouette-core-px", type=float, default=None, metavar="PX",
                    help="the tracker's silhouette_core_px (docs/energy.md; default the tracker's)")
-    p.add_argument("--chain-fraction", type=float, default=None, metavar="F",
-                   help="the tracker's chain stage share (docs/tracking.md; default the tracker's, off)")
     p.add_argument("--leg-untwist", type=float, default=None, metavar="TOL",
                    help="the tracker's untwist stage on with this tolerance (docs/tracking.md; default off)")
     p.add_argument("--pelvis-fraction", type=float, default=None, metavar="F",
@@ -285,7 +283,7 @@ def run(args: argparse.Namespace) -> int:
             if note:
                 print(f"isa-mocap bench mesh: {note}", file=sys.stderr)
         tracker = tuple((k, getattr(args, k)) for k in ("keypoint_weight", "keypoint_every", "silhouette_core_px",
-                                                        "chain_fraction", "pelvis_fraction", "leg_untwist")
+                                                        "pelvis_fraction", "leg_untwist")
                         if getattr(args, k, None) is not None)
         cseeds = None if getattr(args, "calib_seeds", None) is None else tuple(int(x) for x in comma_list(args.calib_seeds))
         design = make_design("quick" if args.quick else "default", seeds=seeds, frames=args.frames,

@@ -51,9 +51,6 @@ _TRACKER_OPTIONS = (
     ("--coarse-fraction", float, None, "F",
      "share of each partition's generations of the main search evaluated on the energy's coarse level (--energy "
      "fast: two views; raster: every second pixel row; docs/energy.md); 0 = off (default: the tracker's default)"),
-    ("--chain-fraction", float, None, "F",
-     "budget share of the chain stage: root, lower spine, hips and knees searched together (docs/tracking.md; "
-     "0 = off; default: the tracker's default)"),
     ("--leg-untwist", float, None, "TOL",
      "the untwist stage on (docs/tracking.md): each thigh's twist halved or undone, the ankle turned back, taken "
      "when its energy is below the pose's times 1 + TOL (0: strictly lower; default: the tracker's, off)"),
@@ -291,9 +288,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         cfg_kw["view_weights"] = False
     if getattr(args, "init_confirm_frames", None) is not None:
         cfg_kw["init_confirm_frames"] = args.init_confirm_frames
-    for name in ("chain_fraction", "pelvis_fraction"):
-        if getattr(args, name, None) is not None:
-            cfg_kw[name] = getattr(args, name)
+    if getattr(args, "pelvis_fraction", None) is not None:
+        cfg_kw["pelvis_fraction"] = args.pelvis_fraction
     if getattr(args, "leg_untwist", None) is not None:
         cfg_kw.update(leg_untwist=True, leg_untwist_tolerance=args.leg_untwist)
     if getattr(args, "coarse_fraction", None) is not None:

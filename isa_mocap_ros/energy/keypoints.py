@@ -53,10 +53,6 @@ LANDMARK_TO_JOINT: dict[str, str] = {
     "left_ankle": "left_ankle", "right_ankle": "right_ankle",
     "left_foot_index": "left_toe", "right_foot_index": "right_toe",
 }
-#: an option (issue 34, off): the midpoint of the two ears' pixels (confidence the lower of the two) as a landmark
-#: of the model's ``head`` joint (the head's pivot on the neck, at the ears' height), which the 14 above leave free
-HEAD_FROM_EARS = False
-_EARS = (LANDMARK_NAMES.index("left_ear"), LANDMARK_NAMES.index("right_ear"))
 
 
 def geman_mcclure(d2: np.ndarray, sigma: float) -> np.ndarray:
@@ -121,8 +117,6 @@ class KeypointEnergy:
         names = set(model.joint_names)
         pairs = [(LANDMARK_NAMES.index(lm), model.joint_names.index(j)) for lm, j in LANDMARK_TO_JOINT.items()
                  if j in names]
-        if HEAD_FROM_EARS and "head" in names:
-            pairs.append((N_LANDMARKS, model.joint_names.index("head")))      # the ears' midpoint, appended below
         lm_idx = np.array([p[0] for p in pairs], dtype=np.int64)
         jt_idx = np.array([p[1] for p in pairs], dtype=np.int64)
         joints, dirs, moms, w, views, pix = [], [], [], [], [], []
@@ -138,9 +132,6 @@ class KeypointEnergy:
             if uv.shape != (N_LANDMARKS, 2) or conf.shape != (N_LANDMARKS,):
                 raise EnergyError(f"keypoints[{v}]: expected uv (33, 2) and confidence (33,), received "
                                   f"{uv.shape} and {conf.shape}")
-            if HEAD_FROM_EARS:
-                uv = np.vstack([uv, uv[list(_EARS)].mean(axis=0)])
-                conf = np.append(conf, conf[list(_EARS)].min())
             u, c = uv[lm_idx], conf[lm_idx]
             ok = np.all(np.isfinite(u), axis=1) & np.isfinite(c) & (c >= min_confidence) & (c <= 1.0)
             if not ok.any():

@@ -350,8 +350,6 @@ class StageConfig:
         Budget share of the pelvis stage: root re-fitted with the thighs re-aimed about the knees (0.15; 0 = off).
     torso_fraction : float
         Budget share of the torso stage (hierarchical optimizers): spine and neck with the upper arms re-aimed (0.13; 0 = off).
-    chain_fraction : float
-        Budget share of the chain stage: root, lower spine, hips and knees searched together, the thighs re-aimed about the knees (0 = off; tracking/chain_moves.py).
     leg_untwist : bool
         The untwist stage after the limb stage: each thigh's twist about its axis halved or undone, the ankle turned back (False = off; tracking/chain_moves.py).
     leg_untwist_tolerance : float
@@ -382,7 +380,6 @@ class StageConfig:
 
     pelvis_fraction: float = 0.15
     torso_fraction: float = 0.13
-    chain_fraction: float = 0.0
     leg_untwist: bool = False
     leg_untwist_tolerance: float = 0.0
     limb_proposals: int = 16
@@ -398,17 +395,13 @@ class StageConfig:
     contour_max_px: float = 2.0
 
     def __post_init__(self) -> None:
-        for name in ("pelvis_fraction", "torso_fraction", "chain_fraction"):
+        for name in ("pelvis_fraction", "torso_fraction"):
             _number(name, getattr(self, name), lo=0.0)
             if getattr(self, name) >= 1.0:
                 raise TrackerError(f"{name}: expected a share in [0, 1), received {getattr(self, name)!r}")
         if self.pelvis_fraction + self.torso_fraction >= 1.0:
             raise TrackerError(f"pelvis_fraction + torso_fraction: expected below 1 (the main search needs a share), "
                                f"received {self.pelvis_fraction!r} + {self.torso_fraction!r}")
-        if self.pelvis_fraction + self.torso_fraction + self.chain_fraction >= 1.0:
-            raise TrackerError(f"pelvis_fraction + torso_fraction + chain_fraction: expected below 1 (the main search "
-                               f"needs a share), received {self.pelvis_fraction!r} + {self.torso_fraction!r} + "
-                               f"{self.chain_fraction!r}")
         _bool("leg_untwist", self.leg_untwist)
         _number("leg_untwist_tolerance", self.leg_untwist_tolerance, lo=0.0)
         _number("limb_proposals", self.limb_proposals, lo=0, integer=True)

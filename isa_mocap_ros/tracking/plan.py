@@ -156,4 +156,3 @@ def contour_share(tr, notes, budget: FrameBudget) -> int | None:
                          f"frame budget ({budget.evals})")
         return None
     return share
-

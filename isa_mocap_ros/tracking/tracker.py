@@ -281,9 +281,8 @@ class Tracker:
         torso = plan.torso_share(self, notes, budget) if stages else None
         limbs = plan.limb_stage(self, notes, x0, budget) if stages else ([], [], 0)
         contour = plan.contour_share(self, notes, budget) if stages else None
-        chain = chain_moves.chain_share(self, notes, budget) if stages else None
         budget = budget.evals - (share or 0) - (torso or 0) - plan.limb_share(self, len(limbs[0]), limbs[2]) \
-            - (contour or 0) - (chain or 0) - (chain_moves.untwist_share(self) if stages else 0)
+            - (contour or 0) - (chain_moves.untwist_share(self) if stages else 0)
         if torso is not None:
             # the torso stage never starves the main search: two generations per partition stay
             need = 2 * (sum(plan.flat_generation(self, len(p)) for p in self.partitions)
@@ -296,7 +295,7 @@ class Tracker:
                 torso = None
         if inner_optimizer(cfg.search.optimizer) is None:
             budget = whole_generations(budget, opt.generation_size)     # (hierarchical: its split does this)
-        return opt, budget, (share, torso, limbs, contour, chain), (lo, hi, spread, base)
+        return opt, budget, (share, torso, limbs, contour), (lo, hi, spread, base)
 
     def optimize(self, ctx: FrameContext, pred: np.ndarray, rng: np.random.Generator, *, spread_scale: float = 1.0,
                  notes=None, stages: bool = True, budget: FrameBudget | None = None):
@@ -316,7 +315,7 @@ class Tracker:
 
         opt, budget, stage_shares, (lo, hi, spread, base) = self.plan_search(
             pred, rng, ctx.budget if budget is None else budget, spread_scale, notes, stages)
-        share, torso, limbs, contour, chain = stage_shares
+        share, torso, limbs, contour = stage_shares
         res = compiled_search.search(opt, self.energy, budget, extra_terms=ctx.objective.extra_terms,
                                      keypoints=ctx.objective.weighted_keypoints,
                                      coarse_fraction=self.config.search.coarse_fraction) \
@@ -337,12 +336,6 @@ class Tracker:
                                                   energy=res.energy if share is not None else None,
                                                   bounds=(lo, hi), spread=spread)
             spare += torso - n
-            res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
-            exact = True
-        if chain is not None:           # chain_moves.py: root, lower spine, hips and knees together
-            x, e, n, _ = chain_moves.refit_chain(self, ctx, res.x, evals=chain + spare, rng=rng,
-                                                 energy=res.energy if exact else None, bounds=(lo, hi))
-            spare += chain - n
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
             exact = True
         limbs, hinge, n_limb = limbs
