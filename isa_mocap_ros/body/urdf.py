@@ -64,6 +64,16 @@ def _rpy_to_rotvec(Q, out):  # pragma: no cover - compiled
         log_so3_into(B, out[k])
 
 
+def _per_triple(kernel, values, name: str) -> np.ndarray:
+    """``kernel(in (n, 3), out (n, 3))`` over the last axis of ``values (..., 3)``; a clear error for another shape."""
+    a = np.asarray(values, dtype=float)
+    if a.ndim < 1 or a.shape[-1] != 3:
+        raise BodyError(f"{name}: expected shape (..., 3), got {a.shape}")
+    out = np.empty(a.shape)
+    kernel(np.ascontiguousarray(a.reshape(-1, 3)), out.reshape(-1, 3))
+    return out
+
+
 def root_rotvec_to_euler(rotvec) -> np.ndarray:
     """Rotation vectors to ``(roll, pitch, yaw)`` with ``R = Rz(yaw) Ry(pitch) Rx(roll)``.
 
@@ -76,22 +86,12 @@ def root_rotvec_to_euler(rotvec) -> np.ndarray:
     rpy : (..., 3) ndarray
         ``pitch ∈ [-π/2, π/2]``; at ``|pitch| = π/2`` (gimbal lock) roll is set to 0.
     """
-    w = np.asarray(rotvec, dtype=float)
-    if w.ndim < 1 or w.shape[-1] != 3:
-        raise BodyError(f"rotvec: expected shape (..., 3), got {w.shape}")
-    out = np.empty(w.shape)
-    _rotvec_to_rpy(np.ascontiguousarray(w.reshape(-1, 3)), out.reshape(-1, 3))
-    return out
+    return _per_triple(_rotvec_to_rpy, rotvec, "rotvec")
 
 
 def euler_to_root_rotvec(rpy) -> np.ndarray:
     """Inverse of :func:`root_rotvec_to_euler`: ``(roll, pitch, yaw) (..., 3) -> rotvec (..., 3)``."""
-    rpy = np.asarray(rpy, dtype=float)
-    if rpy.ndim < 1 or rpy.shape[-1] != 3:
-        raise BodyError(f"rpy: expected shape (..., 3), got {rpy.shape}")
-    out = np.empty(rpy.shape)
-    _rpy_to_rotvec(np.ascontiguousarray(rpy.reshape(-1, 3)), out.reshape(-1, 3))
-    return out
+    return _per_triple(_rpy_to_rotvec, rpy, "rpy")
 
 
 def pose_to_joint_state(model: BodyModel, X) -> np.ndarray:
