@@ -69,13 +69,13 @@ def _padded_distortion(dist) -> np.ndarray:
     return out
 
 
-def _outer_contour(img: np.ndarray, box=None) -> np.ndarray:
+def _outer_contour(img: np.ndarray, box) -> np.ndarray:
     """``(k, 2)`` int32 outer contour pixels ``(u, v)`` of the nonzero pixels of the uint8 image ``img``: OpenCV's
-    ``findContours`` (external, every pixel) in the box of those pixels with a row and column of background around it,
-    or the image's border, which OpenCV pads with background as it does for the whole image: the same contours,
-    point for point and in the same order, without scanning the empty rest of the image. ``box``: ``(y0, y1, x0, x1)``
-    known to hold those pixels with that margin (:func:`.contour_kernel.outline_box`; default: found by scanning)."""
-    y0, y1, x0, x1 = contour_kernel.foreground_box(img, 1) if box is None else box
+    ``findContours`` (external, every pixel) in ``box`` = ``(y0, y1, x0, x1)``, which holds those pixels with a row
+    and column of background around them or the image's border (OpenCV pads with background as it does for the whole
+    image): the same contours, point for point and in the same order, without scanning the empty rest of the image
+    (``box``: :func:`.contour_kernel.outline_box`, or the whole image ``(0, H, 0, W)``)."""
+    y0, y1, x0, x1 = box
     if y1 <= y0:
         return np.zeros((0, 2), dtype=np.int32)
     contours, _ = cv2.findContours(img[y0:y1, x0:x1], cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE, offset=(x0, y0))
@@ -303,11 +303,8 @@ class ContourFit:
             sil.fill(0)
             fill_capsules(E, radii, *self._outline_cams[v], 0.0, sil, np.uint8(255))
             return _outer_contour(sil, contour_kernel.outline_box(E, radii, *self._outline_cams[v], *sil.shape))
-        contours, _ = cv2.findContours(render_mask(cam, E, radii, capsules=capsules), cv2.RETR_EXTERNAL,
-                                       cv2.CHAIN_APPROX_NONE)
-        if not contours:
-            return np.zeros((0, 2), dtype=np.int32)
-        return np.concatenate(contours).reshape(-1, 2)
+        sil = render_mask(cam, E, radii, capsules=capsules)
+        return _outer_contour(sil, (0, sil.shape[0], 0, sil.shape[1]))
 
     def _pairs(self, points: list, R: np.ndarray, P: np.ndarray):
         """:meth:`correspondences` of the pose with joint rotations ``R`` and positions ``P``, the matching

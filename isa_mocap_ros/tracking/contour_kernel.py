@@ -30,7 +30,7 @@ from ..numba_cache import register_dependent_cache
 from ..vision.outline import project_point
 from ..vision.render import raycast_at
 
-__all__ = ["back_project", "contour_points", "match", "mark_pixels", "foreground_box", "outline_box", "compose_root", "finish_step"]
+__all__ = ["back_project", "contour_points", "match", "mark_pixels", "outline_box", "compose_root", "finish_step"]
 
 # numba keys a cached function on its own file only: the functions here compile the rotations, the projection and the
 # ray cast of these modules into their machine code, so an edit there must also miss this module's cache
@@ -163,33 +163,6 @@ def finish_step(out, x, Rc, theta, lower, upper):  # pragma: no cover - compiled
     out[3], out[4], out[5] = r[0], r[1], r[2]
     for i in range(out.size):
         out[i] = min(max(out[i], lower[i]), upper[i])
-
-
-@numba.njit(cache=True)
-def foreground_box(img, pad):  # pragma: no cover - compiled
-    """``(y0, y1, x0, x1)``: the rows ``y0:y1`` and columns ``x0:x1`` of the smallest box holding every nonzero pixel of
-    ``img (H, W)``, grown by ``pad`` on each side within the image (``y1 <= y0`` when there is none)."""
-    H, W = img.shape
-    y0, y1, x0, x1 = H, 0, W, 0
-    for y in range(H):
-        acc = 0
-        for x in range(W):
-            acc |= img[y, x]
-        if acc == 0:
-            continue
-        if y0 == H:
-            y0 = y
-        y1 = y + 1
-        a = 0
-        while img[y, a] == 0:
-            a += 1
-        b = W
-        while img[y, b - 1] == 0:
-            b -= 1
-        x0, x1 = min(x0, a), max(x1, b)
-    if y1 <= y0:
-        return 0, 0, 0, 0
-    return max(0, y0 - pad), min(H, y1 + pad), max(0, x0 - pad), min(W, x1 + pad)
 
 
 @numba.njit(cache=True)
