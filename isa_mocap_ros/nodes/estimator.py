@@ -142,10 +142,13 @@ class EstimatorNode(EstimatorIntake, Node):
         degrade = declare(self, "degrade", True, "real time: while the tracker does not keep up with the frame sets, "
                           "lower its budget (contour stage off, then fewer evaluations) before dropping sets, and "
                           "return to the full budget when it catches up (isa_mocap_ros.tracking.load; lockstep: never)")
-        degrade_min_evals = declare(self, "degrade_min_evals", 300, "degrade: fewest evaluations per frame set",
-                                    lo=1, hi=1_000_000)
+        degrade_min_evals = declare(self, "degrade_min_evals", 300, "degrade: fewest evaluations a set", lo=1, hi=10**6)
         degrade_headroom = declare(self, "degrade_headroom", 0.85, "degrade: a budget fits when its step time is "
                                    "below this share of frame_period_s", lo=0.05, hi=1.0)
+        slow_only = declare(self, "degrade_slow_drops_only", True, "degrade: a dropped set is overload only beside a "
+                            "step over the headroom; a step up to the contour stage is projected with its cost")
+        fixed_share = declare(self, "degrade_fixed_share", 0.3, "degrade: share of a full-budget step that does not "
+                              "scale with the evaluations (projects a step between levels)", lo=0.0, hi=0.95)
         self.rehearsal = declare(
             self, "startup_rehearsal", True, "while the frame sets are empty (the segmentation's learning frames, "
             "nobody in view yet), run the first-frame hull once on the real cameras with a rendered standing body, so "
@@ -190,7 +193,7 @@ class EstimatorNode(EstimatorIntake, Node):
                                    limit_ms=self.startup_catch_up_ms, stale_ms=self.startup_catch_up_stale_ms),
             governor=LoadGovernor(LoadSettings(
                 evals=self.tracker_config.search.evals, period_s=self.frame_period_s, headroom=degrade_headroom,
-                min_evals=degrade_min_evals)) if degrade else None)
+                min_evals=degrade_min_evals, slow_drops_only=slow_only, fixed_share=fixed_share)) if degrade else None)
         self.governor = self.schedule.governor
         self.catch_up = self.schedule.startup
         self.budget_reason = ""          # the governor's last change, for /diagnostics
@@ -468,6 +471,7 @@ class EstimatorNode(EstimatorIntake, Node):
             self.trace.write(json.dumps({
                 "stamp": frame_set.stamp_ns, "gap": gap, "evals": result.n_evals, "init": result.initialized,
                 "contour": budget.contour_stage, "step_ms": 1e3 * result.time_s, "energy": result.energy,
+                "step_cpu_ms": 1e3 * (time.thread_time() - cpu0),   # (and the governor's account, ~0.1 ms)
                 "waited_ms": 1e3 * (time.monotonic() - t_ready), **(self.schedule.last_account or {})},
                 default=float) + "\n")
         if d is not None:
