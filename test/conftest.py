@@ -159,8 +159,8 @@ def joint_states_by_stamp(bag: Path) -> dict:
 # `make test` runs `pytest -n 2 --dist loadgroup --no-loadscope-reorder`: each group below runs whole on one
 # worker, in the order of this list (the longest first, so no long file starts last on one worker while the other
 # idles), then the other files, one group each, in collection order. Groups keep a module's (or, for the network
-# files, a session's) fixtures from being built on both workers. The order is a schedule, measured on the idle
-# 2-core machine (`--durations`, session 33): a stale entry costs balance, never a result.
+# files, a session's) fixtures from being built on both workers. The order is a schedule, from an idle 2-core run's
+# `--durations` (docs/history/ci_test_time_s33.md): a stale entry costs balance, never a result.
 TEST_GROUPS = (
     ("network_fixture", ("test_network.py", "test_network_keypoints.py", "test_network_fuzz.py")),
     ("energy_silhouette", ("test_energy_silhouette.py",)),
