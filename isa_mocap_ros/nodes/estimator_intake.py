@@ -32,6 +32,30 @@ class EstimatorIntake:
     frame set's prediction and keypoints. Mixed into :class:`~isa_mocap_ros.nodes.estimator.EstimatorNode`, whose
     ``__init__`` sets the state these methods use (``gates``, ``sync``, ``slot``, ``_cv``, ``_intrinsics``, ...)."""
 
+    # -- the tracker ----------------------------------------------------------------------------------------------
+    def _new_tracker(self, cams: list):
+        """A tracker of ``cams`` with the node's config; its own prediction (used when the prediction node's is
+        missing) goes through the same JointState conversions as the prediction node's."""
+        from isa_mocap_ros.tracking.published import PublishedPredictor
+        from isa_mocap_ros.tracking.tracker import Tracker
+
+        tracker = Tracker(self.model, cams, self.tracker_config)
+        tracker.predictor = PublishedPredictor(self.model, tracker.predictor)
+        return tracker
+
+    def _second_opinion(self, masks: list, stamp_ns: int, result):
+        """The recovery's probe on the set just tracked (:meth:`~isa_mocap_ros.tracking.realtime.RealTimeSchedule.probe`):
+        an adopted probe replaces the tracker and its result the track's (its notes say so: one INFO line); the sets
+        dropped meanwhile are not counted as load. Returns the set's result."""
+        cams = self.tracker.cameras
+        probe, probe_result, adopted = self.schedule.probe(result, masks, stamp_ns, lambda: self._new_tracker(cams))
+        with self._cv:
+            self.schedule.seen_drops()
+            if adopted:
+                self.tracker = probe
+                self.schedule.recovered(probe)
+        return probe_result if adopted else result
+
     # -- calibration and masks: checked before they reach the synchronizer (isa_mocap_ros.intake) ----------
     def _info_cb(self, v: int):
         def take(stamp_ns, setting, intr) -> None:
