@@ -176,6 +176,7 @@ def main(argv=None) -> int:
                        lowered=schedule.governor.lowered, caught_up=schedule.startup.caught_up,
                        probes=schedule.recovery.probes if schedule.recovery else 0,
                        recoveries=schedule.recovery.adopted if schedule.recovery else 0,
+                       probe_log=[dict(p, k=stamps.index(p["frame"])) for p in schedule.probe_log],
                        steps=[{k: v for k, v in s.items() if k != "x"} for s in steps])
             rows.append(row)
             print(f"{bag.name} catch-up {catch_up} (stale {a.catch_up_stale_ms:g} ms) seed {seed} load {a.load:g}: dropped {dropped} (start-up "

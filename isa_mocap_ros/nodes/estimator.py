@@ -147,8 +147,9 @@ class EstimatorNode(EstimatorIntake, Node):
                                     lo=1, hi=1_000_000)
         degrade_headroom = declare(self, "degrade_headroom", 0.85, "degrade: a budget fits when its step time is "
                                    "below this share of frame_period_s", lo=0.05, hi=1.0)
-        recovery = declare(self, "recovery", True, "real time: after the track drifted at a lowered budget, a fresh "
-                           "initialization on the same set replaces it when clearly better (tracking/recovery.py)")
+        recovery = declare(self, "recovery", False, "real time: after the track drifted at a lowered budget, a fresh "
+                           "initialization on the same set replaces it when clearly better (tracking/recovery.py; off: "
+                           "measured worse, docs/nodes.md)")
         self.rehearsal = declare(
             self, "startup_rehearsal", True, "while the frame sets are empty (the segmentation's learning frames, "
             "nobody in view yet), run the first-frame hull once on the real cameras with a rendered standing body, so "

@@ -80,6 +80,7 @@ class RealTimeSchedule:
         self.governor = None if self.lockstep else governor
         self.recovery = None if self.governor is None else recovery
         self.probe_due = False             # the set tracked last is due a second opinion (see probe)
+        self.probe_log: list[dict] = []    # per probe: frame key, the probe's and the track's energy, adopted
         self.frames_caught_up = 0          # sets tracked without the contour stage because they were late
         self.last_decision: Decision | None = None   # the governor's last change of budget
         self.last_account: dict | None = None        # the governor's account of the last step (None: not counted)
@@ -170,7 +171,10 @@ class RealTimeSchedule:
         case :meth:`seen_drops` once the probe's time has passed (the sets dropped meanwhile are the probe's, not
         load the governor counts)."""
         self.probe_due = False
-        return second_opinion(make_tracker, masks, frame_index, result, self.recovery)
+        probe, r, adopted = second_opinion(make_tracker, masks, frame_index, result, self.recovery)
+        self.probe_log.append(dict(frame=int(frame_index), probe_energy=float(r.energy),
+                                   track_energy=float(result.energy), adopted=bool(adopted)))
+        return probe, r, adopted
 
     def recovered(self, tracker) -> None:
         """An adopted probe, ``tracker``, is the track now: the governor's energies start anew, and the sets after it
