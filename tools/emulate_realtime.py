@@ -101,6 +101,7 @@ def main(argv=None) -> int:
     from isa_mocap_ros.tracking.load import LoadGovernor, LoadSettings, StartupCatchUp
     from isa_mocap_ros.tracking.published import PublishedPredictor
     from isa_mocap_ros.tracking.realtime import RealTimeSchedule, emulate
+    from isa_mocap_ros.tracking.recovery import Recovery, RecoverySettings
     from isa_mocap_ros.tracking.tracker import Tracker
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -117,6 +118,10 @@ def main(argv=None) -> int:
     p.add_argument("--load", type=float, default=1.0, help="step times × this (2: one core busy)")
     p.add_argument("--cost", default="0.010,9e-6,0.005,0.060",
                    help="fixed_s,per_eval_s,contour_s,init_s of the step cost (default: fitted to the idle bench)")
+    p.add_argument("--recovery", action="store_true",
+                   help="the estimator's recovery (tracking/recovery.py): a second opinion after a drift under load")
+    p.add_argument("--recovery-settings", default="",
+                   help="RecoverySettings fields, e.g. cooldown=30,adopt_ratio=0.7 (with --recovery)")
     p.add_argument("--trace", action="store_true", help="print every tracked set: energy, the governor's state, error")
     p.add_argument("--out", required=True, help="JSON of every run (its steps included)")
     a = p.parse_args(argv)
@@ -125,6 +130,8 @@ def main(argv=None) -> int:
     masks = segmented_masks(bag, seq, out.with_name(bag.name + ".masks.npz"))
     stamps = [int(f.stamp_ns) for f in seq.frames]
     step_s = cost_model(*(float(v) for v in a.cost.split(",")), load=a.load)
+    settings = {k: (float(v) if "." in v else int(v)) for k, v in
+                (kv.split("=") for kv in a.recovery_settings.split(",") if kv)}
     rows = []
     for catch_up in a.catch_up or [0]:
         for seed in (int(s) for s in a.seeds.split(",")):
@@ -137,10 +144,16 @@ def main(argv=None) -> int:
                 startup=StartupCatchUp(sets=catch_up, evals=a.catch_up_evals, limit_ms=a.catch_up_ms,
                                        stale_ms=a.catch_up_stale_ms),
                 governor=LoadGovernor(LoadSettings(evals=cfg.search.evals, period_s=PERIOD,
-                                                   min_evals=a.min_evals)))
+                                                   min_evals=a.min_evals)),
+                recovery=Recovery(RecoverySettings(**settings)) if a.recovery else None)
             governed = governor_trace(schedule)
+
+            def make_tracker():
+                t = Tracker(model, seq.cameras, cfg)
+                t.predictor = PublishedPredictor(model, t.predictor)
+                return t
             done_steps, dropped = emulate(tracker, masks, schedule, period_s=PERIOD, step_s=step_s,
-                                          frame_key=lambda k: stamps[k])
+                                          frame_key=lambda k: stamps[k], make_tracker=make_tracker)
             steps = [dict(k=s.k, x=s.result.x, initialized=s.result.initialized, evals=s.result.n_evals,
                           budget=s.budget.evals, contour=s.budget.contour_stage, latency_ms=s.latency_s * 1e3,
                           gap=s.gap, **{**g, "energy": float(s.result.energy)}) for s, g in zip(done_steps, governed)]
@@ -161,11 +174,15 @@ def main(argv=None) -> int:
                        startup_dropped=startup, p50_ms=float(np.percentile(lat, 50)) if lat else None,
                        p95_ms=float(np.percentile(lat, 95)) if lat else None, mpjpe_mm=acc.get("mpjpe_mm"),
                        lowered=schedule.governor.lowered, caught_up=schedule.startup.caught_up,
+                       probes=schedule.recovery.probes if schedule.recovery else 0,
+                       recoveries=schedule.recovery.adopted if schedule.recovery else 0,
+                       probe_log=[dict(p, k=stamps.index(p["frame"])) for p in schedule.probe_log],
                        steps=[{k: v for k, v in s.items() if k != "x"} for s in steps])
             rows.append(row)
             print(f"{bag.name} catch-up {catch_up} (stale {a.catch_up_stale_ms:g} ms) seed {seed} load {a.load:g}: dropped {dropped} (start-up "
                   f"{len(startup)}), latency p50 {row['p50_ms']:.0f} p95 {row['p95_ms']:.0f} ms (virtual), "
-                  f"{row['mpjpe_mm']:.1f} mm, budget lowered {row['lowered']}, caught up {row['caught_up']}", flush=True)
+                  f"{row['mpjpe_mm']:.1f} mm, budget lowered {row['lowered']}, caught up {row['caught_up']}, "
+                  f"probes {row['probes']} (recoveries {row['recoveries']})", flush=True)
             out.write_text(json.dumps(rows))
     return 0
 

@@ -224,6 +224,7 @@ def write_report(bag: Path, out: Path, *, args: argparse.Namespace, play_summary
         "budget_lowered": int(diag.get("budget_lowered", 0) or 0),
         "budget_level": diag.get("budget_level"),
         "track_resets": int(diag.get("track_resets", 0) or 0),
+        "recoveries": int(diag.get("recoveries", 0) or 0),
     }
     seq = read_sequence(bag, want_images=True, want_masks=False)
     # of those, the sets of the start-up: the first run of sets without an estimate after the first

@@ -72,7 +72,7 @@ from isa_mocap_ros.nodes.estimator_intake import EstimatorIntake
 from isa_mocap_ros.tracking.predict import periods_between
 from isa_mocap_ros.tracking.sync import FrameSynchronizer
 from isa_mocap_ros.tracking.config import TrackerConfig, field_docs
-from isa_mocap_ros.tracking.load import LoadGovernor, LoadSettings, StartupCatchUp
+from isa_mocap_ros.tracking.load import StartupCatchUp
 from isa_mocap_ros.tracking.realtime import RealTimeSchedule, warm_up
 from isa_mocap_ros.vision.overlay import draw_overlay
 
@@ -89,7 +89,7 @@ NOT_PARAMETERS: tuple[str, ...] = ()
 #: the frames before anyone is in view (the segmentation's background-learning frames), the automatic
 #: initialization, the heading check, stages that their budget share or the pose leaves out. Logged at
 #: INFO and counted apart from bad inputs; every other note is logged at WARN and counted as a problem.
-EXPECTED_NOTES = ("initialized automatically", "heading check", "initialization polish",
+EXPECTED_NOTES = ("initialized automatically", "heading check", "initialization polish", "recovered: ",
                   "no usable view and no estimate yet", "contour stage: stopped", "limb stage: ",
                   "prediction: the external one follows the estimates from before the heading check")
 _EXPECTED_NOTE_PATTERNS = (re.compile(r"view \d+: empty mask \(nobody in view\)"),
@@ -139,16 +139,6 @@ class EstimatorNode(EstimatorIntake, Node):
             self, "startup_catch_up_stale_ms", 0.0, "startup_catch_up: a held set that already waited longer than this "
             "when its turn comes is dropped instead, the oldest first (its estimate would come too late, and tracking "
             "it would make the newer sets late too); the newer ones are caught up (0 = never)", lo=0.0, hi=60_000.0)
-        degrade = declare(self, "degrade", True, "real time: while the tracker does not keep up with the frame sets, "
-                          "lower its budget (contour stage off, then fewer evaluations) before dropping sets, and "
-                          "return to the full budget when it catches up (isa_mocap_ros.tracking.load; lockstep: never)")
-        degrade_min_evals = declare(self, "degrade_min_evals", 300, "degrade: fewest evaluations a set", lo=1, hi=10**6)
-        degrade_headroom = declare(self, "degrade_headroom", 0.85, "degrade: a budget fits when its step time is "
-                                   "below this share of frame_period_s", lo=0.05, hi=1.0)
-        slow_only = declare(self, "degrade_slow_drops_only", True, "degrade: a dropped set is overload only beside a "
-                            "step over the headroom; a step up to the contour stage is projected with its cost")
-        fixed_share = declare(self, "degrade_fixed_share", 0.3, "degrade: share of a full-budget step that does not "
-                              "scale with the evaluations (projects a step between levels)", lo=0.0, hi=0.95)
         self.rehearsal = declare(
             self, "startup_rehearsal", True, "while the frame sets are empty (the segmentation's learning frames, "
             "nobody in view yet), run the first-frame hull once on the real cameras with a rendered standing body, so "
@@ -186,14 +176,13 @@ class EstimatorNode(EstimatorIntake, Node):
         # real time: which sets the tracker gets and at what budget (isa_mocap_ros.tracking.realtime): the frame
         # budget under load (governor; None: always the full budget), the start-up's sets caught up after the
         # initialization, late sets without the contour stage
+        governor, recovery, min_evals = self._declare_degrade()
         self.schedule = RealTimeSchedule(
             evals=self.tracker_config.search.evals, heading_sets=self.tracker_config.heading.init_confirm_frames,
             lockstep=self.lockstep, backlog=self.backlog, catch_up_ms=self.catch_up_ms,
-            startup=StartupCatchUp(sets=self.startup_catch_up, evals=degrade_min_evals,
+            startup=StartupCatchUp(sets=self.startup_catch_up, evals=min_evals,
                                    limit_ms=self.startup_catch_up_ms, stale_ms=self.startup_catch_up_stale_ms),
-            governor=LoadGovernor(LoadSettings(
-                evals=self.tracker_config.search.evals, period_s=self.frame_period_s, headroom=degrade_headroom,
-                min_evals=degrade_min_evals, slow_drops_only=slow_only, fixed_share=fixed_share)) if degrade else None)
+            governor=governor, recovery=recovery)
         self.governor = self.schedule.governor
         self.catch_up = self.schedule.startup
         self.budget_reason = ""          # the governor's last change, for /diagnostics
@@ -440,14 +429,9 @@ class EstimatorNode(EstimatorIntake, Node):
                                               f"(world -> the masks' frame) yet for views {missing}", level="error")
                 self._done(frame_set.stamp_ns)
                 return
-            from isa_mocap_ros.tracking.published import PublishedPredictor
-            from isa_mocap_ros.tracking.tracker import Tracker
             # of its cameras, those whose data the worker built ahead from the camera_infos (Tracker() finds them)
             self.cameras_ready_ahead = sum(c.key() in self._prepared_keys for c in cams)
-            self.tracker = Tracker(self.model, cams, self.tracker_config)
-            # The estimator's own prediction (used when the prediction node's is missing) goes
-            # through the same JointState conversions as the prediction node's.
-            self.tracker.predictor = PublishedPredictor(self.model, self.tracker.predictor)
+            self.tracker = self._new_tracker(cams)
         prediction = None
         if prediction_msg is not None:
             from isa_mocap_ros.body import joint_state_to_pose
@@ -467,6 +451,8 @@ class EstimatorNode(EstimatorIntake, Node):
         with self._cv:
             # the governor's account (a track lost for long re-initializes the tracker), the catch-up's
             d = self.schedule.after(self.tracker, result, budget=budget, waited_ms=(time.monotonic() - t_ready) * 1e3)
+        if self.schedule.probe_due:      # a drift at a lowered budget: a second opinion (tracking/recovery.py)
+            result = self._second_opinion(masks, frame_set.stamp_ns, result)
         if self.trace is not None:
             self.trace.write(json.dumps({
                 "stamp": frame_set.stamp_ns, "gap": gap, "evals": result.n_evals, "init": result.initialized,
@@ -573,7 +559,9 @@ class EstimatorNode(EstimatorIntake, Node):
             # the budget under load (isa_mocap_ros.tracking.load): level 0 = full, its evaluations and contour stage
             **({"budget_level": g.level, "budget_evals": g.decision().evals,
                 "budget_contour_stage": g.decision().contour_stage, "budget_lowered": g.lowered,
-                "budget_reason": self.budget_reason, "track_resets": g.resets}
+                "budget_reason": self.budget_reason, "track_resets": g.resets,
+                "recovery_probes": getattr(self.schedule.recovery, "probes", 0),
+                "recoveries": getattr(self.schedule.recovery, "adopted", 0)}
                if (g := self.governor) is not None else {"budget_level": "off"}),
             "problems": json.dumps(self.problems.counts), "events": json.dumps(self.problems.events),
         }

@@ -16,7 +16,7 @@ from std_msgs.msg import Header
 
 import msg_adapters as ma
 from isa_mocap_ros.intake import Setting
-from isa_mocap_ros.nodes.common import camera_info_callback, publishers_on
+from isa_mocap_ros.nodes.common import camera_info_callback, declare, publishers_on
 from isa_mocap_ros.tracking.sync import SyncError
 from isa_mocap_ros.vision import Camera
 
@@ -31,6 +31,55 @@ class EstimatorIntake:
     """The input side of the estimator node: subscription callbacks, the cameras they make, and the lookup of a
     frame set's prediction and keypoints. Mixed into :class:`~isa_mocap_ros.nodes.estimator.EstimatorNode`, whose
     ``__init__`` sets the state these methods use (``gates``, ``sync``, ``slot``, ``_cv``, ``_intrinsics``, ...)."""
+
+    # -- the tracker ----------------------------------------------------------------------------------------------
+    def _declare_degrade(self):
+        """The real-time budget's parameters (``degrade*``, ``recovery``; docs/nodes.md): ``(governor, recovery,
+        degrade_min_evals)``, the governor ``None`` with ``degrade`` off and the recovery ``None`` with ``recovery`` off
+        (lockstep uses neither: isa_mocap_ros.tracking.realtime)."""
+        from isa_mocap_ros.tracking.load import LoadGovernor, LoadSettings
+        from isa_mocap_ros.tracking.recovery import Recovery
+
+        degrade = declare(self, "degrade", True, "real time: while the tracker does not keep up with the frame sets, "
+                          "lower its budget (contour stage off, then fewer evaluations) before dropping sets, and "
+                          "return to the full budget when it catches up (isa_mocap_ros.tracking.load; lockstep: never)")
+        min_evals = declare(self, "degrade_min_evals", 300, "degrade: fewest evaluations a set", lo=1, hi=10**6)
+        headroom = declare(self, "degrade_headroom", 0.85, "degrade: a budget fits when its step time is "
+                           "below this share of frame_period_s", lo=0.05, hi=1.0)
+        slow_only = declare(self, "degrade_slow_drops_only", True, "degrade: a dropped set is overload only beside a "
+                            "step over the headroom; a step up to the contour stage is projected with its cost")
+        fixed_share = declare(self, "degrade_fixed_share", 0.3, "degrade: share of a full-budget step that does not "
+                              "scale with the evaluations (projects a step between levels)", lo=0.0, hi=0.95)
+        recovery = declare(self, "recovery", False, "real time: after the track drifted at a lowered budget, a fresh "
+                           "initialization on the same set replaces it when clearly better (tracking/recovery.py; off: "
+                           "measured worse, docs/nodes.md)")
+        governor = LoadGovernor(LoadSettings(
+            evals=self.tracker_config.search.evals, period_s=self.frame_period_s, headroom=headroom,
+            min_evals=min_evals, slow_drops_only=slow_only, fixed_share=fixed_share)) if degrade else None
+        return governor, (Recovery() if recovery else None), min_evals
+
+    def _new_tracker(self, cams: list):
+        """A tracker of ``cams`` with the node's config; its own prediction (used when the prediction node's is
+        missing) goes through the same JointState conversions as the prediction node's."""
+        from isa_mocap_ros.tracking.published import PublishedPredictor
+        from isa_mocap_ros.tracking.tracker import Tracker
+
+        tracker = Tracker(self.model, cams, self.tracker_config)
+        tracker.predictor = PublishedPredictor(self.model, tracker.predictor)
+        return tracker
+
+    def _second_opinion(self, masks: list, stamp_ns: int, result):
+        """The recovery's probe on the set just tracked (:meth:`~isa_mocap_ros.tracking.realtime.RealTimeSchedule.probe`):
+        an adopted probe replaces the tracker and its result the track's (its notes say so: one INFO line); the sets
+        dropped meanwhile are not counted as load. Returns the set's result."""
+        cams = self.tracker.cameras
+        probe, probe_result, adopted = self.schedule.probe(result, masks, stamp_ns, lambda: self._new_tracker(cams))
+        with self._cv:
+            self.schedule.seen_drops()
+            if adopted:
+                self.tracker = probe
+                self.schedule.recovered(probe)
+        return probe_result if adopted else result
 
     # -- calibration and masks: checked before they reach the synchronizer (isa_mocap_ros.intake) ----------
     def _info_cb(self, v: int):

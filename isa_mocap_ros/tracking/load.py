@@ -124,6 +124,11 @@ class LoadGovernor:
         """Sets lost in a row so far."""
         return self._lost
 
+    def restart_energies(self) -> None:
+        """Forget the energy statistics (a new track, e.g. a recovery's: its energies start anew)."""
+        self._energies.clear()
+        self._lost = 0
+
     def budget(self, level: int) -> tuple[int, bool]:
         """``(evaluations, contour stage)`` of ladder level ``level``."""
         share, contour = LEVELS[level]

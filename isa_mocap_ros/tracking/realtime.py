@@ -14,8 +14,10 @@ schedule puts the policies of :mod:`.load` and :mod:`.sync` together in the orde
    for a set that waited longer than ``catch_up_ms``.
 3. **After** (:meth:`RealTimeSchedule.after`): the governor's account of the step (a track lost for
    ``reset_after`` sets re-initializes the tracker: it finds the person again by itself; the start-up's frames —
-   the initialization, the heading check's — and the sets dropped meanwhile are not load and not counted), then the
-   catch-up's (the rest of the held sets dropped once it stops).
+   the initialization, the heading check's — and the sets dropped meanwhile are not load and not counted), the
+   recovery's (:mod:`.recovery`: after a drift at a lowered budget, a second opinion on the same set is due:
+   :attr:`RealTimeSchedule.probe_due`, :meth:`RealTimeSchedule.probe`), then the catch-up's (the rest of the held
+   sets dropped once it stops).
 
 :func:`emulate` runs a tracker through the schedule on a virtual clock (sets arrive every ``period_s``, a
 step lasts what ``step_s(result)`` says): the node's decisions, reproducible on any machine, for tests and
@@ -27,6 +29,7 @@ import dataclasses
 from typing import Callable, Sequence
 
 from .load import Decision, LoadGovernor, LoadSettings, StartupCatchUp
+from .recovery import Recovery, second_opinion
 from .sync import LatestSlot
 
 __all__ = ["RealTimeSchedule", "Budget", "EmulatedStep", "emulate", "step_cost", "warm_up", "rehearse"]
@@ -60,11 +63,14 @@ class RealTimeSchedule:
         The start-up's held sets, tracked after the initialization.
     governor : LoadGovernor or None
         The budget under load (None: always the full budget).
+    recovery : Recovery or None
+        The second opinion on a track that drifted at a lowered budget (None: never; it needs the governor's account,
+        so lockstep never asks).
     """
 
     def __init__(self, *, evals: int, heading_sets: int, lockstep: bool = False, backlog: int = 1,
                  catch_up_ms: float = 15.0, startup: StartupCatchUp | None = None,
-                 governor: LoadGovernor | None = None) -> None:
+                 governor: LoadGovernor | None = None, recovery: Recovery | None = None) -> None:
         self.evals = int(evals)
         self.heading_sets = int(heading_sets)
         self.lockstep = bool(lockstep)
@@ -72,6 +78,9 @@ class RealTimeSchedule:
         self.slot = LatestSlot(keep_all=self.lockstep, depth=backlog)
         self.startup = startup if startup is not None else StartupCatchUp(sets=0, evals=1, limit_ms=0.0)
         self.governor = None if self.lockstep else governor
+        self.recovery = None if self.governor is None else recovery
+        self.probe_due = False             # the set tracked last is due a second opinion (see probe)
+        self.probe_log: list[dict] = []    # per probe: frame key, the probe's and the track's energy, adopted
         self.frames_caught_up = 0          # sets tracked without the contour stage because they were late
         self.last_decision: Decision | None = None   # the governor's last change of budget
         self.last_account: dict | None = None        # the governor's account of the last step (None: not counted)
@@ -124,6 +133,7 @@ class RealTimeSchedule:
         if budget.late and result.x is not None and not result.fell_back and not result.initialized:
             self.frames_caught_up += 1
         changed = self.last_account = None
+        self.probe_due = False
         if self.governor is not None and result.x is not None and not result.initialized and not self._checking:
             # the start-up's frames are not load: the initialization and the heading check's frames (the rival's
             # step beside the track's) take several periods by design, and the sets dropped meanwhile or when the
@@ -139,6 +149,10 @@ class RealTimeSchedule:
                 changed = self.last_decision = d
             if d.reset:
                 tracker.reset()          # the next set initializes automatically
+            elif self.recovery is not None:
+                self.probe_due = self.recovery.observe(energy=float(result.energy), level=d.level)
+        if result.initialized and self.recovery is not None:
+            self.recovery.restart()
         if tracker.initialized and not tracker.checking_heading:
             # the start-up's sets still waiting are tracked in order (catch-up) until none waits or one waited
             # too long; then (or with no catch-up) on with the newest set
@@ -148,6 +162,30 @@ class RealTimeSchedule:
         if result.initialized or self._checking:
             self._dropped_seen = self.slot.dropped       # (the start-up's drops: not the governor's to count)
         return changed
+
+    def probe(self, result, masks, frame_index: int, make_tracker: Callable):
+        """The second opinion :attr:`probe_due` asked for on the set just tracked (``masks``, frame key
+        ``frame_index``; ``result``: the track's) by a new tracker from ``make_tracker()``
+        (:func:`.recovery.second_opinion`; touches nothing the caller shares). Returns ``(probe tracker, probe
+        result, adopted)``; an adopted probe replaces the track: the caller then calls :meth:`recovered`, and in any
+        case :meth:`seen_drops` once the probe's time has passed (the sets dropped meanwhile are the probe's, not
+        load the governor counts)."""
+        self.probe_due = False
+        probe, r, adopted = second_opinion(make_tracker, masks, frame_index, result, self.recovery)
+        self.probe_log.append(dict(frame=int(frame_index), probe_energy=float(r.energy),
+                                   track_energy=float(result.energy), adopted=bool(adopted)))
+        return probe, r, adopted
+
+    def recovered(self, tracker) -> None:
+        """An adopted probe, ``tracker``, is the track now: the governor's energies start anew, and the sets after it
+        are held in sequence for its heading check."""
+        self.governor.restart_energies()
+        if tracker.checking_heading:
+            self.slot.hold(self.heading_sets)
+
+    def seen_drops(self) -> None:
+        """The sets dropped so far are not the governor's to count (dropped while a probe ran)."""
+        self._dropped_seen = self.slot.dropped
 
 
 def step_cost(*, fixed_s: float = 0.005, per_eval_s: float = 28e-6, load: float = 1.0) -> Callable:
@@ -170,10 +208,14 @@ class EmulatedStep:
 
 
 def emulate(tracker, masks: Sequence, schedule: RealTimeSchedule, *, period_s: float,
-            step_s: Callable, frame_key: Callable[[int], int] = lambda k: k) -> tuple[list[EmulatedStep], int]:
+            step_s: Callable, frame_key: Callable[[int], int] = lambda k: k,
+            make_tracker: Callable | None = None) -> tuple[list[EmulatedStep], int]:
     """Real time on a virtual clock: set ``k`` (``masks[k]``, one mask per view) arrives at ``k × period_s``; the
     tracker steps the set :meth:`RealTimeSchedule.take` gives whenever it is free, for ``step_s(result, budget)``
-    seconds (:func:`step_cost`, or a cost model that sees the budget: ``tools/emulate_realtime.py``). Returns the tracked steps and the number of sets dropped."""
+    seconds (:func:`step_cost`, or a cost model that sees the budget: ``tools/emulate_realtime.py``). With
+    ``make_tracker`` (a new tracker like ``tracker``) the schedule's second opinions run (:meth:`RealTimeSchedule.probe`,
+    the probe's step time added; an adopted probe tracks on and its step replaces the track's). Returns the tracked
+    steps and the number of sets dropped."""
     n = len(masks)
     t_free, arrived, prev = 0.0, 0, None
 
@@ -201,6 +243,14 @@ def emulate(tracker, masks: Sequence, schedule: RealTimeSchedule, *, period_s: f
         t_free += dt
         arrive(t_free)
         schedule.after(tracker, r, budget=b, waited_ms=(t_free - t_ready) * 1e3, step_s=dt)
+        if schedule.probe_due and make_tracker is not None:
+            probe, p, adopted = schedule.probe(r, masks[k], frame_key(k), make_tracker)
+            t_free += step_s(p, b)
+            arrive(t_free)
+            schedule.seen_drops()
+            if adopted:
+                tracker, r = probe, p
+                schedule.recovered(tracker)
         steps.append(EmulatedStep(k, r, b, t_free - t_ready, gap))
     return steps, schedule.slot.dropped
 
