@@ -14,6 +14,11 @@ impulsive pixel noise, ``robust``). Each image gives one
 frame id), including the all-zero masks of the learning phase, so frame sets stay complete
 downstream. The parameters mirror :class:`~isa_mocap_ros.vision.segmentation.SegmentationConfig`.
 
+The learning ends by stamp as well as by count (:class:`~isa_mocap_ros.vision.segmentation_window.LearningWindows`):
+a view learns only from images stamped within ``learn_frames`` frame periods (``frame_rate``; 0 = the smallest stamp
+gap of a view) of the first image of the frame sets, so images lost in real time never let the frames after the
+empty ones into the background; one log line per view gives the stamps learnt (docs/vision.md).
+
 Accepted encodings: ``rgb8``, ``bgr8`` (turned into RGB) and ``mono8``.
 
 Input checks (:mod:`isa_mocap_ros.intake`), before anything reaches a background model. The node
