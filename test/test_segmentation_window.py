@@ -79,7 +79,7 @@ def test_lost_learning_images_end_the_window_by_stamp_and_the_model_is_that_of_t
 def test_every_image_arriving_learns_as_before_bit_for_bit():
     """Lockstep: the count ends the learning at the window's last frame; masks equal the plain segmenter's."""
     frames = _frames(16, noise=0.3)
-    for kw in ({}, {"robust": "on"}):
+    for kw in ({}, {"robust": "on"}, {"learn_from": "stable"}):
         seg, windows, masks = _run_by_stamp(frames, range(16), _config(**kw))
         plain = BackgroundSegmenter(_config(**kw))
         assert all(np.array_equal(masks[k], plain.apply(frames[k])) for k in range(16))
