@@ -19,7 +19,8 @@ FLAT_NAMES = {
     "predictor", "predictor_order", "joint_velocity_gain", "prior_eta", "prior_file", "energy", "downsample",
     "n_model_points", "n_mask_points", "seed", "init_yaw_steps", "init_refine_evals", "init_keep", "init_polish",
     "init_confirm_frames", "init_confirm_ratio", "init_confirm_margin", "heading_travel_cue", "pelvis_fraction",
-    "torso_fraction", "leg_untwist", "leg_untwist_tolerance", "limb_proposals", "limb_proposal_limbs", "limb_hinge_limbs", "limb_extrapolations",
+    "torso_fraction", "leg_untwist", "leg_untwist_tolerance", "leg_untwist_margin", "limb_proposals",
+    "limb_proposal_limbs", "limb_hinge_limbs", "limb_extrapolations",
     "limb_fold_deg", "limb_hinge_window_deg", "partition_order", "contour_iterations", "contour_extra_iterations",
     "contour_extra_partitions", "contour_points", "contour_max_px", "gate_margin_px", "hull_filter",
     "hull_dilate_px", "hull_keep_px", "hull_pad_m", "view_weights", "keypoint_weight", "keypoint_sigma_m",
@@ -28,7 +29,7 @@ FLAT_NAMES = {
 
 def test_leaf_names_are_unique_and_unchanged():
     names = [f.name for g in dataclasses.fields(TrackerConfig) for f in dataclasses.fields(g.default_factory)]
-    assert len(names) == len(set(names)) == len(LEAVES) == 52
+    assert len(names) == len(set(names)) == len(LEAVES) == 53
     assert set(names) == FLAT_NAMES
     assert all(getattr(getattr(TrackerConfig(), LEAVES[n]), n) is not None for n in names)
 

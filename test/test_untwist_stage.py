@@ -14,7 +14,8 @@ def scene():
 
 
 @pytest.mark.parametrize("kw, match", [({"leg_untwist": 1}, "leg_untwist"),
-                                       ({"leg_untwist_tolerance": -0.1}, "leg_untwist_tolerance")])
+                                       ({"leg_untwist_tolerance": -0.1}, "leg_untwist_tolerance"),
+                                       ({"leg_untwist_margin": -1e-4}, "leg_untwist_margin")])
 def test_bad_config(kw, match):
     with pytest.raises(TrackerError, match=match):
         TrackerConfig.from_flat(**kw)
@@ -43,6 +44,9 @@ def test_untwist_puts_a_twisted_thigh_back_and_counts_its_evaluations(scene):
     # nothing taken: the pose and its energy back, one evaluation when the energy was not given
     y, ey, n, legs = untwist_legs(tr, ctx, x, energy=None, scales=(1.0,))
     assert legs == [] and np.array_equal(y, np.clip(x, model.lower, model.upper)) and n == 2 * 2 + 1
+    # a proposal as dear as the pose: refused without a price, taken with an absolute margin (both legs)
+    y, ey, n, legs = untwist_legs(tr, ctx, x, energy=None, scales=(1.0,), margin=1e-9)
+    assert legs == ["left_leg", "right_leg"] and np.array_equal(y, np.clip(x, model.lower, model.upper))
 
 
 def test_untwist_in_a_frame_is_charged_and_off_by_default(scene, monkeypatch):
@@ -51,11 +55,11 @@ def test_untwist_in_a_frame_is_charged_and_off_by_default(scene, monkeypatch):
     model, cams, walk, masks = scene
     calls = []
     orig = chain_moves.untwist_legs
-    monkeypatch.setattr(chain_moves, "untwist_legs", lambda *a, **k: calls.append(k["tolerance"]) or orig(*a, **k))
+    monkeypatch.setattr(chain_moves, "untwist_legs", lambda *a, **k: calls.append((k["tolerance"], k["margin"])) or orig(*a, **k))
     for on in (False, True):
         tr = Tracker(model, cams, TrackerConfig.from_flat(evals=1500, seed=1, leg_untwist=on,
-                                                          leg_untwist_tolerance=0.01))
+                                                          leg_untwist_tolerance=0.01, leg_untwist_margin=0.002))
         tr.initialize(pose=walk[0])
         r = tr.step(masks[1], 1)
         assert 1500 - 4 < r.n_evals <= 1500 and not r.fell_back
-    assert calls == [0.01]
+    assert calls == [(0.01, 0.002)]

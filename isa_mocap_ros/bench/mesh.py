@@ -267,6 +267,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the tracker's silhouette_core_px (docs/energy.md; default the tracker's)")
     p.add_argument("--leg-untwist", type=float, default=None, metavar="TOL",
                    help="the tracker's untwist stage on with this tolerance (docs/tracking.md; default off)")
+    p.add_argument("--leg-untwist-margin", type=float, default=None, metavar="M",
+                   help="the tracker's untwist stage on with this absolute energy margin (docs/tracking.md; default off)")
     p.add_argument("--pelvis-fraction", type=float, default=None, metavar="F",
                    help="the tracker's pelvis stage share (default the tracker's)")
     p.add_argument("--jobs", type=int, default=2, metavar="N", help="worker processes (default 2)")
@@ -283,7 +285,7 @@ def run(args: argparse.Namespace) -> int:
             if note:
                 print(f"isa-mocap bench mesh: {note}", file=sys.stderr)
         tracker = tuple((k, getattr(args, k)) for k in ("keypoint_weight", "keypoint_every", "silhouette_core_px",
-                                                        "pelvis_fraction", "leg_untwist")
+                                                        "pelvis_fraction", "leg_untwist", "leg_untwist_margin")
                         if getattr(args, k, None) is not None)
         cseeds = None if getattr(args, "calib_seeds", None) is None else tuple(int(x) for x in comma_list(args.calib_seeds))
         design = make_design("quick" if args.quick else "default", seeds=seeds, frames=args.frames,

@@ -54,6 +54,9 @@ _TRACKER_OPTIONS = (
     ("--leg-untwist", float, None, "TOL",
      "the untwist stage on (docs/tracking.md): each thigh's twist halved or undone, the ankle turned back, taken "
      "when its energy is below the pose's times 1 + TOL (0: strictly lower; default: the tracker's, off)"),
+    ("--leg-untwist-margin", float, None, "M",
+     "the untwist stage (on with it, --leg-untwist 0 unless given) also takes a proposal whose energy is below the "
+     "pose's plus M (energy units; default: the tracker's, 0)"),
     ("--pelvis-fraction", float, None, "F",
      "budget share of the pelvis stage (0 = off; default: the tracker's default)"),
     ("--keypoint-weight", float, None, "W",
@@ -292,6 +295,8 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         cfg_kw["pelvis_fraction"] = args.pelvis_fraction
     if getattr(args, "leg_untwist", None) is not None:
         cfg_kw.update(leg_untwist=True, leg_untwist_tolerance=args.leg_untwist)
+    if getattr(args, "leg_untwist_margin", None) is not None:
+        cfg_kw.update(leg_untwist=True, leg_untwist_margin=args.leg_untwist_margin)
     if getattr(args, "coarse_fraction", None) is not None:
         cfg_kw["coarse_fraction"] = args.coarse_fraction
     if getattr(args, "partition_order", None) is not None:

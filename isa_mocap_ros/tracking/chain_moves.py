@@ -7,7 +7,7 @@ stage searching root, lower spine, hips and knees together was measured worse th
 
 :func:`untwist_legs` (the untwist stage, ``StageConfig.leg_untwist``): per leg, the thigh's twist about its own
 axis halved and undone, the ankle turned back by as much; a leg takes its best proposal when its energy is below
-the pose's times ``1 + leg_untwist_tolerance``.
+the pose's times ``1 + leg_untwist_tolerance`` plus ``leg_untwist_margin``.
 """
 from __future__ import annotations
 
@@ -20,13 +20,14 @@ __all__ = ["untwist_legs", "untwist_share", "UNTWIST_SCALES"]
 UNTWIST_SCALES = (0.0, 0.5)
 
 
-def untwist_legs(tr, ctx, x, *, energy: float | None = None, tolerance: float = 0.0,
+def untwist_legs(tr, ctx, x, *, energy: float | None = None, tolerance: float = 0.0, margin: float = 0.0,
                  scales=UNTWIST_SCALES) -> tuple[np.ndarray, float, int, list[str]]:
     """The untwist stage on pose ``x``: per leg, proposals with the hip's twist (``<side>_hip_z``, the thigh's turn
     about its own axis, which the silhouettes barely see) scaled by each of ``scales`` and the ankle's twist
     (``<side>_ankle_z``) turned the other way by as much (the foot keeps its heading); a leg takes its
-    lowest-energy proposal when that energy is below ``x``'s times ``1 + tolerance`` (measured:
-    ``docs/history/issue33_knee_s32.md``). Each leg's proposals are scored with ``x`` itself on the energy
+    lowest-energy proposal when that energy is below ``x``'s times ``1 + tolerance`` plus ``margin`` (an absolute
+    price, which the clutter of occluders or noise does not inflate as it inflates ``x``'s energy; measured:
+    ``docs/history/issue33_knee_s32.md``, ``docs/history/issue33_untwist_s33.md``). Each leg's proposals are scored with ``x`` itself on the energy
     restricted to that leg (the same values); returns ``(pose, its energy, evaluations, legs changed)``, the
     evaluations ``(1 + len(scales))`` per leg + 1 (the returned pose's energy when a leg changed, else ``energy``
     or one evaluation of it)."""
@@ -48,7 +49,7 @@ def untwist_legs(tr, ctx, x, *, energy: float | None = None, tolerance: float = 
         E = np.asarray(f(P), dtype=float)
         used += len(P)
         i = 1 + int(np.argmin(E[1:]))
-        if E[i] < E[0] + tolerance * abs(E[0]):
+        if E[i] < E[0] + tolerance * abs(E[0]) + margin:
             out = P[i]
             changed.append(leg)
     if changed or energy is None:

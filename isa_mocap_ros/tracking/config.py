@@ -354,6 +354,9 @@ class StageConfig:
         The untwist stage after the limb stage: each thigh's twist about its axis halved or undone, the ankle turned back (False = off; tracking/chain_moves.py).
     leg_untwist_tolerance : float
         The untwist stage takes a proposal whose energy is below the pose's times 1 + this (0.0: strictly lower).
+    leg_untwist_margin : float
+        ... or below the pose's energy plus this, in energy units: a fixed price, like the prior's, that the clutter of
+        occluders and noise does not inflate (0.0: none; the two add).
     limb_proposals : int
         Twist-and-hinge proposals per limb of the limb stage, within a tenth of the budget (16; 0 = off).
     limb_proposal_limbs : tuple of str
@@ -382,6 +385,7 @@ class StageConfig:
     torso_fraction: float = 0.13
     leg_untwist: bool = False
     leg_untwist_tolerance: float = 0.0
+    leg_untwist_margin: float = 0.0
     limb_proposals: int = 16
     limb_proposal_limbs: tuple = ("left_arm", "right_arm", "left_leg", "right_leg")
     limb_hinge_limbs: tuple = ("left_leg", "right_leg")
@@ -404,6 +408,7 @@ class StageConfig:
                                f"received {self.pelvis_fraction!r} + {self.torso_fraction!r}")
         _bool("leg_untwist", self.leg_untwist)
         _number("leg_untwist_tolerance", self.leg_untwist_tolerance, lo=0.0)
+        _number("leg_untwist_margin", self.leg_untwist_margin, lo=0.0)
         _number("limb_proposals", self.limb_proposals, lo=0, integer=True)
         for name in ("limb_proposal_limbs", "limb_hinge_limbs"):
             object.__setattr__(self, name, _limb_names(name, getattr(self, name)))

@@ -348,7 +348,8 @@ class Tracker:
             exact = True
         if stages and self.config.stages.leg_untwist:      # chain_moves.py: the thighs' twist halved or undone
             x, e, n, _ = chain_moves.untwist_legs(self, ctx, res.x, energy=res.energy if exact else None,
-                                                  tolerance=self.config.stages.leg_untwist_tolerance)
+                                                  tolerance=self.config.stages.leg_untwist_tolerance,
+                                                  margin=self.config.stages.leg_untwist_margin)
             res = dataclasses.replace(res, x=x, energy=e, n_evals=res.n_evals + n)
             exact = True
         if contour is not None:
