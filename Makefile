@@ -33,7 +33,7 @@ $(STAMP): setup.py setup.cfg package.xml Makefile
 	@touch $(STAMP)
 
 test: venv
-	$(PY) -m pytest -n 2 --timeout 600 $(PYTEST_ARGS)
+	$(PY) -m pytest -n 2 --dist loadgroup --no-loadscope-reorder --timeout 600 $(PYTEST_ARGS)
 
 demo: venv
 	$(VENV)/bin/isa-mocap run --lockstep --out out/demo

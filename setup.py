@@ -53,7 +53,7 @@ setup(
     extras_require={
         # 2-D keypoints (vision/landmarks.py): the LiteRT interpreter for the BlazePose model file.
         "keypoints": ["ai-edge-litert>=1.2"],
-        "test": ["pytest>=8", "pytest-timeout>=2.3", "pytest-xdist>=3.5", "hypothesis>=6.100", "cma>=4"],
+        "test": ["pytest>=8", "pytest-timeout>=2.3", "pytest-xdist>=3.8", "hypothesis>=6.100", "cma>=4"],
     },
     zip_safe=True,
     maintainer="isa_mocap_ros developers",

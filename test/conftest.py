@@ -153,3 +153,89 @@ def joint_states_by_stamp(bag: Path) -> dict:
             msg = ma.from_cdr(m.data, m.type)
             out[ma.stamp_to_ns(msg.header)] = np.array(msg.position)
     return out
+
+
+# ---------------------------------------------------------------------------------------------- scheduling
+# `make test` runs `pytest -n 2 --dist loadgroup --no-loadscope-reorder`: each group below runs whole on one
+# worker, in the order of this list (the longest first, so no long file starts last on one worker while the other
+# idles), then the other files, one group each, in collection order. Groups keep a module's (or, for the network
+# files, a session's) fixtures from being built on both workers. The order is a schedule, from an idle 2-core run's
+# `--durations` (docs/history/ci_test_time_s33.md): a stale entry costs balance, never a result.
+TEST_GROUPS = (
+    ("network_fixture", ("test_network.py", "test_network_keypoints.py", "test_network_fuzz.py")),
+    ("energy_silhouette", ("test_energy_silhouette.py",)),
+    ("shape_calibration", ("test_shape_calibration.py",)),
+    ("player_recorder", ("test_player_recorder.py",)),
+    ("bench_results", ("test_bench_results.py",)),
+    ("node_segmentation", ("test_node_segmentation.py",)),
+    ("network_realtime", ("test_network_realtime.py",)),
+    ("real_recording", ("test_real_recording.py",)),
+    ("network_live", ("test_network_live.py",)),
+    ("network_degrade", ("test_network_degrade.py",)),
+    ("node_estimator", ("test_node_estimator.py",)),
+    ("optim_compiled", ("test_optim_compiled.py",)),
+    ("optim_bench", ("test_optim_bench.py",)),
+    ("launcher", ("test_launcher.py",)),
+    ("node_estimator_keypoints", ("test_node_estimator_keypoints.py",)),
+    ("node_estimator_startup", ("test_node_estimator_startup.py",)),
+    ("bench_robustness", ("test_bench_robustness.py",)),
+    ("node_prediction", ("test_node_prediction.py",)),
+    ("bench_compare", ("test_bench_compare.py",)),
+    ("bench_mesh", ("test_bench_mesh.py",)),
+)
+
+
+def schedule(files: list[str]) -> tuple[list[int], list[str]]:
+    """The run order of test items from their ``files`` (one name per item, in collection order) and each item's
+    group: :data:`TEST_GROUPS`' files first, in that order, the others after in collection order, each its own
+    group (its file's name). Stable: a file's items keep their order and stay together."""
+    group_of = {f: (rank, name) for rank, (name, fs) in enumerate(TEST_GROUPS) for f in fs}
+    rest = len(TEST_GROUPS)
+    keys = [group_of.get(f, (rest, f)) for f in files]
+    order = sorted(range(len(files)), key=lambda i: keys[i][0])
+    return order, [k[1] for k in keys]
+
+
+def pytest_configure(config):
+    # xdist registers the mark; so does this, for runs without xdist (-p no:xdist) under --strict-markers
+    config.addinivalue_line("markers", "xdist_group(name): run with the other tests of the group on one xdist worker")
+
+
+@pytest.hookimpl(tryfirst=True)          # before xdist's own hook, which reads the groups into the test ids
+def pytest_collection_modifyitems(config, items):
+    order, groups = schedule([item.path.name for item in items])
+    for item, group in zip(items, groups):
+        item.add_marker(pytest.mark.xdist_group(group))
+    items[:] = [items[i] for i in order]
+
+
+# ---------------------------------------------------------------------------------------------- shared runs
+FIXTURE_BAG = REPO / "bags" / "fixture"
+#: the offline tracker's settings the network tests on bags/fixture compare their lockstep runs with
+FIXTURE_TRACK_SETTINGS = ("--optimizer", "isa", "--evals", "300", "--seed", "3", "--shape", "default")
+
+
+@pytest.fixture(scope="session")
+def fixture_track(tmp_path_factory):
+    """``fixture_track(weight)``: the directory of ``isa-mocap track bags/fixture --keypoint-weight weight``
+    with :data:`FIXTURE_TRACK_SETTINGS`, run once per weight in a session and shared by the network tests that
+    compare a lockstep run with it (test_network, test_network_keypoints, test_network_fuzz: one xdist group,
+    so one worker runs them all). ``weight=None``: ``track``'s default, resolved as ``track`` resolves it
+    (``default_keypoint_weight``: 1 with the landmark model, 0 without), so it is the same run as that weight's."""
+    from isa_mocap_ros.cli.keypoint_options import default_keypoint_weight
+
+    done: dict[str, Path] = {}
+
+    def _track(weight: str | None) -> Path:
+        if weight is None:
+            weight = f"{default_keypoint_weight()[0]:g}"
+        if weight not in done:
+            out = tmp_path_factory.mktemp(f"fixture_track_kw{weight}")
+            res = subprocess.run([sys.executable, "-m", "isa_mocap_ros.cli.main", "track", str(FIXTURE_BAG), "--out",
+                                  str(out), "--keypoint-weight", weight, *FIXTURE_TRACK_SETTINGS],
+                                 capture_output=True, text=True, timeout=400)
+            assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+            done[weight] = out
+        return done[weight]
+
+    return _track

@@ -1,8 +1,10 @@
 """A tiny downstream node for lockstep tests: echoes each image's stamp as a JointState.
 
-``python echo_node.py IN_TOPIC OUT_TOPIC DELAY_S`` — answers each image DELAY_S later (a slow
+``python echo_node.py IN_TOPIC OUT_TOPIC DELAY_S [TOPIC:TYPE ...]`` — answers each image DELAY_S later (a slow
 estimator) without blocking, and prints ``image <stamp> <t>`` on arrival and ``echo <stamp> <t>``
-on publication (``t`` = monotonic seconds), so a test can check causality.
+on publication (``t`` = monotonic seconds), so a test can check causality. ``TOPIC:TYPE`` (TYPE one of
+CameraInfo, TransformStamped, JointState): also subscribed, ignored, so a player that waits for a subscriber on
+every topic of its bag (``play --wait-for-subscribers``) starts once it sees this node, not at its time limit.
 """
 import sys
 import time
@@ -10,7 +12,10 @@ import time
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from sensor_msgs.msg import Image, JointState
+from geometry_msgs.msg import TransformStamped
+from sensor_msgs.msg import CameraInfo, Image, JointState
+
+ALSO_TYPES = {"CameraInfo": CameraInfo, "TransformStamped": TransformStamped, "JointState": JointState}
 
 
 def main() -> None:
@@ -37,6 +42,9 @@ def main() -> None:
                 print(f"echo {stamp_ns(item[1])} {time.monotonic():.6f}", flush=True)
 
     node.create_subscription(Image, in_topic, on_image, 10)
+    for spec in sys.argv[4:]:
+        topic, kind = spec.rsplit(":", 1)
+        node.create_subscription(ALSO_TYPES[kind], topic, lambda msg: None, 10)
     node.create_timer(0.005, on_timer)
     print("echo ready", flush=True)
     try:

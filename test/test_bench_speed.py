@@ -78,7 +78,7 @@ def test_the_network_table_says_where_the_drops_came_from():
            "real_time_factor": 0.88, "latency_ms_p50": 50.0, "latency_ms_p95": 120.0, "dropped_frames": 16,
            "dropped_share": 16 / 145, "dropped_while_initializing": 6, "dropped_by_estimator": 14,
            "dropped_at_bunched_arrivals": 5, "startup_sets_caught_up": 0, "frames_without_contour_stage": 14,
-           "budget_lowered": 3, "init_ms": 168.0, "init_cpu_ms": 101.4, "tracker_ms_p50": 21.0, "tracker_ms_p95": 44.0, "mpjpe_mm": 38.2,
+           "budget_lowered": 3, "budget_levels": [3, 0, 10, 20, 90], "init_ms": 168.0, "init_cpu_ms": 101.4, "tracker_ms_p50": 21.0, "tracker_ms_p95": 44.0, "mpjpe_mm": 38.2,
            "mpjpe_vs_lockstep_mm": 2.9}
     lines = bench_speed.network_table([row, {"mode": "lockstep", "error": "x"}])
     head = next(ln for ln in lines if ln.startswith("| mode |"))
@@ -88,6 +88,18 @@ def test_the_network_table_says_where_the_drops_came_from():
     at = dict(zip(names, cells))
     assert at["of them by the estimator (its queue) / at bunched arrivals"] == "14 / 5"
     assert at["budget lowered (times)"] == "3" and at["dropped"] == "16 (11 %)"
+    assert at["sets per budget level 0/1/2/…"] == "3/0/10/20/90"
     assert at["initialization wall / CPU (ms)"] == "168 / 101"      # the estimator's init_ms and init_cpu_ms
     failed = next(ln for ln in lines if ln.startswith("| lockstep |"))
     assert failed.count("|") == head.count("|")
+
+
+def test_budget_levels_are_counted_from_the_estimators_trace(tmp_path):
+    """The real-time rows' level histogram: the governor's level of each accounted set in the trace (the start-up's
+    sets carry none and are not counted); no trace, no histogram."""
+    lines = [{"stamp": 1, "init": True}, {"stamp": 2, "level": 0}, {"stamp": 3, "level": 2}, {"stamp": 4, "level": 2},
+             {"stamp": 5, "level": 4}]
+    trace = tmp_path / "trace.jsonl"
+    trace.write_text("".join(json.dumps(ln) + "\n" for ln in lines))
+    assert bench_speed.budget_levels(trace) == [1, 0, 2, 0, 1]
+    assert bench_speed.budget_levels(tmp_path / "none.jsonl") is None

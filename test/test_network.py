@@ -35,8 +35,8 @@ def _run(out: Path, rosenv: dict, *extra: str) -> dict:
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    from conftest import next_domain
+def runs(tmp_path_factory, fixture_track):
+    from conftest import FIXTURE_TRACK_SETTINGS, next_domain
     from isa_mocap_ros.rosenv import ros_env
     base = tmp_path_factory.mktemp("network")
     summaries = []
@@ -45,10 +45,9 @@ def runs(tmp_path_factory):
         summaries.append(_run(base / f"run{k}", env))
     # segmentation, prediction and estimator in one process on one executor (isa_mocap_ros.cli.compose)
     summaries.append(_run(base / "single", ros_env(next_domain()), "--single-process"))
-    track = base / "track"
-    res = subprocess.run(CLI + ["track", str(FIXTURE), "--out", str(track), "--shape", "default", *SETTINGS],
-                         capture_output=True, text=True, timeout=400)
-    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    # the offline tracker with the same settings and its default keypoint weight (shared with the other network tests)
+    assert FIXTURE_TRACK_SETTINGS == (*SETTINGS, "--shape", "default")
+    (base / "track").symlink_to(fixture_track(None))
     return base, summaries
 
 

@@ -32,12 +32,12 @@ SETTINGS = ["--optimizer", "isa", "--evals", "300", "--seed", "3"]
 
 
 @pytest.mark.parametrize("keypoints", [False, True], ids=["masks", "keypoints"])
-def test_a_fuzzer_on_every_input_topic_changes_no_estimate(keypoints, request, spawn, rosenv, tmp_path):
+def test_a_fuzzer_on_every_input_topic_changes_no_estimate(keypoints, request, spawn, rosenv, tmp_path, fixture_track):
     """``keypoints``: the network with the keypoint node (``run --keypoints``) against ``track --keypoint-weight 1``.
     One view's image and camera_info that agree at a far stamp (the fuzzer's) once moved the node's schedule, and
     the run drifted from ``track`` (66.96 and 159.06 against 63.18 mm here, 220 mm in another run)."""
-    kp_run, kp_track = ((["--keypoints"], ["--keypoint-weight", "1"]) if keypoints else   # on by default: decision 014
-                        (["--no-keypoints"], ["--keypoint-weight", "0"]))
+    kp_run, kp_track = ((["--keypoints"], "1") if keypoints else   # on by default: decision 014
+                        (["--no-keypoints"], "0"))
     if keypoints:
         request.getfixturevalue("landmark_model")        # skips where `make models` has not run
     fuzzer = spawn("fuzzer", str(HERE / "fuzzer.py"), "4", "30", "0")
@@ -67,9 +67,9 @@ def test_a_fuzzer_on_every_input_topic_changes_no_estimate(keypoints, request, s
                                                                               "ERROR", "lost")))[-3000:])
     assert s["bad_inputs"] > 0                                      # the estimator saw and counted the fuzz
 
-    res = subprocess.run(CLI + ["track", str(FIXTURE), "--out", str(tmp_path / "track"), "--shape", "default",
-                                *kp_track, *SETTINGS], capture_output=True, text=True, timeout=400)
-    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    from conftest import FIXTURE_TRACK_SETTINGS
+    assert FIXTURE_TRACK_SETTINGS == (*SETTINGS, "--shape", "default")
+    (tmp_path / "track").symlink_to(fixture_track(kp_track))    # `track --keypoint-weight W`, shared (conftest)
     offline = json.loads((tmp_path / "track" / "summary.json").read_text())
     if keypoints:      # the term was on: the dense start (4 frames) and every 8th after, 4 views each
         assert offline["keypoint_frames"] == 5 and s["keypoint_sets"] == 5, (offline, s)

@@ -26,7 +26,8 @@ CLI = [sys.executable, "-m", "isa_mocap_ros.cli.main"]
 SETTINGS = ["--optimizer", "isa", "--evals", "300", "--seed", "3", "--shape", "default"]
 
 
-def test_lockstep_run_with_keypoints_equals_offline_track_under_a_fuzzer(landmark_model, spawn, rosenv, tmp_path):
+def test_lockstep_run_with_keypoints_equals_offline_track_under_a_fuzzer(landmark_model, spawn, rosenv, tmp_path,
+                                                                         fixture_track):
     fuzzer = spawn("fuzzer", str(HERE / "fuzzer.py"), "4", "20", "1", "keypoints")
     assert fuzzer.wait_for_output("sent ", 30), fuzzer.output()
     run = subprocess.run(CLI + ["run", str(FIXTURE), "--lockstep", "--keypoints", "--out", str(tmp_path / "run"),
@@ -41,9 +42,9 @@ def test_lockstep_run_with_keypoints_equals_offline_track_under_a_fuzzer(landmar
     with BagReader(FIXTURE) as r:
         n_sets = r.topics["/mocap/cam0/image_raw"].message_count
     assert s["frames_processed"] == n_sets and s["dropped_frames"] == 0
-    res = subprocess.run(CLI + ["track", str(FIXTURE), "--out", str(tmp_path / "track"), "--keypoint-weight", "1",
-                                *SETTINGS], capture_output=True, text=True, timeout=400)
-    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    from conftest import FIXTURE_TRACK_SETTINGS
+    assert FIXTURE_TRACK_SETTINGS == tuple(SETTINGS)
+    (tmp_path / "track").symlink_to(fixture_track("1"))      # `track --keypoint-weight 1`, shared (conftest)
     offline = json.loads((tmp_path / "track" / "summary.json").read_text())
     # 12 frames with a person: the first 4 and every 8th after (frame 8 of them), 4 views each
     assert offline["keypoint_frames"] == 5 and offline["keypoint_detections"] == 20, offline
@@ -68,11 +69,7 @@ def test_lockstep_run_with_keypoints_equals_offline_track_under_a_fuzzer(landmar
     for stamp in node:
         assert np.array_equal(node[stamp], ref[stamp]), (stamp, np.abs(node[stamp] - ref[stamp]).max())
     # the term was on: without it the same settings give other estimates
-    res = subprocess.run(CLI + ["track", str(FIXTURE), "--out", str(tmp_path / "off"), "--keypoint-weight", "0",
-                                *SETTINGS],
-                         capture_output=True, text=True, timeout=400)
-    assert res.returncode == 0, res.stderr[-3000:]
-    off = joint_states_by_stamp(tmp_path / "off" / "estimates")
+    off = joint_states_by_stamp(fixture_track("0") / "estimates")
     assert any(not np.array_equal(off[st], node[st]) for st in node)
 
     log = (tmp_path / "run" / "nodes.log").read_text()

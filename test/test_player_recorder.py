@@ -63,7 +63,10 @@ def test_play_then_record_keeps_every_message_byte_for_byte(spawn, tmp_path):
 def test_lockstep_waits_for_the_echo_of_each_frame(spawn, tmp_path):
     src = tmp_path / "src"
     write_test_bag(src, views=1, frames=8)
-    echo = spawn("echo", str(HERE / "echo_node.py"), "/mocap/cam0/image_raw", "/echo", "0.15")
+    # the echo node also subscribes to the bag's other topics: the player waits for a subscriber on each
+    echo = spawn("echo", str(HERE / "echo_node.py"), "/mocap/cam0/image_raw", "/echo", "0.15",
+                 "/mocap/cam0/camera_info:CameraInfo", "/mocap/cam0/extrinsics:TransformStamped",
+                 "/mocap/ground_truth/joint_states:JointState")
     assert echo.wait_for_output("echo ready", 30)
     # Played at 1000x real time: only the lockstep wait can keep frames apart.
     player = spawn("player", *CLI, "play", str(src), "--rate", "1000", "--lockstep", "/echo",
@@ -71,6 +74,7 @@ def test_lockstep_waits_for_the_echo_of_each_frame(spawn, tmp_path):
     assert player.popen.wait(90) == 0, player.output()
     assert '"lockstep_acks": 8' in player.output(), player.output()
     assert '"lockstep_timeouts": 0' in player.output()
+    assert "no subscriber after" not in player.output(), player.output()     # it started once it saw the echo node
     time.sleep(0.5)
     events = [line.split() for line in echo.output().splitlines()
               if line.startswith(("image ", "echo ")) and len(line.split()) == 3]

@@ -569,7 +569,7 @@ def test_pipeline_yaml_segmentation_section_matches_the_config_defaults():
     cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "config" / "pipeline.yaml").read_text())
     section = cfg["/mocap/segmentation"]["ros__parameters"]
     defaults = {f.name: f.default for f in dataclasses.fields(SegmentationConfig)}
-    node_level = {"views", "use_camera_info", "max_stamp_gap_s", "input_queue"}   # the node's intake, not the core's
+    node_level = {"views", "use_camera_info", "max_stamp_gap_s", "input_queue", "frame_rate"}   # the node's
     assert set(section) - node_level == set(defaults)
     assert {k: section[k] for k in defaults} == defaults
 

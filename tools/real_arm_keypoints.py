@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The detector's arm landmarks against the peer's points where the tracked forearm lies over the trunk (issue 34).
 
-    python tools/real_arm_keypoints.py BAG TRACK_DIR [--every K]
+    python tools/real_arm_keypoints.py BAG TRACK_DIR [--every K] [--joints a,b,...]
 
 ``BAG``: ``bench real``'s imported recording (docs/real_cameras.md section 3); ``TRACK_DIR``: a ``track`` run of it
 (its ``estimates`` and ``body.yaml``). On every ``K``-th frame with reference markers, each view is detected on as
@@ -11,7 +11,8 @@ landmark (confidence >= 0.5, as the keypoint term keeps it) and of the tracked e
 whether the previous frame's estimate has a forearm over its trunk in some view
 (:func:`~isa_mocap_ros.vision.keypoint_schedule.forearms_over_trunk`, ``track --keypoint-extra-gap``'s want). The
 peer's points are not BlazePose's (its own detector and definitions), so this compares the landmark with our
-estimate as seen by the peer, not either with the truth. Evaluation only.
+estimate as seen by the peer, not either with the truth. ``--joints``: other landmarks of the same names (default
+the elbows and wrists; e.g. the hips, whose line gives the pelvis's heading). Evaluation only.
 """
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ def main(argv=None) -> int:
     p.add_argument("bag", type=Path)
     p.add_argument("track", type=Path)
     p.add_argument("--every", type=int, default=1)
+    p.add_argument("--joints", default="right_elbow,right_wrist,left_elbow,left_wrist")
     a = p.parse_args(argv)
     import msg_adapters as ma
     from isa_mocap_ros.bag import BagReader
@@ -50,7 +52,7 @@ def main(argv=None) -> int:
     segs = [BackgroundSegmenter(SegmentationConfig(learn_frames=learn)) for _ in seq.cameras]
     det = PoseLandmarker()
     arm_idx = [model.joint_names.index(n) for n in ARM_TRUNK_JOINTS]
-    joints = ("right_elbow", "right_wrist", "left_elbow", "left_wrist")
+    joints = tuple(a.joints.split(","))
     rows = {(j, over, who): [] for j in joints for over in (False, True) for who in ("landmark", "estimate")}
     prev = None
     n_over = n = 0

@@ -302,6 +302,8 @@ def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path, lockstep:
     argv += ["--lockstep"] if lockstep else ["--rate", "1.0"]
     argv += ["--no-keypoints"]     # every row alike: real time's default (decision 014), so lockstep compares
     argv += ["--single-process"] if single else []
+    trace = None if lockstep else work / ("trace_" + out.name + ".jsonl")
+    estimator = {**(estimator or {}), **({"trace_file": str(trace)} if trace is not None else {})}
     if estimator:
         argv += ["--params", str(_params_with(estimator, work / ("params_" + out.name + ".yaml")))]
     buf = io.StringIO()
@@ -321,7 +323,21 @@ def network_speed(bag: Path, *, mode: str, optimizer: str, work: Path, lockstep:
          "body_shape": str(out / "body.yaml") if (out / "body.yaml").is_file() else (None if shape == "auto" else shape), **{k: s.get(k) for k in keep}, "bag_fps": bag_fps,
          "wall_seconds": round(wall, 1)}
     r["real_time_factor"] = (s["fps"] / bag_fps) if bag_fps and s.get("fps") and np.isfinite(s["fps"]) else None
+    if trace is not None:
+        r["budget_levels"] = budget_levels(trace)
     return r
+
+
+def budget_levels(trace: Path) -> list[int] | None:
+    """Sets the governor accounted for at each budget level (index 0 = the full budget), from the estimator's
+    ``trace_file`` (one JSON line per tracked set; the start-up's sets carry no level); None without a trace."""
+    if not trace.is_file():
+        return None
+    levels = [json.loads(line).get("level") for line in trace.read_text().splitlines() if line.strip()]
+    levels = [lv for lv in levels if isinstance(lv, int)]
+    from isa_mocap_ros.tracking.load import LEVELS
+
+    return [levels.count(k) for k in range(len(LEVELS))]
 
 
 def _params_with(estimator: dict, path: Path) -> Path:
@@ -477,11 +493,11 @@ def render_markdown(res: dict) -> str:
 
 def network_table(rows: list[dict]) -> list[str]:
     """The network part's table (markdown lines): one row per run, a failed run as a row saying so."""
-    L = ["| mode | frame sets played | processed | frames/s | real-time factor | latency p50 (ms) | latency p95 (ms) | of it p95: image → masks / masks → estimate | dropped | of them while initializing | of them by the estimator (its queue) / at bunched arrivals | caught up after start-up | without the contour stage | budget lowered (times) | initialization wall / CPU (ms) | tracker ms per set p50 / p95 | mean joint error (mm) | vs lockstep (mm) |",
-         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    L = ["| mode | frame sets played | processed | frames/s | real-time factor | latency p50 (ms) | latency p95 (ms) | of it p95: image → masks / masks → estimate | dropped | of them while initializing | of them by the estimator (its queue) / at bunched arrivals | caught up after start-up | without the contour stage | budget lowered (times) | sets per budget level 0/1/2/… | initialization wall / CPU (ms) | tracker ms per set p50 / p95 | mean joint error (mm) | vs lockstep (mm) |",
+         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if "error" in r:
-            L.append(f"| {r['mode']} | failed: {r['error']} | | | | | | | | | | | | | | | | |")
+            L.append(f"| {r['mode']} | failed: {r['error']} | | | | | | | | | | | | | | | | | |")
             continue
         share = f" ({100 * r['dropped_share']:.0f} %)" if r.get("dropped_share") is not None else ""
         L.append(f"| {r['mode']} | {r['frame_sets_played']} | {r['frames_processed']} | {_f(r['fps'], '{:.2f}')} | "
@@ -492,6 +508,7 @@ def network_table(rows: list[dict]) -> list[str]:
                  f"{_f(r.get('dropped_at_bunched_arrivals'), '{}')} | "
                  f"{_f(r.get('startup_sets_caught_up'), '{}')} | "
                  f"{_f(r.get('frames_without_contour_stage'), '{}')} | {_f(r.get('budget_lowered'), '{}')} | "
+                 f"{'/'.join(map(str, r['budget_levels'])) if r.get('budget_levels') else '–'} | "
                  f"{_f(r.get('init_ms'), '{:.0f}')} / {_f(r.get('init_cpu_ms'), '{:.0f}')} | "
                  f"{_f(r.get('tracker_ms_p50'), '{:.0f}')} / "
                  f"{_f(r.get('tracker_ms_p95'), '{:.0f}')} | {_f(r['mpjpe_mm'])} | "

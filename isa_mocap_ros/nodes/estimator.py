@@ -72,9 +72,8 @@ from isa_mocap_ros.nodes.estimator_intake import EstimatorIntake
 from isa_mocap_ros.tracking.predict import periods_between
 from isa_mocap_ros.tracking.sync import FrameSynchronizer
 from isa_mocap_ros.tracking.config import TrackerConfig, field_docs
-from isa_mocap_ros.tracking.load import LoadGovernor, LoadSettings, StartupCatchUp
+from isa_mocap_ros.tracking.load import StartupCatchUp
 from isa_mocap_ros.tracking.realtime import RealTimeSchedule, warm_up
-from isa_mocap_ros.tracking.recovery import Recovery
 from isa_mocap_ros.vision.overlay import draw_overlay
 
 
@@ -140,16 +139,6 @@ class EstimatorNode(EstimatorIntake, Node):
             self, "startup_catch_up_stale_ms", 0.0, "startup_catch_up: a held set that already waited longer than this "
             "when its turn comes is dropped instead, the oldest first (its estimate would come too late, and tracking "
             "it would make the newer sets late too); the newer ones are caught up (0 = never)", lo=0.0, hi=60_000.0)
-        degrade = declare(self, "degrade", True, "real time: while the tracker does not keep up with the frame sets, "
-                          "lower its budget (contour stage off, then fewer evaluations) before dropping sets, and "
-                          "return to the full budget when it catches up (isa_mocap_ros.tracking.load; lockstep: never)")
-        degrade_min_evals = declare(self, "degrade_min_evals", 300, "degrade: fewest evaluations per frame set",
-                                    lo=1, hi=1_000_000)
-        degrade_headroom = declare(self, "degrade_headroom", 0.85, "degrade: a budget fits when its step time is "
-                                   "below this share of frame_period_s", lo=0.05, hi=1.0)
-        recovery = declare(self, "recovery", False, "real time: after the track drifted at a lowered budget, a fresh "
-                           "initialization on the same set replaces it when clearly better (tracking/recovery.py; off: "
-                           "measured worse, docs/nodes.md)")
         self.rehearsal = declare(
             self, "startup_rehearsal", True, "while the frame sets are empty (the segmentation's learning frames, "
             "nobody in view yet), run the first-frame hull once on the real cameras with a rendered standing body, so "
@@ -187,14 +176,13 @@ class EstimatorNode(EstimatorIntake, Node):
         # real time: which sets the tracker gets and at what budget (isa_mocap_ros.tracking.realtime): the frame
         # budget under load (governor; None: always the full budget), the start-up's sets caught up after the
         # initialization, late sets without the contour stage
+        governor, recovery, min_evals = self._declare_degrade()
         self.schedule = RealTimeSchedule(
             evals=self.tracker_config.search.evals, heading_sets=self.tracker_config.heading.init_confirm_frames,
             lockstep=self.lockstep, backlog=self.backlog, catch_up_ms=self.catch_up_ms,
-            startup=StartupCatchUp(sets=self.startup_catch_up, evals=degrade_min_evals,
+            startup=StartupCatchUp(sets=self.startup_catch_up, evals=min_evals,
                                    limit_ms=self.startup_catch_up_ms, stale_ms=self.startup_catch_up_stale_ms),
-            governor=LoadGovernor(LoadSettings(
-                evals=self.tracker_config.search.evals, period_s=self.frame_period_s, headroom=degrade_headroom,
-                min_evals=degrade_min_evals)) if degrade else None, recovery=Recovery() if recovery else None)
+            governor=governor, recovery=recovery)
         self.governor = self.schedule.governor
         self.catch_up = self.schedule.startup
         self.budget_reason = ""          # the governor's last change, for /diagnostics
@@ -469,6 +457,7 @@ class EstimatorNode(EstimatorIntake, Node):
             self.trace.write(json.dumps({
                 "stamp": frame_set.stamp_ns, "gap": gap, "evals": result.n_evals, "init": result.initialized,
                 "contour": budget.contour_stage, "step_ms": 1e3 * result.time_s, "energy": result.energy,
+                "step_cpu_ms": 1e3 * (time.thread_time() - cpu0),   # (and the governor's account, ~0.1 ms)
                 "waited_ms": 1e3 * (time.monotonic() - t_ready), **(self.schedule.last_account or {})},
                 default=float) + "\n")
         if d is not None:

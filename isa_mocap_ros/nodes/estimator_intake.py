@@ -16,7 +16,7 @@ from std_msgs.msg import Header
 
 import msg_adapters as ma
 from isa_mocap_ros.intake import Setting
-from isa_mocap_ros.nodes.common import camera_info_callback, publishers_on
+from isa_mocap_ros.nodes.common import camera_info_callback, declare, publishers_on
 from isa_mocap_ros.tracking.sync import SyncError
 from isa_mocap_ros.vision import Camera
 
@@ -33,6 +33,31 @@ class EstimatorIntake:
     ``__init__`` sets the state these methods use (``gates``, ``sync``, ``slot``, ``_cv``, ``_intrinsics``, ...)."""
 
     # -- the tracker ----------------------------------------------------------------------------------------------
+    def _declare_degrade(self):
+        """The real-time budget's parameters (``degrade*``, ``recovery``; docs/nodes.md): ``(governor, recovery,
+        degrade_min_evals)``, the governor ``None`` with ``degrade`` off and the recovery ``None`` with ``recovery`` off
+        (lockstep uses neither: isa_mocap_ros.tracking.realtime)."""
+        from isa_mocap_ros.tracking.load import LoadGovernor, LoadSettings
+        from isa_mocap_ros.tracking.recovery import Recovery
+
+        degrade = declare(self, "degrade", True, "real time: while the tracker does not keep up with the frame sets, "
+                          "lower its budget (contour stage off, then fewer evaluations) before dropping sets, and "
+                          "return to the full budget when it catches up (isa_mocap_ros.tracking.load; lockstep: never)")
+        min_evals = declare(self, "degrade_min_evals", 300, "degrade: fewest evaluations a set", lo=1, hi=10**6)
+        headroom = declare(self, "degrade_headroom", 0.85, "degrade: a budget fits when its step time is "
+                           "below this share of frame_period_s", lo=0.05, hi=1.0)
+        slow_only = declare(self, "degrade_slow_drops_only", True, "degrade: a dropped set is overload only beside a "
+                            "step over the headroom; a step up to the contour stage is projected with its cost")
+        fixed_share = declare(self, "degrade_fixed_share", 0.3, "degrade: share of a full-budget step that does not "
+                              "scale with the evaluations (projects a step between levels)", lo=0.0, hi=0.95)
+        recovery = declare(self, "recovery", False, "real time: after the track drifted at a lowered budget, a fresh "
+                           "initialization on the same set replaces it when clearly better (tracking/recovery.py; off: "
+                           "measured worse, docs/nodes.md)")
+        governor = LoadGovernor(LoadSettings(
+            evals=self.tracker_config.search.evals, period_s=self.frame_period_s, headroom=headroom,
+            min_evals=min_evals, slow_drops_only=slow_only, fixed_share=fixed_share)) if degrade else None
+        return governor, (Recovery() if recovery else None), min_evals
+
     def _new_tracker(self, cams: list):
         """A tracker of ``cams`` with the node's config; its own prediction (used when the prediction node's is
         missing) goes through the same JointState conversions as the prediction node's."""

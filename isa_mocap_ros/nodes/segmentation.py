@@ -14,6 +14,11 @@ impulsive pixel noise, ``robust``). Each image gives one
 frame id), including the all-zero masks of the learning phase, so frame sets stay complete
 downstream. The parameters mirror :class:`~isa_mocap_ros.vision.segmentation.SegmentationConfig`.
 
+The learning ends by stamp as well as by count (:class:`~isa_mocap_ros.vision.segmentation_window.LearningWindows`):
+a view learns only from images stamped within ``learn_frames`` frame periods (``frame_rate``; 0 = the smallest stamp
+gap of a view) of the first image of the frame sets, so images lost in real time never let the frames after the
+empty ones into the background; one log line per view gives the stamps learnt (docs/vision.md).
+
 Accepted encodings: ``rgb8``, ``bgr8`` (turned into RGB) and ``mono8``.
 
 Input checks (:mod:`isa_mocap_ros.intake`), before anything reaches a background model. The node
@@ -70,6 +75,7 @@ from isa_mocap_ros.late_sets import LateSetShedder
 from isa_mocap_ros.nodes.common import (QOS_OVERRIDES, ProblemLog, camera_info_callback, declare, log_closing,
                                         run_node)
 from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig, SegmentationError
+from isa_mocap_ros.vision.segmentation_window import LearningWindows
 
 __all__ = ["SegmentationNode", "main", "ENCODINGS"]
 
@@ -149,7 +155,11 @@ class SegmentationNode(Node):
                          "in every view, so a node under load drops whole sets, not single views (0 = off; stamps "
                          "must advance at wall speed: a live camera, a replay at rate 1.0; never in lockstep)",
                          lo=0.0, hi=1e3)
+        frame_rate = declare(self, "frame_rate", 0.0, "frames per second of the cameras: a view learns its background "
+                             "only from images stamped within learn_frames frame periods of the first (0 = the period "
+                             "from the smallest stamp gap seen in a view)", lo=0.0, hi=1e6)
         self.config = SegmentationConfig(**values)
+        self.windows = LearningWindows(self.config.learn_frames, frame_rate=frame_rate)
         if plates and len(plates) != self.n_views:
             raise ValueError(f"clean_plates: expected one entry per view ({self.n_views}), received {len(plates)}")
         plates = list(plates) or [""] * self.n_views
@@ -297,11 +307,21 @@ class SegmentationNode(Node):
             img = img[:, :, ::-1]
         if not img.flags.c_contiguous:
             img = np.ascontiguousarray(img)
+        learning = seg.learning
+        if learning:
+            self._learn_window(v, seg, ma.stamp_to_ns(msg.header))
         try:
             mask = seg.apply(img)
         except SegmentationError as exc:
             self.problems.report(f"image{v}:segmenter", f"cam{v}/image_raw dropped: {exc}")
             return
+        if learning and not seg.learning:
+            learnt = self.windows.learnt(seg)
+            self.get_logger().info(
+                f"cam{v}: background learnt from {seg.images_learnt} of {self.config.learn_frames} images, stamps "
+                f"{learnt[0]}..{learnt[-1]} (window from {self.windows.start_ns(seg)}, period "
+                f"{self.windows.period_ns() / 1e6:.2f} ms" + (")" if len(learnt) == self.config.learn_frames
+                                                              else "; the others lost)"))
         if not self._reported[v] and not seg.learning and seg.outlier_fraction is not None and \
                 seg is self.streams[v].state:
             self._reported[v] = True    # the robust-mode decision is logged once per view (and learning)
@@ -313,6 +333,15 @@ class SegmentationNode(Node):
         self.masks_published[v] += 1      # before publish(): a Ctrl-C right after it must not lose the count
         pub.publish(out)
         self.latency_s.append(time.perf_counter() - t0)
+
+    def _learn_window(self, v: int, seg: BackgroundSegmenter, stamp_ns: int) -> None:
+        """Before a learning model takes the image of ``stamp_ns``: past its learning window
+        (:class:`LearningWindows`) its learning ends on the images it got (the image is segmented)."""
+        if self.windows.admits(seg, stamp_ns, v):
+            return
+        if seg.finish_learning() == 0:      # nothing learnt (every image of its window lost): a window of its own
+            self.windows.restart(seg, stamp_ns)
+            self.get_logger().warn(f"cam{v}: no image within the learning window; learning from stamp {stamp_ns} on")
 
     def _publish_diagnostics(self) -> None:
         """1 Hz: masks published, inputs dropped (per kind), views still learning, learning restarts."""

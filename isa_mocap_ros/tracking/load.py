@@ -6,8 +6,11 @@ or spend less on each set. :class:`LoadGovernor` does the second first: it steps
 budgets (:data:`LEVELS`: the contour stage off, then fewer evaluations) while the measured step time
 does not fit the frame period, and back up once the measured time at the current level leaves room
 for the next one up (a step up that then does not fit comes back down, and the next try waits
-twice as long: no oscillation at the edge). It is a pure policy: it never reads a clock itself; the caller passes the
-monotonic time of each observation, so tests drive it with a fake clock.
+twice as long: no oscillation at the edge; a step up that turns the contour stage on is projected with the stage's
+cost, so a level that cannot fit is not tried). Sets dropped count as overload only beside a step over the headroom
+(``slow_drops_only``): a drop beside a step that fit (masks arriving bunched, the start-up) is not the budget's, and
+counted it walked the budget down to the last level (decision 018). It is a pure policy: it never reads a clock
+itself; the caller passes the monotonic time of each observation, so tests drive it with a fake clock.
 
 A lost track: the estimate's energy far above its recent level (``lost_factor`` × the running median
 of the last accepted frames) or a frame that fell back returns the governor to the full budget at once
@@ -63,7 +66,14 @@ class LoadSettings:
     window: int = 30                # frames in the running step-time and energy statistics
     max_backoff: int = 8            # a step up that did not fit doubles the wait before the next one, up to this factor
     contour_share: float = 0.3      # share of a step the contour stage takes (bench speed's profile: 32 % at 1500), to
-                                    # project a step down without it: one step down may skip the levels that would not fit
+                                    # project a step down without it (one step down may skip the levels that would not
+                                    # fit) and a step up that turns it on (no try of a level that cannot fit)
+    fixed_share: float = 0.3        # share of a full-budget step (no contour stage) that does not scale with the
+                                    # evaluations, to project a step between levels (one tracker thread: 8 of 28 ms, 0.30,
+                                    # docs/history/issue35_speed.md session 33; 0 = all of it scales, session 32's policy)
+    slow_drops_only: bool = True    # a set dropped counts as overload only beside a step over headroom × period_s (a
+                                    # drop beside a step that fit is not the budget's: bunched arrivals, the start-up),
+                                    # and a step up to the contour stage adds its contour_share (False: session 32's policy)
 
     def __post_init__(self) -> None:
         for name in ("evals", "down_after", "up_after", "min_evals", "reset_after", "window", "max_backoff"):
@@ -72,6 +82,7 @@ class LoadSettings:
         check_number("headroom", self.headroom, lo=0.0, hi=1.0, lo_open=True, error=LoadError)
         check_number("lost_factor", self.lost_factor, lo=1.0, lo_open=True, error=LoadError)
         check_number("contour_share", self.contour_share, lo=0.0, hi=1.0, hi_open=True, error=LoadError)
+        check_number("fixed_share", self.fixed_share, lo=0.0, hi=1.0, hi_open=True, error=LoadError)
 
 
 class LoadGovernor:
@@ -84,7 +95,7 @@ class LoadGovernor:
     (1500, True)
     >>> for t in range(3):            # three sets of 50 ms each: over the 33 ms period
     ...     d = g.observe(step_s=0.05, energy=0.1)
-    >>> d.level, d.evals, d.contour_stage        # projected: 50 x 0.7 = 35 ms > 28; x 0.67: 23 ms fits
+    >>> d.level, d.evals, d.contour_stage        # projected: 50 x 0.7 = 35 ms > 28; x 0.77 (1005) x 0.7: 27 ms fits
     (2, 1005, False)
     """
 
@@ -141,16 +152,23 @@ class LoadGovernor:
         self._over = self._room = 0
         self._steps.clear()
 
+    def _scale(self, evals_from: int, evals_to: int) -> float:
+        """How a step scales from ``evals_from`` to ``evals_to`` evaluations: its ``fixed_share`` (of a full-budget
+        step) stays, the rest scales with the evaluations."""
+        f, n = self.settings.fixed_share, self.settings.evals
+        return (f + (1.0 - f) * evals_to / n) / (f + (1.0 - f) * evals_from / n)
+
     def _level_that_fits(self, step_s: float, limit: float) -> int:
         """The level to step down to from this one, whose step ``step_s`` was over the period: the first level below
-        whose projected step fits ``limit`` (the whole step scaled with the evaluations, less ``contour_share`` where
+        whose projected step fits ``limit`` (the step scaled with the evaluations but its ``fixed_share``, less ``contour_share`` where
         the contour stage goes off), at least one level down, at most the last. Stepping one level at a time, each
         after ``down_after`` sets over the period, a tracker at twice its idle step time dropped a set or two per
         level on the way down (the emulated one-core-busy start-up, docs/history/issue35_speed.md, session 28)."""
         here, contour_here = self.budget(self.level)
         for level in range(self.level + 1, len(LEVELS)):
             evals, contour = self.budget(level)
-            projected = step_s * evals / here * (1.0 - self.settings.contour_share * (contour_here and not contour))
+            projected = step_s * self._scale(here, evals) * (1.0 - self.settings.contour_share
+                                                             * (contour_here and not contour))
             if projected < limit:
                 return level
         return len(LEVELS) - 1
@@ -190,7 +208,7 @@ class LoadGovernor:
         self._steps.append(float(step_s))
         limit = s.headroom * s.period_s
         typical = float(np.median(self._steps))
-        if step_s > s.period_s or dropped > 0:
+        if step_s > s.period_s or (dropped > 0 and (step_s > limit or not s.slow_drops_only)):
             self._over += 1
             self._room = 0
         else:
@@ -209,13 +227,15 @@ class LoadGovernor:
                                  + (f", {dropped} set(s) dropped" if dropped else "")
                                  + f"): {evals} evaluations" + ("" if contour else ", no contour stage"))
         if self.level > 0:
-            # the level above, from this level's typical time: conservatively the whole step scales with
-            # the evaluations (the fixed costs do not); what the contour stage adds back is not modelled
-            # but tried: a step up that does not fit comes down after down_after sets, and the next
-            # try waits twice as long (up to max_backoff × up_after)
-            here, _ = self.budget(self.level)
-            up, _ = self.budget(self.level - 1)
-            projected = typical * up / here
+            # the level above, from this level's typical time: the step less its fixed share scales with
+            # the evaluations (fixed_share), and a contour stage turned on adds its share (with
+            # slow_drops_only; before, it was not modelled but tried); a step up that does not fit comes down
+            # after down_after sets, and the next try waits twice as long (up to max_backoff × up_after)
+            here, contour_here = self.budget(self.level)
+            up, contour_up = self.budget(self.level - 1)
+            projected = typical * self._scale(here, up)
+            if s.slow_drops_only and contour_up and not contour_here:
+                projected /= 1.0 - s.contour_share
             self._room = self._room + 1 if projected < limit else 0
             if self._room >= s.up_after * self._backoff:
                 self._set_level(self.level - 1)

@@ -177,6 +177,7 @@ class BackgroundSegmenter:
         self._mu = self._var = None
         self._cv = None
         self._n_learnt = 0  # images the model has learnt from before segmenting
+        self._learn_target = self.config.learn_frames   # images it learns from (fewer: finish_learning)
         self._samples = None       # (S, H, W, C) uint8: learning images kept for the robust estimate
         self._n_samples = 0        # of them filled
         self._pairs = None         # (n, spread) (S, H, W) int32: their agreements so far
@@ -217,7 +218,34 @@ class BackgroundSegmenter:
     @property
     def learning(self) -> bool:
         """True while the next image only feeds the background model (all-zero mask)."""
-        return self._n_learnt < self.config.learn_frames
+        return self._n_learnt < self._learn_target
+
+    @property
+    def images_learnt(self) -> int:
+        """Images the background was learnt from so far (``learn_frames`` once learnt, fewer after
+        :meth:`finish_learning`; with a clean plate and ``learn_from="frames"``: ``learn_frames``)."""
+        return self._n_learnt if self._buffer is None else len(self._buffer)
+
+    def finish_learning(self) -> int:
+        """End the learning phase now, on the images received so far (a learning window closed before
+        ``learn_frames`` images came: some were lost). The model is the one a segmenter with ``learn_frames``
+        equal to that number learns from the same images (the robust samples: the first ones of the
+        ``learn_frames`` spread, every image when ``learn_frames`` <= ``ROBUST_MAX_SAMPLES``).
+
+        Returns
+        -------
+        int
+            The images learnt from; 0 when nothing was learnt yet (then the model stays learning).
+        """
+        n = self.images_learnt
+        if not self.learning or n == 0:
+            return self._n_learnt if not self.learning else 0
+        self._learn_target = n
+        if self._buffer is not None:
+            self._learn_from_stable()
+        elif self._cv is None:
+            self._finish_learning()
+        return n
 
     @property
     def robust_active(self) -> bool:
@@ -347,7 +375,7 @@ class BackgroundSegmenter:
                 if self._buffer is None:
                     self._buffer = []
                 self._buffer.append(img.copy())
-                if len(self._buffer) == c.learn_frames:
+                if len(self._buffer) == self._learn_target:
                     self._learn_from_stable()
             else:
                 self._learn_sample(img)
@@ -380,7 +408,7 @@ class BackgroundSegmenter:
         if self._sum is None:    # exact integer sums (what float64 sums of the uint8 values held, cheaper)
             self._sum = np.zeros(img.shape, np.int64)
             self._sumsq = np.zeros(img.shape, np.int64)
-        if c.robust != "off" and self._n_learnt in _sample_indices(c.learn_frames):
+        if c.robust != "off" and self._n_learnt in _sample_indices(self._learn_target):
             self._add_sample(img)
         _LEARN_KERNELS[c.kernel][0](img, self._sum, self._sumsq)
         self._n_learnt += 1
@@ -398,7 +426,7 @@ class BackgroundSegmenter:
             p = self._as3(self._reduce(self._plate))
             plates = [np.repeat(p, 3, axis=-1) if p.shape[-1] == 1 else p]
         est = estimate_background(f3, plates=plates)
-        for f in est.frames(self.config.learn_frames, f3):
+        for f in est.frames(self._learn_target, f3):
             self._learn_sample(f[..., :1] if grey else f)
 
     def _foreground(self, img: np.ndarray) -> np.ndarray:
@@ -412,7 +440,7 @@ class BackgroundSegmenter:
         """Keep a learning image for the robust estimate and add its agreements with the earlier
         ones (the pair work is done as the images arrive, not all at the last learning frame)."""
         if self._samples is None:
-            S = len(_sample_indices(self.config.learn_frames))
+            S = len(_sample_indices(self._learn_target))
             self._samples = np.empty((S,) + img.shape, np.uint8)
             self._pairs = (np.ones((S,) + img.shape[:2], np.int32), np.zeros((S,) + img.shape[:2], np.int32))
         k = self._n_samples
