@@ -15,6 +15,7 @@ this test turns it off to keep the check's switch in real time under test.
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -76,7 +77,10 @@ def test_real_time_run_mends_a_backwards_first_heading(tmp_path, rosenv, capsule
         log[-3000:]
     s = json.loads((out / "summary.json").read_text())
     # measured: 24.5 / 25.4 mm (4-11 sets dropped); lost for good without the hold: 310 mm
-    assert s["mpjpe_mm"] < 60.0, s
+    # (on failure, the whole summary and the lines that say why a track goes: where each view's background was
+    # learnt — CI's one loss, session 32, came when the learning window ran into the person —, the budget changes)
+    why = [line for line in log.splitlines() if re.search(r"background learnt|budget|lost|heading check|initiali", line)]
+    assert s["mpjpe_mm"] < 60.0, json.dumps(s, indent=0) + "\n" + "\n".join(why[-40:])
     # the start-up's drops (initialization + heading check) are counted within all the drops; whether there
     # are any depends on the machine (a replay slowed to this machine's speed, rate 0.21 on a loaded one,
     # dropped none), so their count is checked by test_run_report's _first_gap test, not here
