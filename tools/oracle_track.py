@@ -22,10 +22,12 @@ from pathlib import Path
 import numpy as np
 
 from isa_mocap_ros.body import joint_positions
-from isa_mocap_ros.cli.main import main as isa_main
 from isa_mocap_ros.cli.run_report import read_estimates
 from isa_mocap_ros.cli.track_io import read_sequence
 from isa_mocap_ros.tracking import tracker as tracker_module
+
+sys.path.insert(0, str(Path(__file__).parent))
+from track_hooks import track_patched  # noqa: E402
 
 SEGMENTS = (("pelvis", "neck"), ("left_hip", "left_knee"), ("right_hip", "right_knee"),
             ("left_knee", "left_ankle"), ("right_knee", "right_ankle"))
@@ -62,11 +64,7 @@ def main(argv: list[str]) -> int:
             models.append(self.model)
         return r
 
-    tracker_module.Tracker.step = recording_step
-    try:
-        rc = isa_main(["track", *args])
-    finally:
-        tracker_module.Tracker.step = step
+    rc = track_patched(args, [(tracker_module.Tracker, "step", recording_step)])
     if rc or not energies:
         return rc or 1
     E = np.array([(a, b) for _, a, b in energies])

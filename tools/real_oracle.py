@@ -32,6 +32,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 
 from real_floor import ik_to_peer  # noqa: E402
+from track_hooks import track_patched  # noqa: E402
 
 SIDES = ("left", "right")
 
@@ -100,7 +101,6 @@ def knee_report(bag: Path, tracks: list[Path]) -> int:
 
 
 def oracle_run(argv: list[str]) -> int:
-    from isa_mocap_ros.cli.main import main as isa_main
     from isa_mocap_ros.cli.track_io import read_sequence
     from isa_mocap_ros.tracking import tracker as tracker_module
 
@@ -151,11 +151,7 @@ def oracle_run(argv: list[str]) -> int:
                              "energy_estimate": float(e[1])})
         return r
 
-    tracker_module.Tracker.step = recording_step
-    try:
-        rc = isa_main(["track", *args])
-    finally:
-        tracker_module.Tracker.step = step
+    rc = track_patched(args, [(tracker_module.Tracker, "step", recording_step)])
     if rc or not rows:
         return rc or 1
     starts = [i for i in range(len(rows)) if i == 0 or rows[i]["stamp"] <= rows[i - 1]["stamp"]]

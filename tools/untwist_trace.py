@@ -21,11 +21,13 @@ from pathlib import Path
 import numpy as np
 
 from isa_mocap_ros.body import joint_positions
-from isa_mocap_ros.cli.main import main as isa_main
 from isa_mocap_ros.cli.run_report import read_estimates
 from isa_mocap_ros.cli.track_io import read_sequence
 from isa_mocap_ros.tracking import chain_moves
 from isa_mocap_ros.tracking import tracker as tracker_module
+
+sys.path.insert(0, str(Path(__file__).parent))
+from track_hooks import track_patched  # noqa: E402
 
 
 def main(argv: list[str]) -> int:
@@ -62,11 +64,8 @@ def main(argv: list[str]) -> int:
                         "hip_z_after_deg": np.round(np.degrees(r[0][hz]), 2).tolist()})
         return r
 
-    tracker_module.Tracker.step, chain_moves.untwist_legs = recording_step, recording_untwist
-    try:
-        rc = isa_main(["track", *argv])
-    finally:
-        tracker_module.Tracker.step, chain_moves.untwist_legs = step, untwist
+    rc = track_patched(argv, [(tracker_module.Tracker, "step", recording_step),
+                              (chain_moves, "untwist_legs", recording_untwist)])
     with open(Path(out) / "untwist_trace.json", "w") as f:       # kept if the scoring below fails
         json.dump({"per_frame": records}, f)
     if rc:

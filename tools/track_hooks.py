@@ -1,0 +1,18 @@
+"""`isa-mocap track` run in this process with some of the package's functions replaced: the research tools' hook
+(oracle_track, real_oracle, untwist_trace) for recording or steering what the tracker does, frame by frame."""
+from __future__ import annotations
+
+from isa_mocap_ros.cli.main import main as isa_main
+
+
+def track_patched(args: list[str], patches: list[tuple[object, str, object]]) -> int:
+    """``isa-mocap track ARGS`` with each ``(owner, name, replacement)`` of ``patches`` set on its owner (a class or
+    module) for the run and the originals put back after it, also when it raises. Returns track's exit code."""
+    saved = [(owner, name, getattr(owner, name)) for owner, name, _ in patches]
+    for owner, name, new in patches:
+        setattr(owner, name, new)
+    try:
+        return isa_main(["track", *args])
+    finally:
+        for owner, name, old in saved:
+            setattr(owner, name, old)
