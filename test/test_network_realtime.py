@@ -62,10 +62,16 @@ def test_real_time_run_mends_a_backwards_first_heading(tmp_path, rosenv, capsule
     # test worker (122 mm in session 16's clean-clone run)
     params = tmp_path / "pipeline.yaml"
     text = (REPO / "config" / "pipeline.yaml").read_text()
-    assert "init_polish: true" in text and "energy: raster" in text
+    assert "init_polish: true" in text and "energy: raster" in text and "startup_catch_up: 0 " in text
     # and the sampled energy: with the scanline count (the default since decision 017) this bag's seed-0
-    # initialization faces the right way (heading check: kept, 0.0502 vs 0.0600), leaving nothing to mend
-    params.write_text(text.replace("init_polish: true", "init_polish: false").replace("energy: raster", "energy: fast"))
+    # initialization faces the right way (heading check: kept, 0.0502 vs 0.0600), leaving nothing to mend.
+    # And the start-up's sets caught up (startup_catch_up 12, off by default): without it the sets that come
+    # during the initialization and the check are dropped, and after the switch the tracker crosses a gap of
+    # 11-20 frames; beside a busy core (rate 0.7, a busy loop: CI's one failure, 131 mm) a gap of 15 or more lost
+    # the legs' side for the rest of the run in 3 of 8 runs (94-108 mm; root and heading right), an open issue-35
+    # defect of the gap, not of the check (docs/history/issue35_speed.md, session 33 (lead)); with it 8 of 8 held
+    params.write_text(text.replace("init_polish: true", "init_polish: false").replace("energy: raster", "energy: fast")
+                      .replace("startup_catch_up: 0 ", "startup_catch_up: 12 "))
     rate = replay_rate(tmp_path, rosenv, capsule_demo)
     res = subprocess.run(CLI + ["run", str(capsule_demo), "--out", str(out), "--seed", "0", "--shape", "default",
                                 "--params", str(params), "--rate", f"{rate:.3f}"],
