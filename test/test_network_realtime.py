@@ -10,7 +10,16 @@ heading), and without consecutive frames the check could not decide: the whole r
 measured twice). The estimator holds the sets that follow the initialized one (`LatestSlot.hold`)
 while the check runs, so it switches as in lockstep. Since session 17 the initialization's polish
 (`init_polish`) mends that first frame itself (the polished rival fits better: 8.8 mm in real time), so
-this test turns it off to keep the check's switch in real time under test.
+this test turns it off to keep the check in real time under test.
+
+Which set is initialized depends on the machine's load: the first sets with the person come bunched after the
+segmentation's last learning set, and the estimator takes the newest. On frame 10 (an idle machine) the winner
+faces backwards and the check switches; in a clean-clone run beside the other test worker (session 33) it was
+frame 16, whose winner faces the right way, and no check started (its rival's energy was not close enough). So
+this test starts the check on whatever frame comes first (`init_confirm_ratio` 10: every rival is close enough)
+and requires it to decide right: switching where the winner faces backwards, keeping it where not (the error
+bound tells a wrong heading, 200-300 mm, from a right one). The switch itself on held consecutive sets is tested
+without a clock in test_realtime_schedule.py (a track facing backwards under load).
 """
 from __future__ import annotations
 
@@ -55,7 +64,7 @@ def replay_rate(tmp_path: Path, env: dict, bag: Path) -> float:
     return min(1.0, fps / REFERENCE_FPS)
 
 
-def test_real_time_run_mends_a_backwards_first_heading(tmp_path, rosenv, capsule_demo):
+def test_real_time_run_checks_the_first_heading_on_held_sets(tmp_path, rosenv, capsule_demo):
     out = tmp_path / "rt"
     # the default parameters but init_polish; the contour stage on: it makes a set ~18 ms dearer, and without
     # the estimator's catch_up_ms (sets that waited tracked without it) the drops lost the track beside the other
@@ -63,6 +72,7 @@ def test_real_time_run_mends_a_backwards_first_heading(tmp_path, rosenv, capsule
     params = tmp_path / "pipeline.yaml"
     text = (REPO / "config" / "pipeline.yaml").read_text()
     assert "init_polish: true" in text and "energy: raster" in text and "startup_catch_up: 0 " in text
+    assert "    init_confirm_frames: 3 " in text
     # and the sampled energy: with the scanline count (the default since decision 017) this bag's seed-0
     # initialization faces the right way (heading check: kept, 0.0502 vs 0.0600), leaving nothing to mend.
     # And the start-up's sets caught up (startup_catch_up 12, off by default): without it the sets that come
@@ -71,7 +81,8 @@ def test_real_time_run_mends_a_backwards_first_heading(tmp_path, rosenv, capsule
     # the legs' side for the rest of the run in 3 of 8 runs (94-108 mm; root and heading right), an open issue-35
     # defect of the gap, not of the check (docs/history/issue35_speed.md, session 33 (lead)); with it 8 of 8 held
     params.write_text(text.replace("init_polish: true", "init_polish: false").replace("energy: raster", "energy: fast")
-                      .replace("startup_catch_up: 0 ", "startup_catch_up: 12 "))
+                      .replace("startup_catch_up: 0 ", "startup_catch_up: 12 ")
+                      .replace("    init_confirm_frames: 3 ", "    init_confirm_ratio: 10.0\n    init_confirm_frames: 3 "))
     rate = replay_rate(tmp_path, rosenv, capsule_demo)
     res = subprocess.run(CLI + ["run", str(capsule_demo), "--out", str(out), "--seed", "0", "--shape", "default",
                                 "--params", str(params), "--rate", f"{rate:.3f}"],
@@ -79,12 +90,11 @@ def test_real_time_run_mends_a_backwards_first_heading(tmp_path, rosenv, capsule
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
     # the heading check's start and decision are expected events: INFO, in the nodes' log (run echoes WARN/ERROR)
     log = (out / "nodes.log").read_text()
-    assert "heading check started" in log and "heading check decided: switched to the other heading" in log, \
-        log[-3000:]
+    assert "heading check started" in log and "heading check decided: " in log, log[-3000:]
     s = json.loads((out / "summary.json").read_text())
     # measured: 24.5 / 25.4 mm (4-11 sets dropped); lost for good without the hold: 310 mm
     # (on failure, the whole summary and the lines that say why a track goes: where each view's background was
-    # learnt — CI's one loss, session 32, came when the learning window ran into the person —, the budget changes)
+    # learnt, the initialization, the heading check, the budget's changes)
     why = [line for line in log.splitlines() if re.search(r"background learnt|budget|lost|heading check|initiali", line)]
     assert s["mpjpe_mm"] < 60.0, json.dumps(s, indent=0) + "\n" + "\n".join(why[-40:])
     # the start-up's drops (initialization + heading check) are counted within all the drops; whether there
