@@ -27,7 +27,7 @@ from isa_mocap_ros.cli.track_io import read_sequence
 from isa_mocap_ros.tracking import tracker as tracker_module
 
 sys.path.insert(0, str(Path(__file__).parent))
-from track_hooks import track_patched  # noqa: E402
+from track_hooks import track_args, track_patched  # noqa: E402
 
 SEGMENTS = (("pelvis", "neck"), ("left_hip", "left_knee"), ("right_hip", "right_knee"),
             ("left_knee", "left_ankle"), ("right_knee", "right_ankle"))
@@ -39,11 +39,7 @@ def from_vertical_deg(v: np.ndarray) -> np.ndarray:
 
 
 def main(argv: list[str]) -> int:
-    oracle = "--oracle" in argv
-    args = [a for a in argv if a != "--oracle"]
-    if not args or "--out" not in args:
-        raise SystemExit(__doc__)
-    bag, out = args[0], args[args.index("--out") + 1]
+    oracle, args, bag, out = track_args(argv, "--oracle", __doc__)
     seq = read_sequence(bag, want_images=True, want_masks=False)
     if seq.truth_model is None:
         raise SystemExit(f"{bag}: expected a bag with a ground-truth model (isa-mocap synth)")

@@ -32,7 +32,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 
 from real_floor import ik_to_peer  # noqa: E402
-from track_hooks import track_patched  # noqa: E402
+from track_hooks import track_args, track_patched  # noqa: E402
 
 SIDES = ("left", "right")
 
@@ -104,16 +104,14 @@ def oracle_run(argv: list[str]) -> int:
     from isa_mocap_ros.cli.track_io import read_sequence
     from isa_mocap_ros.tracking import tracker as tracker_module
 
-    oracle = "--oracle" in argv
-    args = [a for a in argv if a != "--oracle"]
+    argv = list(argv)
     offsets: dict = {}
-    if "--offsets" in args:                 # a track's summary.json: its per_marker_offset_mm (est − peer, body axes)
-        i = args.index("--offsets")
-        offsets = json.loads(Path(args[i + 1]).read_text())["per_marker_offset_mm"]
-        del args[i:i + 2]
-    if not args or "--out" not in args:
-        raise SystemExit(__doc__)
-    bag, out = args[0], Path(args[args.index("--out") + 1])
+    if "--offsets" in argv:                 # a track's summary.json: its per_marker_offset_mm (est − peer, body axes)
+        i = argv.index("--offsets")
+        offsets = json.loads(Path(argv[i + 1]).read_text())["per_marker_offset_mm"]
+        del argv[i:i + 2]
+    oracle, args, bag, out = track_args(argv, "--oracle", __doc__)
+    out = Path(out)
     seq = read_sequence(bag, want_images=True, want_masks=False)
     names = list(seq.truth_marker_names)
     truth = {int(f.stamp_ns): np.asarray(f.truth_markers, float) for f in seq.frames if f.truth_markers is not None}

@@ -5,6 +5,17 @@ from __future__ import annotations
 from isa_mocap_ros.cli.main import main as isa_main
 
 
+def track_args(argv: list[str], flag: str, usage: str | None) -> tuple[bool, list[str], str, str]:
+    """A research tool's command line, ``BAG --out DIR [track's options] [FLAG]``: whether ``flag`` was given,
+    track's arguments (``argv`` without it), the bag and the output directory. Without a bag or ``--out`` it exits
+    printing ``usage`` (the tool's docstring)."""
+    given = flag in argv
+    args = [a for a in argv if a != flag]
+    if not args or "--out" not in args:
+        raise SystemExit(usage)
+    return given, args, args[0], args[args.index("--out") + 1]
+
+
 def track_patched(args: list[str], patches: list[tuple[object, str, object]]) -> int:
     """``isa-mocap track ARGS`` with each ``(owner, name, replacement)`` of ``patches`` set on its owner (a class or
     module) for the run and the originals put back after it, also when it raises. Returns track's exit code."""

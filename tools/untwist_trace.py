@@ -27,15 +27,11 @@ from isa_mocap_ros.tracking import chain_moves
 from isa_mocap_ros.tracking import tracker as tracker_module
 
 sys.path.insert(0, str(Path(__file__).parent))
-from track_hooks import track_patched  # noqa: E402
+from track_hooks import track_args, track_patched  # noqa: E402
 
 
 def main(argv: list[str]) -> int:
-    null = "--null" in argv
-    argv = [a for a in argv if a != "--null"]
-    if not argv or "--out" not in argv:
-        raise SystemExit(__doc__)
-    bag, out = argv[0], argv[argv.index("--out") + 1]
+    null, argv, bag, out = track_args(argv, "--null", __doc__)
     seq = read_sequence(bag, want_images=True, want_masks=False)
     records: list[dict] = []
     frame = [None]
