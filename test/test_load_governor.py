@@ -113,11 +113,12 @@ def test_drops_count_as_overload_beside_a_slow_step_only():
 
 def test_no_step_up_to_the_contour_stage_that_cannot_fit():
     """At the full evaluations without the contour stage, a step of 25 ms fits 0.85 × 33 ms, but with the stage
-    (projected 25 / (1 - contour_share) = 36 ms) it cannot: no try. Without ``slow_drops_only`` (the earlier policy)
-    the stage's cost was not projected: it tried, came back down, and tried again after twice as many sets."""
-    for slow_only, tries in ((True, 0), (False, 3)):
-        g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD, up_after=5, slow_drops_only=slow_only,
-                                      fixed_share=0.0))
+    (projected 25 / (1 - contour_share) = 36 ms) it cannot: no try. Without ``contour_up_cost`` (the earlier policy)
+    the stage's cost was not projected: it tried, came back down, and tried again after twice as many sets. Which
+    drops count (``slow_drops_only``) does not change this: no set is dropped here."""
+    for up_cost, slow_only, tries in ((True, True, 0), (False, True, 3), (True, False, 0), (False, False, 3)):
+        g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD, up_after=5, contour_up_cost=up_cost,
+                                      slow_drops_only=slow_only, fixed_share=0.0))
         levels = [g.observe(step_s=0.036 if g.level == 0 else 0.025, energy=0.1).level for _ in range(120)]
         assert levels[1] == 1
         assert sum(a == 1 and b == 0 for a, b in zip(levels, levels[1:])) >= tries
@@ -174,6 +175,21 @@ def test_lost_track_returns_to_full_budget_then_resets():
     assert g.resets == 1
     # after the reset the energy statistics start anew: the new level is not "lost"
     assert all(not g.observe(step_s=0.02, energy=0.5).reset for _ in range(10))
+
+
+def test_the_reset_restarts_the_energy_statistics_through_restart_energies():
+    """The reset branch forgets the energies the one way a new track does (``restart_energies``, also the
+    recovery's), so whatever that method forgets the reset forgets too."""
+    g = LoadGovernor(LoadSettings(evals=1500, period_s=PERIOD, reset_after=2))
+    calls = []
+    original = g.restart_energies
+    g.restart_energies = lambda: (calls.append(True), original())[1]
+    for _ in range(6):
+        g.observe(step_s=0.02, energy=0.1)
+    assert g.reference_energy == 0.1 and not calls
+    assert not g.observe(step_s=0.02, energy=0.5).reset
+    assert g.observe(step_s=0.02, energy=0.5).reset
+    assert calls == [True] and np.isnan(g.reference_energy) and g.lost_sets == 0
 
 
 def test_reference_energy_and_lost_count_are_readable():

@@ -47,7 +47,9 @@ class EstimatorIntake:
         headroom = declare(self, "degrade_headroom", 0.85, "degrade: a budget fits when its step time is "
                            "below this share of frame_period_s", lo=0.05, hi=1.0)
         slow_only = declare(self, "degrade_slow_drops_only", True, "degrade: a dropped set is overload only beside a "
-                            "step over the headroom; a step up to the contour stage is projected with its cost")
+                            "step over the headroom")
+        up_cost = declare(self, "degrade_contour_up_cost", True, "degrade: a step up to the contour stage is projected "
+                          "with its cost (a level that cannot fit is not tried)")
         fixed_share = declare(self, "degrade_fixed_share", 0.3, "degrade: share of a full-budget step that does not "
                               "scale with the evaluations (projects a step between levels)", lo=0.0, hi=0.95)
         recovery = declare(self, "recovery", False, "real time: after the track drifted at a lowered budget, a fresh "
@@ -55,7 +57,8 @@ class EstimatorIntake:
                            "measured worse, docs/nodes.md)")
         governor = LoadGovernor(LoadSettings(
             evals=self.tracker_config.search.evals, period_s=self.frame_period_s, headroom=headroom,
-            min_evals=min_evals, slow_drops_only=slow_only, fixed_share=fixed_share)) if degrade else None
+            min_evals=min_evals, slow_drops_only=slow_only, contour_up_cost=up_cost,
+            fixed_share=fixed_share)) if degrade else None
         return governor, (Recovery() if recovery else None), min_evals
 
     def _new_tracker(self, cams: list):

@@ -7,7 +7,7 @@ budgets (:data:`LEVELS`: the contour stage off, then fewer evaluations) while th
 does not fit the frame period, and back up once the measured time at the current level leaves room
 for the next one up (a step up that then does not fit comes back down, and the next try waits
 twice as long: no oscillation at the edge; a step up that turns the contour stage on is projected with the stage's
-cost, so a level that cannot fit is not tried). Sets dropped count as overload only beside a step over the headroom
+cost, ``contour_up_cost``, so a level that cannot fit is not tried). Sets dropped count as overload only beside a step over the headroom
 (``slow_drops_only``): a drop beside a step that fit (masks arriving bunched, the start-up) is not the budget's, and
 counted it walked the budget down to the last level (decision 018). It is a pure policy: it never reads a clock
 itself; the caller passes the monotonic time of each observation, so tests drive it with a fake clock.
@@ -72,8 +72,11 @@ class LoadSettings:
                                     # evaluations, to project a step between levels (one tracker thread: 8 of 28 ms, 0.30,
                                     # docs/history/issue35_speed.md session 33; 0 = all of it scales, session 32's policy)
     slow_drops_only: bool = True    # a set dropped counts as overload only beside a step over headroom × period_s (a
-                                    # drop beside a step that fit is not the budget's: bunched arrivals, the start-up),
-                                    # and a step up to the contour stage adds its contour_share (False: session 32's policy)
+                                    # drop beside a step that fit is not the budget's: bunched arrivals, the start-up;
+                                    # False: every drop counts, session 32's policy)
+    contour_up_cost: bool = True    # a step up that turns the contour stage on is projected with its contour_share, so
+                                    # a level that cannot fit is not tried (False: projected without it and tried,
+                                    # session 32's policy)
 
     def __post_init__(self) -> None:
         for name in ("evals", "down_after", "up_after", "min_evals", "reset_after", "window", "max_backoff"):
@@ -195,8 +198,7 @@ class LoadGovernor:
         if lost:
             self._lost += 1
             if self._lost >= s.reset_after and self.level == 0:
-                self._lost = 0
-                self._energies.clear()
+                self.restart_energies()          # the re-initialized track's energies start anew
                 self.resets += 1
                 return self.decision(f"track lost for {s.reset_after} frame sets: re-initializing", reset=True)
             if self.level != 0:
@@ -228,13 +230,13 @@ class LoadGovernor:
                                  + f"): {evals} evaluations" + ("" if contour else ", no contour stage"))
         if self.level > 0:
             # the level above, from this level's typical time: the step less its fixed share scales with
-            # the evaluations (fixed_share), and a contour stage turned on adds its share (with
-            # slow_drops_only; before, it was not modelled but tried); a step up that does not fit comes down
+            # the evaluations (fixed_share), and a contour stage turned on adds its share (contour_up_cost;
+            # without it, it was not modelled but tried); a step up that does not fit comes down
             # after down_after sets, and the next try waits twice as long (up to max_backoff × up_after)
             here, contour_here = self.budget(self.level)
             up, contour_up = self.budget(self.level - 1)
             projected = typical * self._scale(here, up)
-            if s.slow_drops_only and contour_up and not contour_here:
+            if s.contour_up_cost and contour_up and not contour_here:
                 projected /= 1.0 - s.contour_share
             self._room = self._room + 1 if projected < limit else 0
             if self._room >= s.up_after * self._backoff:
