@@ -17,7 +17,13 @@ downstream. The parameters mirror :class:`~isa_mocap_ros.vision.segmentation.Seg
 The learning ends by stamp as well as by count (:class:`~isa_mocap_ros.vision.segmentation_window.LearningWindows`):
 a view learns only from images stamped within ``learn_frames`` frame periods (``frame_rate``; 0 = the smallest stamp
 gap of a view) of the first image of the frame sets, so images lost in real time never let the frames after the
-empty ones into the background; one log line per view gives the stamps learnt (docs/vision.md).
+empty ones into the background; one log line per view gives the stamps learnt (docs/vision.md). The model's build
+from the learning (:meth:`BackgroundSegmenter.advance_build`, a band of rows a step) runs from a timer between the
+images after a view's last learning image, the views in the order they learnt; the next image of a view finishes what
+is left of its build first. The masks are bit for bit those of a build in one go (docs/vision.md). The compiled
+kernels run on the callback's thread only (:func:`~isa_mocap_ros.nodes.common.one_numba_thread`): the learning's
+``parallel`` kernels spent 2-4x the CPU in spinning workers on a loaded machine (docs/history/issue35_speed.md,
+session 34).
 
 Accepted encodings: ``rgb8``, ``bgr8`` (turned into RGB) and ``mono8``.
 
@@ -73,7 +79,7 @@ from isa_mocap_ros.nodes import qos
 from isa_mocap_ros.intake import Setting, StreamForks, ViewGate
 from isa_mocap_ros.late_sets import LateSetShedder
 from isa_mocap_ros.nodes.common import (QOS_OVERRIDES, ProblemLog, camera_info_callback, declare, log_closing,
-                                        run_node)
+                                        one_numba_thread, run_node)
 from isa_mocap_ros.vision.segmentation import BackgroundSegmenter, SegmentationConfig, SegmentationError
 from isa_mocap_ros.vision.segmentation_window import LearningWindows
 
@@ -81,6 +87,8 @@ __all__ = ["SegmentationNode", "main", "ENCODINGS"]
 
 #: encodings the node segments
 ENCODINGS = ("rgb8", "bgr8", "mono8")
+#: period of the timer that steps the background models' builds between images, seconds (only while one is left)
+BUILD_TICK_S = 0.001
 
 # parameter name -> (description, lo, hi); names and defaults come from SegmentationConfig
 _PARAMS = {
@@ -188,6 +196,9 @@ class SegmentationNode(Node):
         self.masks_published = [0] * self.n_views
         self._reported = [False] * self.n_views
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.RELIABLE)
+        self._building: deque[BackgroundSegmenter] = deque()    # models whose build has steps left, oldest first
+        self._build_timer = self.create_timer(BUILD_TICK_S, self._advance_builds)
+        self._build_timer.cancel()
         self.create_timer(1.0, self._publish_diagnostics)
         self.latency_s: deque[float] = deque(maxlen=1000)
         self.get_logger().info(
@@ -311,10 +322,15 @@ class SegmentationNode(Node):
         if learning:
             self._learn_window(v, seg, ma.stamp_to_ns(msg.header))
         try:
-            mask = seg.apply(img)
+            with one_numba_thread():
+                mask = seg.apply(img)
         except SegmentationError as exc:
             self.problems.report(f"image{v}:segmenter", f"cam{v}/image_raw dropped: {exc}")
             return
+        if seg.building and seg not in self._building:
+            self._building.append(seg)
+            if self._build_timer.is_canceled():
+                self._build_timer.reset()
         if learning and not seg.learning:
             learnt = self.windows.learnt(seg)
             self.get_logger().info(
@@ -333,6 +349,17 @@ class SegmentationNode(Node):
         self.masks_published[v] += 1      # before publish(): a Ctrl-C right after it must not lose the count
         pub.publish(out)
         self.latency_s.append(time.perf_counter() - t0)
+
+    def _advance_builds(self) -> None:
+        """Timer: one step of the oldest background model's build (none left: the timer stops)."""
+        current = self.segmenters
+        while self._building and not (self._building[0].building and any(m is self._building[0] for m in current)):
+            self._building.popleft()        # finished (by its next image), or a model the view forgot
+        if not self._building:
+            self._build_timer.cancel()
+            return
+        with one_numba_thread():
+            self._building[0].advance_build()
 
     def _learn_window(self, v: int, seg: BackgroundSegmenter, stamp_ns: int) -> None:
         """Before a learning model takes the image of ``stamp_ns``: past its learning window

@@ -11,7 +11,8 @@ import numba
 import numpy as np
 
 __all__ = ["_robust_background_numpy", "_robust_pairs_numpy", "_robust_finish_numpy", "_robust_pairs_numba",
-           "_robust_finish_numba", "_robust_background_numba", "_masked_mode_numpy", "_masked_mode_numba"]
+           "_robust_finish_numba", "_robust_pairs_rows_numba", "_robust_finish_rows_numba", "_robust_background_numba",
+           "_masked_mode_numpy", "_masked_mode_numba"]
 
 
 def _robust_background_numpy(stack, radius):
@@ -78,11 +79,17 @@ def _robust_finish_numpy(stack, n, spread, radius):
     return mu.astype(np.float32), var.astype(np.float32), count.astype(np.int32)
 
 
+def _robust_pairs_numba(stack, k, n, spread, radius):
+    """:func:`_robust_pairs_numpy`, compiled (:func:`_robust_pairs_rows_numba` over every row)."""
+    _robust_pairs_rows_numba(stack, k, n, spread, float(radius), 0, stack.shape[1])
+
+
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _robust_pairs_numba(stack, k, n, spread, radius):  # pragma: no cover
-    # _robust_pairs_numpy, branch-free along a row of one channel plane, rows in parallel
+def _robust_pairs_rows_numba(stack, k, n, spread, radius, y0, y1):  # pragma: no cover
+    # _robust_pairs_numpy on rows y0..y1-1, branch-free along a row of one channel plane, rows in parallel (a row's
+    # arithmetic does not depend on the others: a band at a time gives the same bits)
     K, H, W, C = stack.shape
-    for y in numba.prange(H):
+    for y in numba.prange(y0, y1):
         pk = np.empty((C, W), np.int32)
         for x in range(W):
             for c in range(C):
@@ -102,16 +109,23 @@ def _robust_pairs_numba(stack, k, n, spread, radius):  # pragma: no cover
                 spread[j, y, x] += ok * d[x]
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _robust_finish_numba(stack, n, spread, radius):  # pragma: no cover
-    # _robust_finish_numpy, rows in parallel. A row's samples are first copied into channel planes,
-    # and an outlier adds 0.0 (the same sums, in the same order per pixel, as skipping it), so the
-    # inner loops run along x without branches (SIMD)
+def _robust_finish_numba(stack, n, spread, radius):
+    """:func:`_robust_finish_numpy`, compiled (:func:`_robust_finish_rows_numba` over every row)."""
     K, H, W, C = stack.shape
     mu = np.zeros((H, W, C), np.float32)
     var = np.zeros((H, W, C), np.float32)
     count = np.zeros((H, W), np.int32)
-    for y in numba.prange(H):
+    _robust_finish_rows_numba(stack, n, spread, float(radius), 0, H, mu, var, count)
+    return mu, var, count
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _robust_finish_rows_numba(stack, n, spread, radius, y0, y1, mu, var, count):  # pragma: no cover
+    # _robust_finish_numpy on rows y0..y1-1, written into mu, var, count; rows in parallel. A row's samples are first
+    # copied into channel planes, and an outlier adds 0.0 (the same sums, in the same order per pixel, as skipping
+    # it), so the inner loops run along x without branches (SIMD)
+    K, H, W, C = stack.shape
+    for y in numba.prange(y0, y1):
         P = np.empty((K, C, W), np.int32)
         for j in range(K):
             for x in range(W):
@@ -153,7 +167,6 @@ def _robust_finish_numba(stack, n, spread, radius):  # pragma: no cover
             for x in range(W):
                 mu[y, x, c] = m[x]
                 var[y, x, c] = v[x] / max(count[y, x] - 1, 1)
-    return mu, var, count
 
 
 def _robust_background_numba(stack, radius):

@@ -71,6 +71,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from .segmentation_build import ModelBuild, foreground_test
 from .segmentation_config import LEARN_FROM, METHODS, ROBUST, VOTES, SegmentationConfig, SegmentationError  # noqa: F401
 from .stable_background import estimate_background
 
@@ -189,6 +190,8 @@ class BackgroundSegmenter:
         self._agree_fraction = 0.0  # robust field vote: share of background pixels of kind A
         self._field_evidence = None  # robust field vote with field_memory: the leaky sum of evidence
         self._buffer: list[np.ndarray] | None = None   # learn_from="stable": the learning images
+        self._build: ModelBuild | None = None   # the model's build from the learning, while steps remain
+        self._pending_pairs: int | None = None   # the last sample, its agreements left to the build
         if self.config.method != "colour":
             c = self.config
             if c.method == "mog2":
@@ -219,6 +222,33 @@ class BackgroundSegmenter:
     def learning(self) -> bool:
         """True while the next image only feeds the background model (all-zero mask)."""
         return self._n_learnt < self._learn_target
+
+    @property
+    def building(self) -> bool:
+        """True from the last learning image until the model is built (:meth:`advance_build`, or the next
+        :meth:`apply`, which finishes it first)."""
+        return self._build is not None
+
+    def advance_build(self) -> bool:
+        """One step of the model's build (a band of rows; :mod:`.segmentation_build`), for a caller with idle time
+        before the next image; the model is bit for bit the same however many steps ran before :meth:`apply`.
+
+        Returns
+        -------
+        bool
+            True while steps remain.
+        """
+        if self._build is None:
+            return False
+        if self._build.step():
+            return True
+        self._take_build()
+        return False
+
+    def _complete_build(self) -> None:
+        if self._build is not None:
+            self._build.finish()
+            self._take_build()
 
     @property
     def images_learnt(self) -> int:
@@ -269,6 +299,7 @@ class BackgroundSegmenter:
 
     def background_image(self) -> np.ndarray | None:
         """Current background estimate, same shape as the input images, uint8 (None if unknown)."""
+        self._complete_build()
         if self._cv is not None:
             if self._shape is None:
                 return None
@@ -311,6 +342,7 @@ class BackgroundSegmenter:
                 f"image: expected shape {self._shape} (the size the background was learnt at), "
                 f"got {image.shape}")
         self.frames_seen += 1
+        self._complete_build()
         work = self._reduce(image)
         mask = self._apply_opencv(work) if self._cv is not None else self._apply_colour(work)
         return self._expand(mask)
@@ -409,7 +441,8 @@ class BackgroundSegmenter:
             self._sum = np.zeros(img.shape, np.int64)
             self._sumsq = np.zeros(img.shape, np.int64)
         if c.robust != "off" and self._n_learnt in _sample_indices(self._learn_target):
-            self._add_sample(img)
+            # the last learning image's agreements are left to the build (in bands)
+            self._add_sample(img, defer=self._n_learnt + 1 >= self._learn_target)
         _LEARN_KERNELS[c.kernel][0](img, self._sum, self._sumsq)
         self._n_learnt += 1
         if not self.learning:  # last learning image: mean and variance over the K images
@@ -430,15 +463,12 @@ class BackgroundSegmenter:
             self._learn_sample(f[..., :1] if grey else f)
 
     def _foreground(self, img: np.ndarray) -> np.ndarray:
-        c = self.config
-        return _KERNELS[c.kernel][0](
-            img, self._mu, self._var, np.float32(c.min_std) ** 2, np.float32(c.threshold) ** 2,
-            bool(c.shadow_suppression), np.float32(c.shadow_min_brightness),
-            np.float32(c.shadow_max_brightness), np.float32(c.shadow_chroma_threshold) ** 2)
+        return foreground_test(self.config, img, self._mu, self._var)
 
-    def _add_sample(self, img: np.ndarray) -> None:
+    def _add_sample(self, img: np.ndarray, *, defer: bool = False) -> None:
         """Keep a learning image for the robust estimate and add its agreements with the earlier
-        ones (the pair work is done as the images arrive, not all at the last learning frame)."""
+        ones (the pair work is done as the images arrive, not all at the last learning frame; the last
+        one's, ``defer``, by the build)."""
         if self._samples is None:
             S = len(_sample_indices(self._learn_target))
             self._samples = np.empty((S,) + img.shape, np.uint8)
@@ -446,45 +476,28 @@ class BackgroundSegmenter:
         k = self._n_samples
         self._samples[k] = img
         self._n_samples += 1
-        if k:
+        if defer and k:
+            self._pending_pairs = k
+        elif k:
             _KERNELS[self.config.kernel][2](self._samples, k, *self._pairs, float(self.config.robust_radius))
 
     def _finish_learning(self) -> None:
-        """Mean / variance of the learning images; the robust estimate and the mode decision."""
-        c = self.config
-        k = self._n_learnt
-        mu = self._sum / k
-        var = np.maximum(self._sumsq / k - mu * mu, 0.0) * (k / max(k - 1, 1))
-        if c.std_smoothing_px > 1:
-            var = cv2.blur(var.astype(np.float32), (c.std_smoothing_px,) * 2,
-                           borderType=cv2.BORDER_REFLECT).reshape(mu.shape)
-        self._mu = mu.astype(np.float32)
-        self._var = var.astype(np.float32)
-        self._sum = self._sumsq = None
-        if not self._n_samples:
-            return
-        samples, (n, spread) = self._samples[:self._n_samples], self._pairs
-        self._samples = self._pairs = None
+        """Start the model's build from the learning (:class:`~.segmentation_build.ModelBuild`: mean / variance of
+        the learning images; the robust estimate and the mode decision); :meth:`advance_build` steps it, the next
+        :meth:`apply` finishes it."""
+        S = self._n_samples
+        self._build = ModelBuild(self.config, self._sum, self._sumsq, self._n_learnt,
+                                 samples=self._samples[:S] if S else None, pairs=self._pairs if S else None,
+                                 pending=self._pending_pairs)
+        self._sum = self._sumsq = self._samples = self._pairs = self._pending_pairs = None
         self._n_samples = 0
-        rmu, rvar, count = _KERNELS[c.kernel][3](samples, n[:len(samples)], spread[:len(samples)],
-                                                 float(c.robust_radius))
-        reliable = (count >= min(2, len(samples))).astype(np.uint8)
-        if not reliable.any():
-            reliable[:] = 1
-        # unreliable pixels (no two samples agree) take the mean of their reliable neighbours (once the robust
-        # mode is chosen: the share below counts reliable pixels only, where the fill keeps rmu);
-        # the variance is smoothed over reliable pixels only
-        side = max(5, c.std_smoothing_px)
-        rvar = _fill_from_reliable(rvar, reliable, side, smooth=c.std_smoothing_px > 1)
-        keep = (self._mu, self._var)
-        self._mu, self._var = rmu, rvar
-        hits = sum(int(np.count_nonzero(self._foreground(s) & reliable)) for s in samples)
-        self._outlier_fraction = hits / (len(samples) * int(np.count_nonzero(reliable)))
-        if c.robust == "on" or self._outlier_fraction > c.robust_detect_fraction:
-            self._reliable = reliable
-            self._mu = _fill_from_reliable(rmu, reliable, 5)
-        else:
-            self._mu, self._var = keep
+
+    def _take_build(self) -> None:
+        """The finished build's model becomes the segmenter's."""
+        b, self._build = self._build, None
+        self._mu, self._var, self._reliable = b.mu, b.var, b.reliable
+        if b.outlier_fraction is not None:
+            self._outlier_fraction = b.outlier_fraction
 
     def _vote(self, fg: np.ndarray, img: np.ndarray) -> np.ndarray:
         """Robust mode: the per-frame decision from the per-pixel test ``fg`` (``D``) on ``img``.
