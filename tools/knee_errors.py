@@ -4,7 +4,7 @@
 
 Each pair: a ground-truth mesh bag and a run's ``estimates`` recording of it (``isa-mocap track --out DIR``:
 ``DIR/estimates``; ``bench mesh --out DIR`` keeps them per run). The estimates are scored as ``bench mesh`` scores
-them (``eval.metrics.score_markers`` with the bag's rig joint map, the initialized first frame left out) and the
+them (``eval.metrics.score_markers`` with the bag's rig joint map, every estimated frame with ground truth) and the
 mapped knee errors (estimate's flexion − truth's, degrees, per frame and side) are split into: the mean signed error
 (bias: negative = the knee bent too little), its scatter about that mean (RMSE² = bias² + scatter²), the RMSE on the
 frames where the true knee is bent less than ``STANCE_DEG`` (stance, the leg nearly straight) or more (swing), and
@@ -36,8 +36,6 @@ def knee_split(bag: str, est: str) -> dict:
         raise SystemExit(f"knee_errors: {est}: no /mocap/model in the recording (not a track/bench estimates bag)")
     poses = read_estimates(Path(est), model)["poses"]
     stamps = sorted(f.stamp_ns for f in seq.frames if f.truth_markers is not None and f.stamp_ns in poses)
-    first = min(poses) if poses else None                  # the initialized frame, not scored (as bench mesh)
-    stamps = [s for s in stamps if s != first]
     if not stamps:
         raise SystemExit(f"knee_errors: {est}: no estimate on a frame with ground truth in {bag}")
     by = {f.stamp_ns: f.truth_markers for f in seq.frames}
