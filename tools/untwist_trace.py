@@ -3,10 +3,11 @@
     .venv/bin/python tools/untwist_trace.py [--null] BAG --out DIR [isa-mocap track options, e.g. --leg-untwist 0.01]
 
 Runs ``isa-mocap track`` in this process (the same code and options) with ``chain_moves.untwist_legs`` wrapped: on
-every call it records the frame, the step objective's energy of the pose before and after the stage (two more
-evaluations, outside the tracker's count: the results are unchanged, the energy has no random draws), the legs
-changed and their hip twists before and after. At the end it adds each frame's raw joint error (the model's joint
-centres against the bag's markers of the same names, the first frame left out) and writes
+every call it records the frame, the stage's CPU time (``time.process_time``; each step's too), the step
+objective's energy of the pose before and after the stage (two more evaluations, outside the tracker's count: the
+results are unchanged, the energy has no random draws), the legs changed and their hip twists before and after. At
+the end it adds each frame's raw joint error (the model's joint centres against the bag's markers of the same names,
+the first frame left out) and writes
 ``DIR/untwist_trace.json``; it prints the frames with the largest errors and what the stage did on and before them.
 ``--null``: the stage runs and is charged as usual but every leg keeps its pose (the control for what
 taking the evaluations from the main search alone changes: a different random path, not the untwist's choices).
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -38,15 +40,21 @@ def main(argv: list[str]) -> int:
     step, untwist = tracker_module.Tracker.step, chain_moves.untwist_legs
 
     models: list = []
+    step_cpu_ms: list[float] = []
 
     def recording_step(self, masks, frame_index, **kw):
         frame[0] = int(frame_index)
         if not models:
             models.append(self.model)
-        return step(self, masks, frame_index, **kw)
+        t0 = time.process_time()
+        r = step(self, masks, frame_index, **kw)
+        step_cpu_ms.append(1e3 * (time.process_time() - t0))       # includes the stage, not the trace's 2 evaluations
+        return r
 
     def recording_untwist(tr, ctx, x, **kw):
+        t0 = time.process_time()
         r = untwist(tr, ctx, x, **kw)
+        cpu_ms = 1e3 * (time.process_time() - t0)
         if null:                          # same evaluations charged, the pose (and its energy) kept
             x0 = np.clip(np.asarray(x, dtype=float), tr.model.lower, tr.model.upper)
             e0 = kw.get("energy")
@@ -54,7 +62,7 @@ def main(argv: list[str]) -> int:
         names = list(tr.model.dof_names)
         e = np.asarray(ctx.objective(np.stack([np.clip(x, tr.model.lower, tr.model.upper), r[0]])), dtype=float)
         hz = [names.index(f"{s}_hip_z") for s in ("left", "right")]
-        records.append({"frame": frame[0], "energy_before": float(e[0]), "energy_after": float(e[1]),
+        records.append({"frame": frame[0], "cpu_ms": round(cpu_ms, 3), "energy_before": float(e[0]), "energy_after": float(e[1]),
                         "rise": float(e[1] / e[0] - 1.0), "legs": list(r[3]),
                         "hip_z_before_deg": np.round(np.degrees(np.asarray(x)[hz]), 2).tolist(),
                         "hip_z_after_deg": np.round(np.degrees(r[0][hz]), 2).tolist()})
@@ -82,7 +90,9 @@ def main(argv: list[str]) -> int:
     res = {"frames": len(records), "untwists_taken": len(taken), "legs_taken": sum(len(r["legs"]) for r in taken),
            "mean_energy": float(np.mean([r["energy_before"] for r in records])) if records else None,
            "mean_rise_taken": float(rises.mean()), "max_rise_taken": float(rises.max()),
-           "mean_raw_error_mm": float(np.mean(list(err.values()))), "max_raw_error_mm": float(max(err.values()))}
+           "mean_raw_error_mm": float(np.mean(list(err.values()))), "max_raw_error_mm": float(max(err.values())),
+           "stage_cpu_ms_per_frame": float(np.mean([r["cpu_ms"] for r in records])) if records else None,
+           "step_cpu_ms_per_frame": float(np.median(step_cpu_ms[1:])) if len(step_cpu_ms) > 1 else None}
     print(json.dumps(res))
     order = [r["frame"] for r in records]
     for r in sorted(records, key=lambda r: -r["raw_error_mm"] if r["raw_error_mm"] == r["raw_error_mm"] else 0)[:3]:
