@@ -313,10 +313,9 @@ def test_outline_box_holds_the_drawn_silhouette(scene):
 
 
 def test_match_takes_the_first_nearest_pixel_in_raster_order():
-    """``contour_kernel.match`` scans the window's rows from the projection outwards and skips rows farther than the
-    best pixel found; its pick is the raster-order scan's: the smallest distance within ``max_px``, of equal ones the
-    first in raster order (lower row, then lower column). Checked against that scan written out, on a lattice of
-    contour pixels and half-pixel projections, where many pixels tie."""
+    """``contour_kernel.match``'s pick is the raster-order scan's: the smallest distance within ``max_px``, of equal
+    ones the first in raster order (lower row, then lower column), what any faster search must keep. Checked against
+    that scan written out, on a lattice of contour pixels and half-pixel projections, where many pixels tie."""
     from isa_mocap_ros.tracking import contour_kernel
 
     H, W, max_px = 40, 50, 3.0

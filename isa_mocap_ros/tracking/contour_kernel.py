@@ -116,16 +116,10 @@ def match(frames, local, R, P, cam_R, cam_t, K4, D8, hasd, index, max_px, lines_
         cu, cv = int(np.floor(u + 0.5)), int(np.floor(v + 0.5))
         if cu < -r or cv < -r or cu >= W + r or cv >= H + r:
             continue
-        # the window's rows from the projection's outwards (offsets 0, +1, -1, +2, ...): once a pixel is found, a row
-        # whose own distance exceeds the best is skipped (d2 >= dyy^2 there). The result is the raster-order scan's:
-        # the smallest d2, of equal ones the first in raster order (the lower row; in a row the first column)
-        best, row, brow = np.inf, -1, H
-        for t in range(2 * r + 3):
-            yy = cv + (t + 1) // 2 if t % 2 == 1 else cv - t // 2
-            if yy < 0 or yy >= H:
-                continue
+        best, row = np.inf, -1
+        for yy in range(max(0, cv - r - 1), min(H, cv + r + 2)):
             dyy = yy - v
-            if dyy * dyy > lim or dyy * dyy > best:
+            if dyy * dyy > lim:
                 continue
             for xx in range(max(0, cu - r - 1), min(W, cu + r + 2)):
                 j = index[yy, xx]
@@ -133,8 +127,8 @@ def match(frames, local, R, P, cam_R, cam_t, K4, D8, hasd, index, max_px, lines_
                     continue
                 dxx = xx - u
                 d2 = dxx * dxx + dyy * dyy
-                if d2 < best or (d2 == best and yy < brow):
-                    best, row, brow = d2, j, yy
+                if d2 < best:
+                    best, row = d2, j
         if row >= 0 and best <= lim:
             out_f[k] = f
             for a in range(3):
