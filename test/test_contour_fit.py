@@ -310,3 +310,40 @@ def test_outline_box_holds_the_drawn_silhouette(scene):
             assert np.array_equal(_outer_contour(sil, box), want)
             cut += bool(sil[0].any() or sil[-1].any() or sil[:, 0].any() or sil[:, -1].any())
     assert cut > 0            # some silhouettes reach the image border
+
+
+def test_match_takes_the_first_nearest_pixel_in_raster_order():
+    """``contour_kernel.match``'s pick is the raster-order scan's: the smallest distance within ``max_px``, of equal
+    ones the first in raster order (lower row, then lower column), what any faster search must keep. Checked against
+    that scan written out, on a lattice of contour pixels and half-pixel projections, where many pixels tie."""
+    from isa_mocap_ros.tracking import contour_kernel
+
+    H, W, max_px = 40, 50, 3.0
+    index = np.full((H, W), -1, np.int32)
+    ys, xs = np.mgrid[0:H:2, 0:W:3]
+    index[ys.ravel(), xs.ravel()] = np.arange(ys.size)
+    rng = np.random.default_rng(5)
+    uv = np.concatenate([rng.integers(-8, 2 * W + 8, (300, 2)) / 2.0, rng.uniform(-4, W + 4, (100, 2))])
+    uv[:, 1] = np.clip(uv[:, 1], -4, H + 4)
+    n = len(uv)
+    fx = 1.0                           # at depth 1: the projection of a point is (x + 20, y + 15)
+    local = np.stack([uv[:, 0] - 20.0, uv[:, 1] - 15.0, np.zeros(n)], axis=1)
+    uv = local[:, :2] + [20.0, 15.0]
+    lines = np.arange(ys.size * 3, dtype=float).reshape(-1, 3)
+    out = (np.empty(n, np.int64), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty(n))
+    k = contour_kernel.match(np.zeros(n, np.int64), local, np.eye(3)[None], np.zeros((1, 3)), np.eye(3),
+                             np.array([0.0, 0.0, 1.0]), np.array([fx, fx, 20.0, 15.0]), np.zeros(8), False, index,
+                             max_px, lines, -lines, *out, 0)
+    want = []
+    for u, v in uv:
+        best, row = np.inf, -1
+        for yy in range(H):
+            for xx in range(W):
+                d2 = (xx - u) * (xx - u) + (yy - v) * (yy - v)
+                if index[yy, xx] >= 0 and d2 < best:
+                    best, row = d2, index[yy, xx]
+        if best <= max_px ** 2:
+            want.append((row, np.sqrt(best)))
+    assert k == len(want) > 100
+    assert np.array_equal(out[2][:k, 0], lines[[r for r, _ in want], 0])
+    np.testing.assert_allclose(out[4][:k], [d for _, d in want], rtol=1e-12)

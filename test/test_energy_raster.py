@@ -274,3 +274,24 @@ def test_tracker_on_distorted_cameras_with_the_raster_energy(scene, distorted):
     assert r.energy == pytest.approx(float(tr.energy(r.x[None])[0]), abs=1e-12) and r.energy < 0.05
     err = np.linalg.norm(joint_positions(model, r.x[None])[0] - joint_positions(model, Xd[:1])[0], axis=1).mean()
     assert err < 0.03, err
+
+
+@pytest.mark.parametrize("stride", [1, 2, 3])
+def test_foreground_bits_are_numpys_packed_rows(stride):
+    """``raster_kernel.foreground_bits`` (compiled) packs each view's rows as ``numpy.packbits(..., bitorder="little")``
+    does, word-major, and counts the bits: views of different sizes and widths not a multiple of 64, bool and uint8."""
+    from isa_mocap_ros.energy.raster_kernel import foreground_bits
+
+    rng = np.random.default_rng(4)
+    F = [rng.random(s) < p for s, p in (((24, 70), 0.3), ((17, 64), 0.02), ((5, 130), 1.0), ((1, 1), 0.0))]
+    H, nw = 24, 3
+    Hs = -(-H // stride)
+    want = np.zeros((len(F), nw * Hs + 8), np.uint64)
+    for v, f in enumerate(F):
+        b = np.zeros((Hs * stride, nw * 64), np.uint8)
+        b[:f.shape[0], :f.shape[1]] = f
+        want[v, :nw * Hs] = np.packbits(b[::stride], axis=1, bitorder="little").view("<u8").T.reshape(-1)
+    for masks in (F, [f.astype(np.uint8) * 255 for f in F]):
+        fbits, nfg, n_words = foreground_bits(masks, stride)
+        assert n_words == nw and np.array_equal(fbits, want)
+        assert nfg.tolist() == [int(np.count_nonzero(f[::stride])) for f in F]

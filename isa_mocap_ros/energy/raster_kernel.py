@@ -459,13 +459,32 @@ def foreground_bits(F: list, stride: int) -> tuple[np.ndarray, np.ndarray, int]:
     fbits = np.zeros((len(F), nw * Hs + 8), np.uint64)
     nfg = np.zeros(len(F), np.int64)
     for v, f in enumerate(F):
-        b = np.zeros((Hs * stride, nw * 64), np.uint8)
-        b[:f.shape[0], :f.shape[1]] = f != 0
-        b = b[::stride]
-        words = np.packbits(b, axis=1, bitorder="little").view("<u8")      # (Hs, nw): bit i = pixel 64 w + i
-        fbits[v, :nw * Hs] = words.T.reshape(-1)
-        nfg[v] = int(np.count_nonzero(b))
+        f = np.asarray(f)
+        if f.dtype != np.bool_:
+            f = f != 0
+        nfg[v] = _pack_rows(f, int(stride), Hs, nw, fbits[v])
     return fbits, nfg, nw
+
+
+@numba.njit(cache=True)
+def _pack_rows(f, stride, Hs, nw, out):  # pragma: no cover - compiled
+    """Word ``w * Hs + j`` of ``out`` ← pixels ``64 w … 64 w + 63`` of row ``j * stride`` of the bool image ``f`` (bit
+    ``i`` = pixel ``64 w + i``; rows and columns outside ``f`` are 0): :func:`foreground_bits`' words of one view
+    (what ``numpy.packbits(..., bitorder="little")`` gives, transposed to word-major). Returns the bits set."""
+    H, W = f.shape
+    n = 0
+    for j in range(Hs):
+        y = j * stride
+        if y >= H:
+            break
+        for w in range(nw):
+            x0 = 64 * w
+            word = numba.uint64(0)
+            for i in range(min(64, W - x0)):
+                word |= numba.uint64(f[y, x0 + i]) << numba.uint64(i)
+            out[w * Hs + j] = word
+            n += _popcount(word)
+    return n
 
 
 def raster_static(cameras: list, F: list, stride: int) -> dict:

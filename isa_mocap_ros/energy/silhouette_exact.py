@@ -31,7 +31,7 @@ def mask_problem(mask: Any, camera: Camera) -> str | None:
         return f"mask of dtype {m.dtype}, expected uint8 or bool"
     if m.shape != (camera.height, camera.width):
         return f"mask of shape {m.shape}, expected ({camera.height}, {camera.width}) for camera {camera.name}"
-    if not np.any(m > 0):
+    if not (m.any() if m.dtype == np.uint8 or m.dtype == np.bool_ else np.any(m > 0)):   # unsigned: nonzero = > 0
         return "empty mask (nobody in view)"
     return None
 

@@ -52,9 +52,10 @@ def _maps(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
 def undistort_mask(camera: Camera, mask: np.ndarray) -> np.ndarray:
     """``mask (H, W)`` (nonzero = foreground, ``camera``'s size) resampled onto :func:`pinhole` ``(camera)``'s
     image: ``(H, W)`` bool. Without distortion the mask itself as bool."""
-    F = np.asarray(mask) != 0
+    m = np.asarray(mask)
     if not camera.has_distortion:
-        return F
+        return m if m.dtype == np.bool_ else m != 0
+    F = m != 0
     if F.shape != (camera.height, camera.width):
         raise ValueError(f"mask: expected shape {(camera.height, camera.width)} for camera {camera.name}, received "
                          f"{F.shape}")
