@@ -13,9 +13,11 @@ by ``real_floor.ik_to_peer`` from the estimate (the "peer pose"), and evaluates,
 the frame's keypoint term per view (as screened, times its weight; only on the frames the schedule detects on) for:
 
 - ``est``: the estimate; ``peer``: the peer pose;
-- ``est+peer_<part>``: the estimate with one part's angles taken from the peer pose (``left_arm``: the left shoulder,
-  elbow and wrist; ``right_arm``; ``left_leg``: hip, knee, ankle; ``right_leg``; ``pelvis``: the root's rotation), so
-  a part's preference is read with the rest of the body where the energy put it.
+- ``est+peer_<part>``: the estimate with one part's coordinates fitted so that its joints reach the peer's (moved)
+  points, the rest held (``left_arm``: the shoulder's, elbow's and wrist's angles to the peer's elbow and wrist;
+  ``right_arm``; ``left_leg``: the hip's, knee's and ankle's angles to the peer's knee and ankle; ``right_leg``;
+  ``pelvis``: the root, the lower spine and both hips to the peer's hips, with our neck, shoulders, knees and ankles
+  held where they are), so a part's preference is read with the rest of the body where the energy put it.
 
 The frame's total is ``Σ_v w_v E_v / Σ_v w_v`` (Eq. 5 with the tracker's view weights) plus the keypoint term; the
 per-view rows are each view's ``E_v`` unweighted, so the share a view has of a difference is ``w_v ΔE_v / Σ w``.
@@ -36,28 +38,64 @@ sys.path.insert(0, str(Path(__file__).parent))
 from real_floor import ik_to_peer  # noqa: E402
 from track_hooks import track_args, track_patched  # noqa: E402
 
-PARTS = {"left_arm": ("left_shoulder", "left_elbow", "left_wrist"),
-         "right_arm": ("right_shoulder", "right_elbow", "right_wrist"),
-         "left_leg": ("left_hip", "left_knee", "left_ankle"),
-         "right_leg": ("right_hip", "right_knee", "right_ankle")}
+#: part: (DOF-name prefixes fitted, joints moved to the peer's points, joints held where the estimate has them)
+PARTS = {"left_arm": (("left_shoulder", "left_elbow", "left_wrist"), ("left_elbow", "left_wrist"), ()),
+         "right_arm": (("right_shoulder", "right_elbow", "right_wrist"), ("right_elbow", "right_wrist"), ()),
+         "left_leg": (("left_hip", "left_knee", "left_ankle"), ("left_knee", "left_ankle"), ()),
+         "right_leg": (("right_hip", "right_knee", "right_ankle"), ("right_knee", "right_ankle"), ()),
+         "pelvis": (("root", "spine_lower", "left_hip", "right_hip"), ("left_hip", "right_hip"),
+                    ("neck", "left_shoulder", "right_shoulder", "left_knee", "right_knee", "left_ankle",
+                     "right_ankle"))}
 
 
 def part_coords(model) -> dict[str, np.ndarray]:
-    """Pose coordinates of each part (``PARTS`` by DOF-name prefix; ``pelvis``: the root's rotation 3-5)."""
+    """Pose coordinates each part's fit moves (``PARTS`` by DOF-name prefix)."""
     out = {p: np.array([i for i, n in enumerate(model.dof_names) if n.startswith(pre)], dtype=np.int64)
-           for p, pre in PARTS.items()}
-    out["pelvis"] = np.arange(3, 6)
+           for p, (pre, _, _) in PARTS.items()}
     return {p: c for p, c in out.items() if len(c)}
 
 
-def variants(x_est: np.ndarray, x_peer: np.ndarray, parts: dict) -> tuple[list[str], np.ndarray]:
-    """The poses scored per frame: names and rows (est, peer, est with each part from the peer pose)."""
+def fit_part(model, x: np.ndarray, coords: np.ndarray, targets: dict) -> np.ndarray:
+    """``x`` with only ``coords`` moved (bounded least squares, the model's limits) so that the joints of
+    ``targets`` (name -> (3,) point) come nearest to their points."""
+    from scipy.optimize import least_squares
+
+    from isa_mocap_ros.eval.metrics import marker_positions
+
+    names = list(targets)
+    T = np.array([targets[n] for n in names])
+    lo, hi = np.asarray(model.lower, float)[coords], np.asarray(model.upper, float)[coords]
+
+    def pose(z):
+        y = x.copy()
+        y[coords] = z
+        return y
+
+    def residual(z):
+        return (marker_positions(model, pose(z)[None], joints=names)[0] - T).ravel()
+
+    z = least_squares(residual, np.clip(x[coords], lo + 1e-9, hi - 1e-9), bounds=(lo, hi), x_scale=0.1,
+                      max_nfev=200).x
+    return pose(z)
+
+
+def variants(model, x_est: np.ndarray, x_peer: np.ndarray, peer_points: dict,
+             parts: dict) -> tuple[list[str], np.ndarray]:
+    """The poses scored per frame: the estimate, the peer pose, and per part the estimate with that part's
+    coordinates fitted to the peer's points of its joints (the rest held where the estimate has it)."""
+    from isa_mocap_ros.eval.metrics import marker_positions
+
     names, rows = ["est", "peer"], [x_est, x_peer]
     for p, c in parts.items():
-        x = x_est.copy()
-        x[c] = x_peer[c]
+        _, moved, held = PARTS[p]
+        if not all(j in peer_points for j in moved):
+            continue
+        targets = {j: peer_points[j] for j in moved}
+        if held:
+            P = marker_positions(model, x_est[None], joints=list(held))[0]
+            targets.update({j: P[i] for i, j in enumerate(held)})
         names.append(f"est+peer_{p}")
-        rows.append(x)
+        rows.append(fit_part(model, x_est, c, targets))
     return names, np.array(rows)
 
 
@@ -149,7 +187,8 @@ def record(argv: list[str]) -> int:
         t = truth[fr["stamp"]]
         x_est = fr["x"]
         x_peer = ik_to_peer(model, x_est[None], t[[names.index(n) for n in shared]][None], shared)[0]
-        vnames, X = variants(x_est, x_peer, parts)
+        peer_points = {n: t[names.index(n)] for n in shared if np.all(np.isfinite(t[names.index(n)]))}
+        vnames, X = variants(model, x_est, x_peer, peer_points, parts)
         fmasks, weights = fr["masks"]
         w = np.ones(V) if weights is None else np.asarray(weights, float)
         sil = np.full((len(X), V), np.nan)

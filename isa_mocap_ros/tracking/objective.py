@@ -36,7 +36,8 @@ class TotalEnergy:
 
     @property
     def weighted_keypoints(self):
-        """``(keypoint term, its weight)`` for the compiled search, or None (no keypoint term this frame)."""
+        """``(keypoint term, its weight)`` for the compiled search, or None (no keypoint term this frame); with the
+        temporal term, that term (and its weight) or both combined in one kernel term (weight 1)."""
         kw = self.tracker.config.keypoints.keypoint_weight
         if self.temporal_term is None:
             return None if self.keypoint_term is None else (self.keypoint_term, kw)
@@ -98,5 +99,5 @@ def temporal_term(tr, prediction) -> object | None:
         return None
     from isa_mocap_ros.energy.temporal import TemporalTerm
 
-    return TemporalTerm(tr.model, prediction, [j for j in obj.temporal_joints.split(",") if j],
+    return TemporalTerm(tr.model, prediction, [j.strip() for j in obj.temporal_joints.split(",") if j.strip()],
                         sigma_m=tr.config.keypoints.keypoint_sigma_m)
