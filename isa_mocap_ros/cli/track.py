@@ -72,6 +72,11 @@ _TRACKER_OPTIONS = (
     ("--keypoint-extra-gap", int, 0, "G",
      "with --keypoint-weight: also detect on every view of a frame where a forearm of the previous estimate lies "
      "over its trunk in some view, at most every G-th frame (an option, issue 34; 0 = off, the default)"),
+    ("--temporal-weight", float, None, "W",
+     "weight of the temporal term: chosen joints held near their predicted positions, robustly (an option, "
+     "issue 34, energy/temporal.py; 0 = off, the default)"),
+    ("--temporal-joints", str, None, "A,B",
+     "the temporal term's model joints (default: the tracker's, left_ankle,right_ankle)"),
 )
 
 
@@ -287,6 +292,10 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         cfg_kw["gate_margin_px"] = args.gate_margin_px
     if getattr(args, "no_hull", False):
         cfg_kw["hull_filter"] = False
+    if getattr(args, "temporal_weight", None) is not None:
+        cfg_kw["temporal_weight"] = args.temporal_weight
+    if getattr(args, "temporal_joints", None) is not None:
+        cfg_kw["temporal_joints"] = args.temporal_joints
     if getattr(args, "no_view_weights", False):
         cfg_kw["view_weights"] = False
     if getattr(args, "init_confirm_frames", None) is not None:
@@ -310,7 +319,7 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         try:
             res, calibration = calibrate_sequence(
                 seq, args, dof=dof, use_masks=use_masks, learn=learn, first=first,
-                tracker_config=cfg.replace(prior_eta=0.0, keypoint_weight=0.0),
+                tracker_config=cfg.replace(prior_eta=0.0, keypoint_weight=0.0, temporal_weight=0.0),
                 progress=None if args.no_progress else (lambda line: print(line, file=sys.stderr, flush=True)))
         except ShapeCalibrationError as exc:
             raise ValueError(f"--shape auto: {exc}; pass --shape default or a body-shape FILE") from None

@@ -240,6 +240,12 @@ class ObjectiveConfig:
         Weight η of the Parzen prior ``−η ln p(x)`` (13.33); 0 = off (default).
     prior_file : str
         ``.npz`` of :meth:`ParzenPrior.save`, used when no ``prior=`` object is given ("" = none).
+    temporal_weight : float
+        Weight of the temporal term on tracked frames: the temporal_joints held near their predicted positions (0 = off).
+        :mod:`~isa_mocap_ros.energy.temporal`, the keypoint term's loss scale; off by default, measured in
+        docs/history/issue34_real_recording.md.
+    temporal_joints : str
+        Comma-separated model joints of the temporal term.
     """
 
     energy: str = "raster"
@@ -250,6 +256,8 @@ class ObjectiveConfig:
     view_weights: bool = True
     prior_eta: float = 0.0
     prior_file: str = ""
+    temporal_weight: float = 0.0
+    temporal_joints: str = "left_ankle,right_ankle"
 
     def __post_init__(self) -> None:
         check_choice("energy", self.energy, ("fast", "exact", "raster"), error=TrackerError)
@@ -261,6 +269,10 @@ class ObjectiveConfig:
         _number("prior_eta", self.prior_eta, lo=0.0)
         if not isinstance(self.prior_file, (str, Path)):
             raise TrackerError(f"prior_file: expected a path ('' = none), received {self.prior_file!r}")
+        _number("temporal_weight", self.temporal_weight, lo=0.0)
+        if not isinstance(self.temporal_joints, str) or not [j for j in self.temporal_joints.split(",") if j.strip()]:
+            raise TrackerError(f"temporal_joints: expected comma-separated joint names, received "
+                               f"{self.temporal_joints!r}")
 
 
 @dataclass(frozen=True)

@@ -505,6 +505,9 @@ class Tracker:
                          else "no usable view and no estimate yet: nothing to track")
             return FrameResult(x=self.last_estimate, energy=float("nan"), n_evals=0, spread=float("nan"),
                                time_s=time.perf_counter() - t0, views_used=0, notes=tuple(notes), fell_back=True)
+        if cfg.objective.temporal_weight > 0 and self.track.last is not None:
+            # the temporal term (energy/temporal.py, off by default) around the frame's prediction
+            ctx.objective.temporal_term = objective.temporal_term(self, frame_prediction.prediction(self, ctx))
         n_evals = 0
         initialized = False
         if self.track.last is None:
