@@ -324,3 +324,50 @@ def test_the_recovery_asks_only_after_a_drift_at_a_lowered_budget_once_per_coold
     assert not any(so.observe(energy=e, level=4) for e in drift[:8])   # adopted: a new track, a new floor
     with pytest.raises(RecoveryError, match="adopt_ratio"):
         RecoverySettings(adopt_ratio=1.5)
+
+
+def _legs_side_mm(model, x, truth):
+    """Mean distance (mm) of the knees and ankles of ``x`` to those of ``truth``, and to those of ``truth`` with the
+    legs exchanged."""
+    names = list(model.joint_names)
+    same = [names.index(n) for n in ("left_knee", "left_ankle", "right_knee", "right_ankle")]
+    other = [names.index(n) for n in ("right_knee", "right_ankle", "left_knee", "left_ankle")]
+    J, T = joint_positions(model, x[None])[0], joint_positions(model, truth[None])[0]
+    return (1e3 * float(np.linalg.norm(J[same] - T[same], axis=1).mean()),
+            1e3 * float(np.linalg.norm(J[same] - T[other], axis=1).mean()))
+
+
+def test_after_a_long_gap_the_side_check_searches_which_leg_is_in_front(walk45):
+    """A fresh start whose initialization lasts 18 frame periods (no catch-up): the sets that came meanwhile are
+    dropped and the next one comes after a gap of 18, about half a stride: which leg is in front is unknown. The side
+    check (frame_prediction.side_check) searches both leg assignments of the limbs as last seen and starts from the
+    better; every set after the gap has each leg on its own side. (On this scene's exact masks the old unsearched
+    guess held too; the swaps it left — 5 of 9 gaps of 15-25 on the segmented capsule demo, seeds 0-2 — are
+    reproduced by tools/gap_legs.py: docs/history/issue35_speed.md, session 34.)"""
+    model, cams, walk, masks = walk45
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=0))
+    sch = RT.RealTimeSchedule(evals=1500, heading_sets=3, governor=RT.governor_for(1500, PERIOD))
+    steps, _ = RT.emulate(tr, masks[:30], sch, period_s=PERIOD,
+                          step_s=lambda r, b: 18 * PERIOD if r.initialized else 0.02)
+    gaps = [s.gap for s in steps]
+    assert max(gaps) >= 15, gaps
+    after = steps[gaps.index(max(gaps)):]
+    notes = [n for n in after[0].result.notes if "side check" in n]
+    assert notes and after[0].result.n_evals > 1500, after[0].result.notes     # searched beside the frame's budget
+    sides = np.array([_legs_side_mm(model, s.result.x, walk[s.k]) for s in after])
+    assert np.all(sides[:, 0] < 0.5 * sides[:, 1]) and sides[:, 0].mean() < 40, sides
+
+
+def test_a_lockstep_track_never_runs_the_side_check(walk45, monkeypatch):
+    """The side check is tied to gaps: lockstep (every set in order) never asks for it, so its estimates are the
+    ones before it was added."""
+    from isa_mocap_ros.tracking import frame_prediction
+
+    def gap_start(*a, **k):
+        raise AssertionError("gap_start in lockstep")
+    monkeypatch.setattr(frame_prediction, "gap_start", gap_start)
+    model, cams, walk, masks = walk45
+    tr = Tracker(model, cams, TrackerConfig.from_flat(seed=0, evals=300))
+    steps, dropped = RT.emulate(tr, masks[:6], _schedule(evals=300, lockstep=True), period_s=PERIOD,
+                                step_s=RT.step_cost(load=5.0))
+    assert dropped == 0 and [s.k for s in steps] == list(range(6)) and steps[0].result.initialized

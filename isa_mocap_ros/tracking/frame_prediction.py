@@ -1,7 +1,8 @@
 """The frame's prediction: the external one (the prediction node's) when usable, else the tracker's
 own predictor looking as many periods ahead as passed, damped towards the last estimate; after a long
 gap the predicted root follows the foreground's triangulated centroid (:func:`recentre`) and the search starts
-from the better of the prediction and its limbs' other side (:func:`better_side`).
+from the better of the prediction and its limbs' other side (:func:`better_side`), or after a longer one from the
+better leg assignment of the limbs as last seen, each searched briefly (:func:`side_check`).
 """
 from __future__ import annotations
 
@@ -147,3 +148,46 @@ def better_side(tr, ctx, pred: np.ndarray) -> np.ndarray:
         ctx.notes.append(f"prediction: after the gap the search starts with the {what} swapped "
                          f"(energy {E[k]:.4g} vs {E[0]:.4g})")
     return cands[k]
+
+
+#: The side check after a long gap (:func:`side_check`): from this many frame periods unseen (0 = never: below it,
+#: :func:`better_side`), and each leg assignment's share of the frame's evaluations.
+SIDE_CHECK_GAP = 8
+SIDE_CHECK_SHARE = 0.5
+
+
+def side_check(tr, ctx, pred: np.ndarray) -> tuple[np.ndarray, int]:
+    """After a gap of :data:`SIDE_CHECK_GAP` frame periods or more: which leg is in front, searched, not guessed.
+    Both leg assignments of the limbs as last seen — the prediction's root (re-centred on the foreground), the last
+    estimate's joint angles, and the same with the legs exchanged (:func:`swapped_sides`) — are searched briefly
+    (:data:`SIDE_CHECK_SHARE` of the frame's evaluations each, no stage); the lower energy starts the frame's search.
+    The prediction's own limbs are not a candidate: extrapolated over 15-25 frames from the few estimates a fresh
+    track holds they put the legs anywhere, and after a short search they could still win (docs/history/
+    issue35_speed.md, session 34). Returns the start and the evaluations spent (beside the frame's budget)."""
+    from .plan import FrameBudget
+
+    held = np.array(pred, dtype=float)
+    held[6:] = tr.track.last[6:]
+    cands = (held, swapped_sides(tr.model, held, SIDE_SWAPS[0]))
+    brief = FrameBudget(max(1, int(SIDE_CHECK_SHARE * ctx.budget.evals)), False)
+    runs = [tr.optimize(ctx, c, ctx.rng(11, j), stages=False, budget=brief) for j, c in enumerate(cands)]
+    E = [r.energy if np.isfinite(r.energy) else np.inf for r in runs]
+    k = int(E[1] < E[0])
+    ctx.notes.append(f"prediction: after the gap the side check took the limbs as last seen"
+                     f"{' with the legs exchanged' if k else ''} (energy {E[k]:.4g} vs {E[1 - k]:.4g} after a brief "
+                     "search each)")
+    x, _ = tr.final_pose(runs[k])
+    return x, int(sum(r.n_evals for r in runs))
+
+
+def gap_start(tr, ctx, pred: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """The search's start after a gap (``ctx.after_gap``), the evaluations spent on it and those of them charged to
+    the frame's budget: :func:`side_check` after :data:`SIDE_CHECK_GAP` frame periods or more (when its brief searches
+    fit their share: not at the lowest budgets), else :func:`better_side`."""
+    if SIDE_CHECK_GAP and tr.track.elapsed >= SIDE_CHECK_GAP:
+        try:
+            x, n = side_check(tr, ctx, pred)
+            return x, n, 0               # spent beside the frame's budget
+        except ValueError as exc:          # a budget below the brief searches' generations
+            ctx.notes.append(f"prediction: no side check after the gap ({exc})")
+    return better_side(tr, ctx, pred), len(SIDE_SWAPS) + 1, len(SIDE_SWAPS) + 1

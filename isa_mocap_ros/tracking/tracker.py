@@ -523,10 +523,10 @@ class Tracker:
             starts = [c[0] for c in res0.candidates] or [res0.x]
         else:
             starts = [frame_prediction.prediction(self, ctx)]
-            if ctx.after_gap:          # the limbs' phase unknown: the prediction or its other side
-                starts = [frame_prediction.better_side(self, ctx, starts[0])]
-                n_evals += len(frame_prediction.SIDE_SWAPS) + 1          # out of the frame's budget
-                ctx.budget = dataclasses.replace(ctx.budget, evals=ctx.budget.evals - n_evals)
+            if ctx.after_gap:          # the legs' side unknown: frame_prediction.gap_start
+                start, n_side, charged = frame_prediction.gap_start(self, ctx, starts[0])
+                starts, n_evals = [start], n_evals + n_side
+                ctx.budget = dataclasses.replace(ctx.budget, evals=ctx.budget.evals - charged)   # out of the frame's budget
         # the first frame optimizes from every initialization candidate (pruned to config.first_frame.init_keep
         # runs part-way) and keeps the lowest energy
         try:
