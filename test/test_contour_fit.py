@@ -335,15 +335,12 @@ def test_match_takes_the_first_nearest_pixel_in_raster_order():
                              np.array([0.0, 0.0, 1.0]), np.array([fx, fx, 20.0, 15.0]), np.zeros(8), False, index,
                              max_px, lines, -lines, *out, 0)
     want = []
+    py, px = np.nonzero(index >= 0)                  # the contour pixels in raster order
     for u, v in uv:
-        best, row = np.inf, -1
-        for yy in range(H):
-            for xx in range(W):
-                d2 = (xx - u) * (xx - u) + (yy - v) * (yy - v)
-                if index[yy, xx] >= 0 and d2 < best:
-                    best, row = d2, index[yy, xx]
-        if best <= max_px ** 2:
-            want.append((row, np.sqrt(best)))
+        d2 = (px - u) * (px - u) + (py - v) * (py - v)
+        i = int(np.argmin(d2))                       # the first of the smallest: raster order
+        if d2[i] <= max_px ** 2:
+            want.append((index[py[i], px[i]], np.sqrt(d2[i])))
     assert k == len(want) > 100
     assert np.array_equal(out[2][:k, 0], lines[[r for r, _ in want], 0])
     np.testing.assert_allclose(out[4][:k], [d for _, d in want], rtol=1e-12)
