@@ -347,7 +347,7 @@ def test_after_a_long_gap_the_side_check_searches_which_leg_is_in_front(walk45):
     model, cams, walk, masks = walk45
     tr = Tracker(model, cams, TrackerConfig.from_flat(seed=0))
     sch = RT.RealTimeSchedule(evals=1500, heading_sets=3, governor=RT.governor_for(1500, PERIOD))
-    steps, _ = RT.emulate(tr, masks[:30], sch, period_s=PERIOD,
+    steps, _ = RT.emulate(tr, masks[:26], sch, period_s=PERIOD,
                           step_s=lambda r, b: 18 * PERIOD if r.initialized else 0.02)
     gaps = [s.gap for s in steps]
     assert max(gaps) >= 15, gaps
