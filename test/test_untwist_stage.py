@@ -49,7 +49,20 @@ def test_untwist_puts_a_twisted_thigh_back_and_counts_its_evaluations(scene):
     assert legs == ["left_leg", "right_leg"] and np.array_equal(y, np.clip(x, model.lower, model.upper))
 
 
-def test_untwist_in_a_frame_is_charged_and_off_by_default(scene, monkeypatch):
+def test_untwist_on_by_default_and_its_command_line_value():
+    """Decision 019: on at TOL 0.01 (docs/decisions/019-untwist-by-default.md); ``--leg-untwist off`` turns it off."""
+    from isa_mocap_ros.tracking.chain_moves import parse_untwist_tolerance
+
+    st = TrackerConfig().stages
+    assert st.leg_untwist is True and st.leg_untwist_tolerance == 0.01 and st.leg_untwist_margin == 0.0
+    assert parse_untwist_tolerance("off") == "off" and parse_untwist_tolerance(" OFF ") == "off"
+    assert parse_untwist_tolerance("0.02") == 0.02 and parse_untwist_tolerance("0") == 0.0
+    for bad in ("-0.01", "nan", "on", ""):
+        with pytest.raises(ValueError):
+            parse_untwist_tolerance(bad)
+
+
+def test_untwist_in_a_frame_is_charged_only_when_on(scene, monkeypatch):
     from isa_mocap_ros.tracking import chain_moves
 
     model, cams, walk, masks = scene

@@ -246,6 +246,16 @@ def _calibration_settings(design: dict) -> str:
             + (f", radius prior {cfg.radius_prior:g}" if cfg.radius_prior else ""))
 
 
+def _untwist_tolerance(text: str):
+    """``--leg-untwist``'s value: a tolerance >= 0 or ``off``."""
+    from isa_mocap_ros.tracking.chain_moves import parse_untwist_tolerance
+
+    try:
+        return parse_untwist_tolerance(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quick", action="store_true", help="smoke test: one subject, 6 small frames, seed 0")
     p.add_argument("--seeds", default=None, metavar="A,B", help="tracker seeds (default 0-7)")
@@ -265,10 +275,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="keypoints on the first frames and every K-th frame after (default: track's, 8)")
     p.add_argument("--silhouette-core-px", type=float, default=None, metavar="PX",
                    help="the tracker's silhouette_core_px (docs/energy.md; default the tracker's)")
-    p.add_argument("--leg-untwist", type=float, default=None, metavar="TOL",
-                   help="the tracker's untwist stage on with this tolerance (docs/tracking.md; default off)")
+    p.add_argument("--leg-untwist", type=_untwist_tolerance, default=None, metavar="TOL|off",
+                   help="the tracker's untwist stage with this tolerance, or off (docs/tracking.md; default the "
+                        "tracker's, on at 0.01: decision 019)")
     p.add_argument("--leg-untwist-margin", type=float, default=None, metavar="M",
-                   help="the tracker's untwist stage on with this absolute energy margin (docs/tracking.md; default off)")
+                   help="the tracker's untwist stage also with this absolute energy margin (docs/tracking.md; default 0)")
     p.add_argument("--pelvis-fraction", type=float, default=None, metavar="F",
                    help="the tracker's pelvis stage share (default the tracker's)")
     p.add_argument("--jobs", type=int, default=2, metavar="N", help="worker processes (default 2)")

@@ -51,12 +51,13 @@ _TRACKER_OPTIONS = (
     ("--coarse-fraction", float, None, "F",
      "share of each partition's generations of the main search evaluated on the energy's coarse level (--energy "
      "fast: two views; raster: every second pixel row; docs/energy.md); 0 = off (default: the tracker's default)"),
-    ("--leg-untwist", float, None, "TOL",
-     "the untwist stage on (docs/tracking.md): each thigh's twist halved or undone, the ankle turned back, taken "
-     "when its energy is below the pose's times 1 + TOL (0: strictly lower; default: the tracker's, off)"),
+    ("--leg-untwist", "untwist", None, "TOL|off",
+     "the untwist stage (docs/tracking.md, decision 019): each thigh's twist halved or undone, the ankle turned back, "
+     "taken when its energy is below the pose's times 1 + TOL (0: strictly lower; off: the stage off; default: the "
+     "tracker's, on at 0.01)"),
     ("--leg-untwist-margin", float, None, "M",
-     "the untwist stage (on with it, --leg-untwist 0 unless given) also takes a proposal whose energy is below the "
-     "pose's plus M (energy units; default: the tracker's, 0)"),
+     "the untwist stage (on with it) also takes a proposal whose energy is below the pose's times 1 + TOL plus M "
+     "(energy units; with --leg-untwist 0: the margin alone; default: the tracker's, 0)"),
     ("--pelvis-fraction", float, None, "F",
      "budget share of the pelvis stage (0 = off; default: the tracker's default)"),
     ("--keypoint-weight", float, None, "W",
@@ -78,6 +79,16 @@ _TRACKER_OPTIONS = (
     ("--temporal-joints", str, None, "A,B",
      "the temporal term's model joints (default: the tracker's, left_ankle,right_ankle)"),
 )
+
+
+def _untwist_tolerance(text: str):
+    """``--leg-untwist``'s value: a tolerance >= 0 or ``off`` (imported here: the tracker loads only to run)."""
+    from isa_mocap_ros.tracking.chain_moves import parse_untwist_tolerance
+
+    try:
+        return parse_untwist_tolerance(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def register(sub) -> None:
@@ -118,7 +129,8 @@ def register(sub) -> None:
                    help="silhouette energy method (default: the tracker's, raster: Eq. 4 counted on the pixel grid; "
                         "fast: the sampled kernel; exact: the rendered reference; docs/energy.md)")
     for flag, kind, default, metavar, text in _TRACKER_OPTIONS:
-        p.add_argument(flag, type=kind, default=default, metavar=metavar, help=text)
+        p.add_argument(flag, type=_untwist_tolerance if kind == "untwist" else kind, default=default, metavar=metavar,
+                       help=text)
     p.add_argument("--no-hull", action="store_true",
                    help="visual-hull filter off (on by default: foreground pixels the other views do not confirm, "
                         "beyond the predicted silhouette, are dropped)")
@@ -302,7 +314,9 @@ def track_bag(args, *, collect: dict | None = None) -> dict:
         cfg_kw["init_confirm_frames"] = args.init_confirm_frames
     if getattr(args, "pelvis_fraction", None) is not None:
         cfg_kw["pelvis_fraction"] = args.pelvis_fraction
-    if getattr(args, "leg_untwist", None) is not None:
+    if getattr(args, "leg_untwist", None) == "off":
+        cfg_kw["leg_untwist"] = False
+    elif getattr(args, "leg_untwist", None) is not None:
         cfg_kw.update(leg_untwist=True, leg_untwist_tolerance=args.leg_untwist)
     if getattr(args, "leg_untwist_margin", None) is not None:
         cfg_kw.update(leg_untwist=True, leg_untwist_margin=args.leg_untwist_margin)

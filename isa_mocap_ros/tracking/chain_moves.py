@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["untwist_legs", "untwist_share", "UNTWIST_SCALES"]
+__all__ = ["untwist_legs", "untwist_share", "parse_untwist_tolerance", "UNTWIST_SCALES"]
 
 
 #: The untwist stage's proposals: each leg's hip twist scaled by these factors, the ankle's twist taking the rest.
@@ -66,3 +66,17 @@ def untwist_share(tr) -> int:
     names = set(tr.model.dof_names)
     legs = sum(f"{s}_hip_z" in names and f"{s}_ankle_z" in names for s in ("left", "right"))
     return (1 + len(UNTWIST_SCALES)) * legs + 1 if legs else 0
+
+
+def parse_untwist_tolerance(text: str):
+    """A command line's untwist tolerance (``track``/``bench mesh --leg-untwist``): a number >= 0, or ``"off"``
+    (the stage off); ValueError otherwise."""
+    if text.strip().lower() == "off":
+        return "off"
+    try:
+        tol = float(text)
+    except ValueError:
+        tol = float("nan")
+    if not tol >= 0.0:
+        raise ValueError(f"expected a tolerance >= 0 or 'off', received {text!r}")
+    return tol

@@ -363,9 +363,9 @@ class StageConfig:
     torso_fraction : float
         Budget share of the torso stage (hierarchical optimizers): spine and neck with the upper arms re-aimed (0.13; 0 = off).
     leg_untwist : bool
-        The untwist stage after the limb stage: each thigh's twist about its axis halved or undone, the ankle turned back (False = off; tracking/chain_moves.py).
+        The untwist stage after the limb stage: each thigh's twist about its axis halved or undone, the ankle turned back (True; False = off; tracking/chain_moves.py, decision 019).
     leg_untwist_tolerance : float
-        The untwist stage takes a proposal whose energy is below the pose's times 1 + this (0.0: strictly lower).
+        The untwist stage takes a proposal whose energy is below the pose's times 1 + this (0.01; 0.0: strictly lower).
     leg_untwist_margin : float
         ... or below the pose's energy plus this, in energy units: a fixed price, like the prior's, that the clutter of
         occluders and noise does not inflate (0.0: none; the two add).
@@ -395,8 +395,8 @@ class StageConfig:
 
     pelvis_fraction: float = 0.15
     torso_fraction: float = 0.13
-    leg_untwist: bool = False
-    leg_untwist_tolerance: float = 0.0
+    leg_untwist: bool = True
+    leg_untwist_tolerance: float = 0.01
     leg_untwist_margin: float = 0.0
     limb_proposals: int = 16
     limb_proposal_limbs: tuple = ("left_arm", "right_arm", "left_leg", "right_leg")
