@@ -9,9 +9,11 @@ with every stage of the configured budget), waits until both say they are ready,
 they discover no other node (a test suite running beside it is not disturbed).
 
 Beside them (``--library``, the default) it compiles the kernels other commands call first
-(:mod:`.warmup_library`: the sampled energy and the tracker on it, the mesh rasterizer) in a process of its
-own, on the core the nodes leave idle (the segmentation node is ready in seconds, the estimator compiles on one
-core); the sampled energy first, whose kernels the estimator's do not share.
+(:mod:`.warmup_library`: the sampled energy and the tracker on it, the mesh rasterizer, the parallel forward
+kinematics) in two processes of their own, on the core the nodes leave idle (the segmentation node is ready in
+seconds, the estimator compiles on one core): three compiling processes on two cores keep both busy until the
+end; the groups share few kernels with the estimator's (numba compiles a kernel in each process that calls it
+before it is in the cache).
 """
 from __future__ import annotations
 
@@ -27,8 +29,9 @@ from isa_mocap_ros.resources import resource_dir
 from isa_mocap_ros.rosenv import ros_env
 
 READY = {"segmentation_node": "segmentation: ", "estimator_node": "estimator: ready"}
-#: :mod:`.warmup_library`'s groups, in one process beside the nodes
-LIBRARY = ("sampled_energy", "tracker_fast", "mesh_render")
+#: :mod:`.warmup_library`'s groups, in two processes beside the nodes (the tracker on the sampled energy loads
+#: that energy's kernels the first process compiled before it)
+LIBRARY = (("sampled_energy", "tracker_fast"), ("kinematics_batch", "sampled_coverage", "mesh_render"))
 
 
 def register(sub) -> None:
@@ -58,7 +61,7 @@ def warmup(args: argparse.Namespace) -> int:
                                        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                        start_new_session=True)
         threading.Thread(target=_watch, args=(procs[name], READY[name], ready[name]), daemon=True).start()
-    library = [_library(LIBRARY)] if args.library else []
+    library = [_library(groups) for groups in LIBRARY] if args.library else []
     try:
         deadline = time.monotonic() + args.timeout
         for name, ev in ready.items():

@@ -5,8 +5,8 @@ scanline energy, the tracker's stages, the automatic initialization). ``track``'
 other commands call more: the sampled energy (:class:`.energy.SilhouetteEnergy`'s default method, ``track
 --energy fast``, the benches'), its restricted evaluation, the tracker on it, the triangle rasterizer of ``synth
 --body mesh``. numba compiles a kernel for the argument types of its call, so this module makes those calls on a
-tiny synthetic frame (the rest pose in 4 views of 80×60), in groups; ``isa-mocap warmup`` runs them in a process
-beside the nodes:
+tiny synthetic frame (the rest pose in 4 views of 80×60), in groups; ``isa-mocap warmup`` runs them in two
+processes beside the nodes:
 
 ``python -m isa_mocap_ros.cli.warmup_library GROUP...`` with GROUP one of :data:`GROUPS`; prints
 ``warmup_library: GROUP done (N s)`` after each. Changes nothing but numba's on-disk cache.
@@ -31,23 +31,43 @@ def _scene(n_views: int = 4, width: int = 80, height: int = 60):
     return model, rig, x, masks
 
 
-def sampled_energy() -> None:
-    """The sampled silhouette energy (``method="fast"``): the full-size masks (uint8) and the area-averaged
-    coverage (``downsample`` 2, float32), parallel and serial batches, and its restricted evaluation."""
+def _sampled(downsample: int) -> None:
     from isa_mocap_ros.energy import SilhouetteEnergy
     from isa_mocap_ros.energy.restricted import RestrictedSilhouetteEnergy
 
     model, rig, x, masks = _scene()
     rng = np.random.default_rng(0)
     X = x + rng.normal(0.0, 0.02, (8, x.size))
-    for ds in (1, 2):
-        f = SilhouetteEnergy(model, rig, masks, method="fast", downsample=ds, rng=np.random.default_rng(0))
-        f(X)
-        f(X[:1])
-        coords = np.arange(x.size - 4, x.size)               # the last joints' coordinates: a limb moves
-        Xr = np.repeat(x[None], 8, axis=0)
-        Xr[:, coords] = X[:, coords]
-        RestrictedSilhouetteEnergy(f, x, coords)(Xr)
+    f = SilhouetteEnergy(model, rig, masks, method="fast", downsample=downsample, rng=np.random.default_rng(0))
+    f(X)
+    f(X[:1])
+    coords = np.arange(x.size - 4, x.size)               # the last joints' coordinates: a limb moves
+    Xr = np.repeat(x[None], 8, axis=0)
+    Xr[:, coords] = X[:, coords]
+    RestrictedSilhouetteEnergy(f, x, coords)(Xr)
+
+
+def sampled_energy() -> None:
+    """The sampled silhouette energy (``method="fast"``) on full-size masks (uint8): parallel and one-row
+    (serial) batches, and its restricted evaluation."""
+    _sampled(1)
+
+
+def sampled_coverage() -> None:
+    """The same on the area-averaged coverage (``downsample`` 2: float32, other signatures)."""
+    _sampled(2)
+
+
+def kinematics_batch() -> None:
+    """The forward kinematics' parallel kernel (batches of :data:`.body.kinematics.SERIAL_BELOW` poses or more;
+    the warm-ups' trackers call the serial one)."""
+    from isa_mocap_ros.body import capsule_endpoints, joint_positions, make_model
+    from isa_mocap_ros.body.kinematics import SERIAL_BELOW
+
+    model = make_model(39)
+    X = np.repeat(model.rest_pose()[None], max(2, SERIAL_BELOW), axis=0)
+    joint_positions(model, X)
+    capsule_endpoints(model, X)
 
 
 def tracker_fast() -> None:
@@ -72,7 +92,8 @@ def mesh_render() -> None:
 
 
 #: group name → the calls it makes, in order
-GROUPS = {"sampled_energy": sampled_energy, "tracker_fast": tracker_fast, "mesh_render": mesh_render}
+GROUPS = {"sampled_energy": sampled_energy, "tracker_fast": tracker_fast, "sampled_coverage": sampled_coverage,
+          "kinematics_batch": kinematics_batch, "mesh_render": mesh_render}
 
 
 def main(argv: list[str] | None = None) -> int:
