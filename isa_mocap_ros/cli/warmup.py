@@ -7,6 +7,13 @@ warm-up: the segmentation's background kernels, the estimator's tracker on a tin
 with every stage of the configured budget), waits until both say they are ready, and stops them.
 ``make venv`` runs it after installing. The nodes run with ``ROS_AUTOMATIC_DISCOVERY_RANGE=OFF``:
 they discover no other node (a test suite running beside it is not disturbed).
+
+Beside them (``--library``, the default) it compiles the kernels other commands call first
+(:mod:`.warmup_library`: the sampled energy and the tracker on it, the mesh rasterizer, the parallel forward
+kinematics) in two processes of their own, on the core the nodes leave idle (the segmentation node is ready in
+seconds, the estimator compiles on one core): three compiling processes on two cores keep both busy until the
+end; the groups share few kernels with the estimator's (numba compiles a kernel in each process that calls it
+before it is in the cache).
 """
 from __future__ import annotations
 
@@ -22,12 +29,18 @@ from isa_mocap_ros.resources import resource_dir
 from isa_mocap_ros.rosenv import ros_env
 
 READY = {"segmentation_node": "segmentation: ", "estimator_node": "estimator: ready"}
+#: :mod:`.warmup_library`'s groups, in two processes beside the nodes (the tracker on the sampled energy loads
+#: that energy's kernels the first process compiled before it)
+LIBRARY = (("sampled_energy", "tracker_fast"), ("kinematics_batch", "sampled_coverage", "mesh_render"))
 
 
 def register(sub) -> None:
     p = sub.add_parser("warmup", help="compile the numba kernels ahead (make venv runs it)")
     p.add_argument("--params", default=None, help="parameter file (default: the package's config/pipeline.yaml)")
     p.add_argument("--timeout", type=float, default=900.0, help="longest wait, seconds (default 900)")
+    p.add_argument("--library", action=argparse.BooleanOptionalAction, default=True,
+                   help="also compile the kernels of the sampled energy, of the tracker on it and of the mesh "
+                        "rasterizer, which track, synth, calibrate and the benches call (default: on)")
     p.set_defaults(func=warmup)
 
 
@@ -36,8 +49,9 @@ def warmup(args: argparse.Namespace) -> int:
     env = ros_env()
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "OFF"   # the nodes see no other node, on any domain
     t0 = time.monotonic()
-    print("warmup: compiling the numba kernels of the segmentation and estimator nodes (1.5-4 min the first "
-          "time after an install, seconds once cached)", flush=True)
+    print("warmup: compiling the numba kernels of the segmentation and estimator nodes"
+          f"{' and of the library' if args.library else ''} (1.5-4 min the first time after an install, seconds "
+          "once cached)", flush=True)
     procs, ready = {}, {name: threading.Event() for name in READY}
     bindir = os.path.dirname(sys.executable)
     for name in READY:
@@ -47,6 +61,7 @@ def warmup(args: argparse.Namespace) -> int:
                                        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                        start_new_session=True)
         threading.Thread(target=_watch, args=(procs[name], READY[name], ready[name]), daemon=True).start()
+    library = [_library(groups) for groups in LIBRARY] if args.library else []
     try:
         deadline = time.monotonic() + args.timeout
         for name, ev in ready.items():
@@ -54,17 +69,31 @@ def warmup(args: argparse.Namespace) -> int:
                 if procs[name].poll() is not None or time.monotonic() > deadline:
                     print(f"warmup: {name} did not get ready (exit code {procs[name].poll()})", file=sys.stderr)
                     return 1
+        for p in library:
+            try:
+                code = p.wait(max(1.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                code = None
+            if code != 0:
+                print(f"warmup: {' '.join(p.args[3:])} failed (exit code {code})", file=sys.stderr)
+                return 1
     finally:
-        for p in procs.values():
+        for p in list(procs.values()) + library:
             if p.poll() is None:
                 p.send_signal(signal.SIGINT)
-        for p in procs.values():
+        for p in list(procs.values()) + library:
             try:
                 p.wait(30)
             except subprocess.TimeoutExpired:
                 p.kill()
     print(f"warmup: kernels compiled and cached ({time.monotonic() - t0:.0f} s)", flush=True)
     return 0
+
+
+def _library(groups: tuple[str, ...]) -> subprocess.Popen:
+    """A process compiling :mod:`.warmup_library`'s ``groups`` (its output passed through)."""
+    return subprocess.Popen([sys.executable, "-m", "isa_mocap_ros.cli.warmup_library", *groups],
+                            start_new_session=True)
 
 
 def _watch(proc: subprocess.Popen, text: str, ready: threading.Event) -> None:
