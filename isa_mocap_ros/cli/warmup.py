@@ -62,6 +62,7 @@ def warmup(args: argparse.Namespace) -> int:
                                        start_new_session=True)
         threading.Thread(target=_watch, args=(procs[name], READY[name], ready[name]), daemon=True).start()
     library = [_library(groups) for groups in LIBRARY] if args.library else []
+    stopped: list[subprocess.Popen] = []          # signalled once only (a second SIGINT could interrupt its exit)
     try:
         deadline = time.monotonic() + args.timeout
         for name, ev in ready.items():
@@ -69,6 +70,9 @@ def warmup(args: argparse.Namespace) -> int:
                 if procs[name].poll() is not None or time.monotonic() > deadline:
                     print(f"warmup: {name} did not get ready (exit code {procs[name].poll()})", file=sys.stderr)
                     return 1
+        for p in procs.values():                   # ready: the nodes need not wait for the library
+            p.send_signal(signal.SIGINT)
+            stopped.append(p)
         for p in library:
             try:
                 code = p.wait(max(1.0, deadline - time.monotonic()))
@@ -79,7 +83,7 @@ def warmup(args: argparse.Namespace) -> int:
                 return 1
     finally:
         for p in list(procs.values()) + library:
-            if p.poll() is None:
+            if p.poll() is None and p not in stopped:
                 p.send_signal(signal.SIGINT)
         for p in list(procs.values()) + library:
             try:
