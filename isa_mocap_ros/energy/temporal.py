@@ -29,7 +29,25 @@ from .keypoint_kernel import KeypointTerm, keypoint_batch
 __all__ = ["TemporalTerm", "combined_term"]
 
 
-class TemporalTerm:
+class _Correspondences:
+    """What a term of the keypoint kernel's kind shares: its correspondence tables (``model``, ``joints``,
+    ``directions``, ``moments``, ``weights``, ``sigma_m``) as the compiled search takes them, and its evaluation."""
+
+    @property
+    def n_correspondences(self) -> int:
+        return len(self.joints)
+
+    def kernel_term(self, scale: float) -> KeypointTerm:
+        """This term weighted by ``scale`` as the compiled search takes it."""
+        return KeypointTerm(*kernel_tables(self.model), self.joints, self.directions, self.moments, self.weights,
+                            self.sigma_m, float(scale))
+
+    def __call__(self, X: Any) -> np.ndarray:
+        """Energies ``(n,)`` (the keypoint kernel's function); non-finite rows give ``+inf``."""
+        return _evaluate(self, X)
+
+
+class TemporalTerm(_Correspondences):
     """Robust distance of chosen model joints from their positions in a reference pose (the frame's prediction).
 
     Parameters
@@ -74,21 +92,7 @@ class TemporalTerm:
         self.sigma_m = float(sigma_m)
         self.n_evals = 0
 
-    @property
-    def n_correspondences(self) -> int:
-        return len(self.joints)
-
-    def kernel_term(self, scale: float) -> KeypointTerm:
-        """This term weighted by ``scale`` as the compiled search takes it."""
-        return KeypointTerm(*kernel_tables(self.model), self.joints, self.directions, self.moments, self.weights,
-                            self.sigma_m, float(scale))
-
-    def __call__(self, X: Any) -> np.ndarray:
-        """Energies ``(n,)`` (the keypoint kernel's function); non-finite rows give ``+inf``."""
-        return _evaluate(self, X)
-
-
-class _Combined:
+class _Combined(_Correspondences):
     """Two terms of the keypoint kernel's kind with their weights, as one (:func:`combined_term`)."""
 
     def __init__(self, parts: Sequence[tuple[Any, float]]) -> None:
@@ -110,17 +114,6 @@ class _Combined:
         for t, _ in self.parts:
             t.n_evals += int(value) - self._n_evals
         self._n_evals = int(value)
-
-    @property
-    def n_correspondences(self) -> int:
-        return len(self.joints)
-
-    def kernel_term(self, scale: float) -> KeypointTerm:
-        return KeypointTerm(*kernel_tables(self.model), self.joints, self.directions, self.moments, self.weights,
-                            self.sigma_m, float(scale))
-
-    def __call__(self, X: Any) -> np.ndarray:
-        return _evaluate(self, X)
 
 
 def combined_term(parts: Sequence[tuple[Any, float]]):
