@@ -261,8 +261,8 @@ def test_tracker_steps_are_the_same_with_and_without_restriction(scene, monkeypa
     monkeypatch.setattr(SilhouetteEnergy, "restrict", lambda self, x, c: calls.append(1) or orig(self, x, c))
     tr, with_ = track()
     # once per partition and frame, the torso stage's (from 830 with the contour stage) and the limb stage's (one per
-    # limb: its proposals scored on the energy restricted to that limb)
-    assert len(calls) == 2 * (len(PARTS) + 1 + 4)
+    # limb: its proposals scored on the energy restricted to that limb), and the untwist stage's (one per leg)
+    assert len(calls) == 2 * (len(PARTS) + 1 + 4 + 2)
     monkeypatch.setattr(TotalEnergy, "restrict", lambda self, x, c: None)
     n = tr.energy.n_evals
     tr2, without = track()

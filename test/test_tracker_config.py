@@ -23,13 +23,13 @@ FLAT_NAMES = {
     "limb_proposal_limbs", "limb_hinge_limbs", "limb_extrapolations",
     "limb_fold_deg", "limb_hinge_window_deg", "partition_order", "contour_iterations", "contour_extra_iterations",
     "contour_extra_partitions", "contour_points", "contour_max_px", "gate_margin_px", "hull_filter",
-    "hull_dilate_px", "hull_keep_px", "hull_pad_m", "view_weights", "keypoint_weight", "keypoint_sigma_m",
+    "hull_dilate_px", "hull_keep_px", "hull_pad_m", "view_weights", "keypoint_weight", "keypoint_sigma_m", "temporal_weight", "temporal_joints",
     "max_frames_ahead", "silhouette_core_px", "first_frame_hull", "coarse_fraction"}
 
 
 def test_leaf_names_are_unique_and_unchanged():
     names = [f.name for g in dataclasses.fields(TrackerConfig) for f in dataclasses.fields(g.default_factory)]
-    assert len(names) == len(set(names)) == len(LEAVES) == 53
+    assert len(names) == len(set(names)) == len(LEAVES) == 55
     assert set(names) == FLAT_NAMES
     assert all(getattr(getattr(TrackerConfig(), LEAVES[n]), n) is not None for n in names)
 
