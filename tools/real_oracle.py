@@ -32,7 +32,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 
 from real_floor import ik_to_peer  # noqa: E402
-from track_hooks import track_args, track_patched  # noqa: E402
+from track_hooks import pop_option, reference_markers, track_args, track_patched  # noqa: E402
 
 SIDES = ("left", "right")
 
@@ -66,12 +66,9 @@ def _filtered_reference(names: list[str], n: int) -> np.ndarray | None:
 
 def knee_report(bag: Path, tracks: list[Path]) -> int:
     from isa_mocap_ros.cli.run_report import published_model, read_estimates
-    from isa_mocap_ros.cli.track_io import read_sequence
     from isa_mocap_ros.eval.metrics import marker_positions
 
-    seq = read_sequence(bag, want_images=True, want_masks=False)
-    names = list(seq.truth_marker_names)
-    truth = {f.stamp_ns: np.asarray(f.truth_markers, float) for f in seq.frames if f.truth_markers is not None}
+    names, truth = reference_markers(bag)
     for tr in tracks:
         model = published_model(tr / "estimates")
         poses = read_estimates(tr / "estimates", model)["poses"]
@@ -101,22 +98,14 @@ def knee_report(bag: Path, tracks: list[Path]) -> int:
 
 
 def oracle_run(argv: list[str]) -> int:
-    from isa_mocap_ros.cli.track_io import read_sequence
     from isa_mocap_ros.tracking import tracker as tracker_module
 
     argv = list(argv)
-    offsets: dict = {}
-    if "--offsets" in argv:                 # a track's summary.json: its per_marker_offset_mm (est − peer, body axes)
-        i = argv.index("--offsets")
-        offsets = json.loads(Path(argv[i + 1]).read_text())["per_marker_offset_mm"]
-        del argv[i:i + 2]
+    summary = pop_option(argv, "--offsets")     # a track's summary.json: its per_marker_offset_mm (est − peer, body axes)
+    offsets: dict = json.loads(Path(summary).read_text())["per_marker_offset_mm"] if summary is not None else {}
     oracle, args, bag, out = track_args(argv, "--oracle", __doc__)
     out = Path(out)
-    seq = read_sequence(bag, want_images=True, want_masks=False)
-    names = list(seq.truth_marker_names)
-    truth = {int(f.stamp_ns): np.asarray(f.truth_markers, float) for f in seq.frames if f.truth_markers is not None}
-    if not truth:
-        raise SystemExit(f"{bag}: expected reference markers, found none")
+    names, truth = reference_markers(bag)
     if offsets:                             # the peer's points moved by those offsets: what the score compares
         from isa_mocap_ros.eval.metrics import body_frames
 

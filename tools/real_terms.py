@@ -36,7 +36,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 
 from real_floor import ik_to_peer  # noqa: E402
-from track_hooks import track_args, track_patched  # noqa: E402
+from track_hooks import pop_option, reference_markers, track_args, track_patched  # noqa: E402
 
 #: part: (DOF-name prefixes fitted, joints moved to the peer's points, joints held where the estimate has them)
 PARTS = {"left_arm": (("left_shoulder", "left_elbow", "left_wrist"), ("left_elbow", "left_wrist"), ()),
@@ -121,24 +121,16 @@ def _moved_truth(truth: dict, names: list[str], summary: Path) -> dict:
 
 
 def record(argv: list[str]) -> int:
-    from isa_mocap_ros.cli.track_io import read_sequence
     from isa_mocap_ros.energy.silhouette import SilhouetteEnergy
     from isa_mocap_ros.tracking import keypoint_screen
     from isa_mocap_ros.tracking import tracker as tracker_module
 
     argv = list(argv)
-    summary = None
-    if "--offsets" in argv:
-        i = argv.index("--offsets")
-        summary = Path(argv[i + 1])
-        del argv[i:i + 2]
+    summary = pop_option(argv, "--offsets")
+    summary = Path(summary) if summary is not None else None
     _, args, bag, out = track_args(argv, "--no-such-flag", __doc__)
     out = Path(out)
-    seq = read_sequence(bag, want_images=True, want_masks=False)
-    names = list(seq.truth_marker_names)
-    truth = {int(f.stamp_ns): np.asarray(f.truth_markers, float) for f in seq.frames if f.truth_markers is not None}
-    if not truth:
-        raise SystemExit(f"{bag}: expected reference markers, found none")
+    names, truth = reference_markers(bag)
     per_tracker: list[list[dict]] = []
     last_masks: dict = {}
     last_term: list = [None]
