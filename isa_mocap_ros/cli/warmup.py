@@ -50,8 +50,8 @@ def warmup(args: argparse.Namespace) -> int:
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "OFF"   # the nodes see no other node, on any domain
     t0 = time.monotonic()
     print("warmup: compiling the numba kernels of the segmentation and estimator nodes"
-          f"{' and of the library' if args.library else ''} (1.5-4 min the first time after an install, seconds "
-          "once cached)", flush=True)
+          f"{' and of the library' if args.library else ''} (the first time after an install "
+          f"{'~7 min on 2 cores' if args.library else '1.5-4 min'}, seconds once cached)", flush=True)
     procs, ready = {}, {name: threading.Event() for name in READY}
     bindir = os.path.dirname(sys.executable)
     for name in READY:
